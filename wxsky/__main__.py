@@ -1,0 +1,3 @@
+from wxsky.cli import main
+
+raise SystemExit(main())

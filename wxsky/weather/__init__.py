@@ -1,0 +1,1 @@
+"""Weather state and its decoders: pure, numpy and stdlib only, no I/O."""

@@ -1,0 +1,281 @@
+"""The weather state: one immutable snapshot of the atmosphere around the observer, in SI units.
+
+Every input (preset, METAR, cockpit hardware, control channel) produces a `WeatherPatch` naming
+only the fields it knows; `WeatherState.apply` merges it and records where each field came from.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+MAX_LAYERS = 6
+
+
+class CloudType(enum.IntEnum):
+    """Cloud types, numbered as CIGI's Weather Control packet numbers them."""
+
+    NONE = 0
+    ALTOCUMULUS = 1
+    ALTOSTRATUS = 2
+    CIRROCUMULUS = 3
+    CIRROSTRATUS = 4
+    CIRRUS = 5
+    CUMULONIMBUS = 6
+    CUMULUS = 7
+    NIMBOSTRATUS = 8
+    STRATOCUMULUS = 9
+    STRATUS = 10
+
+    @property
+    def wire_name(self) -> str:
+        return self.name.lower()
+
+    @classmethod
+    def from_name(cls, name: str) -> CloudType:
+        try:
+            return cls[name.strip().upper()]
+        except KeyError:
+            known = ", ".join(t.wire_name for t in cls if t is not cls.NONE)
+            raise ValueError(f"unknown cloud type {name!r} (known: {known})") from None
+
+
+class Source(enum.StrEnum):
+    """Where a field of the weather state came from."""
+
+    DEFAULT = "default"
+    PRESET = "preset"
+    METAR = "metar"
+    COCKPIT = "cockpit"
+    CONTROL = "control"
+
+
+@dataclass(frozen=True)
+class Observer:
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+    def __post_init__(self) -> None:
+        _check_range("observer.lat_deg", self.lat_deg, -90.0, 90.0)
+        _check_range("observer.lon_deg", self.lon_deg, -180.0, 180.0)
+        _check_range("observer.alt_m", self.alt_m, -500.0, 30_000.0)
+
+
+@dataclass(frozen=True)
+class CloudLayer:
+    cover_oktas: int
+    base_m: float  # MSL
+    top_m: float  # MSL
+    type: CloudType
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cover_oktas, int) or not 0 <= self.cover_oktas <= 8:
+            raise ValueError(
+                f"cloud layer cover_oktas must be an integer 0..8, got {self.cover_oktas!r}"
+            )
+        _check_range("cloud layer base_m", self.base_m, -500.0, 25_000.0)
+        _check_range("cloud layer top_m", self.top_m, -500.0, 25_000.0)
+        if self.top_m <= self.base_m:
+            raise ValueError(f"cloud layer top_m {self.top_m} must be above base_m {self.base_m}")
+
+    @property
+    def thickness_m(self) -> float:
+        return self.top_m - self.base_m
+
+
+@dataclass(frozen=True)
+class WindLayer:
+    alt_m: float  # MSL
+    dir_from_deg: float  # direction the wind blows from, true
+    speed_mps: float
+    gust_mps: float = 0.0  # 0 when no gusts were reported
+    variable: bool = False  # METAR VRB: direction not steady
+
+    def __post_init__(self) -> None:
+        _check_range("wind alt_m", self.alt_m, -500.0, 30_000.0)
+        _check_range("wind dir_from_deg", self.dir_from_deg, 0.0, 360.0)
+        _check_range("wind speed_mps", self.speed_mps, 0.0, 150.0)
+        _check_range("wind gust_mps", self.gust_mps, 0.0, 200.0)
+
+    def velocity_mps(self) -> tuple[float, float]:
+        """(east, north) velocity of the air; the wind blows *from* dir_from_deg."""
+        to_rad = math.radians(self.dir_from_deg + 180.0)
+        return (self.speed_mps * math.sin(to_rad), self.speed_mps * math.cos(to_rad))
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """The source of each top-level field of a WeatherState."""
+
+    observer: Source = Source.DEFAULT
+    time_utc: Source = Source.DEFAULT
+    layers: Source = Source.DEFAULT
+    wind: Source = Source.DEFAULT
+    visibility_m: Source = Source.DEFAULT
+    temperature_c: Source = Source.DEFAULT
+    dewpoint_c: Source = Source.DEFAULT
+    qnh_hpa: Source = Source.DEFAULT
+    present_weather: Source = Source.DEFAULT
+    seed: Source = Source.DEFAULT
+
+
+@dataclass(frozen=True)
+class WeatherPatch:
+    """A partial update from one source; None means "this source says nothing about it"."""
+
+    source: Source
+    observer: Observer | None = None
+    time_utc: datetime | None = None
+    layers: tuple[CloudLayer, ...] | None = None
+    wind: tuple[WindLayer, ...] | None = None
+    visibility_m: float | None = None
+    temperature_c: float | None = None
+    dewpoint_c: float | None = None
+    qnh_hpa: float | None = None
+    present_weather: tuple[str, ...] | None = None
+    seed: int | None = None
+
+
+@dataclass(frozen=True)
+class WeatherState:
+    observer: Observer = field(default_factory=lambda: Observer(47.4647, 8.5492, 432.0))
+    time_utc: datetime = field(default_factory=lambda: datetime(2026, 6, 21, 12, 0, tzinfo=UTC))
+    layers: tuple[CloudLayer, ...] = ()  # sorted by base_m
+    wind: tuple[WindLayer, ...] = ()  # sorted by alt_m
+    visibility_m: float = 10_000.0
+    temperature_c: float | None = 15.0
+    dewpoint_c: float | None = 5.0
+    qnh_hpa: float = 1013.25
+    present_weather: tuple[str, ...] = ()  # METAR weather groups, e.g. ("-RA", "BR")
+    seed: int = 1
+    sources: Provenance = field(default_factory=Provenance)
+
+    def __post_init__(self) -> None:
+        if self.time_utc.tzinfo is None or self.time_utc.utcoffset() != UTC.utcoffset(None):
+            raise ValueError("time_utc must be timezone-aware UTC")
+        if len(self.layers) > MAX_LAYERS:
+            raise ValueError(f"at most {MAX_LAYERS} cloud layers, got {len(self.layers)}")
+        _check_range("visibility_m", self.visibility_m, 0.0, 1_000_000.0)
+        _check_range("qnh_hpa", self.qnh_hpa, 850.0, 1100.0)
+        if self.temperature_c is not None:
+            _check_range("temperature_c", self.temperature_c, -90.0, 60.0)
+        if self.dewpoint_c is not None:
+            _check_range("dewpoint_c", self.dewpoint_c, -90.0, 60.0)
+        if not 0 <= self.seed < 2**63:
+            raise ValueError(f"seed must be in 0..2**63-1, got {self.seed}")
+        object.__setattr__(self, "layers", tuple(sorted(self.layers, key=lambda lay: lay.base_m)))
+        object.__setattr__(self, "wind", tuple(sorted(self.wind, key=lambda w: w.alt_m)))
+
+    def apply(self, patch: WeatherPatch) -> WeatherState:
+        """A new state with every field the patch sets taken from it, provenance updated."""
+        changes: dict[str, Any] = {}
+        sources: dict[str, Source] = {}
+        for f in dataclasses.fields(Provenance):
+            value = getattr(patch, f.name)
+            if value is not None:
+                changes[f.name] = value
+                sources[f.name] = patch.source
+        if not changes:
+            return self
+        return dataclasses.replace(
+            self, **changes, sources=dataclasses.replace(self.sources, **sources)
+        )
+
+    def wind_at(self, alt_m: float) -> tuple[float, float]:
+        """(east, north) wind velocity at an altitude, linear between reported levels."""
+        if not self.wind:
+            return (0.0, 0.0)
+        vel = [w.velocity_mps() for w in self.wind]
+        alts = [w.alt_m for w in self.wind]
+        if alt_m <= alts[0]:
+            return vel[0]
+        if alt_m >= alts[-1]:
+            return vel[-1]
+        for i in range(1, len(alts)):
+            if alt_m <= alts[i]:
+                t = (alt_m - alts[i - 1]) / (alts[i] - alts[i - 1])
+                return (
+                    vel[i - 1][0] + t * (vel[i][0] - vel[i - 1][0]),
+                    vel[i - 1][1] + t * (vel[i][1] - vel[i - 1][1]),
+                )
+        return vel[-1]
+
+    def summary(self) -> str:
+        """One line for logs and status lines."""
+        clouds = " ".join(
+            f"{lay.type.wire_name}:{lay.cover_oktas}/8@{lay.base_m:.0f}m" for lay in self.layers
+        )
+        wind = self.wind[0] if self.wind else None
+        wind_txt = f"{wind.dir_from_deg:03.0f}/{wind.speed_mps:.1f}mps" if wind else "calm"
+        return (
+            f"{self.time_utc:%Y-%m-%dT%H:%MZ} wind {wind_txt} vis {self.visibility_m:.0f}m "
+            f"clouds {clouds or 'none'}"
+        )
+
+
+def weather_to_dict(state: WeatherState) -> dict[str, Any]:
+    """The weather state as plain data, with the field names of the status/stream protocol."""
+    return {
+        "time_utc": format_time_utc(state.time_utc),
+        "observer": {
+            "lat_deg": state.observer.lat_deg,
+            "lon_deg": state.observer.lon_deg,
+            "alt_m": state.observer.alt_m,
+        },
+        "wind": [
+            {
+                "alt_m": w.alt_m,
+                "dir_deg": w.dir_from_deg,
+                "speed_mps": w.speed_mps,
+                "gust_mps": w.gust_mps,
+                "variable": w.variable,
+            }
+            for w in state.wind
+        ],
+        "visibility_m": state.visibility_m,
+        "temperature_c": state.temperature_c,
+        "dewpoint_c": state.dewpoint_c,
+        "qnh_hpa": state.qnh_hpa,
+        "present_weather": list(state.present_weather),
+        "layers": [
+            {
+                "cover_oktas": lay.cover_oktas,
+                "base_m": lay.base_m,
+                "top_m": lay.top_m,
+                "type": lay.type.wire_name,
+            }
+            for lay in state.layers
+        ],
+        "seed": state.seed,
+        "sources": {
+            f.name: getattr(state.sources, f.name).value for f in dataclasses.fields(Provenance)
+        },
+    }
+
+
+def format_time_utc(t: datetime) -> str:
+    """ISO 8601 with a Z suffix, seconds precision."""
+    return t.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def parse_time_utc(text: str) -> datetime:
+    """ISO 8601 date-time; a naive value is taken as UTC. Raises ValueError naming the text."""
+    try:
+        t = datetime.fromisoformat(text.strip().replace("Z", "+00:00").replace("z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"not an ISO 8601 time: {text!r}") from None
+    if t.tzinfo is None:
+        t = t.replace(tzinfo=UTC)
+    return t.astimezone(UTC)
+
+
+def _check_range(name: str, value: float, lo: float, hi: float) -> None:
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    if not math.isfinite(value) or not lo <= value <= hi:
+        raise ValueError(f"{name} = {value} is outside {lo}..{hi}")
