@@ -1,0 +1,1 @@
+"""The renderer: the only package that imports moderngl."""

@@ -1,0 +1,216 @@
+"""Draws the layers a host composites: the sky, the near sprites, and the 8 ring impostors.
+
+Every layer is RGBA8, premultiplied alpha, top row first. One Renderer owns one GL context
+and must be used from the thread that created it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.errors import RenderError
+from wxsky.render.context import create_context
+from wxsky.render.shaders import ShaderLibrary
+from wxsky.render.sprite_sheet import SHEET_CELLS, build_sheet
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
+from wxsky.scene.ring import RING_SIZE
+from wxsky.scene.sky import SkyParams
+
+log = logging.getLogger(__name__)
+
+SUN_RADIUS_DEG = 0.27
+# centre (3) + size + rotation + texture + rgba (4), float32
+_INSTANCE_FLOATS = 10
+_INSTANCE_FORMAT = "3f f f f 4f/i"
+_INSTANCE_ATTRS = ("in_centre", "in_size", "in_rotation", "in_texture", "in_rgba")
+
+
+@dataclass
+class _Target:
+    texture: moderngl.Texture
+    fbo: moderngl.Framebuffer
+
+    @property
+    def size(self) -> tuple[int, int]:
+        w, h = self.texture.size
+        return (int(w), int(h))
+
+    def release(self) -> None:
+        self.fbo.release()
+        self.texture.release()
+
+
+class Renderer:
+    """Owns the GL context and every GL object; `close()` releases them."""
+
+    def __init__(self, ring_texture_px: int = 256, ctx: moderngl.Context | None = None) -> None:
+        self._own_ctx = ctx is None
+        self.ctx = ctx if ctx is not None else create_context()
+        self._closed = False
+        self.ring_px = ring_texture_px
+        self.shaders = ShaderLibrary(self.ctx)
+        defines = {"SHEET_CELLS": str(SHEET_CELLS)}
+        self._sky_prog = self.shaders.program("sky.glsl")
+        self._sprite_prog = self.shaders.program("sprites.glsl", defines)
+        sheet = build_sheet()
+        self._sheet = self.ctx.texture((sheet.shape[1], sheet.shape[0]), 4, sheet.tobytes())
+        self._sheet.build_mipmaps(0, 4)  # 512 down to 32, as Wang's sheet
+        self._sheet.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self._sheet.repeat_x = self._sheet.repeat_y = False
+        corners = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype=np.float32)
+        self._corner_buf = self.ctx.buffer(corners.tobytes())
+        self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
+        self._sprite_vao = self._make_sprite_vao()
+        self._sky_vao = self.ctx.vertex_array(self._sky_prog, [])
+        self._targets: dict[str, _Target] = {}
+        self._check("initialising the renderer")
+
+    # -- public API -------------------------------------------------------------------
+
+    def render_frame(self, frame: FrameScene) -> None:
+        """Draw the sky and the near layer for the frame's camera."""
+        cam = frame.camera
+        self._draw_sky("sky", cam, frame.sky)
+        target = self._target("near", cam.width_px, cam.height_px)
+        self._draw_sprites(
+            target, frame.near, cam.position_m, cam.view_matrix(), cam.projection_matrix()
+        )
+        self._check("rendering a frame")
+
+    def render_ring(self, ring: RingScene, indices: range | list[int] | None = None) -> None:
+        """Draw ring impostors (all 8 unless given), each from the ring centre."""
+        geo = ring.geometry
+        for i in indices if indices is not None else range(RING_SIZE):
+            target = self._target(f"ring_{i}", self.ring_px, self.ring_px)
+            self._draw_sprites(
+                target,
+                ring.impostors[i],
+                geo.centre_m,
+                geo.view_matrix(i),
+                geo.projection_matrix(i),
+            )
+        self._check("rendering the impostor ring")
+
+    def layer_size(self, name: str) -> tuple[int, int]:
+        return self._targets[name].size
+
+    def read_into(self, name: str, buffer: memoryview) -> None:
+        """Copy a layer's pixels, top row first, into a writable buffer of w*h*4 bytes."""
+        self._targets[name].fbo.read_into(buffer, components=4, alignment=1)
+
+    def read(self, name: str) -> npt.NDArray[np.uint8]:
+        """A layer as a (H, W, 4) uint8 array."""
+        w, h = self.layer_size(name)
+        data = self._targets[name].fbo.read(components=4, alignment=1)
+        return np.frombuffer(data, np.uint8).reshape(h, w, 4).copy()
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for target in self._targets.values():
+            target.release()
+        self._targets.clear()
+        self._sprite_vao.release()
+        self._sky_vao.release()
+        self._instance_buf.release()
+        self._corner_buf.release()
+        self._sheet.release()
+        self.shaders.release()
+        if self._own_ctx:
+            self.ctx.release()
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- passes -----------------------------------------------------------------------
+
+    def _draw_sky(self, name: str, cam: Camera, sky: SkyParams) -> None:
+        target = self._target(name, cam.width_px, cam.height_px)
+        target.fbo.use()
+        self.ctx.disable(moderngl.BLEND)
+        right, up, fwd = cam.basis()
+        prog = self._sky_prog
+        prog["u_right"].value = tuple(right)
+        prog["u_up"].value = tuple(up)
+        prog["u_forward"].value = tuple(fwd)
+        prog["u_tan_half_fov"].value = (cam.tan_half_fov_x, cam.tan_half_fov_y)
+        prog["u_sun_dir"].value = sky.sun.direction_enu
+        prog["u_zenith"].value = sky.zenith_rgb
+        prog["u_horizon"].value = sky.horizon_rgb
+        prog["u_ground"].value = sky.ground_rgb
+        prog["u_sun_rgb"].value = sky.sun_rgb
+        prog["u_sun_cos_radius"].value = math.cos(math.radians(SUN_RADIUS_DEG))
+        self._sky_vao.render(moderngl.TRIANGLES, vertices=3)
+
+    def _draw_sprites(
+        self,
+        target: _Target,
+        draw: SpriteDraw,
+        eye_m: tuple[float, float, float],
+        view: npt.NDArray[np.float64],
+        proj: npt.NDArray[np.float64],
+    ) -> None:
+        target.fbo.use()
+        target.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        n = len(draw)
+        if n == 0:
+            return
+        s = draw.sprites
+        inst = np.empty((n, _INSTANCE_FLOATS), np.float32)
+        inst[:, 0:3] = s.centre_m - np.asarray(eye_m)
+        inst[:, 3] = s.size_m
+        inst[:, 4] = s.rotation_rad
+        inst[:, 5] = s.texture
+        inst[:, 6:10] = draw.rgba
+        data = inst.tobytes()
+        if len(data) > self._instance_buf.size:
+            self._instance_buf.orphan(len(data) * 2)
+        self._instance_buf.write(data)
+        prog = self._sprite_prog
+        # GLSL matrices are column-major: hand it the transpose of numpy's row-major layout.
+        prog["u_view_rot"].write(np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes())
+        prog["u_proj"].write(np.ascontiguousarray(proj.T, dtype=np.float32).tobytes())
+        prog["u_sheet"].value = 0
+        self._sheet.use(0)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+        self._sprite_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+        self.ctx.disable(moderngl.BLEND)
+
+    # -- plumbing ---------------------------------------------------------------------
+
+    def _make_sprite_vao(self) -> moderngl.VertexArray:
+        return self.ctx.vertex_array(
+            self._sprite_prog,
+            [
+                (self._corner_buf, "2f", "in_corner"),
+                (self._instance_buf, _INSTANCE_FORMAT, *_INSTANCE_ATTRS),
+            ],
+        )
+
+    def _target(self, name: str, width: int, height: int) -> _Target:
+        target = self._targets.get(name)
+        if target is not None and target.size == (width, height):
+            return target
+        if target is not None:
+            target.release()
+        tex = self.ctx.texture((width, height), 4)
+        target = _Target(tex, self.ctx.framebuffer(color_attachments=[tex]))
+        self._targets[name] = target
+        return target
+
+    def _check(self, what: str) -> None:
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            raise RenderError(f"GL error while {what}: {err}")

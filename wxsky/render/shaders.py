@@ -1,0 +1,57 @@
+"""Shader programs from `.glsl` package files: one file per program, `#include` and injected
+`#define`s, each program compiled once per context."""
+
+from __future__ import annotations
+
+import re
+from importlib import resources
+
+import moderngl
+
+from wxsky.errors import RenderError
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+_STAGES = {"vertex_shader": "VERTEX_SHADER", "fragment_shader": "FRAGMENT_SHADER"}
+
+
+def shader_source(name: str, _depth: int = 0) -> str:
+    """The text of `shaders/<name>` with its includes expanded."""
+    if _depth > 8:
+        raise RenderError(f"shader include nesting too deep at {name}")
+    try:
+        text = resources.files("wxsky.render").joinpath("shaders", name).read_text("utf-8")
+    except FileNotFoundError:
+        raise RenderError(f"shader file not found: shaders/{name}") from None
+    return _INCLUDE.sub(lambda m: shader_source(m.group(1), _depth + 1), text)
+
+
+class ShaderLibrary:
+    """Compiles programs on first use and keeps them for the context's life."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self._ctx = ctx
+        self._programs: dict[tuple[str, tuple[tuple[str, str], ...]], moderngl.Program] = {}
+
+    def program(self, name: str, defines: dict[str, str] | None = None) -> moderngl.Program:
+        key = (name, tuple(sorted((defines or {}).items())))
+        prog = self._programs.get(key)
+        if prog is None:
+            prog = self._compile(name, defines or {})
+            self._programs[key] = prog
+        return prog
+
+    def _compile(self, name: str, defines: dict[str, str]) -> moderngl.Program:
+        body = shader_source(name)
+        header = "#version 330 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
+        stages = {
+            arg: f"{header}#define {macro} 1\n#line 1\n{body}" for arg, macro in _STAGES.items()
+        }
+        try:
+            return self._ctx.program(**stages)
+        except moderngl.Error as exc:
+            raise RenderError(f"shaders/{name}: {exc}") from exc
+
+    def release(self) -> None:
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()

@@ -1,0 +1,115 @@
+"""Cameras and their matrices, in the scene's local frame.
+
+The frame is east-north-up (ENU) in metres, centred on the weather observer's latitude and
+longitude at mean sea level, so z is altitude MSL. Heading 0 looks north and grows clockwise,
+pitch is positive nose up, roll positive right wing down. Matrices follow OpenGL (column
+vectors, camera looking down -z), stored row-major as numpy (4, 4) float64.
+
+Images are produced top row first: every projection here flips y, so that reading a
+framebuffer back gives rows in the order a host uploads them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+Vec3 = tuple[float, float, float]
+Mat4 = npt.NDArray[np.float64]  # (4, 4)
+
+NEAR_M = 2.0
+FAR_M = 200_000.0
+
+
+@dataclass(frozen=True)
+class Camera:
+    position_m: Vec3
+    heading_deg: float = 0.0
+    pitch_deg: float = 0.0
+    roll_deg: float = 0.0
+    fov_deg: float = 60.0  # horizontal
+    width_px: int = 960
+    height_px: int = 540
+
+    def __post_init__(self) -> None:
+        if not 1.0 <= self.fov_deg <= 170.0:
+            raise ValueError(f"camera fov_deg must be in 1..170, got {self.fov_deg}")
+        if not (1 <= self.width_px <= 8192 and 1 <= self.height_px <= 8192):
+            raise ValueError(f"camera viewport {self.width_px}x{self.height_px} is outside 1..8192")
+        if not -90.0 <= self.pitch_deg <= 90.0:
+            raise ValueError(f"camera pitch_deg must be in -90..90, got {self.pitch_deg}")
+        if not all(math.isfinite(v) for v in (*self.position_m, self.heading_deg, self.roll_deg)):
+            raise ValueError("camera position and angles must be finite")
+
+    def basis(self) -> tuple[npt.NDArray[np.float64], ...]:
+        """(right, up, forward) unit vectors in the ENU frame."""
+        return camera_basis(self.heading_deg, self.pitch_deg, self.roll_deg)
+
+    @property
+    def tan_half_fov_x(self) -> float:
+        return math.tan(math.radians(self.fov_deg) / 2.0)
+
+    @property
+    def tan_half_fov_y(self) -> float:
+        return self.tan_half_fov_x * self.height_px / self.width_px
+
+    def view_matrix(self) -> Mat4:
+        right, up, fwd = self.basis()
+        return view_from_basis(np.asarray(self.position_m, dtype=np.float64), right, up, fwd)
+
+    def projection_matrix(self) -> Mat4:
+        tx, ty = self.tan_half_fov_x, self.tan_half_fov_y
+        return frustum(-tx * NEAR_M, tx * NEAR_M, -ty * NEAR_M, ty * NEAR_M, NEAR_M, FAR_M)
+
+    def view_projection(self) -> Mat4:
+        return self.projection_matrix() @ self.view_matrix()
+
+    def pixel_rays(self) -> npt.NDArray[np.float64]:
+        """(H, W, 3) unit view rays through each pixel centre, top row first."""
+        right, up, fwd = self.basis()
+        xs = ((np.arange(self.width_px) + 0.5) / self.width_px * 2.0 - 1.0) * self.tan_half_fov_x
+        ys = (1.0 - (np.arange(self.height_px) + 0.5) / self.height_px * 2.0) * self.tan_half_fov_y
+        rays = fwd + xs[None, :, None] * right + ys[:, None, None] * up
+        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+        return rays
+
+
+def camera_basis(
+    heading_deg: float, pitch_deg: float, roll_deg: float
+) -> tuple[npt.NDArray[np.float64], ...]:
+    h, p, r = (math.radians(v) for v in (heading_deg, pitch_deg, roll_deg))
+    fwd = np.array([math.sin(h) * math.cos(p), math.cos(h) * math.cos(p), math.sin(p)])
+    right0 = np.array([math.cos(h), -math.sin(h), 0.0])
+    up0 = np.cross(right0, fwd)
+    right = right0 * math.cos(r) - up0 * math.sin(r)
+    up = up0 * math.cos(r) + right0 * math.sin(r)
+    return right, up, fwd
+
+
+def view_from_basis(
+    eye: npt.NDArray[np.float64],
+    right: npt.NDArray[np.float64],
+    up: npt.NDArray[np.float64],
+    fwd: npt.NDArray[np.float64],
+) -> Mat4:
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = right, up, -fwd
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def frustum(left: float, right: float, bottom: float, top: float, near: float, far: float) -> Mat4:
+    """glFrustum with y flipped, so row 0 of the framebuffer is the image's top row."""
+    m = np.zeros((4, 4))
+    m[0, 0] = 2 * near / (right - left)
+    m[0, 2] = (right + left) / (right - left)
+    m[1, 1] = 2 * near / (top - bottom)
+    m[1, 2] = (top + bottom) / (top - bottom)
+    m[2, 2] = -(far + near) / (far - near)
+    m[2, 3] = -2 * far * near / (far - near)
+    m[3, 2] = -1.0
+    m[1, :] *= -1.0
+    return m

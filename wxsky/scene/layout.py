@@ -1,0 +1,163 @@
+"""The scene stage: weather state + camera -> the sprites and ring the renderer draws.
+
+Blocks whose nearest point lies inside the ring radius (measured from the ring centre) are
+"near" and drawn as sprites every frame from the host camera; the rest, out to the maximum
+range, go into the impostor ring. Each layer drifts with the wind at its altitude: its blocks
+live in a frame moved by the integrated wind, so the clouds travel but never change shape.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.camera import Camera
+from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds
+from wxsky.scene.ring import RingGeometry, bin_far_sprites
+from wxsky.scene.shading import sprite_colours
+from wxsky.scene.sky import SkyParams
+from wxsky.weather.state import WeatherState
+
+Drift = tuple[tuple[float, float], ...]  # per cloud layer: (east, north) offset in metres
+
+
+@dataclass(frozen=True)
+class SceneSettings:
+    ring_radius_m: float = 8000.0
+    max_range_m: float = 40000.0
+    ring_texture_px: int = 256
+
+
+@dataclass(frozen=True)
+class SpriteDraw:
+    """Sprites ready to draw from one eye: sorted back to front, shaded."""
+
+    sprites: SpriteBatch
+    rgba: npt.NDArray[np.float32]  # (N, 4) straight alpha
+
+    def __len__(self) -> int:
+        return len(self.sprites)
+
+
+@dataclass(frozen=True)
+class RingScene:
+    geometry: RingGeometry
+    impostors: tuple[SpriteDraw, ...]  # (8,)
+    drift: Drift  # the drift the ring was built with
+
+
+@dataclass(frozen=True)
+class FrameScene:
+    camera: Camera
+    sky: SkyParams
+    near: SpriteDraw
+
+
+def zero_drift(state: WeatherState) -> Drift:
+    return tuple((0.0, 0.0) for _ in state.layers)
+
+
+def advance_drift(state: WeatherState, drift: Drift, dt_s: float) -> Drift:
+    """Move every layer by the wind at its mid altitude for dt_s simulated seconds."""
+    if len(drift) != len(state.layers):
+        drift = zero_drift(state)
+    out = []
+    for (dx, dy), layer in zip(drift, state.layers, strict=True):
+        ve, vn = state.wind_at(0.5 * (layer.base_m + layer.top_m))
+        out.append((dx + ve * dt_s, dy + vn * dt_s))
+    return tuple(out)
+
+
+def gather_blocks(
+    state: WeatherState,
+    drift: Drift,
+    centre_m: tuple[float, float, float],
+    min_range_m: float,
+    max_range_m: float,
+) -> SpriteBatch:
+    """Sprites of every block whose nearest point to the centre lies in [min, max) metres."""
+    if len(drift) != len(state.layers):
+        drift = zero_drift(state)
+    batches: list[SpriteBatch] = []
+    for li, (layer, (dx, dy)) in enumerate(zip(state.layers, drift, strict=True)):
+        if layer.cover_oktas == 0:
+            continue
+        qx, qy = centre_m[0] - dx, centre_m[1] - dy
+        bx0 = math.floor((qx - max_range_m) / BLOCK_SIZE_M)
+        bx1 = math.floor((qx + max_range_m) / BLOCK_SIZE_M)
+        by0 = math.floor((qy - max_range_m) / BLOCK_SIZE_M)
+        by1 = math.floor((qy + max_range_m) / BLOCK_SIZE_M)
+        for by in range(by0, by1 + 1):
+            for bx in range(bx0, bx1 + 1):
+                near_x = min(max(qx, bx * BLOCK_SIZE_M), (bx + 1) * BLOCK_SIZE_M)
+                near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
+                d = math.hypot(near_x - qx, near_y - qy)
+                if min_range_m <= d < max_range_m:
+                    block = block_clouds(bx, by, li, layer, state.seed)
+                    if len(block):
+                        batches.append(block.shifted((dx, dy, 0.0)))
+    return SpriteBatch.concat(batches)
+
+
+def sort_back_to_front(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> SpriteBatch:
+    d2 = np.sum((batch.centre_m - np.asarray(eye_m)) ** 2, axis=1)
+    # Stable sort on distance so equal distances keep their generation order on every machine.
+    return batch.take(np.argsort(-d2, kind="stable"))
+
+
+def fade_by_range(
+    rgba: npt.NDArray[np.float32],
+    batch: SpriteBatch,
+    eye_m: tuple[float, float, float],
+    sky: SkyParams,
+    max_range_m: float,
+) -> npt.NDArray[np.float32]:
+    """Aerial perspective: distant clouds take the horizon colour and fade out before the
+    edge of the generated range, so the range limit never shows as a hard line."""
+    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1)
+    haze = (1.0 - np.exp(-dist / sky.haze_m)).astype(np.float32)
+    out = rgba.copy()
+    out[:, :3] = rgba[:, :3] * (1.0 - haze[:, None]) + np.asarray(sky.horizon_rgb) * haze[:, None]
+    edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)
+    out[:, 3] *= (edge * edge * (3.0 - 2.0 * edge)).astype(np.float32)
+    return out
+
+
+def shade_for_eye(
+    batch: SpriteBatch, eye_m: tuple[float, float, float], sky: SkyParams, max_range_m: float
+) -> SpriteDraw:
+    ordered = sort_back_to_front(batch, eye_m)
+    rgba = fade_by_range(sprite_colours(ordered, sky), ordered, eye_m, sky, max_range_m)
+    return SpriteDraw(ordered, rgba)
+
+
+def build_ring(
+    state: WeatherState,
+    drift: Drift,
+    centre_m: tuple[float, float, float],
+    sky: SkyParams,
+    settings: SceneSettings,
+) -> RingScene:
+    far = gather_blocks(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m)
+    geometry, bins = bin_far_sprites(far, centre_m, settings.ring_radius_m)
+    impostors = tuple(shade_for_eye(b, centre_m, sky, settings.max_range_m) for b in bins)
+    return RingScene(geometry=geometry, impostors=impostors, drift=drift)
+
+
+def build_frame(
+    state: WeatherState,
+    drift: Drift,
+    camera: Camera,
+    ring_centre_m: tuple[float, float, float],
+    sky: SkyParams,
+    settings: SceneSettings,
+) -> FrameScene:
+    near = gather_blocks(state, drift, ring_centre_m, 0.0, settings.ring_radius_m)
+    return FrameScene(
+        camera=camera,
+        sky=sky,
+        near=shade_for_eye(near, camera.position_m, sky, settings.max_range_m),
+    )

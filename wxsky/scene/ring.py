@@ -1,0 +1,125 @@
+"""Wang's octagonal impostor ring: 8 views of 45° around a fixed centre.
+
+Each impostor is a vertical quad at the ring radius facing the centre, rendered through an
+off-axis frustum whose apex is the ring centre and whose window is the quad itself, so the
+quad shows exactly what lies behind it as seen from the centre. The window is fitted
+vertically to the clouds it holds (Wang translates the impostor up or down to follow them).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.camera import FAR_M, NEAR_M, Mat4, frustum, view_from_basis
+from wxsky.scene.clouds import SpriteBatch
+
+RING_SIZE = 8
+HALF_ANGLE_RAD = math.pi / RING_SIZE  # 22.5°
+# Regenerate after the camera leaves this share of the radius (Wang: 15 % and 2 %).
+MOVE_HORIZONTAL_FRAC = 0.15
+MOVE_VERTICAL_FRAC = 0.02
+
+
+@dataclass(frozen=True)
+class RingGeometry:
+    centre_m: tuple[float, float, float]
+    radius_m: float
+    bottom_m: tuple[float, ...]  # (8,) window bottom relative to the centre's altitude
+    top_m: tuple[float, ...]  # (8,) window top relative to the centre's altitude
+
+    def heading_deg(self, i: int) -> float:
+        return i * 360.0 / RING_SIZE
+
+    def axes(self, i: int) -> tuple[npt.NDArray[np.float64], ...]:
+        """(right, up, forward) of impostor i."""
+        h = math.radians(self.heading_deg(i))
+        fwd = np.array([math.sin(h), math.cos(h), 0.0])
+        right = np.array([math.cos(h), -math.sin(h), 0.0])
+        return right, np.array([0.0, 0.0, 1.0]), fwd
+
+    @property
+    def half_width_m(self) -> float:
+        return self.radius_m * math.tan(HALF_ANGLE_RAD)
+
+    def corners_m(self) -> npt.NDArray[np.float64]:
+        """(8, 4, 3) world corners of each quad: top-left, top-right, bottom-right, bottom-left
+        as seen from the centre (texture row 0 is the quad's top edge)."""
+        out = np.zeros((RING_SIZE, 4, 3))
+        c = np.asarray(self.centre_m)
+        w = self.half_width_m
+        for i in range(RING_SIZE):
+            right, up, fwd = self.axes(i)
+            mid = c + fwd * self.radius_m
+            top, bottom = self.top_m[i], self.bottom_m[i]
+            out[i] = [
+                mid - right * w + up * top,
+                mid + right * w + up * top,
+                mid + right * w + up * bottom,
+                mid - right * w + up * bottom,
+            ]
+        return out
+
+    def view_matrix(self, i: int) -> Mat4:
+        right, up, fwd = self.axes(i)
+        return view_from_basis(np.asarray(self.centre_m), right, up, fwd)
+
+    def projection_matrix(self, i: int) -> Mat4:
+        k = NEAR_M / self.radius_m
+        w = self.half_width_m
+        return frustum(-w * k, w * k, self.bottom_m[i] * k, self.top_m[i] * k, NEAR_M, FAR_M)
+
+    def needs_regeneration(self, eye_m: tuple[float, float, float]) -> bool:
+        dx, dy = eye_m[0] - self.centre_m[0], eye_m[1] - self.centre_m[1]
+        dz = eye_m[2] - self.centre_m[2]
+        return (
+            math.hypot(dx, dy) > MOVE_HORIZONTAL_FRAC * self.radius_m
+            or abs(dz) > MOVE_VERTICAL_FRAC * self.radius_m
+        )
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "centre_m": list(self.centre_m),
+            "radius_m": self.radius_m,
+            "quads_m": self.corners_m().tolist(),
+        }
+
+
+def bin_far_sprites(
+    far: SpriteBatch, centre_m: tuple[float, float, float], radius_m: float
+) -> tuple[RingGeometry, tuple[SpriteBatch, ...]]:
+    """Assign far sprites to the impostors whose 45° wedge they touch, and fit each window."""
+    c = np.asarray(centre_m)
+    rel = far.centre_m - c
+    azimuth = np.arctan2(rel[:, 0], rel[:, 1])  # from north, clockwise
+    dist_h = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), 1.0)
+    half_extent = np.arctan(0.75 * far.size_m / dist_h)  # angular half-size, rotation included
+    bins: list[SpriteBatch] = []
+    bottoms: list[float] = []
+    tops: list[float] = []
+    default_half = radius_m * math.tan(HALF_ANGLE_RAD)
+    for i in range(RING_SIZE):
+        axis_az = i * 2.0 * HALF_ANGLE_RAD
+        delta = np.abs((azimuth - axis_az + math.pi) % (2.0 * math.pi) - math.pi)
+        idx = np.nonzero(delta <= HALF_ANGLE_RAD + half_extent)[0]
+        batch = far.take(idx)
+        bins.append(batch)
+        if len(idx) == 0:
+            bottoms.append(-default_half)
+            tops.append(default_half)
+            continue
+        along = np.maximum(rel[idx, 0] * math.sin(axis_az) + rel[idx, 1] * math.cos(axis_az), 1.0)
+        scale = radius_m / along
+        reach = 0.75 * batch.size_m
+        bottoms.append(float(np.min((rel[idx, 2] - reach) * scale)))
+        tops.append(float(np.max((rel[idx, 2] + reach) * scale)))
+    geometry = RingGeometry(
+        centre_m=(float(c[0]), float(c[1]), float(c[2])),
+        radius_m=radius_m,
+        bottom_m=tuple(bottoms),
+        top_m=tuple(tops),
+    )
+    return geometry, tuple(bins)
