@@ -1,0 +1,234 @@
+"""The daemon config: defaults, the documented default file, and every kind of bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from wxsky.config import (
+    BLOCK_SIZE_M,
+    CameraSection,
+    DaemonConfig,
+    config_to_toml_dict,
+    load_config,
+)
+from wxsky.errors import ConfigError
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_FILE = REPO / "configs" / "wxsky.toml"
+
+
+def write(tmp_path: Path, text: str, name: str = "x.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def load_error(tmp_path: Path, text: str) -> str:
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: "), message
+    return message
+
+
+def to_toml(data: dict[str, dict[str, Any]]) -> str:
+    """Just enough of a TOML writer for config_to_toml_dict's output."""
+    lines = []
+    for section, table in data.items():
+        lines.append(f"[{section}]")
+        lines.extend(f"{key} = {json.dumps(value)}" for key, value in table.items())
+    return "\n".join(lines) + "\n"
+
+
+def test_defaults() -> None:
+    cfg = load_config(None)
+    assert cfg == DaemonConfig()
+    assert cfg.daemon.tick_hz == 30.0
+    assert cfg.daemon.status_interval_s == 5.0
+    assert cfg.daemon.preset == "fair-cumulus"
+    assert cfg.daemon.log_level == "INFO"
+    assert cfg.daemon.shutdown_timeout_s == 1.5
+    assert cfg.camera == CameraSection(0.0, 12.0, 0.0, 60.0, 960, 540, 2.0)
+    assert cfg.scene.ring_radius_m == 8000.0
+    assert cfg.scene.max_range_m == 40000.0
+    assert cfg.scene.ring_texture_px == 256
+    assert cfg.scene.block_size_m == BLOCK_SIZE_M == 4000.0
+    assert cfg.clock.rate == 1.0
+    assert cfg.output.control == ""
+    assert cfg.output.shm_name == "wxsky"
+    assert (cfg.output.max_width, cfg.output.max_height) == (1920, 1080)
+    assert cfg.preview.interval_s == 3.0
+    assert cfg.presets.dirs == ()
+
+
+def test_sections_are_frozen() -> None:
+    cfg = load_config(None)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.camera.fov_deg = 90.0  # type: ignore[misc]
+
+
+def test_default_file_equals_defaults() -> None:
+    assert load_config(DEFAULT_FILE) == load_config(None)
+
+
+def test_default_file_documents_every_key() -> None:
+    raw = tomllib.loads(DEFAULT_FILE.read_text(encoding="utf-8"))
+    expected = config_to_toml_dict(load_config(None))
+    assert {s: set(t) for s, t in raw.items()} == {s: set(t) for s, t in expected.items()}
+    lines = DEFAULT_FILE.read_text(encoding="utf-8").splitlines()
+    for i, line in enumerate(lines):
+        if re.match(r"[a-z_]+ = ", line):
+            assert lines[i - 1].startswith("#"), f"no comment above line {i + 1}: {line}"
+
+
+def test_empty_file_is_defaults(tmp_path: Path) -> None:
+    assert load_config(write(tmp_path, "")) == load_config(None)
+
+
+def test_values_are_read_and_normalised(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        """
+        [daemon]
+        tick_hz = 60
+        log_level = "debug"
+        preset = "thunderstorm"
+        [camera]
+        fov_deg = 90
+        width = 1280
+        height = 720
+        [clock]
+        rate = 0
+        """,
+    )
+    cfg = load_config(path)
+    assert cfg.daemon.tick_hz == 60.0 and isinstance(cfg.daemon.tick_hz, float)
+    assert cfg.daemon.log_level == "DEBUG"
+    assert cfg.daemon.preset == "thunderstorm"
+    assert (cfg.camera.fov_deg, cfg.camera.width, cfg.camera.height) == (90.0, 1280, 720)
+    assert cfg.clock.rate == 0.0
+    assert cfg.camera.pitch_deg == 12.0  # untouched keys keep their defaults
+
+
+def test_preset_dirs_are_relative_to_the_config_file(tmp_path: Path) -> None:
+    path = write(tmp_path, '[presets]\ndirs = ["mine", "/abs/presets"]\n')
+    cfg = load_config(path)
+    assert cfg.presets.dirs == (tmp_path / "mine", Path("/abs/presets"))
+
+
+def test_round_trip_through_toml_dict(tmp_path: Path) -> None:
+    original = load_config(
+        write(tmp_path, '[camera]\nfov_deg = 75.5\n[presets]\ndirs = ["/p"]\n', "a.toml")
+    )
+    data = config_to_toml_dict(original)
+    assert data["presets"]["dirs"] == ["/p"]
+    assert load_config(write(tmp_path, to_toml(data), "b.toml")) == original
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("fovv = 1\n", "'fovv'"),
+        ("[camra]\nfov_deg = 1\n", "'camra'"),
+        ("[camera]\nfovv = 1\n", "'camera.fovv'"),
+        ("[daemon]\ntick = 1\n", "'daemon.tick'"),
+    ],
+)
+def test_unknown_key_is_named(tmp_path: Path, text: str, key: str) -> None:
+    assert f"unknown key {key}" in load_error(tmp_path, text)
+
+
+def test_unknown_key_message_format(tmp_path: Path) -> None:
+    path = write(tmp_path, "[camera]\nfovv = 1\n")
+    with pytest.raises(ConfigError, match=re.escape(f"{path}: unknown key 'camera.fovv'")):
+        load_config(path)
+
+
+def test_wrong_type(tmp_path: Path) -> None:
+    message = load_error(tmp_path, '[camera]\nfov_deg = "wide"\n')
+    assert message.endswith("camera.fov_deg must be a number in 1..170, got 'wide'")
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("[daemon]\ntick_hz = true\n", "daemon.tick_hz must be a number in 1..240, got True"),
+        ("[camera]\nwidth = 960.5\n", "camera.width must be an integer in 16..16384"),
+        ('[daemon]\nlog_level = "LOUD"\n', "daemon.log_level must be one of DEBUG, INFO"),
+        ("[daemon]\npreset = 3\n", "daemon.preset must be a string, got 3"),
+        ('[presets]\ndirs = "x"\n', "presets.dirs must be a list"),
+        ("[presets]\ndirs = [1]\n", "presets.dirs must be a list"),
+        ("camera = 3\n", "camera must be a table"),
+    ],
+)
+def test_wrong_types(tmp_path: Path, text: str, fragment: str) -> None:
+    assert fragment in load_error(tmp_path, text)
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("[daemon]\ntick_hz = 0.5\n", "daemon.tick_hz must be a number in 1..240, got 0.5"),
+        ("[daemon]\ntick_hz = 241\n", "daemon.tick_hz must be a number in 1..240, got 241"),
+        ("[daemon]\ntick_hz = nan\n", "daemon.tick_hz must be a number in 1..240, got nan"),
+        ("[camera]\nfov_deg = 171\n", "camera.fov_deg must be a number in 1..170, got 171"),
+        ("[camera]\npitch_deg = -91\n", "camera.pitch_deg"),
+        ("[clock]\nrate = -1\n", "clock.rate must be a number in 0..10000, got -1"),
+        ("[output]\nmax_width = 8\n", "output.max_width must be an integer in 16..16384"),
+        ('[daemon]\npreset = "../etc"\n', "daemon.preset must be lowercase letters"),
+        ('[output]\nshm_name = "a/b"\n', "output.shm_name must be"),
+        ("[camera]\nwidth = 2000\n", "camera.width 2000 exceeds output.max_width 1920"),
+        (
+            "[scene]\nring_radius_m = 50000\n",
+            "scene.max_range_m 40000 must be beyond scene.ring_radius_m 50000",
+        ),
+    ],
+)
+def test_out_of_range(tmp_path: Path, text: str, fragment: str) -> None:
+    assert fragment in load_error(tmp_path, text)
+
+
+def test_block_size_is_fixed(tmp_path: Path) -> None:
+    message = load_error(tmp_path, "[scene]\nblock_size_m = 2000.0\n")
+    assert "scene.block_size_m is fixed at 4000" in message
+    assert "4 km blocks by design" in message
+    assert load_config(write(tmp_path, "[scene]\nblock_size_m = 4000\n", "ok.toml")) == (
+        load_config(None)
+    )
+
+
+def test_malformed_toml_reports_line(tmp_path: Path) -> None:
+    message = load_error(tmp_path, "[daemon]\ntick_hz = 30\nlog_level = INFO\n")
+    assert "invalid TOML" in message
+    assert "line 3" in message
+
+
+def test_not_utf8(tmp_path: Path) -> None:
+    path = tmp_path / "x.toml"
+    path.write_bytes(b"[daemon]\n\xff\xfe\x00garbage\n")
+    with pytest.raises(ConfigError, match=r"not UTF-8 text .*line 2"):
+        load_config(path)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    path = tmp_path / "nope.toml"
+    with pytest.raises(ConfigError, match=re.escape(f"{path}: no such file")):
+        load_config(path)
+
+
+def test_directory_instead_of_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="is a directory"):
+        load_config(tmp_path)
+
+
+def test_sections_validate_when_built_directly() -> None:
+    with pytest.raises(ValueError, match=re.escape("camera.fov_deg must be a number in 1..170")):
+        CameraSection(fov_deg=0.0)

@@ -1,0 +1,306 @@
+"""The daemon config: a TOML file read into frozen dataclasses, one per section, in SI units.
+
+Every key is optional and has a default; unknown keys, wrong types and out-of-range values are
+errors naming the file and the dotted key, because a silently ignored typo in a config is worse
+than a daemon that refuses to start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import re
+import tomllib
+import typing
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, TypeVar
+
+from wxsky.errors import ConfigError, WxskyError
+
+# Shared with wxsky.presets; it lives here because presets import this module, not the reverse.
+PRESET_NAME_PATTERN = r"[a-z0-9-]+"
+
+# The scene generator tiles the cloud field in blocks of this size; noise frequencies, seeds and
+# the impostor ring's texel density are all tuned to it, so it is a constant, not a setting.
+BLOCK_SIZE_M = 4000.0
+
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
+
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True)
+class _Rule:
+    """What a config value may be, beyond its type."""
+
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple[str, ...] = ()  # matched case-insensitively, stored as spelled here
+    pattern: str | None = None  # a regular expression the whole string must match
+    pattern_desc: str = ""  # the pattern in words, for the error message
+    fixed_reason: str = ""  # non-empty: only the default is accepted, and this says why
+
+
+def _opt(default: _T, rule: _Rule | None = None) -> _T:
+    return field(default=default, metadata={"rule": rule or _Rule()})
+
+
+class _Section:
+    """Validates and normalises every field on construction, so that code building a section
+    directly (tests, `dataclasses.replace`) gets the same checks as the file loader."""
+
+    SECTION: ClassVar[str]
+
+    def __post_init__(self) -> None:
+        hints = typing.get_type_hints(type(self))
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            key = f"{self.SECTION}.{f.name}"
+            rule: _Rule = f.metadata["rule"]
+            value = _coerce(key, hints[f.name], getattr(self, f.name), rule)
+            default: Any = f.default
+            if rule.fixed_reason and value != default:
+                raise ValueError(
+                    f"{key} is fixed at {_fmt(default)}: {rule.fixed_reason}, got {_fmt(value)}"
+                )
+            object.__setattr__(self, f.name, value)
+
+
+@dataclass(frozen=True)
+class DaemonSection(_Section):
+    SECTION: ClassVar[str] = "daemon"
+
+    tick_hz: float = _opt(30.0, _Rule(1.0, 240.0))
+    status_interval_s: float = _opt(5.0, _Rule(0.1, 3600.0))
+    preset: str = _opt(
+        "fair-cumulus",
+        _Rule(pattern=PRESET_NAME_PATTERN, pattern_desc="lowercase letters, digits and '-'"),
+    )
+    log_level: str = _opt("INFO", _Rule(choices=LOG_LEVELS))
+    shutdown_timeout_s: float = _opt(1.5, _Rule(0.0, 60.0))
+
+
+@dataclass(frozen=True)
+class CameraSection(_Section):
+    SECTION: ClassVar[str] = "camera"
+
+    heading_deg: float = _opt(0.0, _Rule(0.0, 360.0))
+    pitch_deg: float = _opt(12.0, _Rule(-90.0, 90.0))
+    roll_deg: float = _opt(0.0, _Rule(-180.0, 180.0))
+    fov_deg: float = _opt(60.0, _Rule(1.0, 170.0))  # horizontal
+    width: int = _opt(960, _Rule(16, 16384))
+    height: int = _opt(540, _Rule(16, 16384))
+    alt_agl_m: float = _opt(2.0, _Rule(0.0, 20_000.0))  # above the observer's altitude
+
+
+@dataclass(frozen=True)
+class SceneSection(_Section):
+    SECTION: ClassVar[str] = "scene"
+
+    ring_radius_m: float = _opt(8000.0, _Rule(100.0, 200_000.0))
+    max_range_m: float = _opt(40_000.0, _Rule(1000.0, 500_000.0))
+    ring_texture_px: int = _opt(256, _Rule(16, 4096))
+    block_size_m: float = _opt(
+        BLOCK_SIZE_M,
+        _Rule(fixed_reason="the cloud field is generated in 4 km blocks by design"),
+    )
+
+
+@dataclass(frozen=True)
+class ClockSection(_Section):
+    SECTION: ClassVar[str] = "clock"
+
+    rate: float = _opt(1.0, _Rule(0.0, 10_000.0))  # simulation seconds per wall second
+
+
+@dataclass(frozen=True)
+class OutputSection(_Section):
+    SECTION: ClassVar[str] = "output"
+
+    control: str = _opt("")  # empty: the default unix socket
+    shm_name: str = _opt(
+        "wxsky",
+        _Rule(
+            pattern=r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}",
+            pattern_desc="1-64 letters, digits, '_', '.' or '-', starting with a letter or digit",
+        ),
+    )
+    max_width: int = _opt(1920, _Rule(16, 16384))
+    max_height: int = _opt(1080, _Rule(16, 16384))
+
+
+@dataclass(frozen=True)
+class PreviewSection(_Section):
+    SECTION: ClassVar[str] = "preview"
+
+    interval_s: float = _opt(3.0, _Rule(0.1, 3600.0))
+
+
+@dataclass(frozen=True)
+class PresetsSection(_Section):
+    SECTION: ClassVar[str] = "presets"
+
+    dirs: tuple[Path, ...] = _opt(())  # searched before the built-in preset directories
+
+
+@dataclass(frozen=True)
+class DaemonConfig:
+    daemon: DaemonSection = field(default_factory=DaemonSection)
+    camera: CameraSection = field(default_factory=CameraSection)
+    scene: SceneSection = field(default_factory=SceneSection)
+    clock: ClockSection = field(default_factory=ClockSection)
+    output: OutputSection = field(default_factory=OutputSection)
+    preview: PreviewSection = field(default_factory=PreviewSection)
+    presets: PresetsSection = field(default_factory=PresetsSection)
+
+    def __post_init__(self) -> None:
+        cam, out, scene = self.camera, self.output, self.scene
+        if cam.width > out.max_width:
+            raise ValueError(f"camera.width {cam.width} exceeds output.max_width {out.max_width}")
+        if cam.height > out.max_height:
+            raise ValueError(
+                f"camera.height {cam.height} exceeds output.max_height {out.max_height}"
+            )
+        if scene.max_range_m <= scene.ring_radius_m:
+            raise ValueError(
+                f"scene.max_range_m {_fmt(scene.max_range_m)} must be beyond "
+                f"scene.ring_radius_m {_fmt(scene.ring_radius_m)}"
+            )
+
+
+def load_config(path: Path | None) -> DaemonConfig:
+    """The config in `path`, or the defaults for None. Raises ConfigError naming file and key."""
+    if path is None:
+        return DaemonConfig()
+    path = Path(path)
+    data = read_toml_file(path, ConfigError)
+    try:
+        return _config_from_dict(data, path.parent)
+    except ValueError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def config_to_toml_dict(cfg: DaemonConfig) -> dict[str, dict[str, Any]]:
+    """The config as TOML-ready plain data, `{section: {key: value}}`; loading it back gives
+    an equal config."""
+    out: dict[str, dict[str, Any]] = {}
+    for sf in dataclasses.fields(cfg):
+        section = getattr(cfg, sf.name)
+        out[sf.name] = {
+            f.name: _to_toml_value(getattr(section, f.name)) for f in dataclasses.fields(section)
+        }
+    return out
+
+
+def read_toml_file(path: Path, error: type[WxskyError]) -> dict[str, Any]:
+    """A TOML file's top-level table; any failure is an `error` whose message starts with the
+    path (and, for syntax errors, carries tomllib's line and column)."""
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise error(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise error(f"{path}: is a directory, not a file") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise error(f"{path}: not UTF-8 text (bad byte at line {line})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        # tomllib gives no line for errors at the end of the input, the usual symptom of a
+        # truncated file; the last line is where the reader should look.
+        if message.endswith("(at end of document)"):
+            message = f"{message[:-1]}, line {text.count(chr(10)) + 1})"
+        raise error(f"{path}: invalid TOML: {message}") from None
+
+
+def unknown_key_message(dotted: str, known: Iterable[str]) -> str:
+    """The message for an unknown dotted key, naming the closest known key when one is likely."""
+    prefix, _, leaf = dotted.rpartition(".")
+    close = difflib.get_close_matches(leaf, list(known), n=1)
+    if not close:
+        return f"unknown key {dotted!r}"
+    suggestion = f"{prefix}.{close[0]}" if prefix else close[0]
+    return f"unknown key {dotted!r} (did you mean {suggestion!r}?)"
+
+
+def _config_from_dict(data: dict[str, Any], base_dir: Path) -> DaemonConfig:
+    section_types = typing.get_type_hints(DaemonConfig)
+    sections: dict[str, Any] = {}
+    for name, table in data.items():
+        if name not in section_types:
+            raise ValueError(unknown_key_message(name, section_types))
+        if not isinstance(table, dict):
+            raise ValueError(f"{name} must be a table ([{name}]), got {table!r}")
+        cls = section_types[name]
+        known = [f.name for f in dataclasses.fields(cls)]
+        for key in table:
+            if key not in known:
+                raise ValueError(unknown_key_message(f"{name}.{key}", known))
+        sections[name] = cls(**table)
+    cfg = DaemonConfig(**sections)
+    # Relative preset dirs mean "next to this config file", not "wherever the daemon was
+    # started from", so that a config and its presets can be moved together.
+    dirs = tuple((base_dir / d).absolute() for d in cfg.presets.dirs)
+    return dataclasses.replace(cfg, presets=PresetsSection(dirs=dirs))
+
+
+def _coerce(key: str, hint: Any, value: Any, rule: _Rule) -> Any:
+    if hint is float or hint is int:
+        return _coerce_number(key, hint, value, rule)
+    if hint is str:
+        return _coerce_str(key, value, rule)
+    if hint == tuple[Path, ...]:
+        items = value if isinstance(value, (list, tuple)) else None
+        if items is None or not all(isinstance(v, (str, Path)) and str(v) for v in items):
+            raise ValueError(f"{key} must be a list of non-empty path strings, got {value!r}")
+        return tuple(Path(v).expanduser() for v in items)
+    raise TypeError(f"{key}: no coercion for config type {hint!r}")
+
+
+def _coerce_number(key: str, hint: type, value: Any, rule: _Rule) -> float | int:
+    kind = "an integer" if hint is int else "a number"
+    if rule.lo is not None and rule.hi is not None:
+        kind += f" in {_fmt(rule.lo)}..{_fmt(rule.hi)}"
+    # bool is an int subclass, but `tick_hz = true` is a mistake, not 1 Hz.
+    accepted = (int,) if hint is int else (int, float)
+    if not isinstance(value, accepted) or isinstance(value, bool):
+        raise ValueError(f"{key} must be {kind}, got {value!r}")
+    if not math.isfinite(value):
+        raise ValueError(f"{key} must be {kind}, got {value!r}")
+    if (rule.lo is not None and value < rule.lo) or (rule.hi is not None and value > rule.hi):
+        raise ValueError(f"{key} must be {kind}, got {value!r}")
+    return int(value) if hint is int else float(value)
+
+
+def _coerce_str(key: str, value: Any, rule: _Rule) -> str:
+    if rule.choices:
+        for choice in rule.choices:
+            if isinstance(value, str) and value.casefold() == choice.casefold():
+                return choice
+        raise ValueError(f"{key} must be one of {', '.join(rule.choices)}, got {value!r}")
+    if not isinstance(value, str):
+        raise ValueError(f"{key} must be a string, got {value!r}")
+    if rule.pattern is not None and not re.fullmatch(rule.pattern, value):
+        raise ValueError(f"{key} must be {rule.pattern_desc}, got {value!r}")
+    return value
+
+
+def _to_toml_value(value: Any) -> Any:
+    if isinstance(value, tuple):
+        return [_to_toml_value(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def _fmt(x: float) -> str:
+    """A bound or value as a person writes it: 240, 0.1, 4000."""
+    return str(int(x)) if float(x).is_integer() else str(x)

@@ -1,0 +1,1 @@
+"""The scene stage: cloud blocks, sprites, impostor ring and sky parameters. Pure numpy."""
