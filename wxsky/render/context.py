@@ -20,7 +20,11 @@ GL_VERSION = 330
 def create_context() -> moderngl.Context:
     """A standalone OpenGL 3.3+ core context with no window. Raises RenderError saying why not."""
     try:
-        ctx = moderngl.create_context(standalone=True, backend="egl", require=GL_VERSION)
+        ctx = moderngl.create_context(
+            standalone=True,
+            require=GL_VERSION,
+            backend="egl",  # type: ignore[arg-type]
+        )
     except Exception as exc:
         raise RenderError(
             f"cannot create a headless EGL OpenGL {GL_VERSION // 100}.{GL_VERSION // 10 % 10} "

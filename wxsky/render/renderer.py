@@ -141,16 +141,16 @@ class Renderer:
         self.ctx.disable(moderngl.BLEND)
         right, up, fwd = cam.basis()
         prog = self._sky_prog
-        prog["u_right"].value = tuple(right)
-        prog["u_up"].value = tuple(up)
-        prog["u_forward"].value = tuple(fwd)
-        prog["u_tan_half_fov"].value = (cam.tan_half_fov_x, cam.tan_half_fov_y)
-        prog["u_sun_dir"].value = sky.sun.direction_enu
-        prog["u_zenith"].value = sky.zenith_rgb
-        prog["u_horizon"].value = sky.horizon_rgb
-        prog["u_ground"].value = sky.ground_rgb
-        prog["u_sun_rgb"].value = sky.sun_rgb
-        prog["u_sun_cos_radius"].value = math.cos(math.radians(SUN_RADIUS_DEG))
+        _set(prog, "u_right", tuple(right))
+        _set(prog, "u_up", tuple(up))
+        _set(prog, "u_forward", tuple(fwd))
+        _set(prog, "u_tan_half_fov", (cam.tan_half_fov_x, cam.tan_half_fov_y))
+        _set(prog, "u_sun_dir", sky.sun.direction_enu)
+        _set(prog, "u_zenith", sky.zenith_rgb)
+        _set(prog, "u_horizon", sky.horizon_rgb)
+        _set(prog, "u_ground", sky.ground_rgb)
+        _set(prog, "u_sun_rgb", sky.sun_rgb)
+        _set(prog, "u_sun_cos_radius", math.cos(math.radians(SUN_RADIUS_DEG)))
         self._sky_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def _draw_sprites(
@@ -179,9 +179,9 @@ class Renderer:
         self._instance_buf.write(data)
         prog = self._sprite_prog
         # GLSL matrices are column-major: hand it the transpose of numpy's row-major layout.
-        prog["u_view_rot"].write(np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes())
-        prog["u_proj"].write(np.ascontiguousarray(proj.T, dtype=np.float32).tobytes())
-        prog["u_sheet"].value = 0
+        _write(prog, "u_view_rot", np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes())
+        _write(prog, "u_proj", np.ascontiguousarray(proj.T, dtype=np.float32).tobytes())
+        _set(prog, "u_sheet", 0)
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
@@ -214,3 +214,18 @@ class Renderer:
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"GL error while {what}: {err}")
+
+
+def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
+    member = prog[name]
+    if not isinstance(member, moderngl.Uniform):
+        raise RenderError(f"shader uniform {name!r} is missing (optimised away?)")
+    return member
+
+
+def _set(prog: moderngl.Program, name: str, value: object) -> None:
+    _uniform(prog, name).value = value
+
+
+def _write(prog: moderngl.Program, name: str, data: bytes) -> None:
+    _uniform(prog, name).write(data)

@@ -43,11 +43,11 @@ class ShaderLibrary:
     def _compile(self, name: str, defines: dict[str, str]) -> moderngl.Program:
         body = shader_source(name)
         header = "#version 330 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
-        stages = {
-            arg: f"{header}#define {macro} 1\n#line 1\n{body}" for arg, macro in _STAGES.items()
-        }
+        vertex, fragment = (
+            f"{header}#define {macro} 1\n#line 1\n{body}" for macro in _STAGES.values()
+        )
         try:
-            return self._ctx.program(**stages)
+            return self._ctx.program(vertex_shader=vertex, fragment_shader=fragment)
         except moderngl.Error as exc:
             raise RenderError(f"shaders/{name}: {exc}") from exc
 

@@ -119,7 +119,7 @@ class CloudTemplate:
 
 
 _HEAPED = CloudTemplate(
-    1000.0, (0.42, 0.6), (0.55, 1.0), 70.0, 10, (0.55, 0.85), TEX_PUFFY, True, 1.0, 0.35
+    1000.0, (0.36, 0.52), (0.55, 1.0), 70.0, 10, (0.55, 0.85), TEX_PUFFY, True, 1.0, 0.35
 )
 _SLAB = CloudTemplate(
     1000.0, (0.62, 0.72), (0.7, 1.0), 5.0, 4, (0.85, 1.15), TEX_FOG + TEX_RAGGED, False, 0.9, 0.45

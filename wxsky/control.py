@@ -1,0 +1,188 @@
+"""Control-channel commands: each turns a request's params into a change of the engine's
+inputs. Bad params raise ControlError with one line that names the command and the field."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from wxsky.engine import SkyEngine, enu_from_geodetic
+from wxsky.errors import ProtocolError, WxskyError
+from wxsky.scene.camera import Camera
+from wxsky.weather.state import parse_time_utc
+
+COMMANDS = ("status", "scene", "set_camera", "set_time", "apply_preset", "apply_metar")
+
+
+class ControlError(ProtocolError):
+    """A control request whose params are missing, mistyped or out of range."""
+
+
+def camera_from_params(
+    engine: SkyEngine, params: dict[str, Any], max_size: tuple[int, int]
+) -> Camera:
+    """A new camera: fields the request omits keep their current values."""
+    cam = engine.camera
+    allowed = {
+        "position_m",
+        "lat_deg",
+        "lon_deg",
+        "alt_m",
+        "heading_deg",
+        "pitch_deg",
+        "roll_deg",
+        "fov_deg",
+        "width",
+        "height",
+    }
+    unknown = sorted(set(params) - allowed)
+    if unknown:
+        raise ControlError(f"set_camera: unknown field {unknown[0]!r} (known: {sorted(allowed)})")
+    position = cam.position_m
+    if "position_m" in params:
+        pos = params["position_m"]
+        if not isinstance(pos, (list, tuple)) or len(pos) != 3:
+            raise ControlError("set_camera: position_m must be [east_m, north_m, alt_m]")
+        position = (
+            _number("set_camera", "position_m[0]", pos[0]),
+            _number("set_camera", "position_m[1]", pos[1]),
+            _number("set_camera", "position_m[2]", pos[2]),
+        )
+    elif {"lat_deg", "lon_deg"} & set(params):
+        if not {"lat_deg", "lon_deg"} <= set(params):
+            raise ControlError("set_camera: lat_deg and lon_deg go together")
+        obs = engine.state.observer
+        position = enu_from_geodetic(
+            obs.lat_deg,
+            obs.lon_deg,
+            _number("set_camera", "lat_deg", params["lat_deg"], -90.0, 90.0),
+            _number("set_camera", "lon_deg", params["lon_deg"], -180.0, 180.0),
+            _number("set_camera", "alt_m", params.get("alt_m", position[2]), -500.0, 30_000.0),
+        )
+    elif "alt_m" in params:
+        position = (position[0], position[1], _number("set_camera", "alt_m", params["alt_m"]))
+    width = _integer("set_camera", "width", params.get("width", cam.width_px), 16, max_size[0])
+    height = _integer("set_camera", "height", params.get("height", cam.height_px), 16, max_size[1])
+    try:
+        return Camera(
+            position_m=position,
+            heading_deg=_number(
+                "set_camera", "heading_deg", params.get("heading_deg", cam.heading_deg)
+            )
+            % 360.0,
+            pitch_deg=_number(
+                "set_camera", "pitch_deg", params.get("pitch_deg", cam.pitch_deg), -90.0, 90.0
+            ),
+            roll_deg=_number("set_camera", "roll_deg", params.get("roll_deg", cam.roll_deg)),
+            fov_deg=_number(
+                "set_camera", "fov_deg", params.get("fov_deg", cam.fov_deg), 1.0, 170.0
+            ),
+            width_px=width,
+            height_px=height,
+        )
+    except ValueError as exc:
+        raise ControlError(f"set_camera: {exc}") from None
+
+
+def camera_to_dict(cam: Camera) -> dict[str, Any]:
+    return {
+        "position_m": list(cam.position_m),
+        "heading_deg": cam.heading_deg,
+        "pitch_deg": cam.pitch_deg,
+        "roll_deg": cam.roll_deg,
+        "fov_deg": cam.fov_deg,
+        "width": cam.width_px,
+        "height": cam.height_px,
+    }
+
+
+def set_time(engine: SkyEngine, params: dict[str, Any]) -> None:
+    _only("set_time", params, {"time_utc", "rate"})
+    text = params.get("time_utc")
+    rate = params.get("rate")
+    if text is None and rate is None:
+        raise ControlError("set_time: give time_utc (ISO 8601) and/or rate")
+    if rate is not None:
+        rate = _number("set_time", "rate", rate, 0.0, 10_000.0)
+    if text is not None:
+        if not isinstance(text, str):
+            raise ControlError("set_time: time_utc must be an ISO 8601 string")
+        try:
+            engine.set_time(parse_time_utc(text), rate)
+        except ValueError as exc:
+            raise ControlError(f"set_time: {exc}") from None
+    elif rate is not None:
+        engine.clock_rate = rate
+
+
+def apply_preset(engine: SkyEngine, params: dict[str, Any], preset_dirs: Sequence[Path]) -> str:
+    from wxsky.presets import load_preset
+
+    _only("apply_preset", params, {"name"})
+    name = params.get("name")
+    if not isinstance(name, str):
+        raise ControlError("apply_preset: name must be a string")
+    engine.apply(load_preset(name, preset_dirs))
+    return name
+
+
+def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
+    from wxsky.weather.metar import decode_metar
+
+    _only("apply_metar", params, {"report", "field_elevation_m"})
+    report = params.get("report")
+    if not isinstance(report, str):
+        raise ControlError("apply_metar: report must be a string")
+    elevation = _number(
+        "apply_metar",
+        "field_elevation_m",
+        params.get("field_elevation_m", engine.state.observer.alt_m),
+        -500.0,
+        9000.0,
+    )
+    decoded = decode_metar(report)
+    engine.apply(decoded.to_patch(field_elevation_m=elevation))
+    return decoded.station
+
+
+def dispatch_table(
+    handlers: dict[str, Callable[[dict[str, Any]], Any]],
+) -> Callable[[str, dict[str, Any]], Any]:
+    def dispatch(method: str, params: dict[str, Any]) -> Any:
+        handler = handlers.get(method)
+        if handler is None:
+            raise ControlError(f"unknown command {method!r} (known: {', '.join(sorted(handlers))})")
+        try:
+            return handler(params)
+        except WxskyError:
+            raise
+        except ValueError as exc:
+            raise ControlError(f"{method}: {exc}") from None
+
+    return dispatch
+
+
+def _only(command: str, params: dict[str, Any], allowed: set[str]) -> None:
+    unknown = sorted(set(params) - allowed)
+    if unknown:
+        raise ControlError(f"{command}: unknown field {unknown[0]!r} (known: {sorted(allowed)})")
+
+
+def _number(
+    command: str, name: str, value: Any, lo: float = -math.inf, hi: float = math.inf
+) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ControlError(f"{command}: {name} must be a finite number, got {value!r}")
+    if not lo <= value <= hi:
+        raise ControlError(f"{command}: {name} = {value} is outside {lo}..{hi}")
+    return float(value)
+
+
+def _integer(command: str, name: str, value: Any, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ControlError(f"{command}: {name} must be an integer, got {value!r}")
+    if not lo <= value <= hi:
+        raise ControlError(f"{command}: {name} = {value} is outside {lo}..{hi}")
+    return value

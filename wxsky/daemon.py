@@ -1,0 +1,451 @@
+"""The daemon's life in three phases: startup -> main loop -> shutdown.
+
+The asyncio loop owns the engine and the control channel; one render thread owns the GL
+context and writes each frame straight into the shared-memory slot the host will read.
+The main loop waits on an Event between ticks: a signal wakes it at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import concurrent.futures
+import contextlib
+import logging
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+from wxsky import __version__
+from wxsky.config import DaemonConfig
+from wxsky.control import (
+    apply_metar,
+    apply_preset,
+    camera_from_params,
+    camera_to_dict,
+    dispatch_table,
+    set_time,
+)
+from wxsky.engine import FramePlan, SkyEngine
+from wxsky.errors import WxskyError
+from wxsky.output.frame_meta import FrameMeta
+from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
+from wxsky.output.transport import Address, ControlServer, default_address
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import SceneSettings
+from wxsky.scene.ring import RING_SIZE
+from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
+
+log = logging.getLogger("wxsky.daemon")
+
+FPS_WINDOW_S = 2.0
+
+
+@dataclass
+class InputStats:
+    name: str
+    kind: str
+    messages: int = 0
+    errors: int = 0
+    last_error: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "ok": self.errors == 0 or not self.last_error,
+            "messages": self.messages,
+            "errors": self.errors,
+            "last_error": self.last_error,
+        }
+
+
+def initial_patches(
+    config: DaemonConfig, preset: str | None = None, metar: str | None = None
+) -> list[WeatherPatch]:
+    """The weather the daemon starts on: a preset (the config's unless named), or a METAR."""
+    from wxsky.presets import load_preset
+    from wxsky.weather.metar import decode_metar
+
+    patches = [load_preset(preset or config.daemon.preset, config.presets.dirs)]
+    if metar:
+        patches.append(
+            decode_metar(metar).to_patch(
+                field_elevation_m=patches[0].observer.alt_m if patches[0].observer else 0.0
+            )
+        )
+    return patches
+
+
+def layer_specs(config: DaemonConfig) -> list[LayerSpec]:
+    w, h = config.output.max_width, config.output.max_height
+    ring_px = config.scene.ring_texture_px
+    return [
+        LayerSpec("sky", w, h),
+        LayerSpec("near", w, h),
+        *(LayerSpec(f"ring_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
+    ]
+
+
+class Daemon:
+    def __init__(
+        self,
+        config: DaemonConfig,
+        patches: list[WeatherPatch],
+        address: Address | None = None,
+        preview_dir: Path | None = None,
+    ) -> None:
+        self.config = config
+        self.address = address or (
+            _parse(config.output.control) if config.output.control else default_address()
+        )
+        self.preview_dir = preview_dir
+        state = WeatherState()
+        for patch in patches:
+            state = state.apply(patch)
+        cam = config.camera
+        camera = Camera(
+            position_m=(0.0, 0.0, state.observer.alt_m + cam.alt_agl_m),
+            heading_deg=cam.heading_deg,
+            pitch_deg=cam.pitch_deg,
+            roll_deg=cam.roll_deg,
+            fov_deg=cam.fov_deg,
+            width_px=cam.width,
+            height_px=cam.height,
+        )
+        settings = SceneSettings(
+            ring_radius_m=config.scene.ring_radius_m,
+            max_range_m=config.scene.max_range_m,
+            ring_texture_px=config.scene.ring_texture_px,
+        )
+        self.engine = SkyEngine(state, camera, settings, clock_rate=config.clock.rate)
+        self.inputs = {
+            "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
+            "control": InputStats("control", "control"),
+        }
+        self.frames_published = 0
+        self._frame_times: collections.deque[float] = collections.deque()
+        self._started = time.monotonic()
+        self._stop = asyncio.Event()
+        self._signals = 0
+        self._writer: FrameWriter | None = None
+        self._server: ControlServer | None = None
+        self._render_exec: concurrent.futures.ThreadPoolExecutor | None = None
+        self._renderer: Any = None
+        self._preview_task: asyncio.Future[None] | None = None
+        self._last_meta: FrameMeta | None = None
+        self._dispatch = dispatch_table(
+            {
+                "status": lambda p: self.status(),
+                "scene": lambda p: self.scene_info(),
+                "set_camera": self._set_camera,
+                "set_time": lambda p: set_time(self.engine, p),
+                "apply_preset": lambda p: apply_preset(self.engine, p, config.presets.dirs),
+                "apply_metar": lambda p: apply_metar(self.engine, p),
+            }
+        )
+
+    # -- the three phases -------------------------------------------------------------
+
+    async def run(self) -> int:
+        with self._capture_signals():
+            try:
+                await self.startup()
+            except BaseException:
+                await self.shutdown()
+                raise
+            try:
+                await self.main_loop()
+            finally:
+                await self.shutdown()
+        return 0
+
+    async def startup(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._render_exec = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix="wxsky-render"
+        )
+        await loop.run_in_executor(self._render_exec, self._create_renderer)
+        self._writer = FrameWriter.create(self.config.output.shm_name, layer_specs(self.config))
+        self._server = ControlServer(self.address, self._handle)
+        await self._server.start()
+        log.info(
+            "wxsky %s serving on %s, frames in shm '%s', %s",
+            __version__,
+            self.address,
+            self.config.output.shm_name,
+            self.engine.state.summary(),
+        )
+        if self.preview_dir is not None:
+            log.info("preview: %s", (self.preview_dir / "preview.png").resolve())
+
+    async def main_loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        period = 1.0 / self.config.daemon.tick_hz
+        last = loop.time()
+        next_tick = last
+        next_status = last + self.config.daemon.status_interval_s
+        next_preview = last + 0.5
+        weather_version = self.engine.weather_version
+        while not self._stop.is_set():
+            now = loop.time()
+            plan = self.engine.advance(now - last)
+            last = now
+            meta = await loop.run_in_executor(self._render_exec, self._render_and_publish, plan)
+            self._count_frame()
+            self._last_meta = meta
+            self._broadcast_frame(plan, meta)
+            if plan.ring_changed:
+                self._server_broadcast("scene", self.scene_info())
+            if self.engine.weather_version != weather_version:
+                weather_version = self.engine.weather_version
+                self._server_broadcast("weather", weather_to_dict(self.engine.state))
+            now = loop.time()
+            if now >= next_status:
+                next_status = now + self.config.daemon.status_interval_s
+                log.info("%s", self.status_line())
+            if self.preview_dir is not None and now >= next_preview and self._preview_idle():
+                next_preview = now + self.config.preview.interval_s
+                self._preview_task = loop.run_in_executor(None, self._write_preview)
+            # A late frame starts the next one at once but never tries to catch up a backlog.
+            next_tick = max(next_tick + period, loop.time())
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._stop.wait(), timeout=next_tick - loop.time())
+
+    async def shutdown(self) -> None:
+        """Release everything, bounded by the configured timeout; logs what it had to cut."""
+        timeout = self.config.daemon.shutdown_timeout_s
+        deadline = time.monotonic() + timeout
+        if self._server is not None:
+            try:
+                await asyncio.wait_for(self._server.close(), timeout=max(0.05, timeout / 2))
+            except TimeoutError:
+                log.warning("shutdown: control clients did not close in time; dropped them")
+            self._server = None
+        if self._preview_task is not None and not self._preview_task.done():
+            with contextlib.suppress(TimeoutError, Exception):
+                await asyncio.wait_for(
+                    asyncio.shield(self._preview_task), max(0.05, deadline - time.monotonic())
+                )
+        if self._render_exec is not None:
+            loop = asyncio.get_running_loop()
+            try:
+                await asyncio.wait_for(
+                    loop.run_in_executor(self._render_exec, self._close_renderer),
+                    timeout=max(0.05, deadline - time.monotonic()),
+                )
+            except TimeoutError:
+                log.warning("shutdown: render thread did not finish in time; abandoned it")
+            self._render_exec.shutdown(wait=False, cancel_futures=True)
+            self._render_exec = None
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+        log.info("stopped after %d frames", self.frames_published)
+
+    # -- render thread ----------------------------------------------------------------
+
+    def _create_renderer(self) -> None:
+        from wxsky.render.renderer import Renderer
+
+        self._renderer = Renderer(self.config.scene.ring_texture_px)
+
+    def _close_renderer(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def _render_and_publish(self, plan: FramePlan) -> FrameMeta:
+        r, writer = self._renderer, self._writer
+        assert r is not None and writer is not None
+        if plan.ring_changed:
+            r.render_ring(plan.ring)
+        r.render_frame(plan.frame)
+        cam = plan.frame.camera
+        for name in ("sky", "near"):
+            r.read_into(name, writer.layer_buffer(name, cam.width_px, cam.height_px))
+        px = self.config.scene.ring_texture_px
+        for i in range(RING_SIZE):
+            r.read_into(f"ring_{i}", writer.layer_buffer(f"ring_{i}", px, px))
+        geo = plan.ring.geometry
+        meta = FrameMeta(
+            frame_number=self.frames_published + 1,
+            ring_version=plan.ring_version,
+            time_utc_unix_s=plan.state.time_utc.astimezone(UTC).timestamp(),
+            camera=cam,
+            sun_direction_enu=plan.frame.sky.sun.direction_enu,
+            ring_centre_m=geo.centre_m,
+            ring_radius_m=geo.radius_m,
+            ring_quads_m=geo.corners_m(),
+        )
+        writer.publish(meta.frame_number, meta.pack())
+        return meta
+
+    # -- control channel --------------------------------------------------------------
+
+    async def _handle(self, method: str, params: dict[str, Any]) -> Any:
+        stats = self.inputs["control"]
+        stats.messages += 1
+        try:
+            return self._dispatch(method, params)
+        except WxskyError as exc:
+            stats.errors += 1
+            stats.last_error = str(exc)
+            log.warning("control %s rejected: %s", method, exc)
+            raise
+
+    def _set_camera(self, params: dict[str, Any]) -> dict[str, Any]:
+        out = self.config.output
+        camera = camera_from_params(self.engine, params, (out.max_width, out.max_height))
+        self.engine.set_camera(camera)
+        return camera_to_dict(camera)
+
+    def status(self) -> dict[str, Any]:
+        return {
+            "version": __version__,
+            "uptime_s": time.monotonic() - self._started,
+            "frames_published": self.frames_published,
+            "fps": self.fps(),
+            "weather": weather_to_dict(self.engine.state),
+            "inputs": [s.to_dict() for s in self.inputs.values()],
+            "clients": self._server.client_count if self._server else 0,
+            "shm_name": self.config.output.shm_name,
+            "camera": camera_to_dict(self.engine.camera),
+            "clock_rate": self.engine.clock_rate,
+        }
+
+    def scene_info(self) -> dict[str, Any]:
+        from wxsky.scene.sky import sky_params
+
+        ring = self.engine.ring
+        return {
+            "shm_name": self.config.output.shm_name,
+            "ring_version": self.engine.ring_version,
+            "ring": ring.geometry.to_dict() if ring is not None else None,
+            "ring_texture_px": self.config.scene.ring_texture_px,
+            "camera": camera_to_dict(self.engine.camera),
+            "sky": sky_params(self.engine.state).to_dict(),
+            "block_size_m": 4000.0,
+            "layers": ["sky", "near", *(f"ring_{i}" for i in range(RING_SIZE))],
+        }
+
+    def _broadcast_frame(self, plan: FramePlan, meta: FrameMeta) -> None:
+        self._server_broadcast(
+            "frame",
+            {
+                "frame_number": meta.frame_number,
+                "time_utc": plan.state.time_utc.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+                "ring_version": meta.ring_version,
+                "camera": camera_to_dict(meta.camera),
+                "sun_direction_enu": list(meta.sun_direction_enu),
+            },
+        )
+
+    def _server_broadcast(self, topic: str, params: dict[str, Any]) -> None:
+        if self._server is not None:
+            self._server.broadcast(topic, params)
+
+    # -- bookkeeping ------------------------------------------------------------------
+
+    def _count_frame(self) -> None:
+        self.frames_published += 1
+        now = time.monotonic()
+        self._frame_times.append(now)
+        while self._frame_times and now - self._frame_times[0] > FPS_WINDOW_S:
+            self._frame_times.popleft()
+
+    def fps(self) -> float:
+        times = self._frame_times
+        if len(times) < 2:
+            return 0.0
+        return (len(times) - 1) / max(times[-1] - times[0], 1e-6)
+
+    def status_line(self) -> str:
+        inputs = ", ".join(
+            f"{s.name} {s.messages} msgs/{s.errors} errs" for s in self.inputs.values()
+        )
+        return (
+            f"{self.fps():.1f} fps, {self.frames_published} frames, "
+            f"{self.engine.state.summary()}; inputs: {inputs}"
+        )
+
+    def _preview_idle(self) -> bool:
+        return self._preview_task is None or self._preview_task.done()
+
+    def _write_preview(self) -> None:
+        """Composite the latest published frame the way a host does: from shared memory."""
+        from wxsky.host.compositor import composite
+        from wxsky.png import write_png
+        from wxsky.snapshot import layers_from_images
+
+        assert self.preview_dir is not None
+        try:
+            with FrameReader.open(self.config.output.shm_name) as reader:
+                frame = reader.read(timeout_s=1.0)
+            meta = FrameMeta.unpack(frame.meta)
+            image = composite(layers_from_images(frame.layers, meta.ring_quads_m), meta.camera)
+            write_png(self.preview_dir / "preview.png", image)
+        except (WxskyError, OSError) as exc:
+            log.warning("preview not written: %s", exc)
+
+    # -- signals ----------------------------------------------------------------------
+
+    @contextlib.contextmanager
+    def _capture_signals(self) -> Iterator[None]:
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        loop = asyncio.get_running_loop()
+        sigs = (signal.SIGINT, signal.SIGTERM)
+        original = {sig: signal.getsignal(sig) for sig in sigs}
+
+        def on_signal(sig: int, frame: FrameType | None) -> None:
+            loop.call_soon_threadsafe(self._on_signal, sig)
+
+        try:
+            for sig in sigs:
+                signal.signal(sig, on_signal)
+            yield
+        finally:
+            for sig, handler in original.items():
+                signal.signal(sig, handler)
+
+    def _on_signal(self, sig: int) -> None:
+        self._signals += 1
+        if self._signals > 1 and sig == signal.SIGINT:
+            log.warning("second interrupt: forcing exit")
+            self._force_cleanup()
+            os._exit(1)
+        log.info("received %s, shutting down", signal.Signals(sig).name)
+        self._stop.set()
+
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    def _force_cleanup(self) -> None:
+        """Best effort on a forced exit: leave no segment or socket behind."""
+        with contextlib.suppress(Exception):
+            if self._writer is not None:
+                self._writer.close()
+        path = getattr(self.address, "path", None)
+        if path is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+
+
+def _parse(text: str) -> Address:
+    from wxsky.output.transport import parse_address
+
+    return parse_address(text)
+
+
+def _source_name(patches: list[WeatherPatch]) -> str:
+    kinds = {Source.PRESET: "preset", Source.METAR: "metar"}
+    return "+".join(kinds.get(p.source, p.source.value) for p in patches)
