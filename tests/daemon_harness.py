@@ -1,0 +1,107 @@
+"""Start a real `wxsky run` process for a test and talk to it as a host would."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from wxsky.host.client import ControlClient
+
+
+@dataclass
+class RunningDaemon:
+    proc: subprocess.Popen[bytes]
+    socket_path: Path
+    shm_name: str
+    log_path: Path
+
+    @property
+    def address(self) -> str:
+        return f"unix:{self.socket_path}"
+
+    def client(self) -> ControlClient:
+        return ControlClient.connect(self.address)
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def stop(self, sig: int = signal.SIGTERM, timeout_s: float = 10.0) -> tuple[int, float]:
+        """Signal the daemon; returns (exit status, seconds it took to exit)."""
+        start = time.monotonic()
+        self.proc.send_signal(sig)
+        code = self.proc.wait(timeout=timeout_s)
+        return code, time.monotonic() - start
+
+
+def write_config(path: Path, shm_name: str, extra: str = "") -> Path:
+    path.write_text(
+        f"""
+[daemon]
+status_interval_s = 1.0
+[output]
+shm_name = "{shm_name}"
+max_width = 960
+max_height = 540
+{extra}
+"""
+    )
+    return path
+
+
+@contextlib.contextmanager
+def running_daemon(
+    tmp_path: Path, extra_config: str = "", args: tuple[str, ...] = ()
+) -> Iterator[RunningDaemon]:
+    shm_name = f"wxsky-test-{uuid.uuid4().hex[:10]}"
+    config = write_config(tmp_path / "wxsky.toml", shm_name, extra_config)
+    sock = tmp_path / "wx.sock"
+    log_path = tmp_path / "daemon.log"
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "wxsky",
+                "run",
+                "--config",
+                str(config),
+                "--control",
+                f"unix:{sock}",
+                *args,
+            ],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+    daemon = RunningDaemon(proc, sock, shm_name, log_path)
+    try:
+        deadline = time.monotonic() + 60.0
+        while True:
+            if proc.poll() is not None:
+                raise AssertionError(f"daemon exited early ({proc.returncode}):\n{daemon.log()}")
+            if sock.exists():
+                try:
+                    with daemon.client() as c:
+                        if c.call("status")["frames_published"] > 0:
+                            break
+                except Exception:
+                    pass
+            if time.monotonic() > deadline:
+                raise AssertionError(f"daemon did not start:\n{daemon.log()}")
+            time.sleep(0.1)
+        yield daemon
+    finally:
+        if proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(f"/dev/shm/{shm_name}")

@@ -1,0 +1,170 @@
+"""The `wxsky` command line as a user runs it: separate processes, real files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wxsky.cli import parse_size
+from wxsky.png import read_png
+
+
+def wxsky(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
+    proc = subprocess.run(
+        [sys.executable, "-m", "wxsky", *args], capture_output=True, text=True, timeout=120
+    )
+    if check and proc.returncode != 0:
+        raise AssertionError(f"wxsky {' '.join(args)} -> {proc.returncode}\n{proc.stderr}")
+    return proc
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess[str], *needles: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+
+
+def test_preset_list_names_every_shipped_preset() -> None:
+    out = wxsky("preset", "list").stdout
+    names = {line.split()[0] for line in out.splitlines()}
+    assert {
+        "clear",
+        "fair-cumulus",
+        "scattered-cumulus",
+        "broken-stratocumulus",
+        "overcast-stratus",
+        "thunderstorm",
+        "high-cirrus",
+    } <= names
+
+
+def test_preset_show_prints_the_weather_it_makes() -> None:
+    out = wxsky("preset", "show", "thunderstorm").stdout
+    body = json.loads(out[out.index("{") :])
+    assert any(lay["type"] == "cumulonimbus" for lay in body["layers"])
+
+
+def test_metar_decode_json() -> None:
+    out = wxsky(
+        "metar",
+        "decode",
+        "KJFK 211651Z 31015G25KT 1 1/2SM -RA BR BKN008 OVC015 12/11 A2992",
+        "--json",
+    ).stdout
+    d = json.loads(out)
+    assert d["station"] == "KJFK"
+    assert d["visibility_m"] == pytest.approx(1.5 * 1609.344)
+    assert d["qnh_hpa"] == pytest.approx(29.92 * 33.8639, abs=0.05)
+
+
+@pytest.mark.parametrize(
+    ("args", "needles"),
+    [
+        (("snapshot", "--preset", "no-such", "--out", "x.png"), ("no-such",)),
+        (("snapshot", "--preset", "clear", "--size", "big", "--out", "x.png"), ("--size", "big")),
+        (("snapshot", "--preset", "clear", "--size", "10x99999", "--out", "x.png"), ("--size",)),
+        (("metar", "decode", ""), ("METAR",)),
+        (("metar", "decode", "!!!! ???"), ("METAR",)),
+        (("preset", "show", "../etc"), ("preset",)),
+        (("snapshot", "--preset", "clear", "--time", "noon", "--out", "x.png"), ("noon",)),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(
+    args: tuple[str, ...], needles: tuple[str, ...], tmp_path: Path
+) -> None:
+    assert_one_line_error(wxsky(*args, check=False), *needles)
+
+
+def test_config_with_unknown_key_is_named(tmp_path: Path) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("[camera]\nfovv = 3\n")
+    proc = wxsky("run", "--config", str(cfg), check=False)
+    assert_one_line_error(proc, "camera.fovv", str(cfg))
+
+
+def test_parse_size() -> None:
+    assert parse_size("960x540") == (960, 540)
+    assert parse_size(" 32X16 ") == (32, 16)
+    for bad in ("", "x", "960", "960x", "-5x5", "1e3x5", "8x8", "99999x10"):
+        with pytest.raises(ValueError):
+            parse_size(bad)
+
+
+SKY_30_UP = (
+    "--pitch-deg",
+    "30",
+    "--heading-deg",
+    "180",
+    "--time",
+    "2026-07-08T12:00:00Z",
+    "--size",
+    "480x270",
+)
+
+
+def _cloud_fraction(tmp_path: Path, preset: str) -> float:
+    clear, cloudy = tmp_path / "clear.png", tmp_path / f"{preset}.png"
+    wxsky("snapshot", "--preset", "clear", *SKY_30_UP, "--out", str(clear))
+    wxsky(
+        "snapshot",
+        "--preset",
+        preset,
+        *SKY_30_UP,
+        "--out",
+        str(cloudy),
+        "--layers-out",
+        str(tmp_path / preset),
+    )
+    a, b = read_png(clear), read_png(cloudy)
+    return float(np.any(a != b, axis=2).mean())
+
+
+@pytest.mark.gl
+def test_overcast_fills_the_sky_looking_up(tmp_path: Path) -> None:
+    assert _cloud_fraction(tmp_path, "overcast-stratus") >= 0.90
+    # The clouds themselves, not just a greyer sky, cover it: near + ring alpha.
+    near = read_png(tmp_path / "overcast-stratus" / "near.png")
+    assert (near[..., 3] > 0).mean() >= 0.90
+
+
+@pytest.mark.gl
+def test_scattered_cumulus_leaves_blue_sky(tmp_path: Path) -> None:
+    fraction = _cloud_fraction(tmp_path, "scattered-cumulus")
+    assert 0.10 <= fraction <= 0.70, fraction
+
+
+@pytest.mark.gl
+def test_snapshot_layers_are_byte_identical_across_processes(tmp_path: Path) -> None:
+    runs = []
+    for n in range(2):
+        out = tmp_path / f"run{n}"
+        wxsky(
+            "snapshot",
+            "--preset",
+            "broken-stratocumulus",
+            "--size",
+            "320x180",
+            "--heading-deg",
+            "45",
+            "--seed",
+            "99",
+            "--out",
+            str(out / "sky.png"),
+            "--layers-out",
+            str(out / "layers"),
+        )
+        runs.append(out / "layers")
+    names = sorted(p.name for p in runs[0].iterdir())
+    assert names == sorted(["sky.png", "near.png", *(f"ring_{i}.png" for i in range(8))])
+    for name in names:
+        assert (runs[0] / name).read_bytes() == (runs[1] / name).read_bytes(), name
+    # And the layers hold something: clouds in the near layer and in several impostors.
+    assert read_png(runs[0] / "near.png")[..., 3].max() > 0
+    assert sum(read_png(runs[0] / f"ring_{i}.png")[..., 3].max() > 0 for i in range(8)) >= 4

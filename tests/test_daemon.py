@@ -1,0 +1,191 @@
+"""The daemon end to end: a real process, real socket, real shared memory, real GL."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from daemon_harness import running_daemon
+
+from wxsky.errors import WxskyError
+from wxsky.host.client import RemoteError
+from wxsky.host.reference import ReferenceHost
+from wxsky.presets import load_preset
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import SceneSettings
+from wxsky.snapshot import take_snapshot
+from wxsky.weather.state import WeatherState, parse_time_utc
+
+pytestmark = pytest.mark.gl
+
+
+def test_status_json_reports_the_running_daemon(tmp_path: Path) -> None:
+    with running_daemon(tmp_path) as d:
+        out = subprocess.run(
+            [sys.executable, "-m", "wxsky", "status", "--control", d.address, "--json"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=True,
+        )
+        status = json.loads(out.stdout)
+        assert status["version"] == "0.1.0"
+        assert status["frames_published"] > 0
+        assert status["uptime_s"] > 0
+        assert status["fps"] > 0
+        w = status["weather"]
+        assert w["time_utc"].endswith("Z")
+        assert w["observer"] == {"lat_deg": 47.4647, "lon_deg": 8.5492, "alt_m": 432.0}
+        assert [lay["type"] for lay in w["layers"]] == ["cumulus"]  # fair-cumulus default
+        assert {"alt_m", "dir_deg", "speed_mps", "gust_mps"} <= set(w["wind"][0])
+        for key in ("visibility_m", "temperature_c", "dewpoint_c", "qnh_hpa"):
+            assert isinstance(w[key], float)
+        names = {i["name"]: i for i in status["inputs"]}
+        assert names["control"]["ok"] is True
+        assert {"name", "kind", "ok", "messages", "errors"} <= set(names["control"])
+        human = subprocess.run(
+            [sys.executable, "-m", "wxsky", "status", "--control", d.address],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=True,
+        ).stdout
+        assert "cloud cumulus 3/8" in human
+
+
+def test_sigterm_stops_cleanly_and_removes_socket_and_segment(tmp_path: Path) -> None:
+    with running_daemon(tmp_path) as d:
+        assert Path(f"/dev/shm/{d.shm_name}").exists()
+        code, took_s = d.stop(signal.SIGTERM)
+        assert code == 0, d.log()
+        assert took_s < 2.0, f"took {took_s:.2f} s to stop"
+        assert not d.socket_path.exists()
+        assert not Path(f"/dev/shm/{d.shm_name}").exists()
+        assert "stopped after" in d.log()
+
+
+def test_second_sigint_forces_exit_and_still_cleans_up(tmp_path: Path) -> None:
+    # A long shutdown timeout would hold the first SIGINT; the second must not wait for it.
+    with running_daemon(tmp_path) as d:
+        d.proc.send_signal(signal.SIGINT)
+        d.proc.send_signal(signal.SIGINT)
+        code = d.proc.wait(timeout=5)
+        assert code in (0, 1), d.log()
+        assert not Path(f"/dev/shm/{d.shm_name}").exists()
+        assert not d.socket_path.exists()
+
+
+def test_bad_control_input_is_answered_and_the_daemon_keeps_publishing(tmp_path: Path) -> None:
+    with running_daemon(tmp_path) as d, d.client() as c:
+        before = c.call("status")
+        with pytest.raises(RemoteError, match="unknown command 'fly'"):
+            c.call("fly", {})
+        with pytest.raises(RemoteError, match="unknown preset|no preset|not found"):
+            c.call("apply_preset", {"name": "no-such-sky"})
+        with pytest.raises(RemoteError, match="METAR"):
+            c.call("apply_metar", {"report": "this is not a metar %%"})
+        with pytest.raises(RemoteError, match="set_camera: fov_deg"):
+            c.call("set_camera", {"fov_deg": 500})
+        with pytest.raises(RemoteError, match="set_time"):
+            c.call("set_time", {"time_utc": "yesterday"})
+        # Raw garbage on a second connection: answered, that connection closed, others fine.
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as raw:
+            raw.connect(str(d.socket_path))
+            raw.sendall(b"\xc1\xc1 not msgpack")
+            raw.settimeout(5)
+            reply = raw.recv(4096)
+            assert reply, "no error answer to garbage"
+            assert b"msgpack" in reply.lower() or b"control message" in reply.lower()
+        time.sleep(0.3)
+        after = c.call("status")
+        # The last good state is kept: only the clock has moved on.
+        assert {**after["weather"], "time_utc": None} == {**before["weather"], "time_utc": None}
+        assert after["frames_published"] > before["frames_published"]
+        control = next(i for i in after["inputs"] if i["name"] == "control")
+        assert control["errors"] >= 5
+        assert "rejected" in d.log()
+
+
+def test_apply_preset_and_metar_change_the_published_weather(tmp_path: Path) -> None:
+    with running_daemon(tmp_path) as d, d.client() as c:
+        c.call("apply_preset", {"name": "overcast-stratus"})
+        w = c.call("status")["weather"]
+        assert w["layers"][0]["type"] == "stratus"
+        assert w["layers"][0]["cover_oktas"] == 8
+        c.call("apply_metar", {"report": "LSZH 211250Z 24012G25KT 9999 FEW030 BKN080 18/09 Q1012"})
+        w = c.call("status")["weather"]
+        assert [lay["cover_oktas"] for lay in w["layers"]] == [2, 6]
+        assert w["qnh_hpa"] == pytest.approx(1012.0)
+        assert w["wind"][0]["speed_mps"] == pytest.approx(12 * 1852 / 3600, rel=1e-3)
+        assert w["sources"]["layers"] == "metar"
+
+
+def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) -> None:
+    when = "2026-06-21T15:30:00Z"
+    with running_daemon(tmp_path, extra_config="[clock]\nrate = 0.0\n") as d:
+        with ReferenceHost.connect(d.address) as host:
+            host.call("set_time", {"time_utc": when})
+            host.call(
+                "set_camera",
+                {
+                    "heading_deg": 225.0,
+                    "pitch_deg": 18.0,
+                    "fov_deg": 70.0,
+                    "width": 320,
+                    "height": 180,
+                },
+            )
+            start = host.reader.frame_number
+            frame = host.wait_frame(after=start + 2, timeout_s=20)
+            assert frame.meta.camera.width_px == 320
+            hosted = frame.composite()
+            assert host.weather is not None
+
+    state = WeatherState().apply(load_preset("fair-cumulus"))
+    state = state.apply(
+        type(load_preset("clear"))(source=state.sources.time_utc, time_utc=parse_time_utc(when))
+    )
+    camera = Camera(
+        position_m=(0.0, 0.0, 434.0),
+        heading_deg=225.0,
+        pitch_deg=18.0,
+        fov_deg=70.0,
+        width_px=320,
+        height_px=180,
+    )
+    shot = take_snapshot(state, camera, SceneSettings())
+    assert hosted.shape == shot.image.shape
+    diff = np.abs(hosted.astype(int) - shot.image.astype(int))
+    assert diff.max() <= 1, f"max diff {diff.max()}, {np.mean(diff > 1):.4f} of values off"
+
+
+def test_daemon_writes_a_preview_png(tmp_path: Path) -> None:
+    from wxsky.png import read_png
+
+    preview = tmp_path / "preview"
+    with running_daemon(tmp_path, args=("--preview", str(preview))) as d:
+        deadline = time.monotonic() + 20
+        target = preview / "preview.png"
+        while not target.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert target.exists(), d.log()
+        image = read_png(target)
+        assert image.shape == (540, 960, 4)
+        # A daytime sky with cumulus: blue above, brighter cloud pixels somewhere.
+        top = image[:60].reshape(-1, 4).astype(int)
+        assert (top[:, 2] > top[:, 0]).mean() > 0.5
+        assert image[..., :3].std() > 5
+
+
+def test_client_reports_a_missing_daemon(tmp_path: Path) -> None:
+    from wxsky.host.client import ControlClient
+
+    with pytest.raises(WxskyError, match="cannot connect"):
+        ControlClient.connect(f"unix:{tmp_path / 'nobody.sock'}")

@@ -1,0 +1,102 @@
+"""The reference host: reads wxsky exactly as a simulator would, from the stream and the
+shared-memory segment alone, and composites the picture. `snapshot` must produce the same
+picture; the tests hold the two to that, which is how we know the protocol is sufficient."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.errors import WxskyError
+from wxsky.host.client import ControlClient
+from wxsky.host.compositor import Layers, composite
+from wxsky.output.frame_meta import FrameMeta
+from wxsky.output.shm import FrameReader
+from wxsky.output.transport import Address
+from wxsky.scene.ring import RING_SIZE
+
+TOPICS = ("frame", "scene", "weather")
+
+
+@dataclass(frozen=True)
+class HostFrame:
+    meta: FrameMeta
+    layers: Layers
+
+    def composite(self) -> npt.NDArray[np.uint8]:
+        return composite(self.layers, self.meta.camera)
+
+
+class ReferenceHost:
+    def __init__(self, client: ControlClient, reader: FrameReader) -> None:
+        self.client = client
+        self.reader = reader
+        self.weather: dict[str, Any] | None = None
+        self.scene: dict[str, Any] | None = None
+        self._closed = False
+
+    @classmethod
+    def connect(cls, address: Address | str, timeout_s: float = 5.0) -> ReferenceHost:
+        client = ControlClient.connect(address, timeout_s=timeout_s)
+        try:
+            client.subscribe(TOPICS)
+            scene = client.call("scene")
+            reader = FrameReader.open(scene["shm_name"])
+        except BaseException:
+            client.close()
+            raise
+        host = cls(client, reader)
+        host.scene = scene
+        host.weather = client.call("status")["weather"]
+        return host
+
+    def call(self, method: str, params: dict[str, Any] | None = None) -> Any:
+        return self.client.call(method, params)
+
+    def wait_frame(self, after: int = 0, timeout_s: float = 5.0) -> HostFrame:
+        """The first frame published with a number above `after`, following the stream's
+        frame notifications and keeping the latest weather and scene they carry."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if self.reader.frame_number > after:
+                frame = self.read_latest()
+                if frame.meta.frame_number > after:
+                    return frame
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise WxskyError(f"no frame after #{after} within {timeout_s} s")
+            note = self.client.next_notification(timeout_s=min(remaining, 0.5))
+            if note is None:
+                continue
+            if note.method == "weather":
+                self.weather = note.params
+            elif note.method == "scene":
+                self.scene = note.params
+
+    def read_latest(self) -> HostFrame:
+        frame = self.reader.read(timeout_s=1.0)
+        meta = FrameMeta.unpack(frame.meta)
+        layers = Layers(
+            sky=frame.layers["sky"],
+            near=frame.layers["near"],
+            ring=tuple(frame.layers[f"ring_{i}"] for i in range(RING_SIZE)),
+            ring_quads_m=meta.ring_quads_m,
+        )
+        return HostFrame(meta, layers)
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self.reader.close()
+        self.client.close()
+
+    def __enter__(self) -> ReferenceHost:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
