@@ -26,6 +26,9 @@ from wxsky.scene.sky import SkyParams
 log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.27
+# The near sprites are drawn at this fraction of the viewport and upscaled: fill rate is what
+# limits a CPU renderer, and soft sprites look the same.
+NEAR_SCALE = 0.5
 # centre (3) + size + rotation + texture + rgba (4), float32
 _INSTANCE_FLOATS = 10
 _INSTANCE_FORMAT = "3f f f f 4f/i"
@@ -50,15 +53,22 @@ class _Target:
 class Renderer:
     """Owns the GL context and every GL object; `close()` releases them."""
 
-    def __init__(self, ring_texture_px: int = 256, ctx: moderngl.Context | None = None) -> None:
+    def __init__(
+        self,
+        ring_texture_px: int = 256,
+        ctx: moderngl.Context | None = None,
+        near_scale: float = NEAR_SCALE,
+    ) -> None:
         self._own_ctx = ctx is None
         self.ctx = ctx if ctx is not None else create_context()
         self._closed = False
         self.ring_px = ring_texture_px
+        self.near_scale = near_scale
         self.shaders = ShaderLibrary(self.ctx)
         defines = {"SHEET_CELLS": str(SHEET_CELLS)}
         self._sky_prog = self.shaders.program("sky.glsl")
         self._sprite_prog = self.shaders.program("sprites.glsl", defines)
+        self._upsample_prog = self.shaders.program("upsample.glsl")
         sheet = build_sheet()
         self._sheet = self.ctx.texture((sheet.shape[1], sheet.shape[0]), 4, sheet.tobytes())
         self._sheet.build_mipmaps(0, 4)  # 512 down to 32, as Wang's sheet
@@ -69,6 +79,7 @@ class Renderer:
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
         self._sprite_vao = self._make_sprite_vao()
         self._sky_vao = self.ctx.vertex_array(self._sky_prog, [])
+        self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._targets: dict[str, _Target] = {}
         self._check("initialising the renderer")
 
@@ -78,10 +89,19 @@ class Renderer:
         """Draw the sky and the near layer for the frame's camera."""
         cam = frame.camera
         self._draw_sky("sky", cam, frame.sky)
-        target = self._target("near", cam.width_px, cam.height_px)
+        if self.near_scale >= 1.0:
+            target = self._target("near", cam.width_px, cam.height_px)
+        else:
+            target = self._target(
+                "near_reduced",
+                max(1, round(cam.width_px * self.near_scale)),
+                max(1, round(cam.height_px * self.near_scale)),
+            )
         self._draw_sprites(
             target, frame.near, cam.position_m, cam.view_matrix(), cam.projection_matrix()
         )
+        if self.near_scale < 1.0:
+            self._upsample(target, self._target("near", cam.width_px, cam.height_px))
         self._check("rendering a frame")
 
     def render_ring(self, ring: RingScene, indices: range | list[int] | None = None) -> None:
@@ -120,6 +140,7 @@ class Renderer:
         self._targets.clear()
         self._sprite_vao.release()
         self._sky_vao.release()
+        self._upsample_vao.release()
         self._instance_buf.release()
         self._corner_buf.release()
         self._sheet.release()
@@ -152,6 +173,16 @@ class Renderer:
         _set(prog, "u_sun_rgb", sky.sun_rgb)
         _set(prog, "u_sun_cos_radius", math.cos(math.radians(SUN_RADIUS_DEG)))
         self._sky_vao.render(moderngl.TRIANGLES, vertices=3)
+
+    def _upsample(self, source: _Target, dest: _Target) -> None:
+        dest.fbo.use()
+        self.ctx.disable(moderngl.BLEND)
+        source.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        source.texture.repeat_x = source.texture.repeat_y = False
+        source.texture.use(0)
+        _set(self._upsample_prog, "u_source", 0)
+        _set(self._upsample_prog, "u_target_size", (float(dest.size[0]), float(dest.size[1])))
+        self._upsample_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def _draw_sprites(
         self,
