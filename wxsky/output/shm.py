@@ -1,0 +1,777 @@
+"""POSIX shared-memory frame hand-off: a double-buffered segment guarded by per-slot seqlocks.
+
+The daemon (one `FrameWriter`) renders each frame into the *inactive* slot while hosts (any
+number of `FrameReader`s, in any language) copy the *active* one. Every slot has its own sequence
+counter, odd while the writer is filling it, so a reader detects a frame that changed under it and
+retries; it never waits for the writer, which only ever touches the other slot.
+
+Layout (all integers little-endian, every field naturally aligned; offsets in bytes)::
+
+    Header, at segment offset 0
+      off size type   field
+        0    8 char[8] magic            b"WXSKYSHM"
+        8    4 u32     version          1
+       12    4 u32     header_size      offset of slot 0 (multiple of 4096)
+       16    4 u32     slot_count       2
+       20    4 u32     layer_count      L
+       24    8 u64     slot_size        bytes per slot (multiple of 4096)
+       32    4 u32     meta_capacity    bytes of the metadata region of each slot
+       36    4 u32     writer_pid       process id of the writer (diagnostics only)
+       40    4 u32     active_slot      slot holding the latest published frame (0 or 1)
+       44    4 u32     state            0 initialising, 1 live, 2 closed by the writer
+       48    8 u64     latest_frame     frame number of the latest published frame
+       56    8 u64     publish_count    frames published so far (0: none yet)
+       64 32*L         layer descriptors, 32 bytes each:
+                         +0  char[16] name        ASCII, NUL padded (no NUL when 16 long)
+                         +16 u32      max_width   pixels
+                         +20 u32      max_height  pixels
+                         +24 u64      capacity    max_width * max_height * 4 bytes
+
+    Slot i, at segment offset header_size + i * slot_size
+      off size type   field
+        0    8 u64     seq              odd while the writer fills the slot; 0: never written
+        8    8 u64     frame_number     frame number of the frame in the slot
+       16    4 u32     meta_length      used bytes of the metadata region
+       20    4 u32     meta_offset      offset of the metadata region from the slot start
+       24 16*L         layer table, 16 bytes each, in descriptor order:
+                         +0  u32 width    used width of the layer in this frame (0: absent)
+                         +4  u32 height   used height
+                         +8  u64 offset   offset of the pixels from the *segment* start
+      meta_offset      metadata region, meta_capacity bytes, the first meta_length used
+      layer offsets    pixels: RGBA8, premultiplied alpha, rows top to bottom, tightly packed
+                       (stride = width * 4), each region 64-byte aligned
+
+Writer, per frame: make the inactive slot's seq odd (before the first pixel is written), fill
+pixels, layer table, frame number and metadata, make seq even, then store active_slot,
+latest_frame and publish_count. Reader: load active_slot, load seq (retry if odd or 0), copy what
+it needs, load seq and active_slot again; if either changed, retry. Re-checking active_slot is what
+keeps frame numbers monotonic: without it a reader could return a frame that was complete but not
+yet made active, and its next read would then go back one frame.
+
+Memory ordering. Python cannot issue fences; each field is stored by a separate aligned 4- or
+8-byte store (memoryview casts copy whole items, so a reader never sees half a counter), in
+program order. On x86-64 (TSO) stores become visible in that order, which is all the seqlock needs.
+On weakly ordered CPUs (AArch64) nothing in Python orders them, so the residual risk of a torn
+frame there is accepted. A C/C++ reader must, on any CPU: load seq with acquire semantics
+(`atomic_load_explicit(&seq, memory_order_acquire)`), copy, issue
+`atomic_thread_fence(memory_order_acquire)`, then load seq (and active_slot) again; plain loads
+let the compiler move the copy outside the two checks. A C writer stores seq odd, issues
+`atomic_thread_fence(memory_order_release)`, writes the slot, then stores seq even and
+active_slot with `memory_order_release`.
+
+Stale segments. The writer holds an exclusive `flock` on the segment for its whole life (the kernel
+drops it when the process dies, however it dies). `FrameWriter.create` on an existing name tries
+that lock: if another process holds it the name is in use and creation fails; if not, the old
+writer is gone and the segment is unlinked and recreated. Readers still mapping the old segment
+see no new frames; `FrameReader.is_current()` tells them to reopen. The segment is created with
+mode 0600: only processes of the daemon's user can attach.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import importlib
+import logging
+import mmap
+import os
+import re
+import struct
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from types import TracebackType
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.errors import WxskyError
+
+if sys.byteorder != "little":  # pragma: no cover - every supported host is little-endian
+    raise ImportError("wxsky.output.shm needs a little-endian CPU (the segment layout is LE)")
+
+# The stdlib module behind multiprocessing.shared_memory, used directly because SharedMemory
+# registers every attach with the resource tracker, which unlinks the segment when a *reader*
+# process exits (Python < 3.13). It has no typeshed stub, hence the dynamic import.
+_posixshmem = importlib.import_module("_posixshmem")
+
+logger = logging.getLogger(__name__)
+
+MAGIC = b"WXSKYSHM"
+VERSION = 1
+SLOT_COUNT = 2
+BYTES_PER_PIXEL = 4
+
+STATE_INITIALISING = 0
+STATE_LIVE = 1
+STATE_CLOSED = 2
+
+# Header, offsets from the segment start.
+HDR_MAGIC = 0  # char[8]
+HDR_VERSION = 8  # u32
+HDR_HEADER_SIZE = 12  # u32
+HDR_SLOT_COUNT = 16  # u32
+HDR_LAYER_COUNT = 20  # u32
+HDR_SLOT_SIZE = 24  # u64
+HDR_META_CAPACITY = 32  # u32
+HDR_WRITER_PID = 36  # u32
+HDR_ACTIVE_SLOT = 40  # u32
+HDR_STATE = 44  # u32
+HDR_LATEST_FRAME = 48  # u64
+HDR_PUBLISH_COUNT = 56  # u64
+HDR_LAYERS = 64  # first layer descriptor
+HDR_FIXED_SIZE = 64
+
+# Layer descriptor, offsets from its start.
+LAYER_DESC_SIZE = 32
+LD_NAME = 0  # char[16]
+LAYER_NAME_SIZE = 16
+LD_MAX_WIDTH = 16  # u32
+LD_MAX_HEIGHT = 20  # u32
+LD_CAPACITY = 24  # u64
+
+# Slot header, offsets from the slot start.
+SLOT_SEQ = 0  # u64
+SLOT_FRAME = 8  # u64
+SLOT_META_LENGTH = 16  # u32
+SLOT_META_OFFSET = 20  # u32
+SLOT_LAYERS = 24  # first layer table entry
+
+# Layer table entry, offsets from its start.
+LAYER_ENTRY_SIZE = 16
+LE_WIDTH = 0  # u32
+LE_HEIGHT = 4  # u32
+LE_OFFSET = 8  # u64, from the segment start
+
+REGION_ALIGN = 64  # cache line: pixel and metadata regions
+SLOT_ALIGN = 4096  # page: header and slot sizes, so every slot starts on a page boundary
+
+MAX_LAYERS = 64
+U32_MAX = 0xFFFF_FFFF
+U64_MAX = 0xFFFF_FFFF_FFFF_FFFF
+
+_NAME_RE = re.compile(r"[A-Za-z0-9._-]{1,200}")
+_LAYER_NAME_RE = re.compile(r"[\x21-\x7e]{1,16}")
+
+
+def _align(value: int, alignment: int) -> int:
+    return (value + alignment - 1) // alignment * alignment
+
+
+def _check_name(name: str) -> str:
+    bare = name[1:] if name.startswith("/") else name
+    if not _NAME_RE.fullmatch(bare):
+        raise WxskyError(
+            f"invalid shared-memory segment name {name!r}: use 1-200 characters from "
+            "A-Z a-z 0-9 . _ -"
+        )
+    return bare
+
+
+def _shm_open(name: str, flags: int, mode: int = 0o600) -> int:
+    return int(_posixshmem.shm_open("/" + name, flags, mode))
+
+
+def _shm_unlink(name: str) -> None:
+    _posixshmem.shm_unlink("/" + name)
+
+
+@dataclass(frozen=True)
+class LayerSpec:
+    """A layer's fixed capacity; a frame may use any width/height up to it."""
+
+    name: str
+    max_width: int
+    max_height: int
+
+    @property
+    def capacity(self) -> int:
+        return self.max_width * self.max_height * BYTES_PER_PIXEL
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One published frame, copied out of the segment (arrays are (height, width, 4) uint8)."""
+
+    frame_number: int
+    layers: dict[str, npt.NDArray[np.uint8]]
+    meta: bytes
+
+
+@dataclass(frozen=True)
+class _Layout:
+    layers: tuple[LayerSpec, ...]
+    meta_capacity: int
+    header_size: int
+    slot_size: int
+    meta_offset: int  # from the slot start
+    pixel_offsets: tuple[int, ...]  # from the slot start
+
+    @property
+    def total_size(self) -> int:
+        return self.header_size + SLOT_COUNT * self.slot_size
+
+    def slot_base(self, slot: int) -> int:
+        return self.header_size + slot * self.slot_size
+
+    @classmethod
+    def compute(cls, layers: tuple[LayerSpec, ...], meta_capacity: int) -> _Layout:
+        header_size = _align(HDR_LAYERS + LAYER_DESC_SIZE * len(layers), SLOT_ALIGN)
+        meta_offset = _align(SLOT_LAYERS + LAYER_ENTRY_SIZE * len(layers), REGION_ALIGN)
+        end = meta_offset + meta_capacity
+        offsets = []
+        for spec in layers:
+            start = _align(end, REGION_ALIGN)
+            offsets.append(start)
+            end = start + spec.capacity
+        return cls(
+            layers=layers,
+            meta_capacity=meta_capacity,
+            header_size=header_size,
+            slot_size=_align(end, SLOT_ALIGN),
+            meta_offset=meta_offset,
+            pixel_offsets=tuple(offsets),
+        )
+
+
+def _check_specs(layers: Sequence[LayerSpec]) -> tuple[LayerSpec, ...]:
+    specs = tuple(layers)
+    if not 1 <= len(specs) <= MAX_LAYERS:
+        raise ValueError(f"a frame segment needs 1 to {MAX_LAYERS} layers, got {len(specs)}")
+    seen: set[str] = set()
+    for spec in specs:
+        if not _LAYER_NAME_RE.fullmatch(spec.name):
+            raise ValueError(
+                f"invalid layer name {spec.name!r}: 1-16 printable ASCII characters, no spaces"
+            )
+        if spec.name in seen:
+            raise ValueError(f"duplicate layer name {spec.name!r}")
+        seen.add(spec.name)
+        if not (1 <= spec.max_width <= 65535 and 1 <= spec.max_height <= 65535):
+            raise ValueError(
+                f"layer {spec.name!r}: max size {spec.max_width}x{spec.max_height} is outside "
+                "1..65535"
+            )
+    return specs
+
+
+def _writer_pid(fd: int) -> int | None:
+    """The pid recorded in an existing segment, for error messages; None if unreadable."""
+    try:
+        if os.fstat(fd).st_size < HDR_FIXED_SIZE:
+            return None
+        with mmap.mmap(fd, HDR_FIXED_SIZE, access=mmap.ACCESS_READ) as mm:
+            magic = mm[HDR_MAGIC : HDR_MAGIC + len(MAGIC)]
+            (pid,) = struct.unpack_from("<I", mm, HDR_WRITER_PID)
+    except (OSError, ValueError):
+        return None
+    return int(pid) if magic == MAGIC else None
+
+
+def _looks_like_ours(fd: int) -> bool:
+    """True for a wxsky segment, or for one whose creator died before writing the magic."""
+    size = os.fstat(fd).st_size
+    if size < len(MAGIC):
+        return True
+    with mmap.mmap(fd, len(MAGIC), access=mmap.ACCESS_READ) as mm:
+        magic = bytes(mm)
+    return magic in (MAGIC, bytes(len(MAGIC)))
+
+
+def _replace_stale(name: str) -> None:
+    try:
+        fd = _shm_open(name, os.O_RDWR)
+    except FileNotFoundError:
+        return  # removed between our create attempt and now
+    except OSError as exc:
+        raise WxskyError(
+            f"shared-memory segment {name!r} already exists and cannot be opened: {exc.strerror}"
+        ) from exc
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+                raise WxskyError(f"cannot lock shared-memory segment {name!r}: {exc}") from exc
+            pid = _writer_pid(fd)
+            owner = f" (pid {pid})" if pid else ""
+            raise WxskyError(
+                f"shared-memory segment {name!r} is in use by another wxsky writer{owner}; "
+                "stop it or choose another segment name"
+            ) from None
+        if not _looks_like_ours(fd):
+            raise WxskyError(
+                f"shared-memory segment {name!r} exists and is not a wxsky frame segment; "
+                f"refusing to replace it (remove /dev/shm/{name} by hand if it is stale)"
+            )
+        logger.warning(
+            "replacing stale shared-memory segment %r (writer pid %s exited without closing it)",
+            name,
+            _writer_pid(fd),
+        )
+        _shm_unlink(name)
+    finally:
+        os.close(fd)  # also drops the lock we may hold on the old segment
+
+
+def _create_segment(name: str, size: int) -> int:
+    flags = os.O_CREAT | os.O_EXCL | os.O_RDWR
+    try:
+        fd = _shm_open(name, flags)
+    except FileExistsError:
+        _replace_stale(name)
+        try:
+            fd = _shm_open(name, flags)
+        except FileExistsError:
+            raise WxskyError(
+                f"shared-memory segment {name!r} was created by another writer while this one "
+                "was starting"
+            ) from None
+        except OSError as exc:
+            raise WxskyError(f"cannot create shared-memory segment {name!r}: {exc}") from exc
+    except OSError as exc:
+        raise WxskyError(f"cannot create shared-memory segment {name!r}: {exc}") from exc
+    try:
+        # Taken before the segment has a magic, so a concurrent create sees it as in use.
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        os.ftruncate(fd, size)
+        if hasattr(os, "posix_fallocate"):
+            # Reserve the pages now: on a full tmpfs (Docker's /dev/shm is 64 MiB) a late page
+            # fault would kill the daemon with SIGBUS instead of raising here.
+            os.posix_fallocate(fd, 0, size)
+    except OSError as exc:
+        os.close(fd)
+        _shm_unlink(name)
+        raise WxskyError(
+            f"cannot allocate {size} bytes of shared memory for segment {name!r}: "
+            f"{exc.strerror} (is /dev/shm large enough?)"
+        ) from exc
+    return fd
+
+
+class FrameWriter:
+    """The daemon's side of a segment. Build with `FrameWriter.create`; not thread-safe."""
+
+    def __init__(self, name: str, fd: int, mm: mmap.mmap, layout: _Layout) -> None:
+        self._name = name
+        self._fd = fd
+        self._mm = mm
+        self._layout = layout
+        self._view = memoryview(mm)
+        self._u32 = self._view.cast("I")
+        self._u64 = self._view.cast("Q")
+        self._index = {spec.name: i for i, spec in enumerate(layout.layers)}
+        self._target = 1  # slot being filled; slot 0 is "active" but empty until publish 1
+        self._writing = False
+        self._dims: dict[int, tuple[int, int]] = {}
+        self._handed_out: list[memoryview] = []
+        self._last_frame = -1
+        self._closed = False
+
+    @classmethod
+    def create(
+        cls, name: str, layers: Sequence[LayerSpec], meta_capacity: int = 4096
+    ) -> FrameWriter:
+        """Create segment `name` (as in shm_open, without the leading slash).
+
+        Raises WxskyError if a live writer holds the name; a segment left by a dead writer is
+        replaced (see the module docstring).
+        """
+        bare = _check_name(name)
+        specs = _check_specs(layers)
+        if not 0 <= meta_capacity <= U32_MAX:
+            raise ValueError(f"meta_capacity {meta_capacity} is outside 0..{U32_MAX}")
+        layout = _Layout.compute(specs, meta_capacity)
+        fd = _create_segment(bare, layout.total_size)
+        try:
+            mm = mmap.mmap(fd, layout.total_size)
+        except OSError as exc:
+            os.close(fd)
+            _shm_unlink(bare)
+            raise WxskyError(f"cannot map shared-memory segment {bare!r}: {exc}") from exc
+        writer = cls(bare, fd, mm, layout)
+        writer._init_header()
+        return writer
+
+    @property
+    def name(self) -> str:
+        return self._name
+
+    @property
+    def layers(self) -> tuple[LayerSpec, ...]:
+        return self._layout.layers
+
+    @property
+    def segment_size(self) -> int:
+        return self._layout.total_size
+
+    def _put32(self, offset: int, value: int) -> None:
+        self._u32[offset // 4] = value
+
+    def _put64(self, offset: int, value: int) -> None:
+        self._u64[offset // 8] = value
+
+    def _init_header(self) -> None:
+        lay = self._layout
+        self._put32(HDR_VERSION, VERSION)
+        self._put32(HDR_HEADER_SIZE, lay.header_size)
+        self._put32(HDR_SLOT_COUNT, SLOT_COUNT)
+        self._put32(HDR_LAYER_COUNT, len(lay.layers))
+        self._put64(HDR_SLOT_SIZE, lay.slot_size)
+        self._put32(HDR_META_CAPACITY, lay.meta_capacity)
+        self._put32(HDR_WRITER_PID, os.getpid() & U32_MAX)
+        self._put32(HDR_ACTIVE_SLOT, 1 - self._target)
+        for i, spec in enumerate(lay.layers):
+            desc = HDR_LAYERS + i * LAYER_DESC_SIZE
+            self._view[desc + LD_NAME : desc + LD_NAME + LAYER_NAME_SIZE] = spec.name.encode(
+                "ascii"
+            ).ljust(LAYER_NAME_SIZE, b"\0")
+            self._put32(desc + LD_MAX_WIDTH, spec.max_width)
+            self._put32(desc + LD_MAX_HEIGHT, spec.max_height)
+            self._put64(desc + LD_CAPACITY, spec.capacity)
+        for slot in range(SLOT_COUNT):
+            base = lay.slot_base(slot)
+            self._put32(base + SLOT_META_OFFSET, lay.meta_offset)
+            for i, offset in enumerate(lay.pixel_offsets):
+                self._put64(base + SLOT_LAYERS + i * LAYER_ENTRY_SIZE + LE_OFFSET, base + offset)
+        self._put32(HDR_STATE, STATE_LIVE)
+        # Last, so a reader that sees the magic sees a complete header.
+        self._view[HDR_MAGIC : HDR_MAGIC + len(MAGIC)] = MAGIC
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise WxskyError(f"frame writer for segment {self._name!r} is closed")
+
+    def _begin(self) -> None:
+        if not self._writing:
+            seq = self._layout.slot_base(self._target) + SLOT_SEQ
+            self._put64(seq, self._u64[seq // 8] + 1)  # odd: readers of this slot retry
+            self._writing = True
+
+    def layer_buffer(self, layer: str, width: int, height: int) -> memoryview:
+        """The writable pixels of `layer` in the slot being filled: width*height*4 contiguous
+        bytes (RGBA8, premultiplied, rows top to bottom). Valid until the next `publish`; a layer
+        not asked for before `publish` is published as absent (0x0)."""
+        self._check_open()
+        index = self._index.get(layer)
+        if index is None:
+            raise ValueError(f"unknown layer {layer!r}; segment layers: {sorted(self._index)}")
+        spec = self._layout.layers[index]
+        if not (0 <= width <= spec.max_width and 0 <= height <= spec.max_height):
+            raise ValueError(
+                f"layer {layer!r}: {width}x{height} exceeds its capacity "
+                f"{spec.max_width}x{spec.max_height}"
+            )
+        self._begin()
+        self._dims[index] = (width, height)
+        start = self._layout.slot_base(self._target) + self._layout.pixel_offsets[index]
+        view = self._view[start : start + width * height * BYTES_PER_PIXEL]
+        self._handed_out.append(view)
+        return view
+
+    def publish(self, frame_number: int, meta: bytes = b"") -> None:
+        """Complete the frame being filled and make it the one readers get."""
+        self._check_open()
+        if not self._last_frame < frame_number <= U64_MAX:
+            raise ValueError(
+                f"frame number {frame_number} must be greater than the previous one "
+                f"({self._last_frame}) and fit in 64 bits"
+            )
+        if len(meta) > self._layout.meta_capacity:
+            raise ValueError(
+                f"frame metadata is {len(meta)} bytes; the segment holds at most "
+                f"{self._layout.meta_capacity}"
+            )
+        self._begin()
+        base = self._layout.slot_base(self._target)
+        for index in range(len(self._layout.layers)):
+            width, height = self._dims.get(index, (0, 0))
+            entry = base + SLOT_LAYERS + index * LAYER_ENTRY_SIZE
+            self._put32(entry + LE_WIDTH, width)
+            self._put32(entry + LE_HEIGHT, height)
+        self._put64(base + SLOT_FRAME, frame_number)
+        meta_start = base + self._layout.meta_offset
+        self._view[meta_start : meta_start + len(meta)] = meta
+        self._put32(base + SLOT_META_LENGTH, len(meta))
+        self._put64(base + SLOT_SEQ, self._u64[(base + SLOT_SEQ) // 8] + 1)  # even: complete
+        self._put32(HDR_ACTIVE_SLOT, self._target)
+        self._put64(HDR_LATEST_FRAME, frame_number)
+        self._put64(HDR_PUBLISH_COUNT, self._u64[HDR_PUBLISH_COUNT // 8] + 1)
+        self._release_handed_out()
+        self._target ^= 1
+        self._writing = False
+        self._dims.clear()
+        self._last_frame = frame_number
+
+    def _release_handed_out(self) -> None:
+        # A released view raises on use, so a stale buffer cannot scribble on the active slot.
+        for view in self._handed_out:
+            # Still exported (e.g. a live np.frombuffer array): nothing to enforce then.
+            with contextlib.suppress(BufferError):
+                view.release()
+        self._handed_out.clear()
+
+    def close(self) -> None:
+        """Mark the segment closed for attached readers and unlink it. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._put32(HDR_STATE, STATE_CLOSED)
+            _shm_unlink(self._name)
+        except FileNotFoundError:
+            pass
+        finally:
+            self._release_handed_out()
+            for view in (self._u32, self._u64, self._view):
+                view.release()
+            try:
+                self._mm.close()
+            except BufferError:
+                logger.warning(
+                    "frame segment %r: a layer buffer is still referenced; its mapping is "
+                    "released when that reference goes away",
+                    self._name,
+                )
+            os.close(self._fd)
+
+    def __enter__(self) -> FrameWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _parse_header(name: str, mm: mmap.mmap, size: int) -> _Layout:
+    magic = mm[HDR_MAGIC : HDR_MAGIC + len(MAGIC)]
+    if magic != MAGIC:
+        raise WxskyError(
+            f"shared-memory segment {name!r} is not a wxsky frame segment "
+            f"(magic {magic!r}; a writer still starting up has none yet)"
+        )
+    version, header_size, slot_count, layer_count, slot_size, meta_capacity = struct.unpack_from(
+        "<IIIIQI", mm, HDR_VERSION
+    )
+    if version != VERSION:
+        raise WxskyError(
+            f"shared-memory segment {name!r} uses frame protocol version {version}; "
+            f"this wxsky understands version {VERSION}"
+        )
+
+    def bad(why: str) -> WxskyError:
+        return WxskyError(f"shared-memory segment {name!r} has a corrupt header: {why}")
+
+    if slot_count != SLOT_COUNT:
+        raise bad(f"slot_count {slot_count}, expected {SLOT_COUNT}")
+    if not 1 <= layer_count <= MAX_LAYERS:
+        raise bad(f"layer_count {layer_count}")
+    if header_size < HDR_LAYERS + layer_count * LAYER_DESC_SIZE or header_size % 8:
+        raise bad(f"header_size {header_size}")
+    if slot_size % 8 or header_size + SLOT_COUNT * slot_size > size:
+        raise bad(f"slot_size {slot_size} does not fit the {size}-byte segment")
+    specs = []
+    for i in range(layer_count):
+        desc = HDR_LAYERS + i * LAYER_DESC_SIZE
+        raw = mm[desc + LD_NAME : desc + LD_NAME + LAYER_NAME_SIZE].rstrip(b"\0")
+        max_width, max_height, capacity = struct.unpack_from("<IIQ", mm, desc + LD_MAX_WIDTH)
+        spec = LayerSpec(raw.decode("ascii", "replace"), max_width, max_height)
+        if capacity != spec.capacity or capacity > slot_size:
+            raise bad(f"layer {spec.name!r} capacity {capacity}")
+        specs.append(spec)
+    (meta_offset,) = struct.unpack_from("<I", mm, header_size + SLOT_META_OFFSET)
+    if meta_offset + meta_capacity > slot_size:
+        raise bad(f"metadata region {meta_offset}+{meta_capacity} exceeds the slot")
+    return _Layout(
+        layers=tuple(specs),
+        meta_capacity=meta_capacity,
+        header_size=header_size,
+        slot_size=slot_size,
+        meta_offset=meta_offset,
+        pixel_offsets=(),  # read per frame from the slot's layer table
+    )
+
+
+class FrameReader:
+    """A host's side of a segment. Build with `FrameReader.open`; not thread-safe."""
+
+    def __init__(
+        self, name: str, mm: mmap.mmap, layout: _Layout, identity: tuple[int, int]
+    ) -> None:
+        self._name = name
+        self._mm = mm
+        self._layout = layout
+        self._identity = identity
+        self._view = memoryview(mm)
+        self._u32 = self._view.cast("I")
+        self._u64 = self._view.cast("Q")
+        self._closed = False
+
+    @classmethod
+    def open(cls, name: str) -> FrameReader:
+        """Attach read-only to segment `name`. The segment is never unlinked by a reader."""
+        bare = _check_name(name)
+        try:
+            fd = _shm_open(bare, os.O_RDONLY)
+        except FileNotFoundError:
+            raise WxskyError(
+                f"no shared-memory frame segment named {bare!r} (is the wxsky daemon running?)"
+            ) from None
+        except OSError as exc:
+            raise WxskyError(f"cannot open shared-memory segment {bare!r}: {exc}") from exc
+        try:
+            info = os.fstat(fd)
+            size = info.st_size
+            if size < HDR_FIXED_SIZE or size % 8:
+                raise WxskyError(
+                    f"shared-memory segment {bare!r} is not a wxsky frame segment ({size} bytes)"
+                )
+            mm = mmap.mmap(fd, size, access=mmap.ACCESS_READ)
+        finally:
+            os.close(fd)  # the mapping keeps the segment alive
+        try:
+            layout = _parse_header(bare, mm, size)
+        except BaseException:
+            mm.close()
+            raise
+        return cls(bare, mm, layout, (info.st_dev, info.st_ino))
+
+    @property
+    def name(self) -> str:
+        return self._name
+
+    @property
+    def layers(self) -> tuple[LayerSpec, ...]:
+        return self._layout.layers
+
+    @property
+    def frame_number(self) -> int:
+        """Number of the latest published frame, or -1 if none has been published yet.
+
+        A cheap peek at the header. It is updated just after the slot flip, so it can lag the
+        frame `read` returns by one: compare with `>` ("is there a newer frame than mine?").
+        """
+        self._check_open()
+        if self._u64[HDR_PUBLISH_COUNT // 8] == 0:
+            return -1
+        return int(self._u64[HDR_LATEST_FRAME // 8])
+
+    def is_current(self) -> bool:
+        """False once the writer has closed this segment or the name now refers to another one
+        (a restarted daemon): the cue for a host to close and reopen."""
+        self._check_open()
+        if self._u32[HDR_STATE // 4] == STATE_CLOSED:
+            return False
+        try:
+            fd = _shm_open(self._name, os.O_RDONLY)
+        except OSError:
+            return False
+        try:
+            info = os.fstat(fd)
+        finally:
+            os.close(fd)
+        return (info.st_dev, info.st_ino) == self._identity
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise WxskyError(f"frame reader for segment {self._name!r} is closed")
+
+    def read(self, timeout_s: float = 1.0) -> Frame:
+        """Copy the latest complete frame, retrying while the writer races this reader.
+
+        Raises WxskyError if no complete frame could be copied within `timeout_s` (also when
+        none has been published yet) or when the writer has closed the segment.
+        """
+        self._check_open()
+        deadline = time.monotonic() + timeout_s
+        attempts = 0
+        while True:
+            frame = self._try_read()
+            if frame is not None:
+                return frame
+            attempts += 1
+            if time.monotonic() >= deadline:
+                if self._u64[HDR_PUBLISH_COUNT // 8] == 0:
+                    why = "no frame has been published yet"
+                else:
+                    why = f"the writer overwrote it {attempts} times in a row"
+                raise WxskyError(
+                    f"no complete frame from segment {self._name!r} within {timeout_s} s: {why}"
+                )
+            if attempts > 2:  # the first retries are races with a flip: try again at once
+                time.sleep(0.0005)
+
+    def _try_read(self) -> Frame | None:
+        u32, u64, lay = self._u32, self._u64, self._layout
+        if u32[HDR_STATE // 4] == STATE_CLOSED:
+            raise WxskyError(f"the writer has closed frame segment {self._name!r}")
+        if u64[HDR_PUBLISH_COUNT // 8] == 0:
+            return None
+        active = u32[HDR_ACTIVE_SLOT // 4]
+        if active >= SLOT_COUNT:
+            raise WxskyError(f"segment {self._name!r}: active_slot {active} is out of range")
+        base = lay.slot_base(active)
+        seq_index = (base + SLOT_SEQ) // 8
+        seq = u64[seq_index]
+        if seq & 1 or seq == 0:
+            return None
+        frame_number = int(u64[(base + SLOT_FRAME) // 8])
+        meta_length = u32[(base + SLOT_META_LENGTH) // 4]
+        problem = None
+        if meta_length > lay.meta_capacity:
+            problem = f"meta_length {meta_length}"
+        regions = []
+        for index, spec in enumerate(lay.layers):
+            entry = base + SLOT_LAYERS + index * LAYER_ENTRY_SIZE
+            width = u32[(entry + LE_WIDTH) // 4]
+            height = u32[(entry + LE_HEIGHT) // 4]
+            offset = int(u64[(entry + LE_OFFSET) // 8])
+            length = width * height * BYTES_PER_PIXEL
+            if (
+                width > spec.max_width
+                or height > spec.max_height
+                or offset < base
+                or offset + length > base + lay.slot_size
+            ):
+                problem = f"layer {spec.name!r} entry {width}x{height}@{offset}"
+                break
+            regions.append((spec.name, width, height, offset, length))
+        layers: dict[str, npt.NDArray[np.uint8]] = {}
+        meta = b""
+        if problem is None:
+            meta_start = base + lay.meta_offset
+            meta = bytes(self._view[meta_start : meta_start + meta_length])
+            for layer, width, height, offset, length in regions:
+                pixels = np.frombuffer(self._view[offset : offset + length], dtype=np.uint8)
+                layers[layer] = pixels.reshape(height, width, BYTES_PER_PIXEL).copy()
+        if u64[seq_index] != seq or u32[HDR_ACTIVE_SLOT // 4] != active:
+            return None  # torn: the writer got to this slot while we copied it
+        if problem is not None:
+            raise WxskyError(f"segment {self._name!r} slot {active} is corrupt: {problem}")
+        return Frame(frame_number=frame_number, layers=layers, meta=meta)
+
+    def close(self) -> None:
+        """Detach. Idempotent; leaves the segment in place for the writer to unlink."""
+        if self._closed:
+            return
+        self._closed = True
+        for view in (self._u32, self._u64, self._view):
+            view.release()
+        self._mm.close()
+
+    def __enter__(self) -> FrameReader:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
