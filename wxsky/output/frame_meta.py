@@ -2,7 +2,7 @@
 
 It tells a host, for exactly the pixels in that slot, which camera drew the sky and near
 layers and where the 8 ring quads stand, so a reader never pairs pixels with stale geometry.
-Layout (little-endian, 856 bytes), documented in docs/protocol.md:
+Layout (little-endian, 920 bytes), documented in docs/protocol.md:
 
     u32 record_version, u32 reserved
     u64 frame_number
