@@ -74,15 +74,18 @@ class FrameMeta:
         v = _FORMAT.unpack_from(data)
         if v[0] != RECORD_VERSION:
             raise ProtocolError(f"frame record version {v[0]}, this reader knows {RECORD_VERSION}")
-        camera = Camera(
-            position_m=(v[5], v[6], v[7]),
-            heading_deg=v[8],
-            pitch_deg=v[9],
-            roll_deg=v[10],
-            fov_deg=v[11],
-            width_px=v[12],
-            height_px=v[13],
-        )
+        try:
+            camera = Camera(
+                position_m=(v[5], v[6], v[7]),
+                heading_deg=v[8],
+                pitch_deg=v[9],
+                roll_deg=v[10],
+                fov_deg=v[11],
+                width_px=v[12],
+                height_px=v[13],
+            )
+        except ValueError as exc:
+            raise ProtocolError(f"frame record {v[2]}: {exc}") from None
         return FrameMeta(
             frame_number=v[2],
             ring_version=v[3],

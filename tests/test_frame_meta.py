@@ -1,0 +1,67 @@
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from wxsky.errors import ProtocolError
+from wxsky.output.frame_meta import RECORD_SIZE, FrameMeta
+from wxsky.scene.camera import Camera
+
+
+def _meta() -> FrameMeta:
+    quads = np.arange(96, dtype=np.float64).reshape(8, 4, 3) * 1.5
+    return FrameMeta(
+        frame_number=123456789012,
+        ring_version=7,
+        time_utc_unix_s=1_781_000_000.25,
+        camera=Camera((1.0, -2.0, 434.5), 271.0, -12.5, 3.0, 75.0, 640, 360),
+        sun_direction_enu=(0.1, -0.2, 0.97),
+        ring_centre_m=(5.0, 6.0, 7.0),
+        ring_radius_m=8000.0,
+        ring_quads_m=quads,
+    )
+
+
+def test_round_trip_is_exact() -> None:
+    meta = _meta()
+    data = meta.pack()
+    assert len(data) == RECORD_SIZE == 920
+    back = FrameMeta.unpack(data)
+    assert back.camera == meta.camera
+    assert back.frame_number == meta.frame_number
+    assert back.sun_direction_enu == meta.sun_direction_enu
+    np.testing.assert_array_equal(back.ring_quads_m, meta.ring_quads_m)
+
+
+def test_field_offsets_match_the_protocol_doc() -> None:
+    data = _meta().pack()
+    assert struct.unpack_from("<I", data, 0)[0] == 1
+    assert struct.unpack_from("<Q", data, 8)[0] == 123456789012
+    assert struct.unpack_from("<Q", data, 16)[0] == 7
+    assert struct.unpack_from("<d", data, 56)[0] == 271.0  # heading_deg
+    assert struct.unpack_from("<II", data, 88) == (640, 360)
+    assert struct.unpack_from("<d", data, 144)[0] == 8000.0  # ring radius
+    assert struct.unpack_from("<d", data, 152 + 8 * 5)[0] == 5 * 1.5  # quads[0][1][2]
+
+
+@pytest.mark.parametrize("cut", [0, 1, 100, RECORD_SIZE - 1])
+def test_truncated_record_is_a_protocol_error(cut: int) -> None:
+    with pytest.raises(ProtocolError, match="bytes, expected"):
+        FrameMeta.unpack(_meta().pack()[:cut])
+
+
+def test_unknown_version_is_refused() -> None:
+    data = bytearray(_meta().pack())
+    data[0] = 9
+    with pytest.raises(ProtocolError, match="version 9"):
+        FrameMeta.unpack(bytes(data))
+
+
+def test_garbage_record_is_a_protocol_error() -> None:
+    rng = np.random.default_rng(3)
+    data = bytearray(rng.integers(0, 256, RECORD_SIZE, dtype=np.uint8).tobytes())
+    data[0:4] = struct.pack("<I", 1)
+    with pytest.raises(ProtocolError, match="frame record"):
+        FrameMeta.unpack(bytes(data))
