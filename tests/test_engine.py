@@ -1,0 +1,202 @@
+"""The engine's stage order: simulation clock, drift, and when the impostor ring is rebuilt."""
+
+from __future__ import annotations
+
+import dataclasses
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+import pytest
+
+from wxsky.engine import SkyEngine, enu_from_geodetic
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import SceneSettings
+from wxsky.weather.state import CloudLayer, CloudType, Source, WeatherPatch, WeatherState, WindLayer
+
+T0 = datetime(2026, 6, 21, 13, 0, tzinfo=UTC)
+SETTINGS = SceneSettings(ring_radius_m=8000.0, max_range_m=16_000.0, ring_texture_px=64)
+CU = CloudLayer(3, 1900.0, 2700.0, CloudType.CUMULUS)
+
+
+def _camera(x: float = 0.0, y: float = 0.0, z: float = 600.0) -> Camera:
+    return Camera((x, y, z), heading_deg=200.0, pitch_deg=10.0, width_px=64, height_px=36)
+
+
+def _engine(rate: float = 1.0, wind_mps: float = 0.0, **kw: object) -> SkyEngine:
+    wind = (WindLayer(500.0, 270.0, wind_mps),) if wind_mps else ()
+    args: dict = {"time_utc": T0, "layers": (CU,), "wind": wind, "seed": 5, **kw}
+    return SkyEngine(WeatherState(**args), _camera(), SETTINGS, clock_rate=rate)
+
+
+# -- clock --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("rate", "dt", "expected_s"), [(1.0, 0.5, 0.5), (60.0, 2.0, 120.0)])
+def test_clock_advances_time_by_rate_times_dt(rate: float, dt: float, expected_s: float) -> None:
+    engine = _engine(rate=rate)
+    plan = engine.advance(dt)
+    assert plan.state.time_utc == T0 + timedelta(seconds=expected_s)
+    plan = engine.advance(dt)
+    assert plan.state.time_utc == T0 + timedelta(seconds=2 * expected_s)
+    assert engine.state.time_utc == plan.state.time_utc
+
+
+def test_rate_zero_freezes_time_and_clouds() -> None:
+    engine = _engine(rate=0.0, wind_mps=20.0)
+    first = engine.advance(0.0)
+    for _ in range(3):
+        plan = engine.advance(10.0)
+    assert plan.state.time_utc == T0
+    assert plan.ring is first.ring and not plan.ring_changed
+    np.testing.assert_array_equal(
+        plan.frame.near.sprites.centre_m, first.frame.near.sprites.centre_m
+    )
+
+
+def test_negative_dt_does_not_run_the_clock_backwards() -> None:
+    engine = _engine(rate=1.0)
+    engine.advance(5.0)
+    assert engine.advance(-100.0).state.time_utc == T0 + timedelta(seconds=5)
+
+
+def test_set_time_jumps_and_changes_rate() -> None:
+    engine = _engine(rate=1.0)
+    engine.advance(1.0)
+    t = datetime(2026, 6, 22, 6, 0, tzinfo=UTC)
+    engine.set_time(t, rate=10.0)
+    assert engine.clock_rate == 10.0
+    plan = engine.advance(3.0)
+    assert plan.state.time_utc == t + timedelta(seconds=30)
+    assert plan.ring_changed  # the sun is somewhere else entirely
+
+
+# -- ring rebuilds ------------------------------------------------------------------------
+
+
+def test_first_frame_builds_the_ring_at_the_camera() -> None:
+    engine = _engine()
+    assert engine.ring is None
+    plan = engine.advance(0.0)
+    assert plan.ring_changed and plan.ring_version == 1
+    assert plan.ring.geometry.centre_m == _camera().position_m
+    assert engine.ring is plan.ring
+
+
+def test_same_ring_object_when_nothing_changed() -> None:
+    engine = _engine(rate=1.0)
+    first = engine.advance(0.0)
+    for _ in range(3):
+        plan = engine.advance(1.0 / 60.0)
+        assert plan.ring is first.ring
+        assert not plan.ring_changed and plan.ring_version == first.ring_version
+
+
+@pytest.mark.parametrize(
+    ("move", "rebuilt"),
+    [
+        ((1000.0, 0.0, 0.0), False),  # under 15 % of the 8 km radius
+        ((0.0, -1190.0, 0.0), False),
+        ((1300.0, 0.0, 0.0), True),
+        ((900.0, 900.0, 0.0), True),  # 1273 m diagonally
+        ((0.0, 0.0, 150.0), False),  # under 2 % = 160 m
+        ((0.0, 0.0, -170.0), True),
+    ],
+)
+def test_ring_rebuilt_when_the_camera_moves_past_the_threshold(
+    move: tuple[float, float, float], rebuilt: bool
+) -> None:
+    engine = _engine(rate=0.0)
+    first = engine.advance(0.0)
+    engine.set_camera(_camera(*move[:2], 600.0 + move[2]))
+    plan = engine.advance(0.0)
+    assert plan.ring_changed is rebuilt
+    assert (plan.ring is not first.ring) is rebuilt
+    assert plan.ring_version == first.ring_version + int(rebuilt)
+    expected_centre = (move[0], move[1], 600.0 + move[2]) if rebuilt else (0.0, 0.0, 600.0)
+    assert plan.ring.geometry.centre_m == expected_centre
+    # The frame follows the camera either way.
+    assert plan.frame.camera.position_m == (move[0], move[1], 600.0 + move[2])
+
+
+def test_ring_rebuilt_on_weather_change_only() -> None:
+    engine = _engine(rate=0.0)
+    first = engine.advance(0.0)
+    engine.apply(WeatherPatch(source=Source.CONTROL, visibility_m=3000.0))
+    second = engine.advance(0.0)
+    assert second.ring_changed and second.ring is not first.ring
+    assert second.state.visibility_m == 3000.0
+    # Saying the same thing again (even from another source) is not a change.
+    engine.apply(WeatherPatch(source=Source.METAR, visibility_m=3000.0))
+    third = engine.advance(0.0)
+    assert not third.ring_changed and third.ring is second.ring
+    # New clouds are.
+    layers = (CloudLayer(6, 1900.0, 2700.0, CloudType.CUMULUS),)
+    engine.apply(WeatherPatch(source=Source.CONTROL, layers=layers))
+    fourth = engine.advance(0.0)
+    assert fourth.ring_changed and fourth.ring_version == third.ring_version + 1
+    assert sum(len(d) for d in fourth.ring.impostors) > sum(len(d) for d in third.ring.impostors)
+
+
+def test_ring_rebuilt_when_the_sun_moves_a_degree() -> None:
+    # The sun moves about 15° an hour: 2 minutes is ~0.5°, 5 minutes ~1.25°.
+    engine = _engine(rate=1.0)
+    first = engine.advance(0.0)
+    assert not engine.advance(120.0).ring_changed
+    plan = engine.advance(180.0)
+    assert plan.ring_changed and plan.ring is not first.ring
+
+
+def test_ring_rebuilt_when_the_clouds_drift_too_far() -> None:
+    # 10 m/s from the west; the limit is 3 % of 8 km = 240 m.
+    engine = _engine(rate=1.0, wind_mps=10.0)
+    first = engine.advance(0.0)
+    assert first.ring.drift == ((0.0, 0.0),)
+    plan = engine.advance(20.0)
+    assert not plan.ring_changed and plan.ring is first.ring
+    # Near sprites drift every frame even while the ring stays: 200 m east after 20 s.
+    moved = {tuple(p) for p in np.round(plan.frame.near.sprites.centre_m, 3)}
+    east = np.array([200.0, 0.0, 0.0])
+    still = {tuple(p) for p in np.round(first.frame.near.sprites.centre_m + east, 3)}
+    assert len(still) > 100
+    assert len(moved & still) > 0.9 * len(still)
+    plan = engine.advance(5.0)
+    assert plan.ring_changed
+    np.testing.assert_allclose(plan.ring.drift, [(250.0, 0.0)], atol=1e-9)
+
+
+def test_layer_count_change_resets_the_drift() -> None:
+    engine = _engine(rate=1.0, wind_mps=10.0)
+    engine.advance(0.0)
+    engine.advance(10.0)
+    two = (CU, CloudLayer(5, 4000.0, 4500.0, CloudType.ALTOCUMULUS))
+    engine.apply(WeatherPatch(source=Source.CONTROL, layers=two))
+    plan = engine.advance(0.0)
+    assert plan.ring_changed
+    assert plan.ring.drift == ((0.0, 0.0), (0.0, 0.0))
+
+
+def test_weather_version_counts_changes() -> None:
+    engine = _engine()
+    assert engine.weather_version == 0
+    engine.apply(WeatherPatch(source=Source.CONTROL))  # says nothing
+    assert engine.weather_version == 0
+    engine.apply(WeatherPatch(source=Source.CONTROL, seed=9))
+    assert engine.weather_version == 1 and engine.state.seed == 9
+
+
+def test_plan_state_carries_the_frame_time() -> None:
+    engine = _engine(rate=2.0)
+    plan = engine.advance(1.5)
+    assert plan.state is engine.state
+    assert plan.state.time_utc == T0 + timedelta(seconds=3)
+    assert dataclasses.replace(plan.state, time_utc=T0) == _engine().state
+    assert plan.frame.sky.sun.elevation_deg > 40.0  # Zurich early afternoon in June
+
+
+def test_enu_from_geodetic() -> None:
+    # One degree north is ~110.5 km, one degree east at 60° N is half of ~111.3 km.
+    e, n, u = enu_from_geodetic(60.0, 10.0, 61.0, 11.0, 1234.0)
+    assert n == pytest.approx(110_540.0)
+    assert e == pytest.approx(111_320.0 * 0.5, rel=1e-9)
+    assert u == 1234.0
+    assert enu_from_geodetic(47.0, 8.0, 47.0, 8.0, 0.0) == (0.0, 0.0, 0.0)
