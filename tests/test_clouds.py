@@ -215,11 +215,6 @@ def test_overcast_covers_the_block(kind: CloudType) -> None:
     assert area >= 0.95
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="clouds.block_clouds rounds oktas/8 * cells per block with round(): templates with "
-    "1 cell (CB) give no cloud at all for 1-4 oktas, 4-cell ones (CI, CS) none at 1 okta",
-)
 @pytest.mark.parametrize("kind", [CloudType.CUMULONIMBUS, CloudType.CIRRUS], ids=_kind_id)
 def test_any_nonzero_cover_produces_some_cloud(kind: CloudType) -> None:
     """A FEW or SCT layer must show some clouds somewhere in a 6 x 6 block (24 km) area."""
@@ -236,9 +231,14 @@ def test_any_nonzero_cover_produces_some_cloud(kind: CloudType) -> None:
 @pytest.mark.parametrize("kind", ALL_TYPES, ids=_kind_id)
 def test_sprites_stay_inside_layer_and_block(kind: CloudType, oktas: int) -> None:
     layer = _layer(kind, oktas)
-    bx, by = -4, 9
+    # A coarse template (one cumulonimbus per block) leaves some blocks empty below 8/8:
+    # take the first of a row of blocks that holds a cloud.
+    candidates = [(bx, 9) for bx in range(-4, 2)]
+    bx, by = next(
+        ((x, y) for x, y in candidates if len(block_clouds(x, y, 2, layer, 12345))), (0, 0)
+    )
     batch = block_clouds(bx, by, 2, layer, 12345)
-    assert len(batch) > 0
+    assert len(batch) > 0, f"no cloud in any of {candidates}"
     z = batch.centre_m[:, 2]
     size = batch.size_m.astype(np.float64)
     slack = 1e-3 * size  # sizes are stored as float32
@@ -246,9 +246,9 @@ def test_sprites_stay_inside_layer_and_block(kind: CloudType, oktas: int) -> Non
     # Sprite discs kept inside the layer: centres at least 0.3 sprite above the base, and
     # 0.3 sprite below the top wherever the cloud is tall enough for both margins (a cloud
     # is at least height_frac[0] of the layer thick).
-    assert np.all(z >= layer.base_m + 0.3 * size - slack)
     tpl = template_for(kind)
     fits = 0.6 * size <= tpl.height_frac[0] * layer.thickness_m
+    assert np.all(z[fits] >= layer.base_m + 0.3 * size[fits] - slack[fits])
     assert np.all(z[fits] <= layer.top_m - 0.3 * size[fits] + slack[fits])
     # Horizontally inside the block, give or take one cloud radius.
     cell = BLOCK_SIZE_M / max(1, round(BLOCK_SIZE_M / tpl.cell_m))
@@ -261,11 +261,6 @@ def test_sprites_stay_inside_layer_and_block(kind: CloudType, oktas: int) -> Non
     assert inside.mean() > 0.7
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="clouds._cloud_sprites: when a layer is thinner than 0.3 sprite size, "
-    "z_hi = max(..., z_lo) puts sprite centres at base + 0.3*size, above the layer top",
-)
 def test_sprite_centres_stay_inside_a_thin_layer() -> None:
     thin = CloudLayer(8, 830.0, 930.0, CloudType.STRATUS)
     batch = block_clouds(0, 0, 0, thin, 23)
@@ -274,11 +269,13 @@ def test_sprite_centres_stay_inside_a_thin_layer() -> None:
     assert np.all((z >= thin.base_m) & (z <= thin.top_m)), (z.min(), z.max())
 
 
-def test_sprites_keep_the_bottom_margin_in_a_thin_layer() -> None:
+def test_sprites_in_a_thin_layer_sit_at_its_middle() -> None:
     thin = CloudLayer(8, 830.0, 930.0, CloudType.STRATUS)
     batch = block_clouds(0, 0, 0, thin, 23)
-    size = batch.size_m.astype(np.float64)
-    assert np.all(batch.centre_m[:, 2] >= thin.base_m + 0.3 * size - 1e-3 * size)
+    # Every sprite is far larger than the 100 m layer: the margins meet at each cloud's middle,
+    # which lies in the lower half of the layer or at its centre.
+    z = batch.centre_m[:, 2]
+    assert np.all((z > thin.base_m) & (z <= 0.5 * (thin.base_m + thin.top_m) + 1e-6))
 
 
 @pytest.mark.parametrize("kind", ALL_TYPES, ids=_kind_id)

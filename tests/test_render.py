@@ -375,12 +375,6 @@ def test_snapshot_of_an_empty_sky_is_the_sky_layer(renderer: Renderer) -> None:
     assert snap.ring_quads_m.shape == (8, 4, 3)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=RenderError,
-    reason="Renderer._target releases a layer's framebuffer while it is still bound, then "
-    "creates the new one: moderngl re-binds the deleted name -> GL_INVALID_OPERATION",
-)
 def test_resizing_the_layer_drawn_last(renderer: Renderer) -> None:
     draw = _draw(_sprites([_from_ring_centre(0.0, 16_000.0, 2000.0)], [600.0]))
     ring = _ring_scene(draw, -1000.0, 3000.0)

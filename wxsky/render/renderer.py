@@ -135,6 +135,7 @@ class Renderer:
         if self._closed:
             return
         self._closed = True
+        self._unbind()
         for target in self._targets.values():
             target.release()
         self._targets.clear()
@@ -235,11 +236,17 @@ class Renderer:
         if target is not None and target.size == (width, height):
             return target
         if target is not None:
+            self._unbind()
             target.release()
         tex = self.ctx.texture((width, height), 4)
         target = _Target(tex, self.ctx.framebuffer(color_attachments=[tex]))
         self._targets[name] = target
         return target
+
+    def _unbind(self) -> None:
+        # moderngl re-binds the current framebuffer after creating a new one: if that is one we
+        # just released, GL reports INVALID_OPERATION. Bind object 0 before releasing any.
+        self.ctx.detect_framebuffer(0).use()
 
     def _check(self, what: str) -> None:
         err = self.ctx.error

@@ -217,13 +217,16 @@ def block_clouds(
     cells_per_side = max(1, round(BLOCK_SIZE_M / tpl.cell_m))
     cell_m = BLOCK_SIZE_M / cells_per_side
     n_cells = cells_per_side * cells_per_side
-    n_clouds = round(occupied_fraction(layer.cover_oktas) * n_cells)
     # Draw every random number even for empty cells so a cover change keeps the other clouds.
     order = rng.permutation(n_cells)
     jitter = rng.uniform(-0.3, 0.3, size=(n_cells, 2))
     radius_u = rng.uniform(size=n_cells)
     height_u = rng.uniform(size=n_cells)
     cloud_seeds = rng.integers(0, 2**63 - 1, size=n_cells)
+    # Round the expected cloud count up or down by the block's own coin, so a coarse template
+    # (one cumulonimbus cell per block) still shows its cover on average across blocks.
+    expected = occupied_fraction(layer.cover_oktas) * n_cells
+    n_clouds = int(expected) + int(rng.uniform() < expected - int(expected))
     if n_clouds == 0:
         return SpriteBatch.empty()
     chosen = np.sort(order[:n_clouds])
@@ -275,9 +278,11 @@ def _cloud_sprites(
     rad = np.sqrt(rng.uniform(size=n)) * reach * np.maximum(radius_m - 0.35 * size, 0.2 * radius_m)
     x = base_centre[0] + rad * np.cos(ang)
     y = base_centre[1] + rad * np.sin(ang)
-    # Keep sprite discs inside the layer: centres no lower than a third of a sprite above base.
-    z_lo = base_centre[2] + 0.3 * size
-    z_hi = np.maximum(base_centre[2] + height_m - 0.3 * size, z_lo)
+    # Keep sprite discs inside the layer: centres a third of a sprite from base and top, or
+    # the middle of a cloud too thin for that, never outside it.
+    margin = np.minimum(0.3 * size, 0.5 * height_m)
+    z_lo = base_centre[2] + margin
+    z_hi = base_centre[2] + height_m - margin
     z = z_lo + (z_hi - z_lo) * z_frac
     textures = np.asarray(tpl.textures, dtype=np.int32)[rng.integers(0, len(tpl.textures), size=n)]
     if tpl.dome:
