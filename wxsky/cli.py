@@ -90,7 +90,6 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     from wxsky.config import load_config
     from wxsky.png import write_png
     from wxsky.scene.camera import Camera
-    from wxsky.scene.layout import SceneSettings
     from wxsky.snapshot import take_snapshot
     from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState, parse_time_utc
 
@@ -119,11 +118,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         width_px=width,
         height_px=height,
     )
-    settings = SceneSettings(
-        ring_radius_m=config.scene.ring_radius_m,
-        max_range_m=config.scene.max_range_m,
-        ring_texture_px=config.scene.ring_texture_px,
-    )
+    settings = config.scene.settings()
     shot = take_snapshot(state, camera, settings)
     write_png(args.out, shot.image)
     if args.layers_out:

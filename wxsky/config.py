@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
 from wxsky.errors import ConfigError, WxskyError
+from wxsky.scene.layout import SceneSettings
 
 # Shared with wxsky.presets; it lives here because presets import this module, not the reverse.
 PRESET_NAME_PATTERN = r"[a-z0-9-]+"
@@ -106,6 +107,14 @@ class SceneSection(_Section):
         BLOCK_SIZE_M,
         _Rule(fixed_reason="the cloud field is generated in 4 km blocks by design"),
     )
+
+    def settings(self) -> SceneSettings:
+        """The scene stage's view of this section."""
+        return SceneSettings(
+            ring_radius_m=self.ring_radius_m,
+            max_range_m=self.max_range_m,
+            ring_texture_px=self.ring_texture_px,
+        )
 
 
 @dataclass(frozen=True)

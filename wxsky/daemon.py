@@ -39,7 +39,6 @@ from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import SceneSettings
 from wxsky.scene.ring import RING_SIZE
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
 
@@ -120,11 +119,7 @@ class Daemon:
             width_px=cam.width,
             height_px=cam.height,
         )
-        settings = SceneSettings(
-            ring_radius_m=config.scene.ring_radius_m,
-            max_range_m=config.scene.max_range_m,
-            ring_texture_px=config.scene.ring_texture_px,
-        )
+        settings = config.scene.settings()
         self.engine = SkyEngine(state, camera, settings, clock_rate=config.clock.rate)
         self.inputs = {
             "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
