@@ -200,3 +200,35 @@ def test_enu_from_geodetic() -> None:
     assert e == pytest.approx(111_320.0 * 0.5, rel=1e-9)
     assert u == 1234.0
     assert enu_from_geodetic(47.0, 8.0, 47.0, 8.0, 0.0) == (0.0, 0.0, 0.0)
+
+
+def test_near_and_ring_partition_the_clouds_while_they_drift() -> None:
+    """Between ring rebuilds the near layer keeps the ring's choice of blocks: a drifting
+    block is never drawn both as sprites and in an impostor, nor dropped from both."""
+    from wxsky.scene.layout import gather_blocks
+
+    eng = _engine(rate=1.0, wind_mps=20.0)
+    first = eng.advance(0.0)
+    plan = eng.advance(10.0)  # 200 m of drift: below the 3 % rebuild threshold
+    assert not plan.ring_changed
+    ring = plan.ring
+    drift_now = eng._drift  # the drift the frame was placed with
+    offset = np.asarray(drift_now[0]) - np.asarray(ring.drift[0])
+    far = np.unique(np.concatenate([i.sprites.centre_m for i in ring.impostors]), axis=0)
+    far_now = far + np.array([offset[0], offset[1], 0.0])
+    near = plan.frame.near.sprites.centre_m
+    near_set = {tuple(np.round(p, 3)) for p in near}
+    far_set = {tuple(np.round(p, 3)) for p in far_now}
+    assert near_set and far_set
+    assert not near_set & far_set
+    settings = eng.settings
+    everything = gather_blocks(
+        plan.state,
+        drift_now,
+        ring.geometry.centre_m,
+        0.0,
+        settings.max_range_m,
+        select_drift=ring.drift,
+    )
+    assert len(near_set | far_set) == len({tuple(np.round(p, 3)) for p in everything.centre_m})
+    assert first.ring is ring

@@ -54,12 +54,13 @@ class InputStats:
     messages: int = 0
     errors: int = 0
     last_error: str = ""
+    ok: bool = True  # the input itself works; a client's bad message does not make it fail
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "name": self.name,
             "kind": self.kind,
-            "ok": self.errors == 0 or not self.last_error,
+            "ok": self.ok,
             "messages": self.messages,
             "errors": self.errors,
             "last_error": self.last_error,

@@ -111,7 +111,13 @@ class SkyEngine:
         sky = sky_params(self._state)
         ring, changed = self._ring_for(sky)
         frame = build_frame(
-            self._state, self._drift, self._camera, ring.geometry.centre_m, sky, self.settings
+            self._state,
+            self._drift,
+            self._camera,
+            ring.geometry.centre_m,
+            sky,
+            self.settings,
+            ring_drift=ring.drift,
         )
         return FramePlan(self._state, frame, ring, self._ring_version, changed)
 

@@ -77,15 +77,23 @@ def gather_blocks(
     centre_m: tuple[float, float, float],
     min_range_m: float,
     max_range_m: float,
+    select_drift: Drift | None = None,
 ) -> SpriteBatch:
-    """Sprites of every block whose nearest point to the centre lies in [min, max) metres."""
+    """Sprites of every block whose nearest point to the centre lies in [min, max) metres,
+    placed with `drift`. Blocks are chosen with `select_drift` when given: the near layer
+    picks its blocks as they stood when the ring was built, so no block is drawn both as
+    sprites and in the ring, nor in neither, until the ring is rebuilt."""
     if len(drift) != len(state.layers):
         drift = zero_drift(state)
+    if select_drift is None or len(select_drift) != len(drift):
+        select_drift = drift
     batches: list[SpriteBatch] = []
-    for li, (layer, (dx, dy)) in enumerate(zip(state.layers, drift, strict=True)):
+    for li, (layer, (dx, dy), (sx, sy)) in enumerate(
+        zip(state.layers, drift, select_drift, strict=True)
+    ):
         if layer.cover_oktas == 0:
             continue
-        qx, qy = centre_m[0] - dx, centre_m[1] - dy
+        qx, qy = centre_m[0] - sx, centre_m[1] - sy
         bx0 = math.floor((qx - max_range_m) / BLOCK_SIZE_M)
         bx1 = math.floor((qx + max_range_m) / BLOCK_SIZE_M)
         by0 = math.floor((qy - max_range_m) / BLOCK_SIZE_M)
@@ -154,8 +162,11 @@ def build_frame(
     ring_centre_m: tuple[float, float, float],
     sky: SkyParams,
     settings: SceneSettings,
+    ring_drift: Drift | None = None,
 ) -> FrameScene:
-    near = gather_blocks(state, drift, ring_centre_m, 0.0, settings.ring_radius_m)
+    near = gather_blocks(
+        state, drift, ring_centre_m, 0.0, settings.ring_radius_m, select_drift=ring_drift
+    )
     return FrameScene(
         camera=camera,
         sky=sky,
