@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from wxsky.errors import RenderError
-from wxsky.host.compositor import Layers, composite, sample_ring
+from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring
 from wxsky.render import shaders as shaders_mod
 from wxsky.render.renderer import NEAR_SCALE, Renderer
 from wxsky.render.shaders import ShaderLibrary, shader_source
@@ -26,7 +26,7 @@ from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.layout import FrameScene, RingScene, SceneSettings, SpriteDraw
 from wxsky.scene.ring import RING_SIZE, RingGeometry, bin_far_sprites
 from wxsky.scene.sky import SkyParams, sky_params
-from wxsky.snapshot import LAYER_NAMES, layers_from_images, take_snapshot
+from wxsky.snapshot import LAYER_NAMES, take_snapshot
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
 W, H = 161, 91  # odd: the centre pixel (45, 80) looks exactly along the camera axis

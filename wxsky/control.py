@@ -13,8 +13,6 @@ from wxsky.errors import ProtocolError, WxskyError
 from wxsky.scene.camera import Camera
 from wxsky.weather.state import parse_time_utc
 
-COMMANDS = ("status", "scene", "set_camera", "set_time", "apply_preset", "apply_metar")
-
 
 class ControlError(ProtocolError):
     """A control request whose params are missing, mistyped or out of range."""

@@ -136,7 +136,6 @@ class Daemon:
         self._render_exec: concurrent.futures.ThreadPoolExecutor | None = None
         self._renderer: Any = None
         self._preview_task: asyncio.Future[None] | None = None
-        self._last_meta: FrameMeta | None = None
         self._dispatch = dispatch_table(
             {
                 "status": lambda p: self.status(),
@@ -196,7 +195,6 @@ class Daemon:
             last = now
             meta = await loop.run_in_executor(self._render_exec, self._render_and_publish, plan)
             self._count_frame()
-            self._last_meta = meta
             self._broadcast_frame(plan, meta)
             if plan.ring_changed:
                 self._server_broadcast("scene", self.scene_info())
@@ -377,16 +375,13 @@ class Daemon:
 
     def _write_preview(self) -> None:
         """Composite the latest published frame the way a host does: from shared memory."""
-        from wxsky.host.compositor import composite
+        from wxsky.host.reference import host_frame
         from wxsky.png import write_png
-        from wxsky.snapshot import layers_from_images
 
         assert self.preview_dir is not None
         try:
             with FrameReader.open(self.config.output.shm_name) as reader:
-                frame = reader.read(timeout_s=1.0)
-            meta = FrameMeta.unpack(frame.meta)
-            image = composite(layers_from_images(frame.layers, meta.ring_quads_m), meta.camera)
+                image = host_frame(reader.read(timeout_s=1.0)).composite()
             write_png(self.preview_dir / "preview.png", image)
         except (WxskyError, OSError) as exc:
             log.warning("preview not written: %s", exc)
@@ -420,9 +415,6 @@ class Daemon:
             self._force_cleanup()
             os._exit(1)
         log.info("received %s, shutting down", signal.Signals(sig).name)
-        self._stop.set()
-
-    def request_stop(self) -> None:
         self._stop.set()
 
     def _force_cleanup(self) -> None:

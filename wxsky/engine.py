@@ -25,7 +25,7 @@ from wxsky.scene.layout import (
     zero_drift,
 )
 from wxsky.scene.sky import SkyParams, sky_params
-from wxsky.weather.state import WeatherPatch, WeatherState
+from wxsky.weather.state import Source, WeatherPatch, WeatherState
 
 # Rebuild the ring once the clouds in it have drifted this share of its radius, or the sun
 # has moved this far: past these, the seam between near sprites and impostors shows.
@@ -95,8 +95,10 @@ class SkyEngine:
     def set_camera(self, camera: Camera) -> None:
         self._camera = camera
 
-    def set_time(self, time_utc: datetime, rate: float | None = None) -> None:
-        self.apply(WeatherPatch(source=self._state.sources.time_utc, time_utc=time_utc))
+    def set_time(
+        self, time_utc: datetime, rate: float | None = None, source: Source = Source.CONTROL
+    ) -> None:
+        self.apply(WeatherPatch(source=source, time_utc=time_utc))
         if rate is not None:
             self.clock_rate = rate
 

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.engine import SkyEngine
-from wxsky.host.compositor import Layers, composite
+from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
@@ -29,15 +29,6 @@ class Snapshot:
     image: U8  # (H, W, 4) composited, opaque
     layers: dict[str, U8]  # raw premultiplied layers by name (LAYER_NAMES)
     ring_quads_m: npt.NDArray[np.float64]  # (8, 4, 3)
-
-
-def layers_from_images(images: dict[str, U8], ring_quads_m: npt.NDArray[np.float64]) -> Layers:
-    return Layers(
-        sky=images["sky"],
-        near=images["near"],
-        ring=tuple(images[f"ring_{i}"] for i in range(RING_SIZE)),
-        ring_quads_m=ring_quads_m,
-    )
 
 
 def take_snapshot(

@@ -27,6 +27,16 @@ class Layers:
     ring_quads_m: F64  # (8, 4, 3): top-left, top-right, bottom-right, bottom-left
 
 
+def layers_from_images(images: dict[str, U8], ring_quads_m: F64) -> Layers:
+    """Layers from images named as the daemon names them: sky, near, ring_0 .. ring_7."""
+    return Layers(
+        sky=images["sky"],
+        near=images["near"],
+        ring=tuple(images[f"ring_{i}"] for i in range(len(ring_quads_m))),
+        ring_quads_m=ring_quads_m,
+    )
+
+
 def composite(layers: Layers, camera: Camera) -> U8:
     """(H, W, 4) opaque RGBA8 picture for the camera the sky and near layers were drawn for."""
     h, w = camera.height_px, camera.width_px

@@ -13,11 +13,10 @@ import numpy.typing as npt
 
 from wxsky.errors import WxskyError
 from wxsky.host.client import ControlClient
-from wxsky.host.compositor import Layers, composite
+from wxsky.host.compositor import Layers, composite, layers_from_images
 from wxsky.output.frame_meta import FrameMeta
-from wxsky.output.shm import FrameReader
+from wxsky.output.shm import Frame, FrameReader
 from wxsky.output.transport import Address
-from wxsky.scene.ring import RING_SIZE
 
 TOPICS = ("frame", "scene", "weather")
 
@@ -29,6 +28,12 @@ class HostFrame:
 
     def composite(self) -> npt.NDArray[np.uint8]:
         return composite(self.layers, self.meta.camera)
+
+
+def host_frame(frame: Frame) -> HostFrame:
+    """Pixels and record of one shared-memory frame, ready to composite."""
+    meta = FrameMeta.unpack(frame.meta)
+    return HostFrame(meta, layers_from_images(frame.layers, meta.ring_quads_m))
 
 
 class ReferenceHost:
@@ -78,15 +83,7 @@ class ReferenceHost:
                 self.scene = note.params
 
     def read_latest(self) -> HostFrame:
-        frame = self.reader.read(timeout_s=1.0)
-        meta = FrameMeta.unpack(frame.meta)
-        layers = Layers(
-            sky=frame.layers["sky"],
-            near=frame.layers["near"],
-            ring=tuple(frame.layers[f"ring_{i}"] for i in range(RING_SIZE)),
-            ring_quads_m=meta.ring_quads_m,
-        )
-        return HostFrame(meta, layers)
+        return host_frame(self.reader.read(timeout_s=1.0))
 
     def close(self) -> None:
         if self._closed:

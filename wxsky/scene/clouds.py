@@ -7,6 +7,7 @@ Cover decides how many of the block's cells hold a cloud; the cloud type picks a
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -47,27 +48,11 @@ class SpriteBatch:
         return int(self.size_m.shape[0])
 
     def take(self, index: npt.NDArray[np.intp] | npt.NDArray[np.bool_]) -> SpriteBatch:
-        return SpriteBatch(
-            centre_m=self.centre_m[index],
-            size_m=self.size_m[index],
-            rotation_rad=self.rotation_rad[index],
-            texture=self.texture[index],
-            height_frac=self.height_frac[index],
-            light_dir=self.light_dir[index],
-            opacity=self.opacity[index],
-            darkness=self.darkness[index],
-        )
+        return SpriteBatch(**{f.name: getattr(self, f.name)[index] for f in _FIELDS})
 
     def shifted(self, offset_m: tuple[float, float, float]) -> SpriteBatch:
-        return SpriteBatch(
-            centre_m=self.centre_m + np.asarray(offset_m, dtype=np.float64),
-            size_m=self.size_m,
-            rotation_rad=self.rotation_rad,
-            texture=self.texture,
-            height_frac=self.height_frac,
-            light_dir=self.light_dir,
-            opacity=self.opacity,
-            darkness=self.darkness,
+        return dataclasses.replace(
+            self, centre_m=self.centre_m + np.asarray(offset_m, dtype=np.float64)
         )
 
     @staticmethod
@@ -91,15 +76,11 @@ class SpriteBatch:
         if len(batches) == 1:
             return batches[0]
         return SpriteBatch(
-            centre_m=np.concatenate([b.centre_m for b in batches]),
-            size_m=np.concatenate([b.size_m for b in batches]),
-            rotation_rad=np.concatenate([b.rotation_rad for b in batches]),
-            texture=np.concatenate([b.texture for b in batches]),
-            height_frac=np.concatenate([b.height_frac for b in batches]),
-            light_dir=np.concatenate([b.light_dir for b in batches]),
-            opacity=np.concatenate([b.opacity for b in batches]),
-            darkness=np.concatenate([b.darkness for b in batches]),
+            **{f.name: np.concatenate([getattr(b, f.name) for b in batches]) for f in _FIELDS}
         )
+
+
+_FIELDS = dataclasses.fields(SpriteBatch)
 
 
 @dataclass(frozen=True)
