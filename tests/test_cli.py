@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wxsky.cli import parse_size
+from wxsky.cli.common import parse_size
 from wxsky.png import read_png
 
 

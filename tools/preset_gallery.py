@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wxsky.cli import parse_size
+from wxsky.cli.common import parse_size
 from wxsky.png import write_png
 from wxsky.presets import list_presets, load_preset
 from wxsky.render.renderer import Renderer

@@ -14,7 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from wxsky.cli import parse_size
+from wxsky.cli.common import parse_size
 from wxsky.errors import WxskyError
 from wxsky.host.reference import ReferenceHost
 from wxsky.output.transport import default_address, parse_address

@@ -1,0 +1,152 @@
+"""`wxsky run`, `wxsky status` and `wxsky snapshot`: the daemon and one-off pictures."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from wxsky.cli.common import Subparsers, control_address, parse_size, setup_logging
+
+
+def add_commands(sub: Subparsers) -> None:
+    run = sub.add_parser("run", help="run the daemon in the foreground")
+    run.add_argument("--config", type=Path, help="daemon config (TOML); default: built-in")
+    source = run.add_mutually_exclusive_group()
+    source.add_argument("--preset", help="weather preset to start with")
+    source.add_argument("--metar", help="METAR report to start with")
+    run.add_argument("--control", help="stream/control address: unix:PATH or tcp:127.0.0.1:PORT")
+    run.add_argument(
+        "--preview",
+        type=Path,
+        metavar="DIR",
+        help="write a composited preview.png there every few seconds",
+    )
+    run.set_defaults(func=_cmd_run)
+
+    status = sub.add_parser("status", help="ask a running daemon")
+    status.add_argument("--control", help="address of the daemon (default: the user's socket)")
+    status.add_argument("--json", action="store_true", help="print one JSON object")
+    status.set_defaults(func=_cmd_status)
+
+    snap = sub.add_parser("snapshot", help="render one picture to a PNG")
+    src = snap.add_mutually_exclusive_group(required=True)
+    src.add_argument("--preset")
+    src.add_argument("--metar")
+    snap.add_argument("--config", type=Path)
+    snap.add_argument("--time", help="ISO 8601 UTC time, e.g. 2026-06-21T14:00:00Z")
+    snap.add_argument("--lat", type=float, help="observer latitude, degrees")
+    snap.add_argument("--lon", type=float, help="observer longitude, degrees")
+    snap.add_argument("--alt-m", type=float, help="camera altitude MSL, metres")
+    snap.add_argument("--heading-deg", type=float, default=0.0, help="0 = north")
+    snap.add_argument("--pitch-deg", type=float, default=10.0, help="positive = up")
+    snap.add_argument("--fov-deg", type=float, default=60.0, help="horizontal field of view")
+    snap.add_argument("--size", default="960x540", help="WIDTHxHEIGHT")
+    snap.add_argument("--seed", type=int, help="cloud seed (default: the weather's)")
+    snap.add_argument("--out", type=Path, required=True, help="output PNG")
+    snap.add_argument("--layers-out", type=Path, metavar="DIR", help="also write the raw layers")
+    snap.set_defaults(func=_cmd_snapshot)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from wxsky.config import load_config
+    from wxsky.daemon import Daemon, initial_patches
+    from wxsky.output.transport import parse_address
+
+    config = load_config(args.config)
+    setup_logging(config.daemon.log_level)
+    patches = initial_patches(config, preset=args.preset, metar=args.metar)
+    address = parse_address(args.control) if args.control else None
+    daemon = Daemon(config, patches, address=address, preview_dir=args.preview)
+    return asyncio.run(daemon.run())
+
+
+def _cmd_status(args: argparse.Namespace) -> int:
+    from wxsky.host.client import ControlClient
+
+    with ControlClient.connect(control_address(args)) as client:
+        status = client.call("status")
+    if args.json:
+        print(json.dumps(status, indent=2, sort_keys=True))
+        return 0
+    w = status["weather"]
+    print(
+        f"wxsky {status['version']} up {status['uptime_s']:.0f} s, "
+        f"{status['frames_published']} frames, {status['fps']:.1f} fps"
+    )
+    print(
+        f"time {w['time_utc']}  observer {w['observer']['lat_deg']:.4f} "
+        f"{w['observer']['lon_deg']:.4f} {w['observer']['alt_m']:.0f} m"
+    )
+    for wind in w["wind"]:
+        print(
+            f"wind {wind['alt_m']:.0f} m: {wind['dir_deg']:03.0f}° {wind['speed_mps']:.1f} m/s"
+            + (f" gusts {wind['gust_mps']:.1f}" if wind["gust_mps"] else "")
+        )
+    for lay in w["layers"]:
+        print(
+            f"cloud {lay['type']} {lay['cover_oktas']}/8 {lay['base_m']:.0f}-{lay['top_m']:.0f} m"
+        )
+    print(f"visibility {w['visibility_m']:.0f} m, QNH {w['qnh_hpa']:.1f} hPa")
+    for inp in status["inputs"]:
+        state = "ok" if inp["ok"] else "FAILING"
+        print(
+            f"input {inp['name']} ({inp['kind']}): {state}, {inp['messages']} messages, "
+            f"{inp['errors']} errors"
+        )
+    return 0
+
+
+def _cmd_snapshot(args: argparse.Namespace) -> int:
+    from wxsky.config import load_config
+    from wxsky.png import write_png
+    from wxsky.scene.camera import Camera
+    from wxsky.snapshot import take_snapshot
+    from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState, parse_time_utc
+
+    config = load_config(args.config)
+    width, height = parse_size(args.size)
+    state = WeatherState().apply(_weather_patch(args, config.presets.dirs))
+    overrides = WeatherPatch(
+        source=Source.CONTROL,
+        time_utc=parse_time_utc(args.time) if args.time else None,
+        seed=args.seed,
+        observer=(
+            Observer(args.lat, args.lon, state.observer.alt_m)
+            if args.lat is not None and args.lon is not None
+            else None
+        ),
+    )
+    if (args.lat is None) != (args.lon is None):
+        raise ValueError("--lat and --lon go together")
+    state = state.apply(overrides)
+    alt_m = args.alt_m if args.alt_m is not None else state.observer.alt_m + 2.0
+    camera = Camera(
+        position_m=(0.0, 0.0, alt_m),
+        heading_deg=args.heading_deg % 360.0,
+        pitch_deg=args.pitch_deg,
+        fov_deg=args.fov_deg,
+        width_px=width,
+        height_px=height,
+    )
+    settings = config.scene.settings()
+    shot = take_snapshot(state, camera, settings)
+    write_png(args.out, shot.image)
+    if args.layers_out:
+        for name, image in shot.layers.items():
+            write_png(args.layers_out / f"{name}.png", image)
+    print(f"wrote {args.out} ({width}x{height}): {state.summary()}")
+    return 0
+
+
+def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any:
+    from wxsky.presets import load_preset
+    from wxsky.weather.metar import decode_metar
+
+    if args.metar:
+        return decode_metar(args.metar).to_patch()
+    return load_preset(args.preset, preset_dirs)
