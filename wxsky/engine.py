@@ -1,6 +1,11 @@
 """The fixed stage order from weather to a drawable frame, shared by the daemon and snapshot:
 
-    weather state -> simulation clock -> wind drift -> sky -> impostor ring (when stale) -> frame
+    sources -> target weather -> transition -> clock -> wind drift -> sky -> ring -> frame
+
+Inputs give patches; each lands in its source's slot (`precedence.SourceStack`), which yields
+the target weather. The applied weather moves toward the target at bounded rates
+(`transition.step_toward`), once per `transition_step_s` so the ring is not rebuilt every
+frame while a change is under way; the scene reads only the applied weather.
 
 Each stage takes immutable values and returns immutable values; the engine only remembers the
 latest ones. No GL and no I/O here: the renderer consumes the `FramePlan`.
@@ -22,10 +27,13 @@ from wxsky.scene.layout import (
     advance_drift,
     build_frame,
     build_ring,
+    carry_drift,
     zero_drift,
 )
 from wxsky.scene.sky import SkyParams, sky_params
+from wxsky.weather.precedence import DEFAULT_COCKPIT_HOLD_S, SourceStack
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
+from wxsky.weather.transition import INSTANT, TransitionRates, settled, step_toward
 
 # Rebuild the ring once the clouds in it have drifted this share of its radius, or the sun
 # has moved this far: past these, the seam between near sprites and impostors shows.
@@ -33,6 +41,7 @@ RING_DRIFT_FRAC = 0.03
 RING_SUN_DEG = 1.0
 METRES_PER_DEG_LAT = 110_540.0
 METRES_PER_DEG_LON_EQUATOR = 111_320.0
+DEFAULT_TRANSITION_STEP_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -53,11 +62,22 @@ class SkyEngine:
         camera: Camera,
         settings: SceneSettings,
         clock_rate: float = 1.0,
+        rates: TransitionRates = INSTANT,
+        transition_step_s: float = DEFAULT_TRANSITION_STEP_S,
+        cockpit_hold_s: float = DEFAULT_COCKPIT_HOLD_S,
     ) -> None:
-        self._state = state
+        """`state` is the base weather (defaults and the startup preset), also the first
+        applied weather. Rates default to instant, which suits one-off snapshots."""
+        self._stack = SourceStack(base=state, cockpit_hold_s=cockpit_hold_s)
+        self._state = state  # applied
+        self._target = state
         self._camera = camera
         self.settings = settings
         self.clock_rate = clock_rate
+        self.rates = rates
+        self.transition_step_s = transition_step_s
+        self._wall_s = 0.0
+        self._since_step_s = 0.0
         self._drift: Drift = zero_drift(state)
         self._ring: RingScene | None = None
         self._ring_state: WeatherState | None = None
@@ -67,7 +87,26 @@ class SkyEngine:
 
     @property
     def state(self) -> WeatherState:
+        """The applied weather: what the scene is drawn from."""
         return self._state
+
+    @property
+    def target(self) -> WeatherState:
+        """The weather the sources ask for; the applied weather moves toward it."""
+        return self._target
+
+    @property
+    def settled(self) -> bool:
+        return settled(self._state, self._target)
+
+    @property
+    def sources(self) -> SourceStack:
+        return self._stack
+
+    @property
+    def wall_s(self) -> float:
+        """Wall-clock seconds the engine has advanced (the time base of cockpit holds)."""
+        return self._wall_s
 
     @property
     def camera(self) -> Camera:
@@ -83,14 +122,23 @@ class SkyEngine:
         return self._ring_version
 
     def apply(self, patch: WeatherPatch) -> WeatherState:
-        """Merge an input's patch; the clouds keep drifting from where they are."""
-        new = self._state.apply(patch)
-        if new is not self._state:
-            if len(new.layers) != len(self._state.layers):
-                self._drift = zero_drift(new)
-            self._state = new
-            self.weather_version += 1
-        return new
+        """Put an input's patch into its source's slot; returns the new target. A time in the
+        patch sets the clock at once."""
+        if patch.time_utc is not None:
+            self.set_time(patch.time_utc, source=patch.source)
+        self._stack = self._stack.with_patch(patch, self._wall_s)
+        self._retarget()
+        return self._target
+
+    def release(self, source: Source) -> tuple[str, ...]:
+        """Hand the fields a control or cockpit source holds back to the sources below it."""
+        self._stack, fields = self._stack.released(source)
+        self._retarget()
+        return fields
+
+    def settle(self) -> None:
+        """Jump the applied weather to the target (startup, or a new site)."""
+        self._set_applied(step_toward(self._state, self._target, 0.0, INSTANT))
 
     def set_camera(self, camera: Camera) -> None:
         self._camera = camera
@@ -98,12 +146,54 @@ class SkyEngine:
     def set_time(
         self, time_utc: datetime, rate: float | None = None, source: Source = Source.CONTROL
     ) -> None:
-        self.apply(WeatherPatch(source=source, time_utc=time_utc))
+        sources = dataclasses.replace(self._state.sources, time_utc=source)
+        self._state = dataclasses.replace(self._state, time_utc=time_utc, sources=sources)
+        self._target = dataclasses.replace(self._target, time_utc=time_utc)
+        self.weather_version += 1
         if rate is not None:
             self.clock_rate = rate
 
+    def _retarget(self) -> None:
+        target = self._stack.target()
+        target = dataclasses.replace(
+            target,
+            time_utc=self._state.time_utc,
+            sources=dataclasses.replace(target.sources, time_utc=self._state.sources.time_utc),
+        )
+        if target == self._target:
+            return
+        self._target = target
+        self.weather_version += 1
+        new_sky = target.observer != self._state.observer or target.seed != self._state.seed
+        # A new site or cloud seed is a different sky, not a change of this one.
+        if new_sky or self.rates == INSTANT:
+            self.settle()
+
+    def _set_applied(self, new: WeatherState) -> None:
+        if new == self._state:
+            return
+        self._drift = carry_drift(self._state, new, self._drift)
+        self._state = new
+        self.weather_version += 1
+
+    def _transition(self, dt_wall_s: float) -> None:
+        self._wall_s += dt_wall_s
+        self._stack, expired = self._stack.expired(self._wall_s)
+        if expired:
+            self._retarget()
+        if self.settled:
+            self._since_step_s = 0.0
+            return
+        self._since_step_s += dt_wall_s
+        if self._since_step_s < self.transition_step_s:
+            return
+        step = step_toward(self._state, self._target, self._since_step_s, self.rates)
+        self._since_step_s = 0.0
+        self._set_applied(step)
+
     def advance(self, dt_wall_s: float) -> FramePlan:
         """Run the stages for a frame dt_wall_s after the previous one."""
+        self._transition(max(0.0, dt_wall_s))
         dt_sim = max(0.0, dt_wall_s) * self.clock_rate
         if dt_sim > 0.0:
             self._state = dataclasses.replace(

@@ -89,7 +89,8 @@ def _cmd_status(args: argparse.Namespace) -> int:
         )
     for lay in w["layers"]:
         print(
-            f"cloud {lay['type']} {lay['cover_oktas']}/8 {lay['base_m']:.0f}-{lay['top_m']:.0f} m"
+            f"cloud {lay['type']} {lay['cover_oktas']:.3g}/8 "
+            f"{lay['base_m']:.0f}-{lay['top_m']:.0f} m"
         )
     print(f"visibility {w['visibility_m']:.0f} m, QNH {w['qnh_hpa']:.1f} hPa")
     for inp in status["inputs"]:

@@ -1,6 +1,6 @@
 """Clouds of one 4 km block: Wang's sprite clouds, generated from the block's own seed.
 
-A block's clouds depend only on (block x, block y, layer index, layer, weather seed), so the
+A block's clouds depend only on (block x, block y, layer key, layer, weather seed), so the
 same weather gives the same sky in any process on any machine (numpy's PCG64 is portable).
 Cover decides how many of the block's cells hold a cloud; the cloud type picks a template.
 """
@@ -176,24 +176,38 @@ def template_for(cloud_type: CloudType) -> CloudTemplate:
     return TEMPLATES.get(cloud_type, _HEAPED)
 
 
-def occupied_fraction(cover_oktas: int) -> float:
+def occupied_fraction(cover_oktas: float) -> float:
     """Share of a block's cells that hold a cloud for a cover in oktas."""
     return min(1.0, cover_oktas / 8.0)
 
 
-def block_seed(seed: int, layer_index: int, block_x: int, block_y: int) -> np.random.SeedSequence:
+def layer_keys(layers: tuple[CloudLayer, ...]) -> tuple[int, ...]:
+    """A stable identity per layer: its cloud type and its rank among the layers of that type.
+    Seeding blocks by it (not by the position in the list) keeps a layer's clouds when another
+    layer forms or dissipates below it, or when its base or cover changes."""
+    seen: dict[CloudType, int] = {}
+    keys = []
+    for layer in layers:
+        rank = seen.get(layer.type, 0)
+        seen[layer.type] = rank + 1
+        keys.append(int(layer.type) * 16 + rank)
+    return tuple(keys)
+
+
+def block_seed(seed: int, layer_key: int, block_x: int, block_y: int) -> np.random.SeedSequence:
     # SeedSequence wants non-negative words: split the 63-bit seed, offset signed block indices.
     return np.random.SeedSequence(
-        [seed & 0xFFFFFFFF, seed >> 32, layer_index, block_x + 2**31, block_y + 2**31]
+        [seed & 0xFFFFFFFF, seed >> 32, layer_key, block_x + 2**31, block_y + 2**31]
     )
 
 
 @functools.lru_cache(maxsize=4096)
 def block_clouds(
-    block_x: int, block_y: int, layer_index: int, layer: CloudLayer, seed: int
+    block_x: int, block_y: int, layer_key: int, layer: CloudLayer, seed: int
 ) -> SpriteBatch:
-    """Sprites of one block in the layer's drifting frame: x, y absolute in that frame, z MSL."""
-    rng = np.random.default_rng(block_seed(seed, layer_index, block_x, block_y))
+    """Sprites of one block in the layer's drifting frame: x, y absolute in that frame, z MSL.
+    layer_key comes from `layer_keys`."""
+    rng = np.random.default_rng(block_seed(seed, layer_key, block_x, block_y))
     tpl = template_for(layer.type)
     cells_per_side = max(1, round(BLOCK_SIZE_M / tpl.cell_m))
     cell_m = BLOCK_SIZE_M / cells_per_side

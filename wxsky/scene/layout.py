@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.camera import Camera
-from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds
+from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds, layer_keys
 from wxsky.scene.ring import RingGeometry, bin_far_sprites
 from wxsky.scene.shading import sprite_colours
 from wxsky.scene.sky import SkyParams
@@ -60,6 +60,15 @@ def zero_drift(state: WeatherState) -> Drift:
     return tuple((0.0, 0.0) for _ in state.layers)
 
 
+def carry_drift(old: WeatherState, new: WeatherState, drift: Drift) -> Drift:
+    """The drift of `new`'s layers: a layer that was already there keeps its offset (found by
+    its key), a new one starts at zero, so forming or dissipating a layer moves no other."""
+    if len(drift) != len(old.layers):
+        return zero_drift(new)
+    by_key = dict(zip(layer_keys(old.layers), drift, strict=True))
+    return tuple(by_key.get(key, (0.0, 0.0)) for key in layer_keys(new.layers))
+
+
 def advance_drift(state: WeatherState, drift: Drift, dt_s: float) -> Drift:
     """Move every layer by the wind at its mid altitude for dt_s simulated seconds."""
     if len(drift) != len(state.layers):
@@ -88,10 +97,10 @@ def gather_blocks(
     if select_drift is None or len(select_drift) != len(drift):
         select_drift = drift
     batches: list[SpriteBatch] = []
-    for li, (layer, (dx, dy), (sx, sy)) in enumerate(
-        zip(state.layers, drift, select_drift, strict=True)
+    for key, layer, (dx, dy), (sx, sy) in zip(
+        layer_keys(state.layers), state.layers, drift, select_drift, strict=True
     ):
-        if layer.cover_oktas == 0:
+        if layer.cover_oktas <= 0.0:
             continue
         qx, qy = centre_m[0] - sx, centre_m[1] - sy
         bx0 = math.floor((qx - max_range_m) / BLOCK_SIZE_M)
@@ -104,7 +113,7 @@ def gather_blocks(
                 near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
                 d = math.hypot(near_x - qx, near_y - qy)
                 if min_range_m <= d < max_range_m:
-                    block = block_clouds(bx, by, li, layer, state.seed)
+                    block = block_clouds(bx, by, key, layer, state.seed)
                     if len(block):
                         batches.append(block.shifted((dx, dy, 0.0)))
     return SpriteBatch.concat(batches)

@@ -68,16 +68,15 @@ class Observer:
 
 @dataclass(frozen=True)
 class CloudLayer:
-    cover_oktas: int
+    # Reports and presets give whole oktas; the applied weather moves between them continuously
+    # while clouds form and dissipate, so fractions are valid here.
+    cover_oktas: float
     base_m: float  # MSL
     top_m: float  # MSL
     type: CloudType
 
     def __post_init__(self) -> None:
-        if not isinstance(self.cover_oktas, int) or not 0 <= self.cover_oktas <= 8:
-            raise ValueError(
-                f"cloud layer cover_oktas must be an integer 0..8, got {self.cover_oktas!r}"
-            )
+        _check_range("cloud layer cover_oktas", self.cover_oktas, 0.0, 8.0)
         _check_range("cloud layer base_m", self.base_m, -500.0, 25_000.0)
         _check_range("cloud layer top_m", self.top_m, -500.0, 25_000.0)
         if self.top_m <= self.base_m:
@@ -208,7 +207,7 @@ class WeatherState:
     def summary(self) -> str:
         """One line for logs and status lines."""
         clouds = " ".join(
-            f"{lay.type.wire_name}:{lay.cover_oktas}/8@{lay.base_m:.0f}m" for lay in self.layers
+            f"{lay.type.wire_name}:{lay.cover_oktas:.3g}/8@{lay.base_m:.0f}m" for lay in self.layers
         )
         wind = self.wind[0] if self.wind else None
         wind_txt = f"{wind.dir_from_deg:03.0f}/{wind.speed_mps:.1f}mps" if wind else "calm"

@@ -1,0 +1,117 @@
+"""Which source each weather field is taken from, highest first:
+
+    cockpit (while held) > control channel / preset applied at run time > METAR feed > base
+
+The base is the config's defaults with the preset the daemon started on. Every slot keeps the
+fields its source last gave; a field falls through to the next slot down when a slot has no
+value for it. Cockpit values are held only while they keep coming: a field the cockpit has not
+updated for `cockpit_hold_s` expires, so a knob left alone hands the field back. Control-channel
+overrides stay until released. The simulation clock is not a weather field here: `time_utc` in a
+patch sets the clock directly (see `SkyEngine`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from wxsky.weather.state import Provenance, Source, WeatherPatch, WeatherState
+
+# Fields that can be overridden; time_utc belongs to the clock.
+FIELDS: tuple[str, ...] = tuple(
+    f.name for f in dataclasses.fields(Provenance) if f.name != "time_utc"
+)
+DEFAULT_COCKPIT_HOLD_S = 30.0
+
+Slot = Mapping[str, "Held"]
+_EMPTY: Slot = MappingProxyType({})
+
+
+@dataclass(frozen=True)
+class Held:
+    """One field's value as a source last gave it, with the wall time it arrived."""
+
+    value: Any
+    updated_s: float
+
+
+@dataclass(frozen=True)
+class SourceStack:
+    base: WeatherState
+    metar: Slot = field(default_factory=lambda: _EMPTY)
+    control: Slot = field(default_factory=lambda: _EMPTY)
+    cockpit: Slot = field(default_factory=lambda: _EMPTY)
+    cockpit_hold_s: float = DEFAULT_COCKPIT_HOLD_S
+
+    def with_patch(self, patch: WeatherPatch, now_s: float) -> SourceStack:
+        """The stack with a source's new values. METAR replaces the whole slot (the newest
+        report stands alone); control and cockpit patches update only the fields they give."""
+        values = {
+            name: Held(getattr(patch, name), now_s)
+            for name in FIELDS
+            if getattr(patch, name) is not None
+        }
+        match patch.source:
+            case Source.DEFAULT | Source.PRESET:
+                return dataclasses.replace(self, base=self.base.apply(_without_time(patch)))
+            case Source.METAR:
+                return dataclasses.replace(self, metar=MappingProxyType(values))
+            case Source.CONTROL:
+                return dataclasses.replace(self, control=_merged(self.control, values))
+            case Source.COCKPIT:
+                return dataclasses.replace(self, cockpit=_merged(self.cockpit, values))
+        raise ValueError(f"unknown weather source {patch.source!r}")
+
+    def released(self, source: Source) -> tuple[SourceStack, tuple[str, ...]]:
+        """Drop every value a control or cockpit source holds; returns the fields it held."""
+        if source is Source.CONTROL:
+            return dataclasses.replace(self, control=_EMPTY), tuple(sorted(self.control))
+        if source is Source.COCKPIT:
+            return dataclasses.replace(self, cockpit=_EMPTY), tuple(sorted(self.cockpit))
+        if source is Source.METAR:
+            return dataclasses.replace(self, metar=_EMPTY), tuple(sorted(self.metar))
+        raise ValueError(f"only control, cockpit and metar values can be released, not {source}")
+
+    def expired(self, now_s: float) -> tuple[SourceStack, tuple[str, ...]]:
+        """Drop cockpit fields not updated within the hold time; returns the dropped fields."""
+        limit = now_s - self.cockpit_hold_s
+        gone = tuple(sorted(n for n, h in self.cockpit.items() if h.updated_s < limit))
+        if not gone:
+            return self, ()
+        kept = {n: h for n, h in self.cockpit.items() if n not in gone}
+        return dataclasses.replace(self, cockpit=MappingProxyType(kept)), gone
+
+    def target(self) -> WeatherState:
+        """The weather every field's highest-ranked source asks for, with its provenance."""
+        state = self.base
+        for source, slot in (
+            (Source.METAR, self.metar),
+            (Source.CONTROL, self.control),
+            (Source.COCKPIT, self.cockpit),
+        ):
+            if slot:
+                values = {name: held.value for name, held in slot.items()}
+                state = state.apply(WeatherPatch(source=source, **values))
+        return state
+
+    def holds(self, now_s: float) -> dict[str, dict[str, Any]]:
+        """Control and cockpit overrides for status: field -> source and age."""
+        out: dict[str, dict[str, Any]] = {}
+        for source, slot in ((Source.CONTROL, self.control), (Source.COCKPIT, self.cockpit)):
+            for name, held in slot.items():
+                entry: dict[str, Any] = {"source": source.value, "age_s": now_s - held.updated_s}
+                if source is Source.COCKPIT:
+                    entry["expires_in_s"] = held.updated_s + self.cockpit_hold_s - now_s
+                out[name] = entry
+        return out
+
+
+def _merged(slot: Slot, values: dict[str, Held]) -> Slot:
+    return MappingProxyType({**slot, **values})
+
+
+def _without_time(patch: WeatherPatch) -> WeatherPatch:
+    return dataclasses.replace(patch, time_utc=None)
