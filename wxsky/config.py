@@ -20,6 +20,7 @@ from typing import Any, ClassVar, TypeVar
 
 from wxsky.errors import ConfigError, WxskyError
 from wxsky.scene.layout import SceneSettings
+from wxsky.weather.transition import TransitionRates
 
 # Shared with wxsky.presets; it lives here because presets import this module, not the reverse.
 PRESET_NAME_PATTERN = r"[a-z0-9-]+"
@@ -154,6 +155,51 @@ class PresetsSection(_Section):
     dirs: tuple[Path, ...] = _opt(())  # searched before the built-in preset directories
 
 
+FEED_FORMATS = ("auto", "awc-csv", "awc-xml", "tgftp", "lines")
+
+
+@dataclass(frozen=True)
+class MetarSection(_Section):
+    SECTION: ClassVar[str] = "metar"
+
+    feeds: tuple[str, ...] = _opt(())  # file paths, "-" for stdin, http(s):// URLs
+    format: str = _opt("auto", _Rule(choices=FEED_FORMATS))
+    poll_interval_s: float = _opt(60.0, _Rule(0.05, 86_400.0))
+    http_timeout_s: float = _opt(10.0, _Rule(0.1, 300.0))
+    max_backoff_s: float = _opt(900.0, _Rule(1.0, 86_400.0))
+    max_age_min: float = _opt(90.0, _Rule(1.0, 10_000_000.0))
+    age_reference: str = _opt("clock", _Rule(choices=("clock", "feed")))
+    station: str = _opt(
+        "", _Rule(pattern=r"([A-Z][A-Z0-9]{3})?", pattern_desc="empty or a 4-character ICAO id")
+    )
+    blend_stations: int = _opt(1, _Rule(1, 10))
+    max_station_distance_km: float = _opt(200.0, _Rule(1.0, 20_000.0))
+
+
+@dataclass(frozen=True)
+class TransitionSection(_Section):
+    SECTION: ClassVar[str] = "transition"
+
+    cover_oktas_per_min: float = _opt(2.0, _Rule(0.0, 1000.0))
+    base_m_per_min: float = _opt(300.0, _Rule(0.0, 100_000.0))
+    wind_mps_per_s: float = _opt(1.0, _Rule(0.0, 1000.0))
+    visibility_m_per_s: float = _opt(100.0, _Rule(0.0, 1_000_000.0))
+    temperature_c_per_min: float = _opt(2.0, _Rule(0.0, 1000.0))
+    qnh_hpa_per_min: float = _opt(2.0, _Rule(0.0, 1000.0))
+    step_s: float = _opt(1.0, _Rule(0.0, 60.0))
+    cockpit_hold_s: float = _opt(30.0, _Rule(0.1, 86_400.0))
+
+    def rates(self) -> TransitionRates:
+        return TransitionRates(
+            cover_oktas_per_min=self.cover_oktas_per_min,
+            base_m_per_min=self.base_m_per_min,
+            wind_mps_per_s=self.wind_mps_per_s,
+            visibility_m_per_s=self.visibility_m_per_s,
+            temperature_c_per_min=self.temperature_c_per_min,
+            qnh_hpa_per_min=self.qnh_hpa_per_min,
+        )
+
+
 @dataclass(frozen=True)
 class DaemonConfig:
     daemon: DaemonSection = field(default_factory=DaemonSection)
@@ -163,6 +209,8 @@ class DaemonConfig:
     output: OutputSection = field(default_factory=OutputSection)
     preview: PreviewSection = field(default_factory=PreviewSection)
     presets: PresetsSection = field(default_factory=PresetsSection)
+    metar: MetarSection = field(default_factory=MetarSection)
+    transition: TransitionSection = field(default_factory=TransitionSection)
 
     def __post_init__(self) -> None:
         cam, out, scene = self.camera, self.output, self.scene
@@ -271,6 +319,10 @@ def _coerce(key: str, hint: Any, value: Any, rule: _Rule) -> Any:
         if items is None or not all(isinstance(v, (str, Path)) and str(v) for v in items):
             raise ValueError(f"{key} must be a list of non-empty path strings, got {value!r}")
         return tuple(Path(v).expanduser() for v in items)
+    if hint == tuple[str, ...]:
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
+            raise ValueError(f"{key} must be a list of non-empty strings, got {value!r}")
+        return tuple(value)
     raise TypeError(f"{key}: no coercion for config type {hint!r}")
 
 
