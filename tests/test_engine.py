@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
@@ -236,3 +237,78 @@ def test_near_and_ring_partition_the_clouds_while_they_drift() -> None:
     )
     assert len(near_set | far_set) == len({tuple(np.round(p, 3)) for p in everything.centre_m})
     assert first.ring is ring
+
+
+# -- sources and transitions ----------------------------------------------------------------
+
+
+def _live_engine() -> SkyEngine:
+    from wxsky.weather.transition import TransitionRates
+
+    state = WeatherState(time_utc=T0, layers=(CU,), seed=5)
+    return SkyEngine(
+        state,
+        _camera(),
+        SETTINGS,
+        clock_rate=1.0,
+        rates=TransitionRates(cover_oktas_per_min=3.0, base_m_per_min=600.0),
+        transition_step_s=1.0,
+        cockpit_hold_s=5.0,
+    )
+
+
+def test_a_metar_moves_the_applied_weather_step_by_step() -> None:
+    engine = _live_engine()
+    ovc = CloudLayer(8, 1900.0, 2700.0, CloudType.CUMULUS)
+    engine.apply(WeatherPatch(source=Source.METAR, layers=(ovc,)))
+    assert engine.target.layers == (ovc,) and engine.target.sources.layers is Source.METAR
+    assert engine.state.layers == (CU,) and not engine.settled
+    covers = []
+    for _ in range(30):  # quarter-second frames: a step each second
+        for _ in range(4):
+            engine.advance(0.25)
+        covers.append(engine.state.layers[0].cover_oktas)
+    # 3 oktas/min: 0.05 per one-second step, never more; 5 oktas in 100 s.
+    assert covers[0] == pytest.approx(3.05, abs=0.02)
+    assert max(b - a for a, b in itertools.pairwise(covers)) <= 0.05 + 1e-9
+    assert covers[-1] == pytest.approx(3.0 + 30 * 0.05, abs=0.05)
+    assert engine.state.time_utc == T0 + timedelta(seconds=30)
+
+
+def test_control_override_beats_a_later_metar_until_released() -> None:
+    engine = _live_engine()
+    ovc = (CloudLayer(8, 800.0, 1200.0, CloudType.STRATUS),)
+    engine.apply(WeatherPatch(source=Source.CONTROL, layers=ovc))
+    engine.apply(WeatherPatch(source=Source.METAR, layers=(CU,), visibility_m=3000.0))
+    assert engine.target.layers == ovc and engine.target.visibility_m == 3000.0
+    assert engine.release(Source.CONTROL) == ("layers",)
+    assert engine.target.layers == (CU,) and engine.target.sources.layers is Source.METAR
+
+
+def test_cockpit_hold_expires_with_wall_time_not_sim_time() -> None:
+    engine = _live_engine()
+    engine.clock_rate = 1000.0
+    engine.apply(WeatherPatch(source=Source.COCKPIT, visibility_m=800.0))
+    engine.advance(4.0)
+    assert engine.target.visibility_m == 800.0
+    engine.advance(1.5)
+    assert engine.target.visibility_m == WeatherState().visibility_m
+    assert engine.target.sources.visibility_m is Source.DEFAULT
+
+
+def test_a_new_site_is_applied_at_once() -> None:
+    from wxsky.weather.state import Observer
+
+    engine = _live_engine()
+    engine.apply(
+        WeatherPatch(source=Source.CONTROL, observer=Observer(40.0, -105.0, 1600.0), layers=())
+    )
+    assert engine.settled and engine.state.layers == ()
+
+
+def test_geodetic_round_trip() -> None:
+    from wxsky.engine import geodetic_from_enu
+
+    east, north, _ = enu_from_geodetic(47.0, 8.0, 47.1, 8.2, 500.0)
+    lat, lon = geodetic_from_enu(47.0, 8.0, east, north)
+    assert lat == pytest.approx(47.1, abs=1e-9) and lon == pytest.approx(8.2, abs=1e-9)
