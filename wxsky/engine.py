@@ -187,7 +187,12 @@ class SkyEngine:
         self._since_step_s += dt_wall_s
         if self._since_step_s < self.transition_step_s:
             return
-        step = step_toward(self._state, self._target, self._since_step_s, self.rates)
+        # One step never covers more than step_s, even after a slow frame: the rates are the
+        # fastest the sky may change, and no frame may show a larger jump than one step.
+        dt_s = self._since_step_s
+        if self.transition_step_s > 0.0:
+            dt_s = min(dt_s, self.transition_step_s)
+        step = step_toward(self._state, self._target, dt_s, self.rates)
         self._since_step_s = 0.0
         self._set_applied(step)
 
