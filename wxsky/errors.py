@@ -27,3 +27,7 @@ class PluginError(WxskyError):
 
 class RenderError(WxskyError):
     """The GL context could not be created or a GL call failed."""
+
+
+class FeedError(WxskyError):
+    """A weather feed that is not a METAR feed at all (the message names the source)."""

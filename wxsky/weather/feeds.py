@@ -1,0 +1,199 @@
+"""METAR feed loaders: AWC cache CSV/XML, NOAA tgftp text, and one-report-per-line files.
+
+`parse_feed` turns the bytes of a feed into `Report`s (raw text plus the year and month the
+decoder needs, taken from the feed) and `FeedProblem`s (rows it could not fully use, each with
+`<name>:<line>`). Only content that is not a METAR feed at all (an HTML page, JSON, binary or
+nothing) raises `FeedError`; everything else, however broken, comes back as problems.
+
+The per-format parsers live in `feed_formats`; the formats and their vintages are described in
+`shared/reference/metar-feeds.md` §1.
+"""
+
+from __future__ import annotations
+
+import os
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+from wxsky.errors import FeedError
+from wxsky.weather.feed_formats import (
+    FeedProblem,
+    Problems,
+    Report,
+    awc_csv_records,
+    awc_reports,
+    awc_xml_records,
+    clean_raw,
+    is_tgftp_stamp,
+    line_reports,
+    read_head,
+    tgftp_reports,
+)
+
+__all__ = [
+    "FORMATS",
+    "Feed",
+    "FeedProblem",
+    "Report",
+    "detect_format",
+    "parse_feed",
+    "read_feed",
+    "read_reports",
+]
+
+FORMATS = ("awc-csv", "awc-xml", "tgftp", "lines")
+
+GZIP_MAGIC = b"\x1f\x8b"
+# A whole-world AWC cache is about 1 MB; anything near this is not a feed (or a gzip bomb).
+MAX_FEED_BYTES = 256 * 1024 * 1024
+# How far into a file detection looks: the AWC preamble is 5 lines, then the header.
+_DETECT_LINES = 20
+_BINARY_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class Feed:
+    format: str
+    reports: tuple[Report, ...]
+    problems: tuple[FeedProblem, ...]
+    duplicates: int  # exact repeats dropped (tgftp cycle files)
+
+
+def _looks_binary(sample: str) -> bool:
+    if "\x00" in sample:
+        return True
+    odd = sum(1 for c in sample if c == "\ufffd" or (c < " " and c not in "\t\n\r\f\v"))
+    return odd > _BINARY_FRACTION * len(sample)
+
+
+def _shorten(text: str, chars: int = 60) -> str:
+    return repr(text if len(text) <= chars else text[:chars] + "...")
+
+
+def detect_format(text: str, *, name: str = "<feed>") -> str:
+    """Which of FORMATS `text` is, from its content; FeedError when it is not a METAR feed."""
+    body = text.lstrip("\ufeff \t\r\n")
+    if not body:
+        raise FeedError(f"{name}: empty, not a METAR feed")
+    sample = body[:4096]
+    if _looks_binary(sample):
+        raise FeedError(f"{name}: binary data, not a METAR feed")
+    lowered = sample[:1024].lower()
+    if lowered.startswith(("<!doctype html", "<html")) or "<html" in lowered:
+        raise FeedError(f"{name}: an HTML page (an error or login page?), not a METAR feed")
+    if lowered.startswith(("<?xml", "<response")):
+        return "awc-xml"
+    head = [line.strip() for line in body.split("\n", _DETECT_LINES)[:_DETECT_LINES]]
+    head = [line for line in head if line]
+    if body[0] in "{[":
+        raise FeedError(f"{name}: JSON {_shorten(head[0])}, not a METAR feed")
+    if any(line.startswith("raw_text,") for line in head[:10]):
+        return "awc-csv"
+    if any(is_tgftp_stamp(line) for line in head):
+        return "tgftp"
+    if any(read_head(clean_raw(line)).time is not None for line in head):
+        return "lines"
+    raise FeedError(f"{name}: not a METAR feed (starts with {_shorten(head[0])})")
+
+
+def _gunzip(data: bytes) -> tuple[bytes, str | None]:
+    """Decompressed data and, for a damaged stream, why it stops early (what came out is kept)."""
+    out = bytearray()
+    while data[:2] == GZIP_MAGIC:  # concatenated members are one file to gzip(1)
+        stream = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
+        try:
+            out += stream.decompress(data, MAX_FEED_BYTES + 1 - len(out))
+        except zlib.error as exc:
+            return bytes(out), f"gzip data is corrupt ({exc}); read what came before"
+        if len(out) > MAX_FEED_BYTES:
+            raise FeedError(f"decompresses to more than {MAX_FEED_BYTES} bytes, not a METAR feed")
+        if not stream.eof:
+            return bytes(out), "gzip data ends early (a cut-off download?); read what was there"
+        data = stream.unused_data
+    return bytes(out), None
+
+
+def _decode(data: bytes, problems: Problems) -> str:
+    gzip_trouble = None
+    if data[:2] == GZIP_MAGIC:
+        data, gzip_trouble = _gunzip(data)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        problems.add(line, f"bytes that are not UTF-8 (first at byte {exc.start}), replaced")
+        text = data.decode("utf-8", errors="replace")
+    if gzip_trouble is not None:
+        problems.add(text.count("\n") + 1, gzip_trouble)
+    return text
+
+
+def _as_utc(time: datetime | None) -> datetime:
+    if time is None:
+        # Feeds without dates (network weather) are current: the one place "now" is used.
+        return datetime.now(UTC)
+    return time.replace(tzinfo=UTC) if time.tzinfo is None else time.astimezone(UTC)
+
+
+def parse_feed(
+    data: bytes | str,
+    *,
+    format: str = "auto",
+    name: str = "<feed>",
+    reference_utc: datetime | None = None,
+) -> Feed:
+    """Reports and problems of one feed. gzip bytes are decompressed.
+
+    `reference_utc` (the file's mtime or the HTTP Date) dates reports of feeds that carry no date:
+    a report day after the reference day belongs to the previous month.
+    """
+    if format != "auto" and format not in FORMATS:
+        raise FeedError(f"{name}: unknown feed format {format!r} (expected one of {FORMATS})")
+    if isinstance(data, bytes) and len(data) > MAX_FEED_BYTES:
+        raise FeedError(f"{name}: more than {MAX_FEED_BYTES} bytes, not a METAR feed")
+    problems = Problems(name)
+    try:
+        text = _decode(data, problems) if isinstance(data, bytes) else data
+    except FeedError as exc:
+        raise FeedError(f"{name}: {exc}") from None
+    text = text.removeprefix("\ufeff")
+    if format == "auto":
+        format = detect_format(text, name=name)
+    if not text.strip():
+        problems.add(1, "empty feed")
+        return Feed(format, (), problems.result(), 0)
+    lines = text.replace("\r", "").split("\n")
+    reference = _as_utc(reference_utc)
+    duplicates = 0
+    if format == "awc-csv":
+        reports = awc_reports(awc_csv_records(lines, problems), problems, reference)
+    elif format == "awc-xml":
+        reports = awc_reports(awc_xml_records(lines, problems), problems, reference)
+    elif format == "tgftp":
+        reports, duplicates = tgftp_reports(lines, problems)
+    else:
+        reports = line_reports(lines, problems, reference)
+    return Feed(format, tuple(reports), problems.result(), duplicates)
+
+
+def read_feed(path: str | os.PathLike[str], *, format: str = "auto") -> Feed:
+    """parse_feed on a file (gzip or not, found by its magic bytes), its mtime as reference."""
+    file = Path(path)
+    try:
+        mtime_s = file.stat().st_mtime
+        data = file.read_bytes()
+    except OSError as exc:
+        raise FeedError(f"{file}: cannot read ({exc.strerror or exc})") from None
+    mtime = datetime.fromtimestamp(mtime_s, UTC)
+    return parse_feed(data, format=format, name=str(file), reference_utc=mtime)
+
+
+def read_reports(path: str | os.PathLike[str], *, format: str = "auto") -> Iterator[Report]:
+    """The reports of a feed file, problems dropped (use read_feed to see them).
+
+    The file is read before this returns, so a FeedError is raised here, not at the first next().
+    """
+    return iter(read_feed(path, format=format).reports)
