@@ -61,7 +61,7 @@ def test_metar_decode_json() -> None:
     d = json.loads(out)
     assert d["station"] == "KJFK"
     assert d["visibility_m"] == pytest.approx(1.5 * 1609.344)
-    assert d["qnh_hpa"] == pytest.approx(29.92 * 33.8639, abs=0.05)
+    assert d["altimeter_hpa"] == pytest.approx(29.92 * 33.8639, abs=0.05)
 
 
 @pytest.mark.parametrize(

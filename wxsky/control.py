@@ -3,6 +3,7 @@ inputs. Bad params raise ControlError with one line that names the command and t
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -11,7 +12,7 @@ from typing import Any
 from wxsky.engine import SkyEngine, enu_from_geodetic
 from wxsky.errors import ProtocolError, WxskyError
 from wxsky.scene.camera import Camera
-from wxsky.weather.state import parse_time_utc
+from wxsky.weather.state import Source, parse_time_utc
 
 
 class ControlError(ProtocolError):
@@ -122,14 +123,28 @@ def apply_preset(engine: SkyEngine, params: dict[str, Any], preset_dirs: Sequenc
     name = params.get("name")
     if not isinstance(name, str):
         raise ControlError("apply_preset: name must be a string")
-    engine.apply(load_preset(name, preset_dirs))
+    # A preset applied at run time is an instructor's override: it beats the METAR feed
+    # until released. The clock is the one thing it does not hold.
+    patch = dataclasses.replace(load_preset(name, preset_dirs), source=Source.CONTROL)
+    engine.apply(patch)
     return name
 
 
-def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
-    from wxsky.weather.metar import decode_metar
+def release(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
+    """Hand the fields an override holds back to the sources below it."""
+    _only("release", params, {"source"})
+    name = params.get("source", "control")
+    choices = {"control": Source.CONTROL, "cockpit": Source.COCKPIT}
+    if name not in choices:
+        raise ControlError(f"release: source must be 'control' or 'cockpit', got {name!r}")
+    return {"source": name, "released": list(engine.release(choices[name]))}
 
-    _only("apply_metar", params, {"report", "field_elevation_m"})
+
+def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
+    from wxsky.weather.metar import decode
+    from wxsky.weather.metar_clouds import metar_to_patch
+
+    _only("apply_metar", params, {"report", "field_elevation_m", "year", "month"})
     report = params.get("report")
     if not isinstance(report, str):
         raise ControlError("apply_metar: report must be a string")
@@ -140,9 +155,13 @@ def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
         -500.0,
         9000.0,
     )
-    decoded = decode_metar(report)
-    engine.apply(decoded.to_patch(field_elevation_m=elevation))
-    return decoded.station
+    # The report names only its day; by default it belongs to the simulated month.
+    now = engine.state.time_utc
+    year = _integer("apply_metar", "year", params.get("year", now.year), 1, 9999)
+    month = _integer("apply_metar", "month", params.get("month", now.month), 1, 12)
+    decoded = decode(report, year=year, month=month).require_usable()
+    engine.apply(metar_to_patch(decoded, field_elevation_m=elevation))
+    return decoded.station or ""
 
 
 def dispatch_table(

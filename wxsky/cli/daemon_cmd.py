@@ -14,9 +14,16 @@ from wxsky.cli.common import Subparsers, control_address, parse_size, setup_logg
 def add_commands(sub: Subparsers) -> None:
     run = sub.add_parser("run", help="run the daemon in the foreground")
     run.add_argument("--config", type=Path, help="daemon config (TOML); default: built-in")
-    source = run.add_mutually_exclusive_group()
-    source.add_argument("--preset", help="weather preset to start with")
-    source.add_argument("--metar", help="METAR report to start with")
+    run.add_argument("--preset", help="weather preset to start with (the base weather)")
+    run.add_argument("--metar", help="METAR report to start with (beats the preset's fields)")
+    run.add_argument(
+        "--metar-feed",
+        action="append",
+        default=[],
+        metavar="SOURCE",
+        help="follow a METAR feed: a file, '-' for stdin, or an http(s) URL (repeatable; "
+        "adds to [metar] feeds in the config)",
+    )
     run.add_argument("--control", help="stream/control address: unix:PATH or tcp:127.0.0.1:PORT")
     run.add_argument(
         "--preview",
@@ -61,7 +68,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     setup_logging(config.daemon.log_level)
     patches = initial_patches(config, preset=args.preset, metar=args.metar)
     address = parse_address(args.control) if args.control else None
-    daemon = Daemon(config, patches, address=address, preview_dir=args.preview)
+    daemon = Daemon(
+        config, patches, address=address, preview_dir=args.preview, feeds=args.metar_feed
+    )
     return asyncio.run(daemon.run())
 
 
@@ -146,8 +155,13 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
 
 def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any:
     from wxsky.presets import load_preset
-    from wxsky.weather.metar import decode_metar
+    from wxsky.weather.metar import decode
+    from wxsky.weather.metar_clouds import metar_to_patch
+    from wxsky.weather.state import WeatherState, parse_time_utc
 
     if args.metar:
-        return decode_metar(args.metar).to_patch()
+        # The report names only its day; it belongs to the month of the snapshot.
+        when = parse_time_utc(args.time) if args.time else WeatherState().time_utc
+        report = decode(args.metar, year=when.year, month=when.month).require_usable()
+        return metar_to_patch(report, field_elevation_m=0.0)
     return load_preset(args.preset, preset_dirs)

@@ -1,37 +1,43 @@
-"""Decode one METAR/SPECI report into SI values, and turn it into a `WeatherPatch`.
+"""Decode one METAR/SPECI report into SI values: `decode(report, year=, month=) -> Metar`.
 
-Grammar: the text is split on whitespace and cut at the first `=` (the WMO end-of-report mark).
-An optional `METAR`/`SPECI` word, the station (4 characters, a letter first) and the
-`ddhhmmZ` time group form the header; `COR`, `CCx` and `AUTO` may stand on either side of the
-station. The body runs up to `RMK` (the rest is `remarks`) or the first trend group (`NOSIG`,
-`BECMG`, `TEMPO`, `INTER`, `FMhhmm`, `PROBnn`; kept verbatim in `trend`, never decoded into body
-fields). Body groups are recognised by shape, in any order (`metar_groups`); the first group of a
-kind wins.
+Grammar: the text is cut at the first `=` (the WMO end-of-report mark) and split on whitespace.
+An optional `METAR`/`SPECI` word, the station (4 characters, a letter first) and the `ddhhmmZ`
+time group form the header; `COR`, `CCx` and `AUTO` may stand anywhere before the remarks. The
+body runs up to `RMK` (the rest is `remarks`) or the first trend group (`NOSIG`, `BECMG`,
+`TEMPO`, `INTER`, `FMhhmm`, `PROBnn`, or a military colour state such as `YLO`); the trend is
+kept verbatim in `trend` and never decoded into body fields. Body groups are recognised by shape,
+in any order (`metar_groups`); the first group of a kind wins, so a stray group later in the
+report can never overwrite a value.
 
-Error policy:
+Error policy: `decode` never raises. Whatever cannot be decoded becomes one line in `errors`
+(naming the group: `group 5 'FEW02': malformed cloud group`) and `partial` is true:
 
-* `MetarError` (one line: what, and which group) when there is no report to speak of: empty
-  text, a character outside printable ASCII, no station group, or no valid time group after it.
-* Everything else is a warning and the report still decodes: an unknown or garbled body group,
-  a duplicate group, and a known group with an out-of-range value (wind above 250 kt,
-  temperature or dewpoint outside -90..60 °C, QNH outside 850..1100 hPa, wind direction above
-  360°). Such a group is skipped, its field stays None and `warnings` names the group. Negative
-  visibility cannot be written in METAR syntax, so it only ever appears as an unknown group.
-  Blending reports from several stations can make up for one missing field; it cannot make up
-  for a whole report rejected because of one typo.
-* A second report glued onto the first (a new station + time, or `METAR`/`SPECI`) ends the body
-  with a warning.
+* no station group (`station` None; the body is still decoded: VATSIM-style text can lack it);
+* no valid time group (`time_utc` None; nothing after the header is decoded, because without
+  the time the text is most likely not a report at all: `PART 1 OF 2`, bulletin junk);
+* a day that does not exist in the given month (`time_utc` None, the body decoded);
+* an unknown or garbled body group (skipped), a duplicate group (the first wins);
+* an out-of-range value, field by field: wind above 250 kt (the wind), gust above 250 kt (the
+  gust), direction above 360° (the direction), temperature or dewpoint outside ±70 °C (that
+  value), altimeter outside 850..1100 hPa, a negative cloud base (that group);
+* a second report glued onto the first (the rest is ignored).
+
+Callers that need a report to act on call `Metar.require_usable()`, which raises `MetarError`
+when the station or time is missing or the report is NIL.
 
 Value conventions: `9999` and CAVOK mean 10 km; `M` (less than) and `P` (more than) visibility
-and wind prefixes give the bound itself; cloud bases are above ground level (AGL). A North
-American `Tsttt[sddd]` remark refines temperature and dewpoint to tenths where it agrees with the
-body group to within 1 °C (as AWC's own decode does); no other remark is decoded.
+and wind prefixes give the bound itself; a wind group without a unit (`04014`) is read as knots,
+wherever the station is; cloud bases are above ground level (AGL). A North American
+`Tsttt[sddd]` remark refines temperature and dewpoint to tenths where it agrees with the body
+group to within 1 °C (as AWC's own decode does); no other remark is decoded.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, Literal
 
@@ -39,171 +45,114 @@ from wxsky.errors import MetarError
 from wxsky.units import FT_TO_M, mps_to_kt
 from wxsky.weather import metar_groups as g
 from wxsky.weather.metar_groups import MetarSkyGroup, MetarWind
-from wxsky.weather.state import MAX_LAYERS, CloudLayer, CloudType, Source, WeatherPatch, WindLayer
 
-__all__ = ["MetarReport", "MetarSkyGroup", "MetarWind", "decode_metar"]
+__all__ = ["Metar", "MetarSkyGroup", "MetarWind", "decode"]
 
-# Oktas for each cover: the standard ranges are FEW 1-2, SCT 3-4, BKN 5-7, OVC 8; the midpoints
-# 1.5 and 3.5 round up so that thin cover still shows on screen.
-COVER_OKTAS = {"FEW": 2, "SCT": 4, "BKN": 6, "OVC": 8, "VV": 8}
-
-LOW_CLOUD_MAX_M = 2000.0
-MID_CLOUD_MAX_M = 6000.0
-WIND_HEIGHT_M = 10.0  # anemometer height above the field
-
-# Typical layer depth by cloud type, so that each layer gets a plausible top.
-THICKNESS_M = {
-    CloudType.CUMULONIMBUS: 9000.0,
-    CloudType.CUMULUS: 1200.0,
-    CloudType.STRATOCUMULUS: 600.0,
-    CloudType.STRATUS: 400.0,
-    CloudType.ALTOCUMULUS: 500.0,
-    CloudType.ALTOSTRATUS: 1500.0,
-    CloudType.CIRRUS: 1000.0,
-    CloudType.CIRROSTRATUS: 800.0,
-}
-TOWERING_CUMULUS_THICKNESS_M = 4000.0
-MAX_CLOUD_TOP_M = 25_000.0  # CloudLayer's limit
+# A megabyte of garbage would otherwise give a megabyte of error lines.
+MAX_ERRORS = 40
+# Q and A groups in one report that differ by more than this are reported as inconsistent.
+PRESSURE_AGREEMENT_HPA = 2.0
+# Digits of the knot values in to_dict: enough to give back the reported integer exactly.
+KT_DIGITS = 6
 
 
 @dataclass(frozen=True)
-class MetarReport:
+class Metar:
     """One decoded report. Values are SI; None means the report did not give the value."""
 
-    station: str
-    kind: Literal["METAR", "SPECI"]
-    day: int  # day of month; the month and year come from the feed
-    hour: int  # UTC
-    minute: int
+    raw: str  # the report text up to '=', whitespace collapsed
+    station: str | None = None
+    time_utc: datetime | None = None
+    type: Literal["METAR", "SPECI"] = "METAR"
     auto: bool = False
     cor: bool = False
     nil: bool = False  # "NIL": the station sent no observation
+    errors: tuple[str, ...] = ()
     wind: MetarWind | None = None
     visibility_m: float | None = None
+    # The directional minimum (`9999 4000SE`): the lowest visibility in one sector, never the
+    # prevailing value. Direction None when the group gave none.
+    min_visibility_m: float | None = None
+    min_visibility_dir: str | None = None
     cavok: bool = False
+    rvr: tuple[str, ...] = ()  # runway visual range groups, verbatim
     weather: tuple[str, ...] = ()
     sky: tuple[MetarSkyGroup, ...] = ()
-    sky_clear: str | None = None  # CLR, SKC, NSC or NCD
+    sky_clear: str | None = None  # CLR, SKC, NSC or NCD; None also when there is no sky group
     temperature_c: float | None = None
     dewpoint_c: float | None = None
-    qnh_hpa: float | None = None
-    rvr: tuple[str, ...] = ()  # runway visual range groups, verbatim
+    altimeter_hpa: float | None = None
     trend: str = ""
     remarks: str = ""
-    warnings: tuple[str, ...] = ()
-    raw: str = field(default="", compare=False)
 
     @property
-    def issued_ddhhmm(self) -> tuple[int, int, int]:
-        return (self.day, self.hour, self.minute)
+    def partial(self) -> bool:
+        """True when some group could not be decoded; `errors` says which."""
+        return bool(self.errors)
 
-    def issued_at(self, year: int, month: int) -> datetime:
-        """The observation time, given the year and month the feed says it belongs to."""
-        try:
-            return datetime(year, month, self.day, self.hour, self.minute, tzinfo=UTC)
-        except ValueError:
-            raise MetarError(
-                f"METAR {self.station}: day {self.day} does not exist in {year}-{month:02d}"
-            ) from None
-
-    def to_patch(self, field_elevation_m: float = 0.0) -> WeatherPatch:
-        """The weather this report states, with cloud bases and wind moved to MSL.
-
-        Clouds: `COVER_OKTAS`; CB -> cumulonimbus, TCU -> (towering) cumulus, VV -> 8/8 stratus
-        at the vertical visibility; otherwise by base AGL: below 2000 m cumulus (FEW/SCT),
-        stratocumulus (BKN), stratus (OVC); up to 6000 m altocumulus (FEW/SCT/BKN) or altostratus
-        (OVC); above that cirrus or cirrostratus. Groups without a base or cover are dropped;
-        the lowest MAX_LAYERS are kept. CAVOK and CLR/SKC/NSC/NCD give no layers. Wind: one
-        layer 10 m above the field; VRB and unknown directions give dir 0, variable=True. A
-        report without weather groups says "no weather" (an empty tuple), except a NIL report.
-        """
-        if not -500.0 <= field_elevation_m <= 9000.0:
-            raise ValueError(f"field_elevation_m {field_elevation_m} outside -500..9000")
+    def require_usable(self) -> Metar:
+        """This report, or MetarError (one line) when it names no station or time, or is NIL."""
+        where = f"METAR {self.station}" if self.station else "METAR report"
+        detail = f" ({self.errors[0]})" if self.errors else ""
+        if self.station is None:
+            raise MetarError(f"{where}: no station group{detail}")
+        if self.time_utc is None:
+            raise MetarError(f"{where}: no valid observation time{detail}")
         if self.nil:
-            return WeatherPatch(source=Source.METAR)
-        return WeatherPatch(
-            source=Source.METAR,
-            layers=self._layers(field_elevation_m),
-            wind=self._wind_layers(field_elevation_m),
-            visibility_m=self.visibility_m,
-            temperature_c=self.temperature_c,
-            dewpoint_c=self.dewpoint_c,
-            qnh_hpa=self.qnh_hpa,
-            present_weather=self.weather,
-        )
-
-    def _layers(self, field_elevation_m: float) -> tuple[CloudLayer, ...] | None:
-        if self.cavok or self.sky_clear is not None:
-            return ()
-        if not self.sky:
-            return None
-        layers = []
-        for group in sorted(
-            (s for s in self.sky if s.base_m is not None and s.cover in COVER_OKTAS),
-            key=lambda s: s.base_m or 0.0,
-        ):
-            layer = _cloud_layer(group, field_elevation_m)
-            if layer is not None:
-                layers.append(layer)
-        return tuple(layers[:MAX_LAYERS])
-
-    def _wind_layers(self, field_elevation_m: float) -> tuple[WindLayer, ...] | None:
-        w = self.wind
-        if w is None:
-            return None
-        return (
-            WindLayer(
-                alt_m=field_elevation_m + WIND_HEIGHT_M,
-                dir_from_deg=0.0 if w.dir_from_deg is None else w.dir_from_deg,
-                speed_mps=w.speed_mps,
-                gust_mps=w.gust_mps or 0.0,
-                variable=w.dir_from_deg is None,
-            ),
-        )
+            raise MetarError(f"{where}: NIL report, the station sent no observation")
+        return self
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-serialisable data (lists, not tuples), field names as on the dataclass."""
+        """The report as JSON-ready data, in aviation units (kt, ft) as the report gives them."""
         wind = None
         if self.wind is not None:
+            w = self.wind
             wind = {
-                "dir_from_deg": self.wind.dir_from_deg,
-                "variable": self.wind.variable,
-                "speed_mps": self.wind.speed_mps,
-                "gust_mps": self.wind.gust_mps,
-                "variable_from_deg": self.wind.variable_from_deg,
-                "variable_to_deg": self.wind.variable_to_deg,
+                "dir_deg": w.dir_from_deg,
+                "speed_kt": _kt(w.speed_mps),
+                "gust_kt": None if w.gust_mps is None else _kt(w.gust_mps),
+                "var_from_deg": w.variable_from_deg,
+                "var_to_deg": w.variable_to_deg,
+                "variable": w.variable,
             }
         return {
+            "raw": self.raw,
             "station": self.station,
-            "kind": self.kind,
-            "day": self.day,
-            "hour": self.hour,
-            "minute": self.minute,
+            "time_utc": None if self.time_utc is None else f"{self.time_utc:%Y-%m-%dT%H:%M:00Z}",
+            "type": self.type,
             "auto": self.auto,
             "cor": self.cor,
             "nil": self.nil,
+            "partial": self.partial,
+            "errors": list(self.errors),
             "wind": wind,
             "visibility_m": self.visibility_m,
+            "min_visibility_m": self.min_visibility_m,
+            "min_visibility_dir": self.min_visibility_dir,
             "cavok": self.cavok,
+            "rvr": list(self.rvr),
             "weather": list(self.weather),
-            "sky": [
-                {"cover": s.cover, "base_m": s.base_m, "cb": s.cb, "tcu": s.tcu} for s in self.sky
+            "clouds": [
+                {
+                    "cover": s.cover,
+                    "base_ft_agl": None if s.base_m is None else round(s.base_m / FT_TO_M),
+                    "type": "CB" if s.cb else "TCU" if s.tcu else None,
+                }
+                for s in self.sky
             ],
             "sky_clear": self.sky_clear,
             "temperature_c": self.temperature_c,
             "dewpoint_c": self.dewpoint_c,
-            "qnh_hpa": self.qnh_hpa,
-            "rvr": list(self.rvr),
+            "altimeter_hpa": self.altimeter_hpa,
             "trend": self.trend,
             "remarks": self.remarks,
-            "warnings": list(self.warnings),
-            "raw": self.raw,
         }
 
     def describe(self) -> str:
         """A few human-readable lines for the CLI."""
         flags = " ".join(f for f, on in (("AUTO", self.auto), ("COR", self.cor)) if on)
-        head = f"{self.kind} {self.station} day {self.day} {self.hour:02d}:{self.minute:02d}Z"
+        when = "time n/a" if self.time_utc is None else f"{self.time_utc:%Y-%m-%d %H:%MZ}"
+        head = f"{self.type} {self.station or '(no station)'} {when}"
         lines = [f"{head} {flags}".rstrip()]
         if self.nil:
             lines.append("  no observation (NIL)")
@@ -214,44 +163,18 @@ class MetarReport:
                 f"  weather     {' '.join(self.weather) or 'none'}",
                 f"  sky         {_describe_sky(self)}",
                 f"  temp/dew    {_opt(self.temperature_c, '°C')} / {_opt(self.dewpoint_c, '°C')}",
-                f"  QNH         {_opt(self.qnh_hpa, 'hPa', 1)}",
+                f"  altimeter   {_opt(self.altimeter_hpa, 'hPa', 1)}",
             ]
         if self.trend:
             lines.append(f"  trend       {self.trend}")
         if self.remarks:
             lines.append(f"  remarks     {self.remarks}")
-        lines += [f"  warning: {w}" for w in self.warnings]
+        lines += [f"  error: {e}" for e in self.errors]
         return "\n".join(lines)
 
 
-def _cloud_layer(group: MetarSkyGroup, field_elevation_m: float) -> CloudLayer | None:
-    assert group.base_m is not None
-    cloud_type = _cloud_type(group)
-    thickness = THICKNESS_M[cloud_type]
-    if group.tcu:
-        thickness = TOWERING_CUMULUS_THICKNESS_M
-    base = field_elevation_m + group.base_m
-    top = min(base + thickness, MAX_CLOUD_TOP_M)
-    if top <= base:
-        return None
-    return CloudLayer(COVER_OKTAS[group.cover], base, top, cloud_type)
-
-
-def _cloud_type(group: MetarSkyGroup) -> CloudType:
-    if group.cb:
-        return CloudType.CUMULONIMBUS
-    if group.tcu:
-        return CloudType.CUMULUS
-    if group.cover == "VV":
-        return CloudType.STRATUS
-    base = group.base_m or 0.0
-    if base < LOW_CLOUD_MAX_M:
-        if group.cover == "OVC":
-            return CloudType.STRATUS
-        return CloudType.STRATOCUMULUS if group.cover == "BKN" else CloudType.CUMULUS
-    if base < MID_CLOUD_MAX_M:
-        return CloudType.ALTOSTRATUS if group.cover == "OVC" else CloudType.ALTOCUMULUS
-    return CloudType.CIRROSTRATUS if group.cover == "OVC" else CloudType.CIRRUS
+def _kt(speed_mps: float) -> float:
+    return round(mps_to_kt(speed_mps), KT_DIGITS)
 
 
 def _opt(value: float | None, unit: str, digits: int = 0) -> str:
@@ -275,13 +198,16 @@ def _describe_wind(w: MetarWind | None) -> str:
     return text
 
 
-def _describe_visibility(r: MetarReport) -> str:
+def _describe_visibility(r: Metar) -> str:
     if r.cavok:
         return "CAVOK (10 km or more, no cloud below 1500 m, no CB)"
-    return _opt(r.visibility_m, "m")
+    text = _opt(r.visibility_m, "m")
+    if r.min_visibility_m is not None:
+        text += f", minimum {r.min_visibility_m:.0f} m {r.min_visibility_dir or ''}".rstrip()
+    return text
 
 
-def _describe_sky(r: MetarReport) -> str:
+def _describe_sky(r: Metar) -> str:
     if r.cavok:
         return "CAVOK"
     parts = [_describe_sky_group(s) for s in r.sky]
@@ -299,72 +225,118 @@ def _describe_sky_group(s: MetarSkyGroup) -> str:
 # --- decoding ---------------------------------------------------------------------------------
 
 
-def decode_metar(text: str) -> MetarReport:
-    """Decode one report (see the module docstring for the grammar and the error policy)."""
-    _check_characters(text)
-    tokens = text.split("=", 1)[0].split()
-    if not tokens:
-        raise MetarError("empty METAR report")
-    return _Decoder(tokens).run()
+def decode(report: str, *, year: int, month: int) -> Metar:
+    """Decode one report; never raises (see the module docstring for the error policy).
 
-
-def _check_characters(text: str) -> None:
-    for offset, ch in enumerate(text):
-        if not (ch.isascii() and ch.isprintable()) and ch not in " \t\r\n\f\v":
-            raise MetarError(
-                f"METAR report has a non-ASCII or control character {ch!r} at offset {offset}"
-            )
+    year and month are those the feed says the report belongs to: the report itself carries
+    only the day, and guessing the month from it goes wrong around month ends.
+    """
+    if not isinstance(report, str):
+        return Metar(raw="", errors=(f"report is a {type(report).__name__}, not text",))
+    try:
+        return _Decoder(report.split("=", 1)[0].split(), year, month).run()
+    except Exception as exc:
+        # The promise is "never raises". The fuzz tests keep this path unused; should it ever
+        # run, the report still says what happened instead of taking the caller down.
+        return Metar(
+            raw=" ".join(report.split("=", 1)[0].split()),
+            errors=(f"decoder failure {type(exc).__name__}: {exc}".replace("\n", " "),),
+        )
 
 
 def _group_message(index: int, token: str, reason: str) -> str:
     return f"group {index + 1} {token!r}: {reason}"
 
 
-class _Decoder:
-    """Walks the tokens once and collects the fields of a MetarReport."""
+def _year_month(year: object, month: object) -> str:
+    if isinstance(year, int) and isinstance(month, int):
+        return f"{year:04d}-{month:02d}"
+    return f"{year!r}-{month!r}"
 
-    def __init__(self, tokens: list[str]) -> None:
+
+class _Decoder:
+    """Walks the tokens once and collects the fields of a Metar."""
+
+    def __init__(self, tokens: list[str], year: int, month: int) -> None:
         self.tokens = tokens
+        self.year = year
+        self.month = month
         self.fields: dict[str, Any] = {}
         self.weather: list[str] = []
         self.sky: list[MetarSkyGroup] = []
         self.rvr: list[str] = []
-        self.warnings: list[str] = []
-        self.sector: g.WindSector | None = None
-        self.qnh_kind = ""
+        self.errors: list[str] = []
+        self.sector: tuple[float, float] | None = None
+        self.pressure_kind = ""
+        self.last_kind = ""  # the kind of the previous body group
+        self.discard_rest = False  # after NIL or a glued-on report: no trend, no remarks
 
-    def run(self) -> MetarReport:
-        i = self._header()
-        end = len(self.tokens)
+    def error(self, index: int, reason: str) -> None:
+        if len(self.errors) < MAX_ERRORS:
+            self.errors.append(_group_message(index, self.tokens[index], reason))
+        elif len(self.errors) == MAX_ERRORS:
+            self.errors.append("more errors not listed")
+
+    def run(self) -> Metar:
+        tokens = self.tokens
+        raw = " ".join(tokens)
+        if not tokens:
+            return Metar(raw=raw, errors=("empty report",))
+        i = self._common_header(raw)
+        if i < 0:
+            i = self._header()
+        end = len(tokens)
+        if i < 0:  # no time group: what follows is not decoded
+            i = end
+        # The hot loop of the decoder: locals instead of attribute look-ups, one dict look-up or
+        # one regex match per token, then a handler by kind (see metar_groups).
+        fixed, match, kind_of = g.FIXED_GROUPS, g.BODY_GROUP.fullmatch, g.KIND_OF_GROUP
         while i < end:
-            tok = self.tokens[i]
-            if tok == "RMK" or g.is_trend_start(tok) or self.fields.get("nil"):
-                break
-            if self._second_report_at(i):
-                self.warnings.append(
-                    _group_message(i, tok, "a second report starts here; the rest is ignored")
-                )
+            tok = tokens[i]
+            if len(tok) == 4 and i + 1 < end and g.starts_report(tok, tokens[i + 1]):
+                self.error(i, "a second report starts here; the rest is ignored")
                 end = i
                 break
-            i += self._body_group(i)
-        rest = self.tokens[i:end]
+            kind = fixed.get(tok)
+            try:
+                if kind is not None:
+                    used = _FIXED_HANDLERS[kind](self, i)
+                else:
+                    m = match(tok) if len(tok) <= g.MAX_GROUP_CHARS else None
+                    if m is None:
+                        self.error(i, g.unknown_reason(tok))
+                        self.last_kind = ""
+                        i += 1
+                        continue
+                    kind = kind_of[m.lastgroup or ""]
+                    used = _MATCH_HANDLERS[kind](self, i, m)
+            except g.GroupValueError as e:
+                self.error(i, f"{e}; group skipped")
+                used = 1
+            if used == 0:
+                break  # a trend, the remarks, or after NIL: the body ends here
+            self.last_kind = kind or ""
+            i += used
+        rest = [] if self.discard_rest else tokens[i:end]
         rmk = rest.index("RMK") if "RMK" in rest else len(rest)
-        self._refine_temperatures(rest[rmk + 1 :])
+        remarks = rest[rmk + 1 :]
+        if remarks:
+            self._refine_temperatures(remarks)
         wind = self.fields.pop("wind", None)
         if wind is not None and self.sector is not None:
             wind = dataclasses.replace(
-                wind, variable_from_deg=self.sector.from_deg, variable_to_deg=self.sector.to_deg
+                wind, variable_from_deg=self.sector[0], variable_to_deg=self.sector[1]
             )
-        return MetarReport(
+        return Metar(
+            raw=raw,
             **self.fields,
+            errors=tuple(self.errors),
             wind=wind,
+            rvr=tuple(self.rvr),
             weather=tuple(self.weather),
             sky=tuple(self.sky),
-            rvr=tuple(self.rvr),
-            trend="" if self.fields.get("nil") else " ".join(rest[:rmk]),
-            remarks=" ".join(rest[rmk + 1 :]),
-            warnings=tuple(self.warnings),
-            raw=" ".join(self.tokens),
+            trend=" ".join(rest[:rmk]),
+            remarks=" ".join(remarks),
         )
 
     def _refine_temperatures(self, remarks: list[str]) -> None:
@@ -378,139 +350,332 @@ class _Decoder:
             if body is not None and precise is not None and abs(precise - body) <= 1.0:
                 self.fields[name] = precise
 
+    # --- header ---
+
+    def _common_header(self, raw: str) -> int:
+        """The header in one match when it has the usual shape; -1 to take the general path."""
+        m = g.COMMON_HEADER.match(raw)
+        if m is None:
+            return -1
+        day, hour, minute = int(m["day"]), int(m["hour"]), int(m["minute"])
+        if not 1 <= day <= 31 or hour > 23 or minute > 59:
+            return -1  # the general path says what is wrong
+        try:
+            time_utc = datetime(self.year, self.month, day, hour, minute, tzinfo=UTC)
+        except (TypeError, ValueError, OverflowError):
+            return -1
+        fields = self.fields
+        fields["station"] = m["station"]
+        fields["time_utc"] = time_utc
+        if m["type"]:
+            fields["type"] = m["type"]
+        flags = m["flags"] + m["flags2"]
+        if flags:
+            if "AUTO" in flags:
+                fields["auto"] = True
+            if "C" in flags.replace("AUTO", ""):
+                fields["cor"] = True
+        return m["header"].count(" ") + 1
+
     def _header(self) -> int:
-        """Reads type, station, flags and time; returns the index of the first body token."""
+        """Reads type, station, flags and time; the index of the first body token, or -1 when
+        there is no time group (then nothing after the header is worth decoding)."""
         tokens = self.tokens
+        n = len(tokens)
         i = 0
-        self.fields["kind"] = "METAR"
-        if tokens[0] in ("METAR", "SPECI"):
-            self.fields["kind"] = tokens[0]
+        if tokens[0] in g.REPORT_TYPES:
+            self.fields["type"] = tokens[0]
             i = 1
         i = self._flags(i)
-        if i >= len(tokens):
-            raise MetarError("METAR report has no station group")
-        if not g.is_station(tokens[i]):
-            raise MetarError(
-                f"METAR group {i + 1} {tokens[i]!r}: expected a 4-character station identifier"
-            )
-        self.fields["station"] = tokens[i]
-        i = self._flags(i + 1)
-        where = f"after station {self.fields['station']!r}"
-        if i >= len(tokens):
-            raise MetarError(f"METAR report has no time group (ddhhmmZ) {where}")
+        if i >= n:
+            self.errors.append("no station group")
+            return -1
+        tok = tokens[i]
+        if g.STATION.fullmatch(tok):
+            self.fields["station"] = tok
+            i = self._flags(i + 1)
+        elif g.looks_like_time(tok):
+            self.errors.append(f"no station group before group {i + 1} {tok!r}")
+        elif i + 1 < n and g.looks_like_time(tokens[i + 1]):
+            self.error(i, "expected a 4-character station identifier")
+            i += 1
+        else:
+            self.error(i, "expected a 4-character station identifier; the rest is not decoded")
+            return -1
+        after = f" after station {self.fields['station']!r}" if "station" in self.fields else ""
+        if i >= n:
+            self.errors.append(f"no time group (ddhhmmZ){after}")
+            return -1
         try:
             issued = g.parse_time(tokens[i])
         except g.GroupValueError as e:
-            raise MetarError(f"METAR {_group_message(i, tokens[i], str(e))}") from None
+            self.error(i, str(e))
+            return i + 1  # the shape of a time group: a report, so its body is decoded
         if issued is None:
-            raise MetarError(
-                f"METAR group {i + 1} {tokens[i]!r}: expected the time group (ddhhmmZ) {where}"
-            )
-        self.fields["day"], self.fields["hour"], self.fields["minute"] = issued
-        if not tokens[i].endswith("Z"):
-            self.warnings.append(_group_message(i, tokens[i], "time group without its Z"))
+            self.error(i, f"expected the time group (ddhhmmZ){after}; the rest is not decoded")
+            return -1
+        day, hour, minute = issued
+        try:
+            self.fields["time_utc"] = datetime(self.year, self.month, day, hour, minute, tzinfo=UTC)
+        except (TypeError, ValueError, OverflowError):
+            self.error(i, f"day {day} does not exist in {_year_month(self.year, self.month)}")
         return i + 1
 
     def _flags(self, i: int) -> int:
-        while i < len(self.tokens) and (name := g.flag_name(self.tokens[i])) in ("COR", "AUTO"):
-            self.fields[name.lower()] = True
+        while i < len(self.tokens):
+            kind = g.FIXED_GROUPS.get(self.tokens[i])
+            if kind not in ("auto", "cor"):
+                break
+            self.fields[kind] = True
             i += 1
         return i
 
-    def _second_report_at(self, i: int) -> bool:
-        tok = self.tokens[i]
-        if tok in ("METAR", "SPECI"):
-            return True
-        nxt = self.tokens[i + 1] if i + 1 < len(self.tokens) else ""
-        return g.is_station(tok) and g.is_time_group(nxt)
+    # --- body: one handler per group kind; each returns the tokens it used, 0 to end the body
 
-    def _body_group(self, i: int) -> int:
-        """Applies the group at token i and returns how many tokens it used."""
-        tok = self.tokens[i]
-        try:
-            found = g.parse_group(self.tokens, i)
-        except g.GroupValueError as e:
-            self.warnings.append(_group_message(i, tok, f"{e}; group skipped"))
-            return 1
-        if found is None:
-            self.warnings.append(_group_message(i, tok, g.unknown_reason(tok)))
-            return 1
-        group, used = found
-        problem = self._apply(group)
-        if problem:
-            self.warnings.append(_group_message(i, " ".join(self.tokens[i : i + used]), problem))
-        return used
-
-    def _set_first(self, name: str, value: object) -> str | None:
-        # A group reported as missing (None) neither blocks a later real value nor warns: AUTO
-        # stations often send "/////" where a later group carries the actual value.
+    def _set_first(self, i: int, name: str, value: object) -> None:
+        # A group reported as missing (None) neither blocks a later real value nor is an error:
+        # AUTO stations often send "/////" where a later group carries the actual value.
         if self.fields.get(name) is None:
             self.fields[name] = value
-            return None
-        return None if value is None else f"second {name.replace('_', ' ')} group ignored"
+        elif value is not None:
+            self.error(i, f"second {name.replace('_', ' ')} group ignored")
 
-    def _apply(self, group: g.Group) -> str | None:
-        """Stores one group; returns a warning when it had to be ignored."""
-        match group:
-            case g.Flag(name):
-                if name != "RTD":  # a late report: nothing about the weather changes
-                    self.fields[name.lower()] = True
-            case MetarWind():
-                return self._set_first("wind", group)
-            case g.UnitlessWind(wind):
-                if "wind" in self.fields or "visibility_m" in self.fields or self.sky:
-                    return "unrecognised group"
-                self.fields["wind"] = wind
-                return "wind group without a unit, read as knots"
-            case g.WindSector():
-                if self.sector is not None:
-                    return "second variable wind sector ignored"
-                self.sector = group
-            case g.Visibility(metres, cavok, directional):
-                if "visibility_m" in self.fields and directional:
-                    return None  # the lowest visibility in one direction, not the prevailing one
-                problem = self._set_first("visibility_m", metres)
-                if problem is None and cavok:
-                    self.fields["cavok"] = True
-                return problem
-            case g.RunwayVisualRange(text):
-                self.rvr.append(text)
-            case g.Weather(code):
-                self.weather.append(code)
-            case g.SkyClear(code):
-                return self._set_first("sky_clear", code)
-            case MetarSkyGroup():
-                self.sky.append(group)
-            case g.DetachedCloudType(code):
-                if not self.sky or self.sky[-1].cb or self.sky[-1].tcu:
-                    return "cloud type without a cloud group"
-                last = self.sky[-1]
-                self.sky[-1] = MetarSkyGroup(
-                    last.cover, last.base_m, cb=code == "CB", tcu=code == "TCU"
-                )
-            case g.Temperatures(temperature, dewpoint):
-                known = self.fields.get("temperature_c") is not None
-                if known or self.fields.get("dewpoint_c") is not None:
-                    missing = temperature is None and dewpoint is None
-                    return None if missing else "second temperature group ignored"
-                self.fields["temperature_c"] = temperature
-                self.fields["dewpoint_c"] = dewpoint
-            case g.Pressure(hpa, kind):
-                return self._pressure(hpa, kind)
-            case g.Ignored():
-                pass
-        return None
+    def _on_end_of_body(self, i: int) -> int:
+        return 0
 
-    def _pressure(self, hpa: float | None, kind: str) -> str | None:
-        if "qnh_hpa" not in self.fields:
-            self.fields["qnh_hpa"], self.qnh_kind = hpa, kind
-            return None
-        old = self.fields["qnh_hpa"]
-        if hpa is None:
-            return None
+    def _on_report_type(self, i: int) -> int:
+        self.error(i, "a second report starts here; the rest is ignored")
+        self.discard_rest = True
+        return 0
+
+    def _on_nil(self, i: int) -> int:
+        self.fields["nil"] = True
+        self.discard_rest = True  # nothing after NIL is an observation
+        return 0
+
+    def _on_flag(self, i: int) -> int:
+        self.fields[g.FIXED_GROUPS[self.tokens[i]]] = True
+        return 1
+
+    def _on_ignored(self, i: int) -> int:
+        return 1
+
+    def _on_sky_clear(self, i: int) -> int:
+        self._set_first(i, "sky_clear", self.tokens[i])
+        return 1
+
+    def _on_cavok(self, i: int) -> int:
+        if self.fields.get("visibility_m") is None:
+            self.fields["visibility_m"] = g.TEN_KM
+            self.fields["cavok"] = True
+        else:
+            self.error(i, "second visibility group ignored")
+        return 1
+
+    def _on_visibility_missing(self, i: int) -> int:
+        self._set_first(i, "visibility_m", None)
+        return 1
+
+    def _on_pressure_missing(self, i: int) -> int:
+        self.fields.setdefault("altimeter_hpa", None)
+        return 1
+
+    def _on_detached_cloud_type(self, i: int) -> int:
+        tok = self.tokens[i]
+        last = self.sky[-1] if self.sky else None
+        if last is None or last.cb or last.tcu or self.last_kind != "sky":
+            self.error(i, "cloud type without a cloud group")
+        else:
+            self.sky[-1] = MetarSkyGroup(last.cover, last.base_m, tok == "CB", tok == "TCU")
+        return 1
+
+    def _on_unknown_cover_type(self, i: int) -> int:
+        tok = self.tokens[i]
+        self.sky.append(MetarSkyGroup("///", None, tok == "///CB", tok == "///TCU"))
+        return 1
+
+    def _on_wind_shear(self, i: int) -> int:
+        return g.wind_shear_tokens(self.tokens, i)
+
+    def _on_qfe_word(self, i: int) -> int:
+        used = g.qfe_tokens(self.tokens, i)
+        if used == 0:
+            self.error(i, "unrecognised group")
+            return 1
+        return used
+
+    def _on_wind(self, i: int, m: re.Match[str]) -> int:
+        self._wind(i, m["wind_dir"], m["wind_speed"], m["wind_gust"], m["wind_unit"])
+        return 1
+
+    def _on_unitless_wind(self, i: int, m: re.Match[str]) -> int:
+        # Trusted only where the wind group belongs: before visibility and sky.
+        if "wind" in self.fields or "visibility_m" in self.fields or self.sky:
+            self.error(i, "unrecognised group")
+        else:
+            # Knots wherever the station is: the real reports seen (HSPN 04014, HSDN 36020)
+            # match AWC's knot decode, where python-metar's m/s outside the US doubles them.
+            self._wind(i, m["uwind_dir"], m["uwind_speed"], m["uwind_gust"], "KT")
+        return 1
+
+    def _on_wind_sector(self, i: int, m: re.Match[str]) -> int:
+        sector = g.wind_sector(m)
+        if self.sector is None:
+            self.sector = sector
+        else:
+            self.error(i, "second variable wind sector ignored")
+        return 1
+
+    def _on_sky(self, i: int, m: re.Match[str]) -> int:
+        group = g.sky_group(m)
+        if group is not None:
+            self.sky.append(group)
+        return 1
+
+    def _on_vertical_visibility(self, i: int, m: re.Match[str]) -> int:
+        self.sky.append(MetarSkyGroup("VV", g.hundreds_of_feet_m(m["vv_height"])))
+        return 1
+
+    def _on_visibility_m(self, i: int, m: re.Match[str]) -> int:
+        self._visibility(i, g.visibility_metres(m), m["vis_dir"])
+        return 1
+
+    def _on_visibility_sm(self, i: int, m: re.Match[str]) -> int:
+        self._visibility(i, g.visibility_statute_miles(m), None)
+        return 1
+
+    def _on_visibility_km(self, i: int, m: re.Match[str]) -> int:
+        self._visibility(i, g.visibility_kilometres(m), None)
+        return 1
+
+    def _on_whole_number(self, i: int, m: re.Match[str]) -> int:
+        nxt = self.tokens[i + 1] if i + 1 < len(self.tokens) else ""
+        metres = g.mixed_statute_miles(self.tokens[i], nxt)
+        if metres is None:
+            self.error(i, "unrecognised group")
+            return 1
+        self._visibility(i, metres, None)
+        return 2
+
+    def _on_rvr(self, i: int, m: re.Match[str]) -> int:
+        self.rvr.append(self.tokens[i])
+        return 1
+
+    def _on_weather(self, i: int, m: re.Match[str]) -> int:
+        if m["wx_descriptor"] or m["wx_phenomena"]:
+            self.weather.append(self.tokens[i])
+        else:
+            self.error(i, "unrecognised group")  # "+" or "VC" on its own
+        return 1
+
+    def _on_temperatures(self, i: int, m: re.Match[str]) -> int:
+        self._temperatures(i, m["temp"], m["dew"])
+        return 1
+
+    def _on_qnh(self, i: int, m: re.Match[str]) -> int:
+        self._pressure(i, g.qnh_hpa(m), "Q")
+        return 1
+
+    def _on_altimeter(self, i: int, m: re.Match[str]) -> int:
+        self._pressure(i, g.altimeter_hpa(m), "A")
+        return 1
+
+    def _on_matched_end_of_body(self, i: int, m: re.Match[str]) -> int:
+        return 0
+
+    def _on_matched_ignored(self, i: int, m: re.Match[str]) -> int:
+        return 1
+
+    def _wind(self, i: int, direction: str, speed: str, gust: str | None, unit: str) -> None:
+        wind, problems = g.wind(direction, speed, gust, unit)
+        for problem in problems:
+            self.error(i, problem)
+        self._set_first(i, "wind", wind)
+
+    def _visibility(self, i: int, metres: float, direction: str | None) -> None:
+        fields = self.fields
+        if fields.get("visibility_m") is None:
+            fields["visibility_m"] = metres
+            return
+        # A second visibility right after the first is the sector minimum (`9999 4000SE`, or
+        # `4300 0900` without its direction); anywhere else it is a stray group.
+        if (
+            self.last_kind == "visibility_m"
+            and fields.get("min_visibility_m") is None
+            and metres < fields["visibility_m"]
+            and direction != "NDV"
+        ):
+            fields["min_visibility_m"] = metres
+            fields["min_visibility_dir"] = direction
+            return
+        self.error(i, "second visibility group ignored")
+
+    def _temperatures(self, i: int, temp: str, dew: str | None) -> None:
+        values: list[float | None] = []
+        for text, what in ((temp, "temperature"), (dew, "dewpoint")):
+            try:
+                values.append(g.celsius(text, what))
+            except g.GroupValueError as e:
+                self.error(i, f"{e}; {what} left out")
+                values.append(None)
+        temperature, dewpoint = values
+        fields = self.fields
+        if fields.get("temperature_c") is not None or fields.get("dewpoint_c") is not None:
+            if temperature is not None or dewpoint is not None:
+                self.error(i, "second temperature group ignored")
+            return
+        fields["temperature_c"] = temperature
+        fields["dewpoint_c"] = dewpoint
+
+    def _pressure(self, i: int, hpa: float, kind: str) -> None:
+        old = self.fields.get("altimeter_hpa")
+        if old is None:
+            self.fields["altimeter_hpa"], self.pressure_kind = hpa, kind
+            return
+        if kind == self.pressure_kind:
+            self.error(i, "second altimeter group ignored")
+            return
         # With both Q and A groups, Q wins: it is the hPa value itself, not a rounded conversion.
-        if old is None or (kind == "Q" and self.qnh_kind == "A"):
-            self.fields["qnh_hpa"], self.qnh_kind = hpa, kind
-        if old is not None and abs(old - hpa) > 2.0:
-            return f"disagrees with the other pressure group ({old:.1f} hPa)"
-        return None
+        if kind == "Q":
+            self.fields["altimeter_hpa"], self.pressure_kind = hpa, kind
+        if abs(old - hpa) > PRESSURE_AGREEMENT_HPA:
+            self.error(i, f"disagrees with the other pressure group ({old:.1f} hPa)")
+
+
+_FIXED_HANDLERS: dict[str, Callable[[_Decoder, int], int]] = {
+    "cavok": _Decoder._on_cavok,
+    "sky_clear": _Decoder._on_sky_clear,
+    "auto": _Decoder._on_flag,
+    "cor": _Decoder._on_flag,
+    "nil": _Decoder._on_nil,
+    "report_type": _Decoder._on_report_type,
+    "ignored": _Decoder._on_ignored,
+    "visibility_missing": _Decoder._on_visibility_missing,
+    "pressure_missing": _Decoder._on_pressure_missing,
+    "detached_cloud_type": _Decoder._on_detached_cloud_type,
+    "unknown_cover_type": _Decoder._on_unknown_cover_type,
+    "wind_shear": _Decoder._on_wind_shear,
+    "qfe_word": _Decoder._on_qfe_word,
+    "remarks": _Decoder._on_end_of_body,
+    "trend": _Decoder._on_end_of_body,
+}
+_MATCH_HANDLERS: dict[str, Callable[[_Decoder, int, re.Match[str]], int]] = {
+    "wind": _Decoder._on_wind,
+    "unitless_wind": _Decoder._on_unitless_wind,
+    "wind_sector": _Decoder._on_wind_sector,
+    "visibility_m": _Decoder._on_visibility_m,
+    "visibility_sm": _Decoder._on_visibility_sm,
+    "visibility_km": _Decoder._on_visibility_km,
+    "whole_number": _Decoder._on_whole_number,
+    "rvr": _Decoder._on_rvr,
+    "runway_state": _Decoder._on_matched_ignored,
+    "recent_weather": _Decoder._on_matched_ignored,
+    "ignored": _Decoder._on_matched_ignored,
+    "sky": _Decoder._on_sky,
+    "vertical_visibility": _Decoder._on_vertical_visibility,
+    "weather": _Decoder._on_weather,
+    "temperatures": _Decoder._on_temperatures,
+    "qnh": _Decoder._on_qnh,
+    "altimeter": _Decoder._on_altimeter,
+    "trend": _Decoder._on_matched_end_of_body,
+}
