@@ -113,18 +113,23 @@ def test_bad_control_input_is_answered_and_the_daemon_keeps_publishing(tmp_path:
         assert "rejected" in d.log()
 
 
-def test_apply_preset_and_metar_change_the_published_weather(tmp_path: Path) -> None:
+def test_apply_metar_and_preset_set_the_target_in_precedence_order(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d, d.client() as c:
-        c.call("apply_preset", {"name": "overcast-stratus"})
-        w = c.call("status")["weather"]
-        assert w["layers"][0]["type"] == "stratus"
-        assert w["layers"][0]["cover_oktas"] == 8
         c.call("apply_metar", {"report": "LSZH 211250Z 24012G25KT 9999 FEW030 BKN080 18/09 Q1012"})
-        w = c.call("status")["weather"]
-        assert [lay["cover_oktas"] for lay in w["layers"]] == [2, 6]
-        assert w["qnh_hpa"] == pytest.approx(1012.0)
-        assert w["wind"][0]["speed_mps"] == pytest.approx(12 * 1852 / 3600, rel=1e-3)
-        assert w["sources"]["layers"] == "metar"
+        status = c.call("status")
+        t = status["target"]
+        assert [lay["cover_oktas"] for lay in t["layers"]] == [2, 6]
+        assert t["qnh_hpa"] == pytest.approx(1012.0)
+        assert t["wind"][0]["speed_mps"] == pytest.approx(12 * 1852 / 3600, rel=1e-3)
+        assert t["sources"]["layers"] == "metar"
+        # The applied weather has not jumped there: it moves at the configured rates.
+        assert status["weather"]["layers"] != t["layers"] and not status["settled"]
+        c.call("apply_preset", {"name": "overcast-stratus"})
+        t = c.call("status")["target"]
+        assert [(lay["type"], lay["cover_oktas"]) for lay in t["layers"]] == [("stratus", 8)]
+        assert t["sources"]["layers"] == "control"
+        assert "layers" in c.call("release", {})["released"]
+        assert c.call("status")["target"]["sources"]["layers"] == "metar"
 
 
 def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) -> None:

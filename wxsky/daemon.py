@@ -16,8 +16,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
 from datetime import UTC
 from pathlib import Path
 from types import FrameType
@@ -31,10 +30,14 @@ from wxsky.control import (
     camera_from_params,
     camera_to_dict,
     dispatch_table,
+    release,
     set_time,
 )
-from wxsky.engine import FramePlan, SkyEngine
+from wxsky.engine import FramePlan, SkyEngine, geodetic_from_enu
 from wxsky.errors import WxskyError
+from wxsky.inputs.feed_sources import open_source
+from wxsky.inputs.metar_input import MetarFeedInput, MetarSettings
+from wxsky.inputs.stats import InputStats
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
@@ -47,38 +50,23 @@ log = logging.getLogger("wxsky.daemon")
 FPS_WINDOW_S = 2.0
 
 
-@dataclass
-class InputStats:
-    name: str
-    kind: str
-    messages: int = 0
-    errors: int = 0
-    last_error: str = ""
-    ok: bool = True  # the input itself works; a client's bad message does not make it fail
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "kind": self.kind,
-            "ok": self.ok,
-            "messages": self.messages,
-            "errors": self.errors,
-            "last_error": self.last_error,
-        }
-
-
 def initial_patches(
     config: DaemonConfig, preset: str | None = None, metar: str | None = None
 ) -> list[WeatherPatch]:
     """The weather the daemon starts on: a preset (the config's unless named), or a METAR."""
     from wxsky.presets import load_preset
-    from wxsky.weather.metar import decode_metar
+    from wxsky.weather.metar import decode
+    from wxsky.weather.metar_clouds import metar_to_patch
 
     patches = [load_preset(preset or config.daemon.preset, config.presets.dirs)]
     if metar:
+        # The report names only its day; it belongs to the month the daemon starts in.
+        start = patches[0].time_utc or WeatherState().time_utc
+        report = decode(metar, year=start.year, month=start.month).require_usable()
         patches.append(
-            decode_metar(metar).to_patch(
-                field_elevation_m=patches[0].observer.alt_m if patches[0].observer else 0.0
+            metar_to_patch(
+                report,
+                field_elevation_m=patches[0].observer.alt_m if patches[0].observer else 0.0,
             )
         )
     return patches
@@ -101,15 +89,19 @@ class Daemon:
         patches: list[WeatherPatch],
         address: Address | None = None,
         preview_dir: Path | None = None,
+        feeds: Sequence[str] = (),
     ) -> None:
         self.config = config
         self.address = address or (
             _parse(config.output.control) if config.output.control else default_address()
         )
         self.preview_dir = preview_dir
+        # Presets are the base; a METAR given on the command line is the METAR source, so a
+        # feed's reports replace it and a control override beats it.
         state = WeatherState()
         for patch in patches:
-            state = state.apply(patch)
+            if patch.source in (Source.DEFAULT, Source.PRESET):
+                state = state.apply(patch)
         cam = config.camera
         camera = Camera(
             position_m=(0.0, 0.0, state.observer.alt_m + cam.alt_agl_m),
@@ -121,11 +113,25 @@ class Daemon:
             height_px=cam.height,
         )
         settings = config.scene.settings()
-        self.engine = SkyEngine(state, camera, settings, clock_rate=config.clock.rate)
+        self.engine = SkyEngine(
+            state,
+            camera,
+            settings,
+            clock_rate=config.clock.rate,
+            rates=config.transition.rates(),
+            transition_step_s=config.transition.step_s,
+            cockpit_hold_s=config.transition.cockpit_hold_s,
+        )
+        for patch in patches:
+            if patch.source not in (Source.DEFAULT, Source.PRESET):
+                self.engine.apply(patch)
+        self.engine.settle()
         self.inputs = {
             "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
             "control": InputStats("control", "control"),
         }
+        self._feeds = [self._feed_input(spec) for spec in (*config.metar.feeds, *(feeds or ()))]
+        self._feed_tasks: list[asyncio.Task[None]] = []
         self.frames_published = 0
         self._frame_times: collections.deque[float] = collections.deque()
         self._started = time.monotonic()
@@ -143,6 +149,7 @@ class Daemon:
                 "set_camera": self._set_camera,
                 "set_time": lambda p: set_time(self.engine, p),
                 "apply_preset": lambda p: apply_preset(self.engine, p, config.presets.dirs),
+                "release": lambda p: release(self.engine, p),
                 "apply_metar": lambda p: apply_metar(self.engine, p),
             }
         )
@@ -180,6 +187,9 @@ class Daemon:
         )
         if self.preview_dir is not None:
             log.info("preview: %s", (self.preview_dir / "preview.png").resolve())
+        for feed in self._feeds:
+            self._feed_tasks.append(asyncio.create_task(feed.run(self._stop)))
+            log.info("METAR feed %s", feed.source.name)
 
     async def main_loop(self) -> None:
         loop = asyncio.get_running_loop()
@@ -217,6 +227,16 @@ class Daemon:
         """Release everything, bounded by the configured timeout; logs what it had to cut."""
         timeout = self.config.daemon.shutdown_timeout_s
         deadline = time.monotonic() + timeout
+        self._stop.set()
+        if self._feed_tasks:
+            _, pending = await asyncio.wait(self._feed_tasks, timeout=max(0.05, timeout / 4))
+            for task in pending:
+                # A fetch blocked in a worker thread (a slow URL) cannot be interrupted.
+                log.warning("shutdown: METAR feed still fetching; abandoned it")
+                task.cancel()
+            self._feed_tasks = []
+        for feed in self._feeds:
+            feed.close()
         if self._server is not None:
             try:
                 await asyncio.wait_for(self._server.close(), timeout=max(0.05, timeout / 2))
@@ -286,12 +306,11 @@ class Daemon:
 
     async def _handle(self, method: str, params: dict[str, Any]) -> Any:
         stats = self.inputs["control"]
-        stats.messages += 1
+        stats.message()
         try:
             return self._dispatch(method, params)
         except WxskyError as exc:
-            stats.errors += 1
-            stats.last_error = str(exc)
+            stats.error(str(exc))
             log.warning("control %s rejected: %s", method, exc)
             raise
 
@@ -301,6 +320,33 @@ class Daemon:
         self.engine.set_camera(camera)
         return camera_to_dict(camera)
 
+    def _feed_input(self, spec: str) -> MetarFeedInput:
+        m = self.config.metar
+        stats = InputStats(f"metar:{spec}", "metar")
+        self.inputs[stats.name] = stats
+        settings = MetarSettings(
+            format=m.format,
+            poll_interval_s=m.poll_interval_s,
+            max_backoff_s=m.max_backoff_s,
+            max_age_s=m.max_age_min * 60.0,
+            age_reference=m.age_reference,
+            station=m.station,
+            blend_stations=m.blend_stations,
+            max_distance_m=m.max_station_distance_km * 1000.0,
+        )
+        return MetarFeedInput(
+            open_source(spec, timeout_s=m.http_timeout_s),
+            settings,
+            stats,
+            apply=self.engine.apply,
+            position=self._camera_lat_lon,
+        )
+
+    def _camera_lat_lon(self) -> tuple[float, float]:
+        obs = self.engine.state.observer
+        east, north, _ = self.engine.camera.position_m
+        return geodetic_from_enu(obs.lat_deg, obs.lon_deg, east, north)
+
     def status(self) -> dict[str, Any]:
         return {
             "version": __version__,
@@ -308,6 +354,9 @@ class Daemon:
             "frames_published": self.frames_published,
             "fps": self.fps(),
             "weather": weather_to_dict(self.engine.state),
+            "target": weather_to_dict(self.engine.target),
+            "settled": self.engine.settled,
+            "overrides": self.engine.sources.holds(self.engine.wall_s),
             "inputs": [s.to_dict() for s in self.inputs.values()],
             "clients": self._server.client_count if self._server else 0,
             "shm_name": self.config.output.shm_name,

@@ -1,0 +1,263 @@
+"""A live METAR feed as a daemon input: fetch -> parse -> decode -> newest report per
+station -> the station(s) for the observer's position -> one METAR-sourced patch.
+
+Bad input never stops it: a malformed report, a junk row or a failed fetch is counted in the
+input's status and logged (rate-limited) with its station and reason, and the weather stays
+what it was. When no report near the observer is fresh enough the last good weather stays and
+the status says `stale`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+
+from wxsky.errors import FeedError
+from wxsky.inputs.feed_sources import FeedSource, Fetched, StreamSource
+from wxsky.inputs.station_table import StationPosition, station_table
+from wxsky.inputs.stats import InputStats, RateLimitedLog
+from wxsky.weather.feeds import Feed, parse_feed
+from wxsky.weather.metar import decode
+from wxsky.weather.metar_clouds import metar_to_patch
+from wxsky.weather.state import WeatherPatch
+from wxsky.weather.stations import StationWeather, blend, nearest, split_by_age
+
+log = logging.getLogger("wxsky.inputs.metar")
+
+RESELECT_S = 5.0  # how often the station choice follows the observer between fetches
+STREAM_POLL_S = 0.25
+
+
+@dataclass(frozen=True)
+class MetarSettings:
+    format: str = "auto"
+    poll_interval_s: float = 60.0
+    max_backoff_s: float = 900.0
+    max_age_s: float = 90 * 60.0
+    age_reference: str = "clock"  # or "feed": ages against the newest report in the feed
+    station: str = ""  # pinned station; empty picks by position
+    blend_stations: int = 1
+    max_distance_m: float = 200_000.0
+
+
+@dataclass(frozen=True)
+class Ingested:
+    stations: Mapping[str, StationWeather]
+    reports: int = 0
+    partial: int = 0
+    nil: int = 0
+    duplicates: int = 0
+    problems: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Selection:
+    patch: WeatherPatch | None  # None: nothing usable; keep the last weather
+    used: tuple[tuple[str, float], ...] = ()  # (station, distance_m)
+    stale: bool = False
+    reason: str = ""
+    fresh: int = 0
+    stale_count: int = 0
+    stale_stations: tuple[str, ...] = field(default=(), compare=False)
+
+
+def ingest(
+    feed: Feed,
+    known: Mapping[str, StationWeather] | None = None,
+    positions: Mapping[str, StationPosition] | None = None,
+) -> Ingested:
+    """Decode every report of a feed and keep the newest usable one per station."""
+    positions = station_table() if positions is None else positions
+    stations: dict[str, StationWeather] = dict(known or {})
+    problems = [f"{p.where}: {p.reason}" for p in feed.problems]
+    partial = nil = 0
+    for report in feed.reports:
+        metar = decode(report.raw, year=report.year, month=report.month)
+        where = f"{report.where}: {metar.station or report.station or '?'}"
+        if metar.station is None or metar.time_utc is None:
+            reason = metar.errors[0] if metar.errors else "no station or time group"
+            problems.append(f"{where}: {reason}")
+            continue
+        if metar.nil:
+            nil += 1
+            continue
+        partial += metar.partial
+        pos = _position(report.lat_deg, report.lon_deg, report.elevation_m)
+        pos = pos or positions.get(metar.station)
+        if pos is None:
+            problems.append(f"{where}: position unknown (not in the feed or the station table)")
+            continue
+        old = stations.get(metar.station)
+        # Same time is a correction (COR, or a feed file rewritten): the later read wins.
+        if old is not None and old.observed_utc > metar.time_utc:
+            continue
+        try:
+            patch = metar_to_patch(metar, field_elevation_m=pos.elevation_m)
+        except ValueError as exc:
+            problems.append(f"{where}: {exc}")
+            continue
+        stations[metar.station] = StationWeather(
+            metar.station, pos.lat_deg, pos.lon_deg, pos.elevation_m, metar.time_utc, patch
+        )
+    return Ingested(
+        stations=stations,
+        reports=len(feed.reports),
+        partial=partial,
+        nil=nil,
+        duplicates=feed.duplicates,
+        problems=tuple(problems),
+    )
+
+
+def _position(
+    lat: float | None, lon: float | None, elevation: float | None
+) -> StationPosition | None:
+    if lat is None or lon is None or elevation is None:
+        return None
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and -500.0 <= elevation <= 9000.0):
+        return None
+    return StationPosition(lat, lon, elevation)
+
+
+def select(
+    stations: Mapping[str, StationWeather],
+    lat_deg: float,
+    lon_deg: float,
+    settings: MetarSettings,
+    now_utc: datetime | None = None,
+) -> Selection:
+    """The weather for a position from the stations' newest reports."""
+    if not stations:
+        return Selection(None, reason="no usable report yet")
+    if settings.age_reference == "feed":
+        now_utc = max(s.observed_utc for s in stations.values())
+    elif now_utc is None:
+        now_utc = datetime.now(UTC)
+    candidates = list(stations.values())
+    if settings.station:
+        candidates = [s for s in candidates if s.station == settings.station]
+        if not candidates:
+            return Selection(None, reason=f"no report from station {settings.station}")
+    fresh, stale = split_by_age(candidates, now_utc, settings.max_age_s)
+    limit = math.inf if settings.station else settings.max_distance_m
+    chosen = nearest(fresh, lat_deg, lon_deg, settings.blend_stations, limit)
+    if not chosen:
+        near_stale = nearest(stale, lat_deg, lon_deg, 3, limit)
+        names = tuple(s.station for s, _ in near_stale)
+        age = f"older than {settings.max_age_s / 60:.0f} min" if near_stale else "none in range"
+        return Selection(
+            None,
+            stale=True,
+            reason=f"no fresh report within {limit / 1000:.0f} km ({age})",
+            fresh=len(fresh),
+            stale_count=len(stale),
+            stale_stations=names,
+        )
+    return Selection(
+        blend(chosen),
+        used=tuple((s.station, d) for s, d in chosen),
+        fresh=len(fresh),
+        stale_count=len(stale),
+    )
+
+
+class MetarFeedInput:
+    """Runs one feed source inside the daemon's event loop."""
+
+    def __init__(
+        self,
+        source: FeedSource,
+        settings: MetarSettings,
+        stats: InputStats,
+        apply: Callable[[WeatherPatch], object],
+        position: Callable[[], tuple[float, float]],
+        positions: Mapping[str, StationPosition] | None = None,
+    ) -> None:
+        self.source = source
+        self.settings = settings
+        self.stats = stats
+        self._apply = apply
+        self._position = position
+        self._positions = positions
+        self._stations: Mapping[str, StationWeather] = {}
+        self._last_patch: WeatherPatch | None = None
+        self._warn = RateLimitedLog(log)
+        self._failures = 0
+        stats.detail.update(stale=False, stations=0, using=[], partial=0, format=None)
+
+    async def run(self, stop: asyncio.Event) -> None:
+        loop = asyncio.get_running_loop()
+        next_fetch = loop.time()
+        while not stop.is_set():
+            if loop.time() >= next_fetch:
+                next_fetch = loop.time() + await self.poll_once()
+                if isinstance(self.source, StreamSource) and self.source.eof:
+                    log.info("%s: end of input; keeping the last weather", self.source.name)
+                    self.stats.detail["eof"] = True
+                    return
+            self.reselect()
+            wait = min(RESELECT_S, max(0.0, next_fetch - loop.time()))
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), timeout=wait)
+
+    async def poll_once(self) -> float:
+        """Fetch and ingest once; returns the seconds until the next fetch (backing off)."""
+        interval = self.settings.poll_interval_s
+        if isinstance(self.source, StreamSource):
+            interval = min(interval, STREAM_POLL_S)
+        try:
+            fetched = await self.source.fetch()
+            if fetched is not None:
+                await asyncio.to_thread(self._ingest, fetched)
+        except FeedError as exc:
+            self._failures += 1
+            self.stats.ok = False
+            self.stats.error(str(exc))
+            self._warn.warning("fetch", f"METAR feed {exc}")
+            return float(min(self.settings.max_backoff_s, interval * 2.0**self._failures))
+        self._failures = 0
+        self.stats.ok = True
+        return interval
+
+    def _ingest(self, fetched: Fetched) -> None:
+        fmt = self.settings.format if fetched.format == "auto" else fetched.format
+        feed = parse_feed(
+            fetched.data, format=fmt, name=self.source.name, reference_utc=fetched.reference_utc
+        )
+        result = ingest(feed, self._stations, self._positions)
+        self._stations = result.stations
+        used = result.reports - len(result.problems)
+        self.stats.message(max(0, used))
+        if result.problems:
+            self.stats.error(result.problems[-1], len(result.problems))
+            for problem in result.problems:
+                self._warn.warning("report", f"METAR {problem}")
+        d = self.stats.detail
+        d["format"] = feed.format
+        d["stations"] = len(result.stations)
+        d["partial"] = d.get("partial", 0) + result.partial
+        d["duplicates"] = d.get("duplicates", 0) + result.duplicates
+
+    def reselect(self) -> None:
+        lat, lon = self._position()
+        choice = select(self._stations, lat, lon, self.settings)
+        d = self.stats.detail
+        d["stale"] = choice.stale
+        if choice.patch is None:
+            if choice.stale:
+                self._warn.warning("stale", f"METAR {self.source.name}: {choice.reason}")
+            d["reason"] = choice.reason
+            return
+        d.pop("reason", None)
+        d["using"] = [{"station": s, "distance_km": round(m / 1000.0, 1)} for s, m in choice.used]
+        if choice.patch != self._last_patch:
+            self._last_patch = choice.patch
+            self._apply(choice.patch)
+
+    def close(self) -> None:
+        self.source.close()
