@@ -1,33 +1,64 @@
-"""`wxsky metar ...`: decode reports and try feeds."""
+"""`wxsky metar ...`: decode reports and files, and try a feed the way the daemon reads it."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
 
 from wxsky.cli.common import Subparsers
+
+FORMAT_CHOICES = ("auto", "awc-csv", "awc-xml", "tgftp", "lines")
 
 
 def add_commands(sub: Subparsers) -> None:
     metar = sub.add_parser("metar", help="METAR tools")
     msub = metar.add_subparsers(dest="metar_command", required=True)
-    dec = msub.add_parser("decode", help="decode one report")
-    dec.add_argument("report")
+    dec = msub.add_parser("decode", help="decode one report, or every report of a feed file")
+    dec.add_argument("report", nargs="?", help="the report text (or use --file)")
+    dec.add_argument("--file", type=Path, help="a feed file; prints one JSON object per report")
+    dec.add_argument("--format", choices=FORMAT_CHOICES, default="auto", help="with --file")
     # A report names only its day; one typed on the command line is most likely current.
-    now = datetime.now(UTC)
-    dec.add_argument("--year", type=int, default=now.year, help="default: the current UTC year")
-    dec.add_argument("--month", type=int, default=now.month, help="default: the current UTC month")
+    dec.add_argument("--year", type=int, help="for REPORT; default: the current UTC year")
+    dec.add_argument("--month", type=int, help="for REPORT; default: the current UTC month")
     dec.add_argument("--json", action="store_true", help="print the decoded fields as JSON")
     dec.set_defaults(func=_cmd_decode)
 
+    fetch = msub.add_parser(
+        "fetch", help="read a feed once and show what the daemon would take from it"
+    )
+    fetch.add_argument("source", help="a file, '-' for stdin, or an http(s) URL")
+    fetch.add_argument("--config", type=Path, help="daemon config ([metar] settings, preset)")
+    fetch.add_argument("--format", choices=FORMAT_CHOICES, help="default: the config's")
+    fetch.add_argument("--lat", type=float, help="observer latitude (default: the preset's)")
+    fetch.add_argument("--lon", type=float, help="observer longitude (default: the preset's)")
+    fetch.add_argument("--station", help="use this station only (ICAO)")
+    fetch.add_argument("--blend", type=int, help="blend the nearest N stations")
+    fetch.add_argument(
+        "--age-reference",
+        choices=("clock", "feed"),
+        help="measure report age against the clock or the feed's newest report",
+    )
+    fetch.add_argument("--json", action="store_true", help="print one JSON object")
+    fetch.set_defaults(func=_cmd_fetch)
+
 
 def _cmd_decode(args: argparse.Namespace) -> int:
+    if (args.report is None) == (args.file is None):
+        raise ValueError("give a REPORT or --file PATH (one of them)")
+    if args.file is not None:
+        return _decode_file(args.file, args.format)
     from wxsky.weather.metar import decode
 
-    if not 1 <= args.month <= 12:
-        raise ValueError(f"--month {args.month} is not a month (1..12)")
-    report = decode(args.report, year=args.year, month=args.month)
+    now = datetime.now(UTC)
+    year = now.year if args.year is None else args.year
+    month = now.month if args.month is None else args.month
+    if not 1 <= month <= 12:
+        raise ValueError(f"--month {month} is not a month (1..12)")
+    report = decode(args.report, year=year, month=month)
     if report.station is None or report.time_utc is None:
         # Nothing a user could mean as a report; a partial body or a NIL report still prints.
         report.require_usable()
@@ -36,3 +67,110 @@ def _cmd_decode(args: argparse.Namespace) -> int:
     else:
         print(report.describe())
     return 0
+
+
+def _decode_file(path: Path, fmt: str) -> int:
+    """JSON Lines: every report of the feed, in feed order; feed problems go to stderr."""
+    from wxsky.weather.feeds import read_feed
+    from wxsky.weather.metar import decode
+
+    feed = read_feed(path, format=fmt)
+    for problem in feed.problems:
+        print(f"wxsky: {problem.where}: {problem.reason}", file=sys.stderr)
+    out = sys.stdout
+    for report in feed.reports:
+        data = decode(report.raw, year=report.year, month=report.month).to_dict()
+        data["where"] = report.where
+        out.write(json.dumps(data) + "\n")
+    return 0
+
+
+def _cmd_fetch(args: argparse.Namespace) -> int:
+    from wxsky.config import load_config
+    from wxsky.inputs.feed_sources import Fetched, gunzip_if_needed, open_source
+    from wxsky.inputs.metar_input import MetarSettings, ingest, select
+    from wxsky.presets import load_preset
+    from wxsky.weather.feeds import parse_feed
+    from wxsky.weather.state import WeatherState, weather_to_dict
+
+    config = load_config(args.config)
+    m = config.metar
+    settings = MetarSettings(
+        format=args.format or m.format,
+        max_age_s=m.max_age_min * 60.0,
+        age_reference=args.age_reference or m.age_reference,
+        station=(args.station or m.station).upper(),
+        blend_stations=args.blend or m.blend_stations,
+        max_distance_m=m.max_station_distance_km * 1000.0,
+    )
+    if (args.lat is None) != (args.lon is None):
+        raise ValueError("--lat and --lon go together")
+    observer = WeatherState().apply(load_preset(config.daemon.preset, config.presets.dirs))
+    lat = observer.observer.lat_deg if args.lat is None else args.lat
+    lon = observer.observer.lon_deg if args.lon is None else args.lon
+    if args.source == "-":
+        fetched: Fetched | None = Fetched(
+            gunzip_if_needed(sys.stdin.buffer.read(), "stdin"), datetime.now(UTC)
+        )
+    else:
+        import asyncio
+
+        fetched = asyncio.run(open_source(args.source, timeout_s=m.http_timeout_s).fetch())
+    assert fetched is not None  # a first fetch always returns data or raises
+    feed = parse_feed(
+        fetched.data,
+        format=settings.format,
+        name=args.source,
+        reference_utc=fetched.reference_utc,
+    )
+    result = ingest(feed)
+    choice = select(result.stations, lat, lon, settings)
+    weather = None
+    if choice.patch is not None:
+        weather = _patch_fields(weather_to_dict(observer.apply(choice.patch)), choice.patch)
+    summary: dict[str, Any] = {
+        "source": args.source,
+        "format": feed.format,
+        "reports": result.reports,
+        "duplicates": result.duplicates,
+        "stations": len(result.stations),
+        "partial": result.partial,
+        "nil": result.nil,
+        "problems": list(result.problems),
+        "observer": {"lat_deg": lat, "lon_deg": lon},
+        "using": [{"station": s, "distance_km": round(d / 1000, 1)} for s, d in choice.used],
+        "fresh": choice.fresh,
+        "stale": choice.stale_count,
+        "reason": choice.reason or None,
+        "weather": weather,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    print(
+        f"{args.source}: {feed.format}, {result.reports} reports, {result.duplicates} duplicates, "
+        f"{len(result.stations)} stations ({result.partial} partial, {result.nil} NIL), "
+        f"{len(result.problems)} problems"
+    )
+    for problem in result.problems[:10]:
+        print(f"  problem: {problem}")
+    if len(result.problems) > 10:
+        print(f"  ... and {len(result.problems) - 10} more")
+    print(
+        f"observer {lat:.4f} {lon:.4f}: {choice.fresh} fresh and {choice.stale_count} stale "
+        f"stations (age limit {m.max_age_min:.0f} min against the {settings.age_reference})"
+    )
+    if weather is None:
+        print(f"the daemon would keep its weather: {choice.reason}")
+        return 0
+    using = ", ".join(f"{s} at {d / 1000:.1f} km" for s, d in choice.used)
+    print(f"the daemon would take (source metar) from {using}:")
+    print(json.dumps(weather, indent=2))
+    return 0
+
+
+def _patch_fields(weather: dict[str, Any], patch: Any) -> dict[str, Any]:
+    """Only the fields the METAR patch sets, in the status shape."""
+    names = {"layers", "wind", "visibility_m", "temperature_c", "dewpoint_c", "qnh_hpa"}
+    names.add("present_weather")
+    return {k: v for k, v in weather.items() if k in names and getattr(patch, k) is not None}

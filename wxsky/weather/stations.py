@@ -25,6 +25,7 @@ from wxsky.weather.state import MAX_LAYERS, CloudLayer, Source, WeatherPatch, Wi
 
 EARTH_RADIUS_M = 6_371_000.0
 LAYER_MATCH_M = 600.0  # layers of one type closer than this are the same layer
+MIN_BLEND_COVER_OKTAS = 0.05  # a far station's trace of a layer is not worth drawing
 AT_STATION_M = 1.0  # nearer than this, the station's own report is the weather
 
 
@@ -122,7 +123,7 @@ def _blend_layers(
         cover = sum(lay.cover_oktas * w for lay, w in members) / total
         base = sum(lay.base_m * w for lay, w in members) / have
         thickness = sum(lay.thickness_m * w for lay, w in members) / have
-        if cover > 0.0:
+        if cover >= MIN_BLEND_COVER_OKTAS:
             out.append(CloudLayer(min(8.0, cover), base, base + thickness, head.type))
     out.sort(key=lambda lay: -lay.cover_oktas)
     return tuple(sorted(out[:MAX_LAYERS], key=lambda lay: lay.base_m))
