@@ -132,6 +132,7 @@ class Daemon:
         }
         self._feeds = [self._feed_input(spec) for spec in (*config.metar.feeds, *(feeds or ()))]
         self._feed_tasks: list[asyncio.Task[None]] = []
+        self._had_feed_weather = False
         self.frames_published = 0
         self._frame_times: collections.deque[float] = collections.deque()
         self._started = time.monotonic()
@@ -338,9 +339,18 @@ class Daemon:
             open_source(spec, timeout_s=m.http_timeout_s),
             settings,
             stats,
-            apply=self.engine.apply,
+            apply=self._apply_feed_weather,
             position=self._camera_lat_lon,
         )
+
+    def _apply_feed_weather(self, patch: WeatherPatch) -> None:
+        self.engine.apply(patch)
+        if not self._had_feed_weather:
+            # The first live weather replaces the start-up preset at once: the preset was only
+            # a stand-in until the feed answered, not a sky to morph out of for minutes.
+            self._had_feed_weather = True
+            self.engine.settle()
+            log.info("first METAR feed weather applied: %s", self.engine.state.summary())
 
     def _camera_lat_lon(self) -> tuple[float, float]:
         obs = self.engine.state.observer

@@ -91,23 +91,40 @@ def _cmd_status(args: argparse.Namespace) -> int:
         f"time {w['time_utc']}  observer {w['observer']['lat_deg']:.4f} "
         f"{w['observer']['lon_deg']:.4f} {w['observer']['alt_m']:.0f} m"
     )
+    src = w["sources"]
     for wind in w["wind"]:
         print(
             f"wind {wind['alt_m']:.0f} m: {wind['dir_deg']:03.0f}° {wind['speed_mps']:.1f} m/s"
             + (f" gusts {wind['gust_mps']:.1f}" if wind["gust_mps"] else "")
+            + f"  [{src['wind']}]"
         )
     for lay in w["layers"]:
         print(
             f"cloud {lay['type']} {lay['cover_oktas']:.3g}/8 "
-            f"{lay['base_m']:.0f}-{lay['top_m']:.0f} m"
+            f"{lay['base_m']:.0f}-{lay['top_m']:.0f} m  [{src['layers']}]"
         )
     print(f"visibility {w['visibility_m']:.0f} m, QNH {w['qnh_hpa']:.1f} hPa")
+    if not status.get("settled", True):
+        target = ", ".join(
+            f"{lay['type']} {lay['cover_oktas']:.3g}/8 at {lay['base_m']:.0f} m"
+            for lay in status["target"]["layers"]
+        )
+        print(f"changing toward: clouds {target or 'none'}")
+    for name, hold in sorted(status.get("overrides", {}).items()):
+        print(f"override {name}: {hold['source']}")
     for inp in status["inputs"]:
         state = "ok" if inp["ok"] else "FAILING"
-        print(
+        line = (
             f"input {inp['name']} ({inp['kind']}): {state}, {inp['messages']} messages, "
             f"{inp['errors']} errors"
         )
+        if inp.get("using"):
+            line += ", using " + ", ".join(u["station"] for u in inp["using"])
+        if inp.get("stale"):
+            line += f", STALE ({inp.get('reason', '')})"
+        print(line)
+        if not inp["ok"] and inp.get("last_error"):
+            print(f"  last error: {inp['last_error']}")
     return 0
 
 
