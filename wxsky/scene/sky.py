@@ -98,7 +98,10 @@ def sky_params(state: WeatherState) -> SkyParams:
     el = sun.elevation_deg
     day = _smoothstep(-6.0, 10.0, el)  # civil twilight to well-lit day
     sunset = _smoothstep(-8.0, 0.0, el) * (1.0 - _smoothstep(2.0, 18.0, el))
-    cover = min(1.0, sum(lay.cover_oktas for lay in state.layers) / 8.0)
+    # Layers overlap at random (the usual assumption for total cloud amount): two 4/8 layers
+    # hide 3/4 of the sky, not all of it, so a forming layer darkens the sky gradually.
+    clear = math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in state.layers)
+    cover = 1.0 - clear
     overcast_dim = 1.0 - 0.45 * _smoothstep(0.6, 1.0, cover)
 
     night_zenith, night_horizon = (0.008, 0.012, 0.035), (0.025, 0.035, 0.07)
