@@ -586,12 +586,12 @@ def test_to_dict_variable_calm_and_missing_wind() -> None:
 
 
 def test_to_dict_of_a_partial_report() -> None:
-    d = dec("KXYZ 311550Z 12O45KT 9999 CAVOK", month=6).to_dict()
+    d = dec("KXYZ 311550Z 12O45KT 4000 CAVOK", month=6).to_dict()
     assert (d["time_utc"], d["partial"]) == (None, True)
     assert d["errors"] == [
         "group 2 '311550Z': day 31 does not exist in 2025-06",
         "group 3 '12O45KT': malformed wind group",
-        "group 5 'CAVOK': second visibility group ignored",
+        "group 5 'CAVOK': CAVOK contradicts the visibility of 4000 m; visibility kept",
     ]
     cavok = dec("KXYZ 261550Z CAVOK").to_dict()
     assert (cavok["cavok"], cavok["visibility_m"], cavok["clouds"]) == (True, 10_000.0, [])
@@ -734,3 +734,23 @@ def test_common_header_shortcut_agrees_with_the_general_path(
     monkeypatch.setattr("wxsky.weather.metar_groups.COMMON_HEADER", never)
     slow = [dec(text, year, month).to_dict() for text, year, month in reports]
     assert fast == slow
+
+
+# -- found by tools/metar_agreement.py against AWC's own decode (2014-09 corpus) ---------------
+
+
+def test_kts_wind_unit_is_knots() -> None:
+    m = decode("KGPM 262050Z 00000KTS 10SM SKC 30/12 A3006", year=2014, month=9)
+    assert m.wind is not None and m.wind.speed_mps == 0.0 and not m.partial
+
+
+def test_visibility_with_a_metre_suffix() -> None:
+    m = decode("OPNH 262055Z 18008KT 4000M HZ NSC 27/20 Q1007", year=2014, month=9)
+    assert m.visibility_m == 4000.0 and not m.partial
+
+
+def test_cavok_after_a_visibility_group_still_means_no_significant_cloud() -> None:
+    m = decode("EIME 262100Z 18006KT 9999 CAVOK 08/06 Q1025", year=2014, month=9)
+    assert m.cavok and m.visibility_m == 10_000.0 and not m.partial
+    odd = decode("EIME 262100Z 18006KT 4000 CAVOK 08/06 Q1025", year=2014, month=9)
+    assert odd.cavok and odd.visibility_m == 4000.0 and odd.partial

@@ -465,11 +465,14 @@ class _Decoder:
         return 1
 
     def _on_cavok(self, i: int) -> int:
-        if self.fields.get("visibility_m") is None:
+        # CAVOK also says "no cloud below 5000 ft, no CB", which holds even when a station
+        # wrote a visibility group before it ("9999 CAVOK").
+        vis = self.fields.get("visibility_m")
+        if vis is None:
             self.fields["visibility_m"] = g.TEN_KM
-            self.fields["cavok"] = True
-        else:
-            self.error(i, "second visibility group ignored")
+        elif vis < g.TEN_KM:
+            self.error(i, f"CAVOK contradicts the visibility of {vis:.0f} m; visibility kept")
+        self.fields["cavok"] = True
         return 1
 
     def _on_visibility_missing(self, i: int) -> int:

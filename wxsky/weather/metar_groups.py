@@ -143,10 +143,11 @@ GROUP_PATTERNS: tuple[tuple[str, str], ...] = (
     (
         "wind",
         r"(?P<wind_dir>[0-9]{3}|VRB|///)(?P<wind_speed>P?[0-9]{2,3}|//)"
-        r"(?:G(?P<wind_gust>P?[0-9]{2,3}|//))?(?P<wind_unit>KT|MPS|KMH)",
+        r"(?:G(?P<wind_gust>P?[0-9]{2,3}|//))?(?P<wind_unit>KTS?|MPS|KMH)",
     ),
     ("wind_sector", r"(?P<sector_from>[0-9]{3})V(?P<sector_to>[0-9]{3})"),
-    ("visibility_m", r"[MP]?(?P<vis_m>[0-9]{4})(?P<vis_dir>NDV|NE|NW|SE|SW|N|E|S|W)?"),
+    # "4000M": some stations spell out the metres.
+    ("visibility_m", r"[MP]?(?P<vis_m>[0-9]{4})M?(?P<vis_dir>NDV|NE|NW|SE|SW|N|E|S|W)?"),
     (
         "visibility_sm",
         r"[MP]?(?:(?P<sm_num>[0-9]{1,2})/(?P<sm_den>[0-9]{1,2})|(?P<sm_whole>[0-9]{1,3}))SM",
@@ -211,7 +212,8 @@ KIND_OF_GROUP: dict[str, str] = {
     f"{kind}__{index}": kind for index, (kind, _) in enumerate(GROUP_PATTERNS)
 }
 
-_WIND_UNIT_MPS = {"KT": KT_TO_MPS, "MPS": 1.0, "KMH": KMH_TO_MPS}
+# "KTS" is a common manual-station spelling of KT.
+_WIND_UNIT_MPS = {"KT": KT_TO_MPS, "KTS": KT_TO_MPS, "MPS": 1.0, "KMH": KMH_TO_MPS}
 _WIND_SHEAR_RUNWAY = re.compile(r"R[0-9]{2}[LCR]?|RWY[0-9]{2}[LCR]?")
 _QFE_VALUE = re.compile(r"[0-9]{3,4}(?:\.[0-9])?")
 _REMARK_TEMPERATURES = re.compile(r"T([01])([0-9]{3})(?:([01])([0-9]{3})|////)?")
@@ -370,7 +372,7 @@ def unknown_reason(token: str) -> str:
     """A short guess at what a token that matched no group was meant to be."""
     if not (token.isascii() and token.isprintable()):
         return "non-ASCII or control character; group skipped"
-    if token.endswith(("KT", "MPS", "KMH")):
+    if token.endswith(("KT", "KTS", "MPS", "KMH")):
         return "malformed wind group"
     if token.endswith("SM"):
         return "malformed visibility group"
