@@ -325,19 +325,9 @@ class Daemon:
         m = self.config.metar
         stats = InputStats(f"metar:{spec}", "metar")
         self.inputs[stats.name] = stats
-        settings = MetarSettings(
-            format=m.format,
-            poll_interval_s=m.poll_interval_s,
-            max_backoff_s=m.max_backoff_s,
-            max_age_s=m.max_age_min * 60.0,
-            age_reference=m.age_reference,
-            station=m.station,
-            blend_stations=m.blend_stations,
-            max_distance_m=m.max_station_distance_km * 1000.0,
-        )
         return MetarFeedInput(
             open_source(spec, timeout_s=m.http_timeout_s),
-            settings,
+            MetarSettings.from_section(m),
             stats,
             apply=self._apply_feed_weather,
             position=self._camera_lat_lon,

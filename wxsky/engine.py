@@ -71,6 +71,7 @@ class SkyEngine:
         self._stack = SourceStack(base=state, cockpit_hold_s=cockpit_hold_s)
         self._state = state  # applied
         self._target = state
+        self._settled = True
         self._camera = camera
         self.settings = settings
         self.clock_rate = clock_rate
@@ -97,7 +98,9 @@ class SkyEngine:
 
     @property
     def settled(self) -> bool:
-        return settled(self._state, self._target)
+        """The applied weather has reached the target (kept up to date on every change, so
+        the per-frame check compares nothing)."""
+        return self._settled
 
     @property
     def sources(self) -> SourceStack:
@@ -163,6 +166,7 @@ class SkyEngine:
         if target == self._target:
             return
         self._target = target
+        self._settled = settled(self._state, target)
         self.weather_version += 1
         new_sky = target.observer != self._state.observer or target.seed != self._state.seed
         # A new site or cloud seed is a different sky, not a change of this one.
@@ -174,6 +178,7 @@ class SkyEngine:
             return
         self._drift = carry_drift(self._state, new, self._drift)
         self._state = new
+        self._settled = settled(new, self._target)
         self.weather_version += 1
 
     def _transition(self, dt_wall_s: float) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from datetime import UTC, datetime
@@ -95,13 +96,12 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
 
     config = load_config(args.config)
     m = config.metar
-    settings = MetarSettings(
+    settings = dataclasses.replace(
+        MetarSettings.from_section(m),
         format=args.format or m.format,
-        max_age_s=m.max_age_min * 60.0,
         age_reference=args.age_reference or m.age_reference,
         station=(args.station or m.station).upper(),
         blend_stations=args.blend or m.blend_stations,
-        max_distance_m=m.max_station_distance_km * 1000.0,
     )
     if (args.lat is None) != (args.lon is None):
         raise ValueError("--lat and --lon go together")
@@ -171,6 +171,4 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
 
 def _patch_fields(weather: dict[str, Any], patch: Any) -> dict[str, Any]:
     """Only the fields the METAR patch sets, in the status shape."""
-    names = {"layers", "wind", "visibility_m", "temperature_c", "dewpoint_c", "qnh_hpa"}
-    names.add("present_weather")
-    return {k: v for k, v in weather.items() if k in names and getattr(patch, k) is not None}
+    return {k: v for k, v in weather.items() if getattr(patch, k, None) is not None}

@@ -16,6 +16,7 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from typing import TYPE_CHECKING
 
 from wxsky.errors import FeedError
 from wxsky.inputs.feed_sources import FeedSource, Fetched, StreamSource
@@ -26,6 +27,9 @@ from wxsky.weather.metar import decode
 from wxsky.weather.metar_clouds import metar_to_patch
 from wxsky.weather.state import WeatherPatch
 from wxsky.weather.stations import StationWeather, blend, nearest, split_by_age
+
+if TYPE_CHECKING:
+    from wxsky.config import MetarSection
 
 log = logging.getLogger("wxsky.inputs.metar")
 
@@ -44,11 +48,26 @@ class MetarSettings:
     blend_stations: int = 1
     max_distance_m: float = 200_000.0
 
+    @classmethod
+    def from_section(cls, m: MetarSection) -> MetarSettings:
+        """The input's view of the config's [metar] section, in SI units."""
+        return cls(
+            format=m.format,
+            poll_interval_s=m.poll_interval_s,
+            max_backoff_s=m.max_backoff_s,
+            max_age_s=m.max_age_min * 60.0,
+            age_reference=m.age_reference,
+            station=m.station,
+            blend_stations=m.blend_stations,
+            max_distance_m=m.max_station_distance_km * 1000.0,
+        )
+
 
 @dataclass(frozen=True)
 class Ingested:
     stations: Mapping[str, StationWeather]
     reports: int = 0
+    accepted: int = 0  # reports that decoded to a usable station and time
     partial: int = 0
     nil: int = 0
     duplicates: int = 0
@@ -75,7 +94,7 @@ def ingest(
     positions = station_table() if positions is None else positions
     stations: dict[str, StationWeather] = dict(known or {})
     problems = [f"{p.where}: {p.reason}" for p in feed.problems]
-    partial = nil = 0
+    partial = nil = accepted = 0
     for report in feed.reports:
         metar = decode(report.raw, year=report.year, month=report.month)
         where = f"{report.where}: {metar.station or report.station or '?'}"
@@ -95,18 +114,21 @@ def ingest(
         old = stations.get(metar.station)
         # Same time is a correction (COR, or a feed file rewritten): the later read wins.
         if old is not None and old.observed_utc > metar.time_utc:
+            accepted += 1  # a good report, only superseded
             continue
         try:
             patch = metar_to_patch(metar, field_elevation_m=pos.elevation_m)
         except ValueError as exc:
             problems.append(f"{where}: {exc}")
             continue
+        accepted += 1
         stations[metar.station] = StationWeather(
             metar.station, pos.lat_deg, pos.lon_deg, pos.elevation_m, metar.time_utc, patch
         )
     return Ingested(
         stations=stations,
         reports=len(feed.reports),
+        accepted=accepted,
         partial=partial,
         nil=nil,
         duplicates=feed.duplicates,
@@ -231,8 +253,7 @@ class MetarFeedInput:
         )
         result = ingest(feed, self._stations, self._positions)
         self._stations = result.stations
-        used = result.reports - len(result.problems)
-        self.stats.message(max(0, used))
+        self.stats.message(result.accepted)
         if result.problems:
             self.stats.error(result.problems[-1], len(result.problems))
             for problem in result.problems:
