@@ -152,6 +152,25 @@ def cloud_row(group: MetarSkyGroup, espy_m: float | None) -> CloudRow | None:
     return _ROWS[band, form, group.cover]
 
 
+def cover_of_oktas(cover_oktas: float) -> Cover:
+    """The report cover a (possibly fractional) okta count falls in (WMO code table 2700)."""
+    if cover_oktas <= 2.0:
+        return "FEW"
+    if cover_oktas <= 4.0:
+        return "SCT"
+    if cover_oktas < 8.0:
+        return "BKN"
+    return "OVC"
+
+
+def derived_layer_row(cover_oktas: float, base_agl_m: float, espy_m: float | None) -> CloudRow:
+    """The table row for a layer known only by cover and base (a cockpit knob, not a report):
+    the same bands and Espy test as a reported group without CB or TCU."""
+    band = band_of(base_agl_m)
+    form: Form = low_cloud_form(base_agl_m, espy_m) if band == "low" else "-"
+    return _ROWS[band, form, cover_of_oktas(cover_oktas)]
+
+
 def cloud_layer(
     group: MetarSkyGroup, field_elevation_m: float, espy_m: float | None
 ) -> CloudLayer | None:

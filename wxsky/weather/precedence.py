@@ -8,6 +8,10 @@ value for it. Cockpit values are held only while they keep coming: a field the c
 updated for `cockpit_hold_s` expires, so a knob left alone hands the field back. Control-channel
 overrides stay until released. The simulation clock is not a weather field here: `time_utc` in a
 patch sets the clock directly (see `SkyEngine`).
+
+The cockpit slot also holds finely keyed values (`wind.speed_mps`, `layer2.base_m`; see
+`wxsky.weather.cockpit`): hardware sets one knob at a time, and each knob expires on its own.
+They are laid over the weather of the sources below by `cockpit.overlay`.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from wxsky.weather.cockpit import overlay
 from wxsky.weather.state import Provenance, Source, WeatherPatch, WeatherState
 
 # Fields that can be overridden; time_utc belongs to the clock.
@@ -65,6 +70,13 @@ class SourceStack:
                 return dataclasses.replace(self, cockpit=_merged(self.cockpit, values))
         raise ValueError(f"unknown weather source {patch.source!r}")
 
+    def with_cockpit_values(self, values: Mapping[str, Any], now_s: float) -> SourceStack:
+        """The stack with a cockpit link's finely keyed values (already range-checked)."""
+        if not values:
+            return self
+        held = {key: Held(value, now_s) for key, value in values.items()}
+        return dataclasses.replace(self, cockpit=_merged(self.cockpit, held))
+
     def released(self, source: Source) -> tuple[SourceStack, tuple[str, ...]]:
         """Drop every value a control or cockpit source holds; returns the fields it held."""
         if source is Source.CONTROL:
@@ -93,9 +105,10 @@ class SourceStack:
             (Source.COCKPIT, self.cockpit),
         ):
             if slot:
-                values = {name: held.value for name, held in slot.items()}
-                state = state.apply(WeatherPatch(source=source, **values))
-        return state
+                whole = {n: h.value for n, h in slot.items() if n in FIELDS}
+                state = state.apply(WeatherPatch(source=source, **whole))
+        fine = {n: h.value for n, h in self.cockpit.items() if n not in FIELDS}
+        return overlay(state, fine)
 
     def holds(self, now_s: float) -> dict[str, dict[str, Any]]:
         """Control and cockpit overrides for status: field -> source and age."""
