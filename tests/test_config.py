@@ -14,7 +14,9 @@ import pytest
 from wxsky.config import (
     BLOCK_SIZE_M,
     CameraSection,
+    CanInputSection,
     DaemonConfig,
+    SerialInputSection,
     config_to_toml_dict,
     load_config,
 )
@@ -39,12 +41,14 @@ def load_error(tmp_path: Path, text: str) -> str:
     return message
 
 
-def to_toml(data: dict[str, dict[str, Any]]) -> str:
+def to_toml(data: dict[str, Any]) -> str:
     """Just enough of a TOML writer for config_to_toml_dict's output."""
     lines = []
-    for section, table in data.items():
-        lines.append(f"[{section}]")
-        lines.extend(f"{key} = {json.dumps(value)}" for key, value in table.items())
+    for section, value in data.items():
+        tables = value if isinstance(value, list) else [value]
+        for table in tables:
+            lines.append(f"[[{section}]]" if isinstance(value, list) else f"[{section}]")
+            lines.extend(f"{key} = {json.dumps(v)}" for key, v in table.items())
     return "\n".join(lines) + "\n"
 
 
@@ -81,12 +85,32 @@ def test_default_file_equals_defaults() -> None:
 
 def test_default_file_documents_every_key() -> None:
     raw = tomllib.loads(DEFAULT_FILE.read_text(encoding="utf-8"))
-    expected = config_to_toml_dict(load_config(None))
+    expected = {
+        name: table
+        for name, table in config_to_toml_dict(load_config(None)).items()
+        if isinstance(table, dict)  # the [[serial]]/[[can]] arrays are empty by default
+    }
     assert {s: set(t) for s, t in raw.items()} == {s: set(t) for s, t in expected.items()}
     lines = DEFAULT_FILE.read_text(encoding="utf-8").splitlines()
     for i, line in enumerate(lines):
-        if re.match(r"[a-z_]+ = ", line):
-            assert lines[i - 1].startswith("#"), f"no comment above line {i + 1}: {line}"
+        if re.match(r"(#! )?[a-z_]+ = ", line):
+            assert lines[i - 1].startswith(("#", "#! #")), f"no comment above line {i + 1}: {line}"
+
+
+def test_default_file_cockpit_examples_load_and_name_every_key(tmp_path: Path) -> None:
+    text = DEFAULT_FILE.read_text(encoding="utf-8")
+    example = "\n".join(
+        line.removeprefix("#!").removeprefix(" ")
+        for line in text.splitlines()
+        if line.startswith("#!")
+    )
+    cfg = load_config(write(tmp_path, example))
+    assert [s.url for s in cfg.serial] == ["/dev/ttyUSB0"]
+    assert [(c.interface, c.channel) for c in cfg.can] == [("socketcan", "can0")]
+    raw = tomllib.loads(example)
+    for name in ("serial", "can"):
+        documented = set(raw[name][0])
+        assert documented == set(config_to_toml_dict(cfg)[name][0]), name
 
 
 def test_empty_file_is_defaults(tmp_path: Path) -> None:
@@ -126,10 +150,17 @@ def test_preset_dirs_are_relative_to_the_config_file(tmp_path: Path) -> None:
 
 def test_round_trip_through_toml_dict(tmp_path: Path) -> None:
     original = load_config(
-        write(tmp_path, '[camera]\nfov_deg = 75.5\n[presets]\ndirs = ["/p"]\n', "a.toml")
+        write(
+            tmp_path,
+            '[camera]\nfov_deg = 75.5\n[presets]\ndirs = ["/p"]\n'
+            '[[serial]]\nurl = "loop://"\nbaud = 9600\nfields = ["wind"]\n'
+            '[[can]]\ninterface = "virtual"\nchannel = "c"\nnode_ids = [3]\n',
+            "a.toml",
+        )
     )
     data = config_to_toml_dict(original)
     assert data["presets"]["dirs"] == ["/p"]
+    assert data["serial"][0]["baud"] == 9600 and data["can"][0]["node_ids"] == [3]
     assert load_config(write(tmp_path, to_toml(data), "b.toml")) == original
 
 
@@ -140,6 +171,8 @@ def test_round_trip_through_toml_dict(tmp_path: Path) -> None:
         ("[camra]\nfov_deg = 1\n", "'camra'"),
         ("[camera]\nfovv = 1\n", "'camera.fovv'"),
         ("[daemon]\ntick = 1\n", "'daemon.tick'"),
+        ('[[serial]]\nurl = "x"\n[[serial]]\nurl = "y"\nbuad = 1\n', "'serial[2].buad'"),
+        ('[[can]]\ninterface = "virtual"\nnodes = [1]\n', "'can[1].nodes'"),
     ],
 )
 def test_unknown_key_is_named(tmp_path: Path, text: str, key: str) -> None:
@@ -167,6 +200,10 @@ def test_wrong_type(tmp_path: Path) -> None:
         ('[presets]\ndirs = "x"\n', "presets.dirs must be a list"),
         ("[presets]\ndirs = [1]\n", "presets.dirs must be a list"),
         ("camera = 3\n", "camera must be a table"),
+        ("serial = 3\n", "serial must be an array of tables ([[serial]])"),
+        ('[[serial]]\nurl = "x"\nallow_missing_checksum = 1\n', "must be true or false"),
+        ('[[serial]]\nurl = "x"\nfields = "wind"\n', "serial[1].fields must be a list"),
+        ('[[can]]\ninterface = "virtual"\nnode_ids = ["1"]\n', "can[1].node_ids must be"),
     ],
 )
 def test_wrong_types(tmp_path: Path, text: str, fragment: str) -> None:
@@ -186,6 +223,12 @@ def test_wrong_types(tmp_path: Path, text: str, fragment: str) -> None:
         ('[daemon]\npreset = "../etc"\n', "daemon.preset must be lowercase letters"),
         ('[output]\nshm_name = "a/b"\n', "output.shm_name must be"),
         ("[camera]\nwidth = 2000\n", "camera.width 2000 exceeds output.max_width 1920"),
+        ('[[serial]]\nurl = "x"\nbaud = 10\n', "serial[1].baud must be an integer in 50..4000000"),
+        ("[[serial]]\nbaud = 4800\n", "serial[1].url must be a device path or pyserial URL"),
+        ('[[serial]]\nurl = "x"\nfields = ["rain"]\n', "serial[1].fields must be one of wind"),
+        ('[[serial]]\nurl = "x"\nheading_source = "gps"\n', "must be one of fixed, hdt, hdg"),
+        ('[[can]]\ninterface = "virtual"\nnode_ids = [256]\n', "can[1].node_ids must be an"),
+        ('[[can]]\ninterface = "Bad Name"\n', "can[1].interface must be a python-can interface"),
         (
             "[scene]\nring_radius_m = 50000\n",
             "scene.max_range_m 40000 must be beyond scene.ring_radius_m 50000",
@@ -232,3 +275,52 @@ def test_directory_instead_of_file(tmp_path: Path) -> None:
 def test_sections_validate_when_built_directly() -> None:
     with pytest.raises(ValueError, match=re.escape("camera.fov_deg must be a number in 1..170")):
         CameraSection(fov_deg=0.0)
+
+
+@pytest.mark.parametrize(
+    ("spec", "url", "baud"),
+    [
+        ("/dev/ttyUSB0@4800", "/dev/ttyUSB0", 4800),
+        ("/dev/ttyUSB0", "/dev/ttyUSB0", 4800),
+        ("loop://", "loop://", 4800),
+        ("socket://localhost:4001@9600", "socket://localhost:4001", 9600),
+        ("rfc2217://user@host:2217", "rfc2217://user@host:2217", 4800),
+    ],
+)
+def test_serial_spec(spec: str, url: str, baud: int) -> None:
+    section = SerialInputSection.from_spec(spec)
+    assert (section.url, section.baud) == (url, baud)
+    assert section.input_name == f"serial:{url}"
+
+
+@pytest.mark.parametrize(
+    ("spec", "interface", "channel"),
+    [
+        ("socketcan:can0", "socketcan", "can0"),
+        ("udp_multicast:239.74.163.2", "udp_multicast", "239.74.163.2"),
+        (
+            "udp_multicast:ff15:7079:7468:6f6e:6465:6d6f:6d63:6173",
+            "udp_multicast",
+            "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173",
+        ),
+        ("virtual:", "virtual", ""),
+    ],
+)
+def test_can_spec(spec: str, interface: str, channel: str) -> None:
+    section = CanInputSection.from_spec(spec)
+    assert (section.interface, section.channel) == (interface, channel)
+
+
+@pytest.mark.parametrize(
+    ("spec", "fragment"),
+    [("/dev/ttyUSB0@fast", "baud rate after '@' must be a number"), ("@4800", "device path")],
+)
+def test_bad_serial_spec(spec: str, fragment: str) -> None:
+    with pytest.raises(ValueError, match=fragment):
+        SerialInputSection.from_spec(spec)
+
+
+@pytest.mark.parametrize("spec", ["socketcan", ":can0"])
+def test_bad_can_spec(spec: str) -> None:
+    with pytest.raises(ValueError, match="INTERFACE:CHANNEL"):
+        CanInputSection.from_spec(spec)

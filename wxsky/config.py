@@ -20,6 +20,7 @@ from typing import Any, ClassVar, TypeVar
 
 from wxsky.errors import ConfigError, WxskyError
 from wxsky.scene.layout import SceneSettings
+from wxsky.weather.cockpit import ALL_GROUPS
 from wxsky.weather.transition import TransitionRates
 
 # Shared with wxsky.presets; it lives here because presets import this module, not the reverse.
@@ -200,6 +201,71 @@ class TransitionSection(_Section):
         )
 
 
+HEADING_SOURCES = ("fixed", "hdt", "hdg")
+
+
+@dataclass(frozen=True)
+class SerialInputSection(_Section):
+    """One `[[serial]]` table: a cockpit serial line speaking NMEA 0183."""
+
+    SECTION: ClassVar[str] = "serial"
+
+    url: str = _opt("", _Rule(pattern=r".+", pattern_desc="a device path or pyserial URL"))
+    baud: int = _opt(4800, _Rule(50, 4_000_000))
+    name: str = _opt("")  # empty: "serial:<url>"
+    fields: tuple[str, ...] = _opt(ALL_GROUPS, _Rule(choices=ALL_GROUPS))
+    max_line_bytes: int = _opt(256, _Rule(82, 65_536))
+    allow_missing_checksum: bool = _opt(False)
+    sensor_heading_deg: float = _opt(0.0, _Rule(0.0, 360.0))
+    heading_source: str = _opt("fixed", _Rule(choices=HEADING_SOURCES))
+    accept_relative_wind: bool = _opt(False)
+
+    @property
+    def input_name(self) -> str:
+        return self.name or f"serial:{self.url}"
+
+    @classmethod
+    def from_spec(cls, spec: str) -> SerialInputSection:
+        """`URL[@BAUD]` from the command line (`/dev/ttyUSB0@4800`, `socket://host:4001`)."""
+        url, sep, baud = spec.rpartition("@")
+        if sep and not url:
+            raise ValueError(f"--serial {spec!r}: expected a device path or pyserial URL")
+        if sep and url and baud.isdigit():
+            return cls(url=url, baud=int(baud))
+        if sep and url and "://" not in spec:
+            raise ValueError(f"--serial {spec!r}: the baud rate after '@' must be a number")
+        return cls(url=spec)
+
+
+@dataclass(frozen=True)
+class CanInputSection(_Section):
+    """One `[[can]]` table: a CAN bus speaking CANaerospace, through any python-can interface."""
+
+    SECTION: ClassVar[str] = "can"
+
+    interface: str = _opt(
+        "", _Rule(pattern=r"[a-z][a-z0-9_]*", pattern_desc="a python-can interface name")
+    )
+    channel: str = _opt("")  # interface-specific; empty lets the interface choose
+    bitrate: int = _opt(0, _Rule(0, 10_000_000))  # 0: the interface's own setting
+    name: str = _opt("")  # empty: "can:<interface>:<channel>"
+    fields: tuple[str, ...] = _opt(ALL_GROUPS, _Rule(choices=ALL_GROUPS))
+    node_ids: tuple[int, ...] = _opt((), _Rule(0, 255))  # empty: every node
+
+    @property
+    def input_name(self) -> str:
+        return self.name or f"can:{self.interface}:{self.channel}"
+
+    @classmethod
+    def from_spec(cls, spec: str) -> CanInputSection:
+        """`INTERFACE:CHANNEL` from the command line (`socketcan:can0`,
+        `udp_multicast:239.74.163.2`). The channel may itself hold colons (an IPv6 group)."""
+        interface, sep, channel = spec.partition(":")
+        if not interface or not sep:
+            raise ValueError(f"--can {spec!r}: expected INTERFACE:CHANNEL, e.g. socketcan:can0")
+        return cls(interface=interface, channel=channel)
+
+
 @dataclass(frozen=True)
 class DaemonConfig:
     daemon: DaemonSection = field(default_factory=DaemonSection)
@@ -211,6 +277,8 @@ class DaemonConfig:
     presets: PresetsSection = field(default_factory=PresetsSection)
     metar: MetarSection = field(default_factory=MetarSection)
     transition: TransitionSection = field(default_factory=TransitionSection)
+    serial: tuple[SerialInputSection, ...] = ()  # [[serial]] tables
+    can: tuple[CanInputSection, ...] = ()  # [[can]] tables
 
     def __post_init__(self) -> None:
         cam, out, scene = self.camera, self.output, self.scene
@@ -239,16 +307,21 @@ def load_config(path: Path | None) -> DaemonConfig:
         raise ConfigError(f"{path}: {exc}") from None
 
 
-def config_to_toml_dict(cfg: DaemonConfig) -> dict[str, dict[str, Any]]:
-    """The config as TOML-ready plain data, `{section: {key: value}}`; loading it back gives
-    an equal config."""
-    out: dict[str, dict[str, Any]] = {}
+def config_to_toml_dict(cfg: DaemonConfig) -> dict[str, Any]:
+    """The config as TOML-ready plain data, `{section: {key: value}}` (a list of those for the
+    `[[serial]]`/`[[can]]` arrays); loading it back gives an equal config."""
+    out: dict[str, Any] = {}
     for sf in dataclasses.fields(cfg):
-        section = getattr(cfg, sf.name)
-        out[sf.name] = {
-            f.name: _to_toml_value(getattr(section, f.name)) for f in dataclasses.fields(section)
-        }
+        value = getattr(cfg, sf.name)
+        if isinstance(value, tuple):
+            out[sf.name] = [_section_dict(v) for v in value]
+        else:
+            out[sf.name] = _section_dict(value)
     return out
+
+
+def _section_dict(section: Any) -> dict[str, Any]:
+    return {f.name: _to_toml_value(getattr(section, f.name)) for f in dataclasses.fields(section)}
 
 
 def read_toml_file(path: Path, error: type[WxskyError]) -> dict[str, Any]:
@@ -294,14 +367,18 @@ def _config_from_dict(data: dict[str, Any], base_dir: Path) -> DaemonConfig:
     for name, table in data.items():
         if name not in section_types:
             raise ValueError(unknown_key_message(name, section_types))
+        hint = section_types[name]
+        if typing.get_origin(hint) is tuple:
+            if not isinstance(table, list) or not all(isinstance(t, dict) for t in table):
+                raise ValueError(f"{name} must be an array of tables ([[{name}]]), got {table!r}")
+            cls = typing.get_args(hint)[0]
+            sections[name] = tuple(
+                _section_from_table(cls, f"{name}[{i}]", t) for i, t in enumerate(table, 1)
+            )
+            continue
         if not isinstance(table, dict):
             raise ValueError(f"{name} must be a table ([{name}]), got {table!r}")
-        cls = section_types[name]
-        known = [f.name for f in dataclasses.fields(cls)]
-        for key in table:
-            if key not in known:
-                raise ValueError(unknown_key_message(f"{name}.{key}", known))
-        sections[name] = cls(**table)
+        sections[name] = _section_from_table(hint, name, table)
     cfg = DaemonConfig(**sections)
     # Relative preset dirs mean "next to this config file", not "wherever the daemon was
     # started from", so that a config and its presets can be moved together.
@@ -309,7 +386,29 @@ def _config_from_dict(data: dict[str, Any], base_dir: Path) -> DaemonConfig:
     return dataclasses.replace(cfg, presets=PresetsSection(dirs=dirs))
 
 
+def _section_from_table(cls: Any, label: str, table: dict[str, Any]) -> Any:
+    """One section from its table; `label` names it in errors (`serial[2]` for the second
+    `[[serial]]`)."""
+    known = [f.name for f in dataclasses.fields(cls)]
+    for key in table:
+        if key not in known:
+            raise ValueError(unknown_key_message(f"{label}.{key}", known))
+    try:
+        section = cls(**table)
+    except ValueError as exc:
+        message = str(exc)
+        prefix = f"{cls.SECTION}."
+        if label != cls.SECTION and message.startswith(prefix):
+            message = f"{label}.{message[len(prefix) :]}"
+        raise ValueError(message) from None
+    return section
+
+
 def _coerce(key: str, hint: Any, value: Any, rule: _Rule) -> Any:
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"{key} must be true or false, got {value!r}")
+        return value
     if hint is float or hint is int:
         return _coerce_number(key, hint, value, rule)
     if hint is str:
@@ -322,7 +421,13 @@ def _coerce(key: str, hint: Any, value: Any, rule: _Rule) -> Any:
     if hint == tuple[str, ...]:
         if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
             raise ValueError(f"{key} must be a list of non-empty strings, got {value!r}")
+        if rule.choices:
+            return tuple(_coerce_str(key, v, rule) for v in value)
         return tuple(value)
+    if hint == tuple[int, ...]:
+        if not isinstance(value, (list, tuple)):
+            raise ValueError(f"{key} must be a list of integers, got {value!r}")
+        return tuple(_coerce_number(key, int, v, rule) for v in value)
     raise TypeError(f"{key}: no coercion for config type {hint!r}")
 
 

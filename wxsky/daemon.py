@@ -23,7 +23,7 @@ from types import FrameType
 from typing import Any
 
 from wxsky import __version__
-from wxsky.config import DaemonConfig
+from wxsky.config import CanInputSection, DaemonConfig, SerialInputSection
 from wxsky.control import (
     apply_metar,
     apply_preset,
@@ -34,7 +34,9 @@ from wxsky.control import (
     set_time,
 )
 from wxsky.engine import FramePlan, SkyEngine, geodetic_from_enu
-from wxsky.errors import WxskyError
+from wxsky.errors import ConfigError, WxskyError
+from wxsky.inputs.cockpit_link import CockpitLink, Mailbox
+from wxsky.inputs.drivers import open_link
 from wxsky.inputs.feed_sources import open_source
 from wxsky.inputs.metar_input import MetarFeedInput, MetarSettings
 from wxsky.inputs.stats import InputStats
@@ -43,6 +45,7 @@ from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.ring import RING_SIZE
+from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
 
 log = logging.getLogger("wxsky.daemon")
@@ -90,6 +93,8 @@ class Daemon:
         address: Address | None = None,
         preview_dir: Path | None = None,
         feeds: Sequence[str] = (),
+        serial: Sequence[SerialInputSection] = (),
+        can: Sequence[CanInputSection] = (),
     ) -> None:
         self.config = config
         self.address = address or (
@@ -132,6 +137,15 @@ class Daemon:
         }
         self._feeds = [self._feed_input(spec) for spec in (*config.metar.feeds, *(feeds or ()))]
         self._feed_tasks: list[asyncio.Task[None]] = []
+        self._links: list[CockpitLink] = [
+            *(open_link("serial", section) for section in (*config.serial, *serial)),
+            *(open_link("can", section) for section in (*config.can, *can)),
+        ]
+        for link in self._links:
+            if link.name in self.inputs:
+                raise ConfigError(f"two inputs are named {link.name!r}; give one a 'name'")
+            self.inputs[link.name] = link.stats
+        self._target_version = -1
         self._had_feed_weather = False
         self.frames_published = 0
         self._frame_times: collections.deque[float] = collections.deque()
@@ -191,6 +205,10 @@ class Daemon:
         for feed in self._feeds:
             self._feed_tasks.append(asyncio.create_task(feed.run(self._stop)))
             log.info("METAR feed %s", feed.source.name)
+        mailbox = Mailbox(loop, self._apply_cockpit)
+        for link in self._links:
+            link.start(mailbox.post)
+            log.info("cockpit input %s (%s)", link.name, link.kind)
 
     async def main_loop(self) -> None:
         loop = asyncio.get_running_loop()
@@ -202,9 +220,13 @@ class Daemon:
         weather_version = self.engine.weather_version
         while not self._stop.is_set():
             now = loop.time()
-            plan = self.engine.advance(now - last)
+            # The scene is built on the render thread too: a ring build takes long enough on a
+            # CPU to hold up cockpit input if it ran here.
+            plan, meta = await loop.run_in_executor(
+                self._render_exec, self._advance_render_publish, now - last
+            )
             last = now
-            meta = await loop.run_in_executor(self._render_exec, self._render_and_publish, plan)
+            self._publish_target()
             self._count_frame()
             self._broadcast_frame(plan, meta)
             if plan.ring_changed:
@@ -238,6 +260,8 @@ class Daemon:
             self._feed_tasks = []
         for feed in self._feeds:
             feed.close()
+        if self._links:
+            await self._close_links(max(0.05, timeout / 4))
         if self._server is not None:
             try:
                 await asyncio.wait_for(self._server.close(), timeout=max(0.05, timeout / 2))
@@ -276,6 +300,10 @@ class Daemon:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+    def _advance_render_publish(self, dt_wall_s: float) -> tuple[FramePlan, FrameMeta]:
+        plan = self.engine.advance(dt_wall_s)
+        return plan, self._render_and_publish(plan)
 
     def _render_and_publish(self, plan: FramePlan) -> FrameMeta:
         r, writer = self._renderer, self._writer
@@ -332,6 +360,29 @@ class Daemon:
             apply=self._apply_feed_weather,
             position=self._camera_lat_lon,
         )
+
+    async def _close_links(self, timeout_s: float) -> None:
+        """Stop every cockpit reader thread, together, within the shutdown budget."""
+        links, self._links = self._links, []
+        per_link_s = max(0.05, timeout_s - 0.02)
+        try:
+            await asyncio.wait_for(
+                asyncio.gather(*(asyncio.to_thread(link.close, per_link_s) for link in links)),
+                timeout=timeout_s + 0.1,
+            )
+        except TimeoutError:
+            log.warning("shutdown: cockpit readers did not stop in time; abandoned them")
+
+    def _apply_cockpit(self, update: CockpitUpdate) -> None:
+        """Runs on the loop (posted by a reader thread): the target, and the stream's copy
+        of it, change at once rather than at the next frame."""
+        self.engine.apply_cockpit(update)
+        self._publish_target()
+
+    def _publish_target(self) -> None:
+        if self.engine.target_version != self._target_version:
+            self._target_version = self.engine.target_version
+            self._server_broadcast("target", weather_to_dict(self.engine.target))
 
     def _apply_feed_weather(self, patch: WeatherPatch) -> None:
         self.engine.apply(patch)

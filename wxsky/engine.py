@@ -9,14 +9,21 @@ frame while a change is under way; the scene reads only the applied weather.
 
 Each stage takes immutable values and returns immutable values; the engine only remembers the
 latest ones. No GL and no I/O here: the renderer consumes the `FramePlan`.
+
+Thread use: the daemon runs `advance` on its render thread, so that building a ring (a few
+hundred milliseconds on a CPU) never holds up the event loop, while inputs call `apply*`,
+`release`, `set_*` from the loop. A lock guards the weather and camera; it is held only for
+the cheap stages, never while the scene is built, so an input is never kept waiting by a
+ring build. The ring cache is touched by `advance` alone.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from dataclasses import dataclass
-from datetime import datetime, timedelta
+from datetime import date, datetime, timedelta
 
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import (
@@ -31,8 +38,9 @@ from wxsky.scene.layout import (
     zero_drift,
 )
 from wxsky.scene.sky import SkyParams, sky_params
+from wxsky.weather.cockpit import CockpitUpdate, clock_target
 from wxsky.weather.precedence import DEFAULT_COCKPIT_HOLD_S, SourceStack
-from wxsky.weather.state import Source, WeatherPatch, WeatherState
+from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
 from wxsky.weather.transition import INSTANT, TransitionRates, settled, step_toward
 
 # Rebuild the ring once the clouds in it have drifted this share of its radius, or the sun
@@ -42,6 +50,11 @@ RING_SUN_DEG = 1.0
 METRES_PER_DEG_LAT = 110_540.0
 METRES_PER_DEG_LON_EQUATOR = 111_320.0
 DEFAULT_TRANSITION_STEP_S = 1.0
+# A cockpit position within this distance of the observer moves the camera; farther, the flat
+# local frame is no longer good and the position becomes the new observer (a new site).
+REORIGIN_M = 100_000.0
+# A cockpit date (CANaerospace 1206) is paired with time frames (1200) this long after it.
+DATE_MEMORY_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -68,6 +81,7 @@ class SkyEngine:
     ) -> None:
         """`state` is the base weather (defaults and the startup preset), also the first
         applied weather. Rates default to instant, which suits one-off snapshots."""
+        self._lock = threading.RLock()
         self._stack = SourceStack(base=state, cockpit_hold_s=cockpit_hold_s)
         self._state = state  # applied
         self._target = state
@@ -78,13 +92,15 @@ class SkyEngine:
         self.rates = rates
         self.transition_step_s = transition_step_s
         self._wall_s = 0.0
+        self._cockpit_date: tuple[date, float] | None = None  # (date, wall_s it arrived)
         self._since_step_s = 0.0
         self._drift: Drift = zero_drift(state)
         self._ring: RingScene | None = None
         self._ring_state: WeatherState | None = None
         self._ring_sun_dir: tuple[float, float, float] = (0.0, 0.0, 1.0)
         self._ring_version = 0
-        self.weather_version = 0
+        self.weather_version = 0  # bumped when the applied weather or the target changes
+        self.target_version = 0  # bumped when the target (or the clock, set from outside) changes
 
     @property
     def state(self) -> WeatherState:
@@ -127,34 +143,78 @@ class SkyEngine:
     def apply(self, patch: WeatherPatch) -> WeatherState:
         """Put an input's patch into its source's slot; returns the new target. A time in the
         patch sets the clock at once."""
-        if patch.time_utc is not None:
-            self.set_time(patch.time_utc, source=patch.source)
-        self._stack = self._stack.with_patch(patch, self._wall_s)
-        self._retarget()
-        return self._target
+        with self._lock:
+            if patch.time_utc is not None:
+                self.set_time(patch.time_utc, source=patch.source)
+            self._stack = self._stack.with_patch(patch, self._wall_s)
+            self._retarget()
+            return self._target
+
+    def apply_cockpit(self, update: CockpitUpdate) -> WeatherState:
+        """Lay a cockpit link's values over the weather (each held while it keeps coming),
+        set the clock from its time and move the camera to its position; returns the target."""
+        with self._lock:
+            if update.values:
+                self._stack = self._stack.with_cockpit_values(update.values, self._wall_s)
+                self._retarget()
+            if update.date_utc is not None:
+                self._cockpit_date = (update.date_utc, self._wall_s)
+            recent = self._cockpit_date
+            recent_date = (
+                recent[0] if recent and self._wall_s - recent[1] <= DATE_MEMORY_S else None
+            )
+            when = clock_target(self._state.time_utc, update, recent_date)
+            if when is not None:
+                self.set_time(when, source=Source.COCKPIT)
+            if update.position_deg is not None:
+                self.move_observer(*update.position_deg)
+            return self._target
+
+    def move_observer(self, lat_deg: float, lon_deg: float) -> None:
+        """Put the camera over a geodetic position: within `REORIGIN_M` of the observer the
+        camera moves in the local frame (same sky); beyond it the position becomes the
+        observer of a new site."""
+        with self._lock:
+            obs = self._stack.base.observer
+            east_m, north_m, _ = enu_from_geodetic(obs.lat_deg, obs.lon_deg, lat_deg, lon_deg, 0.0)
+            up_m = self._camera.position_m[2]
+            if math.hypot(east_m, north_m) > REORIGIN_M:
+                site = Observer(lat_deg, lon_deg, obs.alt_m)
+                self.apply(WeatherPatch(source=Source.PRESET, observer=site))
+                east_m = north_m = 0.0
+            self._camera = dataclasses.replace(self._camera, position_m=(east_m, north_m, up_m))
 
     def release(self, source: Source) -> tuple[str, ...]:
         """Hand the fields a control or cockpit source holds back to the sources below it."""
-        self._stack, fields = self._stack.released(source)
-        self._retarget()
-        return fields
+        with self._lock:
+            self._stack, fields = self._stack.released(source)
+            self._retarget()
+            return fields
 
     def settle(self) -> None:
         """Jump the applied weather to the target (startup, or a new site)."""
-        self._set_applied(step_toward(self._state, self._target, 0.0, INSTANT))
+        with self._lock:
+            self._set_applied(step_toward(self._state, self._target, 0.0, INSTANT))
 
     def set_camera(self, camera: Camera) -> None:
-        self._camera = camera
+        with self._lock:
+            self._camera = camera
 
     def set_time(
         self, time_utc: datetime, rate: float | None = None, source: Source = Source.CONTROL
     ) -> None:
-        sources = dataclasses.replace(self._state.sources, time_utc=source)
-        self._state = dataclasses.replace(self._state, time_utc=time_utc, sources=sources)
-        self._target = dataclasses.replace(self._target, time_utc=time_utc)
-        self.weather_version += 1
-        if rate is not None:
-            self.clock_rate = rate
+        with self._lock:
+            sources = dataclasses.replace(self._state.sources, time_utc=source)
+            self._state = dataclasses.replace(self._state, time_utc=time_utc, sources=sources)
+            self._target = dataclasses.replace(
+                self._target,
+                time_utc=time_utc,
+                sources=dataclasses.replace(self._target.sources, time_utc=source),
+            )
+            self.weather_version += 1
+            self.target_version += 1
+            if rate is not None:
+                self.clock_rate = rate
 
     def _retarget(self) -> None:
         target = self._stack.target()
@@ -168,6 +228,7 @@ class SkyEngine:
         self._target = target
         self._settled = settled(self._state, target)
         self.weather_version += 1
+        self.target_version += 1
         new_sky = target.observer != self._state.observer or target.seed != self._state.seed
         # A new site or cloud seed is a different sky, not a change of this one.
         if new_sky or self.rates == INSTANT:
@@ -203,50 +264,57 @@ class SkyEngine:
 
     def advance(self, dt_wall_s: float) -> FramePlan:
         """Run the stages for a frame dt_wall_s after the previous one."""
-        self._transition(max(0.0, dt_wall_s))
-        dt_sim = max(0.0, dt_wall_s) * self.clock_rate
-        if dt_sim > 0.0:
-            self._state = dataclasses.replace(
-                self._state, time_utc=self._state.time_utc + timedelta(seconds=dt_sim)
-            )
-            self._drift = advance_drift(self._state, self._drift, dt_sim)
-        sky = sky_params(self._state)
-        ring, changed = self._ring_for(sky)
+        with self._lock:
+            self._transition(max(0.0, dt_wall_s))
+            dt_sim = max(0.0, dt_wall_s) * self.clock_rate
+            if dt_sim > 0.0:
+                self._state = dataclasses.replace(
+                    self._state, time_utc=self._state.time_utc + timedelta(seconds=dt_sim)
+                )
+                self._drift = advance_drift(self._state, self._drift, dt_sim)
+            state, drift, camera = self._state, self._drift, self._camera
+        # The scene stages read only the immutable values taken above: no lock from here on.
+        sky = sky_params(state)
+        ring, changed = self._ring_for(state, drift, camera, sky)
         frame = build_frame(
-            self._state,
-            self._drift,
-            self._camera,
+            state,
+            drift,
+            camera,
             ring.geometry.centre_m,
             sky,
             self.settings,
             ring_drift=ring.drift,
         )
-        return FramePlan(self._state, frame, ring, self._ring_version, changed)
+        return FramePlan(state, frame, ring, self._ring_version, changed)
 
-    def _ring_for(self, sky: SkyParams) -> tuple[RingScene, bool]:
+    def _ring_for(
+        self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
+    ) -> tuple[RingScene, bool]:
         ring = self._ring
-        if ring is not None and not self._ring_stale(ring, sky):
+        if ring is not None and not self._ring_stale(ring, state, drift, camera, sky):
             return ring, False
-        ring = build_ring(self._state, self._drift, self._camera.position_m, sky, self.settings)
+        ring = build_ring(state, drift, camera.position_m, sky, self.settings)
         self._ring = ring
-        self._ring_state = self._state
+        self._ring_state = state
         self._ring_sun_dir = sky.sun.direction_enu
         self._ring_version += 1
         return ring, True
 
-    def _ring_stale(self, ring: RingScene, sky: SkyParams) -> bool:
+    def _ring_stale(
+        self, ring: RingScene, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
+    ) -> bool:
         built = self._ring_state
-        if built is None or _weather_differs(built, self._state):
+        if built is None or _weather_differs(built, state):
             return True
-        if ring.geometry.needs_regeneration(self._camera.position_m):
+        if ring.geometry.needs_regeneration(camera.position_m):
             return True
         cos_sun = sum(a * b for a, b in zip(sky.sun.direction_enu, self._ring_sun_dir, strict=True))
         if math.degrees(math.acos(max(-1.0, min(1.0, cos_sun)))) > RING_SUN_DEG:
             return True
         limit = RING_DRIFT_FRAC * self.settings.ring_radius_m
-        return len(ring.drift) != len(self._drift) or any(
+        return len(ring.drift) != len(drift) or any(
             math.hypot(a[0] - b[0], a[1] - b[1]) > limit
-            for a, b in zip(ring.drift, self._drift, strict=True)
+            for a, b in zip(ring.drift, drift, strict=True)
         )
 
 

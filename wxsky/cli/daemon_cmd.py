@@ -24,6 +24,22 @@ def add_commands(sub: Subparsers) -> None:
         help="follow a METAR feed: a file, '-' for stdin, or an http(s) URL (repeatable; "
         "adds to [metar] feeds in the config)",
     )
+    run.add_argument(
+        "--serial",
+        action="append",
+        default=[],
+        metavar="URL[@BAUD]",
+        help="read NMEA 0183 from a serial device or pyserial URL, e.g. /dev/ttyUSB0@4800, "
+        "socket://host:4001 (repeatable; adds to [[serial]] in the config)",
+    )
+    run.add_argument(
+        "--can",
+        action="append",
+        default=[],
+        metavar="INTERFACE:CHANNEL",
+        help="read CANaerospace from a python-can bus, e.g. socketcan:can0, "
+        "udp_multicast:239.74.163.2 (repeatable; adds to [[can]] in the config)",
+    )
     run.add_argument("--control", help="stream/control address: unix:PATH or tcp:127.0.0.1:PORT")
     run.add_argument(
         "--preview",
@@ -60,7 +76,7 @@ def add_commands(sub: Subparsers) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     import asyncio
 
-    from wxsky.config import load_config
+    from wxsky.config import CanInputSection, SerialInputSection, load_config
     from wxsky.daemon import Daemon, initial_patches
     from wxsky.output.transport import parse_address
 
@@ -69,7 +85,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     patches = initial_patches(config, preset=args.preset, metar=args.metar)
     address = parse_address(args.control) if args.control else None
     daemon = Daemon(
-        config, patches, address=address, preview_dir=args.preview, feeds=args.metar_feed
+        config,
+        patches,
+        address=address,
+        preview_dir=args.preview,
+        feeds=args.metar_feed,
+        serial=[SerialInputSection.from_spec(spec) for spec in args.serial],
+        can=[CanInputSection.from_spec(spec) for spec in args.can],
     )
     return asyncio.run(daemon.run())
 
@@ -122,6 +144,10 @@ def _cmd_status(args: argparse.Namespace) -> int:
             line += ", using " + ", ".join(u["station"] for u in inp["using"])
         if inp.get("stale"):
             line += f", STALE ({inp.get('reason', '')})"
+        if inp.get("ignored"):
+            line += f", {inp['ignored']} ignored"
+        if not inp["ok"] and inp.get("state"):
+            line += f" ({inp['state']})"
         print(line)
         if not inp["ok"] and inp.get("last_error"):
             print(f"  last error: {inp['last_error']}")
