@@ -6,7 +6,9 @@ the same code path renders in CI and on a workstation.
 
 from __future__ import annotations
 
+import ctypes
 import logging
+from collections.abc import Callable
 
 import moderngl
 
@@ -36,3 +38,24 @@ def create_context() -> moderngl.Context:
 
 def describe(ctx: moderngl.Context) -> str:
     return f"{ctx.info['GL_RENDERER']} / {ctx.info['GL_VERSION']}"
+
+
+def gil_free_finish(ctx: moderngl.Context) -> Callable[[], None]:
+    """A glFinish that lets other Python threads run while it waits.
+
+    moderngl holds the GIL through every GL call, and on a CPU renderer a call that has to wait
+    for rasterisation (rewriting a buffer a queued draw still reads, reading pixels back) waits
+    for tens of milliseconds: with the GIL held, the daemon's event loop and the cockpit
+    readers stall with it. ctypes releases the GIL around a foreign call, so finishing the
+    queued work through it first leaves the following moderngl call nothing to wait for.
+    glvnd's libOpenGL dispatches to the context current on this thread; without it, the
+    ordinary (GIL-holding) finish still keeps the results correct."""
+    for name in ("libOpenGL.so.0", "libGL.so.1"):
+        try:
+            finish: Callable[[], None] = ctypes.CDLL(name).glFinish
+        except (OSError, AttributeError):
+            continue
+        finish.restype = None  # type: ignore[attr-defined]
+        return finish
+    log.info("no libOpenGL for a GIL-free glFinish; other threads wait while GL works")
+    return ctx.finish

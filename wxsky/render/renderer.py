@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.errors import RenderError
-from wxsky.render.context import create_context
+from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import SHEET_CELLS, build_sheet
 from wxsky.scene.camera import Camera
@@ -81,6 +81,7 @@ class Renderer:
         self._sky_vao = self.ctx.vertex_array(self._sky_prog, [])
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._targets: dict[str, _Target] = {}
+        self._finish = gil_free_finish(self.ctx)
         self._check("initialising the renderer")
 
     # -- public API -------------------------------------------------------------------
@@ -174,6 +175,7 @@ class Renderer:
         _set(prog, "u_sun_rgb", sky.sun_rgb)
         _set(prog, "u_sun_cos_radius", math.cos(math.radians(SUN_RADIUS_DEG)))
         self._sky_vao.render(moderngl.TRIANGLES, vertices=3)
+        self._finish()
 
     def _upsample(self, source: _Target, dest: _Target) -> None:
         dest.fbo.use()
@@ -219,6 +221,9 @@ class Renderer:
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         self._sprite_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
         self.ctx.disable(moderngl.BLEND)
+        # The next draw rewrites the instance buffer this one reads: wait here, GIL-free,
+        # rather than inside that write with the GIL held (see gil_free_finish).
+        self._finish()
 
     # -- plumbing ---------------------------------------------------------------------
 
