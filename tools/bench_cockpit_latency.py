@@ -2,12 +2,13 @@
 a pty and CANaerospace on a udp_multicast bus; this process changes a value and times the
 `target` notification that shows it.
 
-    .venv/bin/python tools/bench_cockpit_latency.py [--changes 60] [--tick-hz 30]
+    .venv/bin/python tools/bench_cockpit_latency.py [--changes 60] [--tick-hz 30] [--png FILE]
 
 Each case (MWV, ZDA, $PWXCL on serial; 333/334, 1200+1206, 1500-1502 on CAN) is changed
 `--changes` times, with a random pause before each so the changes land at every phase of the
 daemon's tick. Prints median, p99 and max per case against the issue's budget (one tick plus
 20 ms). Without multicast on the host the CAN cases are skipped, and the output says so.
+`--png` also draws every measurement against the budget (docs/cockpit-latency.png).
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ def main() -> int:
     p.add_argument("--changes", type=int, default=60, help="changes per case (>= 50)")
     p.add_argument("--tick-hz", type=float, default=30.0)
     p.add_argument("--group", default="239.74.163.77", help="udp_multicast group for CAN")
+    p.add_argument("--png", type=Path, help="also draw the distributions into this PNG")
     args = p.parse_args()
     master, slave = os.openpty()
     bus = _multicast_bus(args.group)
@@ -98,7 +100,50 @@ def main() -> int:
     )
     if bus is None:
         print("CAN cases skipped: no udp multicast on this host")
+    if args.png is not None:
+        _chart(results, budget_ms, fps, args.png)
+        print(f"chart: {args.png}")
     return 0
+
+
+def _chart(results: dict[str, list[float]], budget_ms: float, fps: float, path: Path) -> None:
+    """Every measurement as a dot per case on a log time axis, with median, p99 and the budget."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(results)
+    fig, ax = plt.subplots(figsize=(9, 0.55 * len(names) + 1.6), dpi=110)
+    rng = random.Random(0)
+    for row, name in enumerate(names):
+        lat_ms = results[name]
+        ys = [row + rng.uniform(-0.18, 0.18) for _ in lat_ms]
+        ax.scatter(lat_ms, ys, s=9, alpha=0.55, color="tab:blue", linewidths=0)
+        med, p99 = statistics.median(lat_ms), _p99(lat_ms)
+        ax.plot([med, med], [row - 0.3, row + 0.3], color="black", lw=2)
+        ax.plot([p99, p99], [row - 0.3, row + 0.3], color="tab:orange", lw=2)
+        ax.text(
+            budget_ms * 1.08, row, f"median {med:.2f} ms, p99 {p99:.1f} ms", va="center", fontsize=8
+        )
+    ax.axvline(budget_ms, color="tab:red", ls="--", lw=1.2)
+    ax.text(budget_ms, len(names) - 0.4, f" budget {budget_ms:.1f} ms", color="tab:red", fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlim(0.1, budget_ms * 6)
+    ax.set_yticks(range(len(names)), names)
+    ax.set_ylim(-0.6, len(names) - 0.2)
+    ax.invert_yaxis()
+    ax.set_xlabel("knob change to `target` on the daemon's stream, ms (log)")
+    n = len(next(iter(results.values())))
+    ax.set_title(
+        f"Cockpit input latency: {n} changes per case, daemon at {fps:.0f} fps, "
+        f"{os.cpu_count()} CPU cores (black: median, orange: p99)",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def _measure(client: ControlClient, case: Case, changes: int) -> list[float]:
