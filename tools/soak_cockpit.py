@@ -39,7 +39,7 @@ from wxsky.protocols.canaerospace import encode_float, encode_raw, encode_time
 from wxsky.protocols.nmea import NmeaDecoder, sentence
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cockpit_latency import _connect, _multicast_bus  # noqa: E402
+from bench_cockpit_latency import _connect, _multicast_bus
 
 
 def main() -> int:

@@ -5,19 +5,33 @@ tables number them) and returns a `CockpitUpdate`, or None for a
 sentence that only feeds later ones (a heading for MWV). It raises `SentenceError` for a
 malformed or out-of-range field and `SentenceIgnored` for a well-formed sentence wxsky cannot
 use. Fields an interpreter does not use are not looked at, so a device's odd magnetic or
-humidity field does not cost the values beside it. Framing and checksums are `nmea`'s job.
+humidity field does not cost the values beside it. Reading one field into a checked value is
+`nmea_fields`' job; framing and checksums are `nmea`'s.
 """
 
 from __future__ import annotations
 
-import math
-import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, date, datetime, time
+from datetime import date, datetime
 from types import MappingProxyType
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING
 
+from wxsky.protocols.nmea_fields import (
+    DDMMYY,
+    SentenceError,
+    SentenceIgnored,
+    TimeOfDay,
+    angle,
+    calendar_date,
+    coordinate,
+    full_year,
+    measure,
+    number,
+    text,
+    time_of_day,
+    whole,
+)
 from wxsky.protocols.result import Decoded
 from wxsky.units import FT_TO_M, INHG_TO_HPA, KMH_TO_MPS, KT_TO_MPS, STATUTE_MILE_TO_M
 from wxsky.weather.cockpit import (
@@ -44,12 +58,6 @@ if TYPE_CHECKING:
 # A heading older than this no longer says where a (possibly turning) sensor points.
 HEADING_MAX_AGE_S = 10.0
 
-# NMEA numbers are plain decimals: no exponent, and none of the nan/inf/1_000 that float() takes.
-_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)")
-_HHMMSS = re.compile(r"([0-9]{2})([0-9]{2})([0-9]{2})(?:\.([0-9]*))?")
-_DDMMYY = re.compile(r"([0-9]{2})([0-9]{2})([0-9]{2})")
-_DDMM = re.compile(r"([0-9]*)([0-9]{2}(?:\.[0-9]*)?)")  # (d)ddmm.mmmm; degrees may be short
-
 # MWV speed units -> (m/s per unit, how the unit is written in a reason).
 _MWV_UNITS: Mapping[str, tuple[float, str]] = MappingProxyType(
     {
@@ -59,15 +67,6 @@ _MWV_UNITS: Mapping[str, tuple[float, str]] = MappingProxyType(
         "S": (STATUTE_MILE_TO_M / 3600.0, "mph"),  # not in the standard; some devices send it
     }
 )
-
-
-class SentenceError(ValueError):
-    """A field makes the sentence unusable; the message names the field, the caller the
-    sentence."""
-
-
-class SentenceIgnored(Exception):
-    """A well-formed sentence wxsky cannot use (invalid status, apparent wind, no heading)."""
 
 
 @dataclass
@@ -114,48 +113,6 @@ def interpret(name: str, fields: Sequence[str], ctx: Context) -> Decoded:
 # -- fields -----------------------------------------------------------------------------
 
 
-def _text(fields: Sequence[str], n: int) -> str:
-    """Field n (1-based); an absent trailing field reads as empty."""
-    return fields[n - 1] if n <= len(fields) else ""
-
-
-def _number(fields: Sequence[str], n: int, what: str) -> float | None:
-    text = _text(fields, n)
-    if text == "":
-        return None
-    if _NUMBER.fullmatch(text) is None:
-        raise SentenceError(f"field {n} ({what}) {text!r} is not a number")
-    value = float(text)
-    if not math.isfinite(value):  # more digits than a float holds
-        raise SentenceError(f"field {n} ({what}) {text!r} is not a finite number")
-    return value
-
-
-def _measure(fields: Sequence[str], n: int, what: str, unit: str) -> float | None:
-    """Field n, whose unit letter follows in field n+1. Devices that leave the letter empty
-    are common; a different letter is a different quantity and must not be read as this."""
-    value = _number(fields, n, what)
-    letter = _text(fields, n + 1)
-    if value is not None and letter not in ("", unit):
-        raise SentenceError(f"field {n + 1} ({what} unit) {letter!r}, expected {unit!r}")
-    return value
-
-
-def _whole(fields: Sequence[str], n: int, what: str) -> int | None:
-    text = _text(fields, n)
-    if text == "":
-        return None
-    if not text.isdigit():
-        raise SentenceError(f"field {n} ({what}) {text!r} is not a whole number")
-    return int(text)
-
-
-def _angle(value_deg: float | None, n: int, what: str) -> float | None:
-    if value_deg is not None and not 0.0 <= value_deg <= 360.0:
-        raise SentenceError(f"field {n} ({what}) {value_deg:g}° out of range 0..360")
-    return value_deg
-
-
 def _weather(key: str, value: float, what: str, unit: str, given: str = "") -> float:
     """`checked(key, value)`, refusing with a reason that names the quantity as the sentence
     gave it (`given`, e.g. "300 kn") and in the unit wxsky keeps it in."""
@@ -177,17 +134,17 @@ def _wind_dir(dir_from_deg: float) -> float:
 
 def _speed_mps(fields: Sequence[str], mps_n: int, kn_n: int) -> float | None:
     """Wind speed from the m/s field, else the knots one (MWD, MDA)."""
-    mps = _measure(fields, mps_n, "wind speed m/s", "M")
+    mps = measure(fields, mps_n, "wind speed m/s", "M")
     if mps is not None:
         return _weather(WIND_SPEED, mps, "wind speed", "m/s")
-    kn = _measure(fields, kn_n, "wind speed knots", "N")
+    kn = measure(fields, kn_n, "wind speed knots", "N")
     if kn is not None:
         return _weather(WIND_SPEED, kn * KT_TO_MPS, "wind speed", "m/s", f"{kn:g} kn")
     return None
 
 
 def _status(fields: Sequence[str], n: int, invalid: str) -> None:
-    status = _text(fields, n)
+    status = text(fields, n)
     if status == "V":
         raise SentenceIgnored(f"status V ({invalid})")
     if status != "A":
@@ -228,7 +185,7 @@ def _mwv(f: Sequence[str], ctx: Context) -> CockpitUpdate:
             f"MWD/MDA gave wind {ctx.now_s - held_at_s:.1f} s ago, within geographic_wind_hold_s"
         )
     values: dict[str, float | CloudType] = {}
-    speed = _number(f, 3, "wind speed")
+    speed = number(f, 3, "wind speed")
     if speed is not None:
         unit = _MWV_UNITS.get(f[3])
         if unit is None:
@@ -236,7 +193,7 @@ def _mwv(f: Sequence[str], ctx: Context) -> CockpitUpdate:
         per_unit_mps, unit_name = unit
         given = "" if unit_name == "m/s" else f"{speed:g} {unit_name}"
         values[WIND_SPEED] = _weather(WIND_SPEED, speed * per_unit_mps, "wind speed", "m/s", given)
-    angle_deg = _angle(_number(f, 1, "wind angle"), 1, "wind angle")
+    angle_deg = angle(number(f, 1, "wind angle"), 1, "wind angle")
     if angle_deg is not None:
         values[WIND_DIR] = _wind_dir(angle_deg + _heading_deg(ctx))
     return CockpitUpdate(values=values)
@@ -245,7 +202,7 @@ def _mwv(f: Sequence[str], ctx: Context) -> CockpitUpdate:
 def _mwd(f: Sequence[str], ctx: Context) -> CockpitUpdate:
     values: dict[str, float | CloudType] = {}
     # Only the true direction: magnetic needs a variation this sentence does not carry.
-    dir_deg = _angle(_measure(f, 1, "wind direction true", "T"), 1, "wind direction true")
+    dir_deg = angle(measure(f, 1, "wind direction true", "T"), 1, "wind direction true")
     if dir_deg is not None:
         values[WIND_DIR] = _wind_dir(dir_deg)
     speed_mps = _speed_mps(f, 7, 5)
@@ -258,20 +215,20 @@ def _mwd(f: Sequence[str], ctx: Context) -> CockpitUpdate:
 
 def _mda(f: Sequence[str], ctx: Context) -> CockpitUpdate:
     values: dict[str, float | CloudType] = {}
-    bar = _measure(f, 3, "pressure bar", "B")
-    inhg = _measure(f, 1, "pressure inHg", "I") if bar is None else None
+    bar = measure(f, 3, "pressure bar", "B")
+    inhg = measure(f, 1, "pressure inHg", "I") if bar is None else None
     if bar is not None:
         values[QNH] = _weather(QNH, bar * 1000.0, "pressure", "hPa", f"{bar:g} bar")
     elif inhg is not None:
         values[QNH] = _weather(QNH, inhg * INHG_TO_HPA, "pressure", "hPa", f"{inhg:g} inHg")
-    air_c = _measure(f, 5, "air temperature", "C")
+    air_c = measure(f, 5, "air temperature", "C")
     if air_c is not None:
         values[TEMPERATURE] = _weather(TEMPERATURE, air_c, "air temperature", "°C")
-    dew_c = _measure(f, 11, "dew point", "C")
+    dew_c = measure(f, 11, "dew point", "C")
     if dew_c is not None:
         values[DEWPOINT] = _weather(DEWPOINT, dew_c, "dew point", "°C")
     wind: dict[str, float | CloudType] = {}
-    dir_deg = _angle(_measure(f, 13, "wind direction true", "T"), 13, "wind direction true")
+    dir_deg = angle(measure(f, 13, "wind direction true", "T"), 13, "wind direction true")
     if dir_deg is not None:
         wind[WIND_DIR] = _wind_dir(dir_deg)
     speed_mps = _speed_mps(f, 19, 17)
@@ -286,7 +243,7 @@ def _mda(f: Sequence[str], ctx: Context) -> CockpitUpdate:
 
 
 def _hdt(f: Sequence[str], ctx: Context) -> None:
-    heading_deg = _angle(_measure(f, 1, "heading true", "T"), 1, "heading true")
+    heading_deg = angle(measure(f, 1, "heading true", "T"), 1, "heading true")
     if heading_deg is None:
         raise SentenceIgnored("no heading (field 1 empty)")
     ctx.state.headings["hdt"] = (heading_deg % 360.0, ctx.now_s)
@@ -294,19 +251,19 @@ def _hdt(f: Sequence[str], ctx: Context) -> None:
 
 def _east_positive(f: Sequence[str], n: int, what: str) -> float:
     """A deviation or variation with its E/W letter in field n+1; missing counts as 0."""
-    value = _number(f, n, what)
+    value = number(f, n, what)
     if value is None or value == 0.0:
         return 0.0
     if abs(value) > 180.0:
         raise SentenceError(f"field {n} ({what}) {value:g}° out of range 0..180")
-    side = _text(f, n + 1)
+    side = text(f, n + 1)
     if side not in ("E", "W"):
         raise SentenceError(f"field {n + 1} ({what} direction) {side!r}, expected E or W")
     return value if side == "E" else -value
 
 
 def _hdg(f: Sequence[str], ctx: Context) -> None:
-    heading_deg = _angle(_number(f, 1, "heading magnetic"), 1, "heading magnetic")
+    heading_deg = angle(number(f, 1, "heading magnetic"), 1, "heading magnetic")
     if heading_deg is None:
         raise SentenceIgnored("no heading (field 1 empty)")
     true_deg = heading_deg + _east_positive(f, 2, "deviation") + _east_positive(f, 4, "variation")
@@ -316,64 +273,8 @@ def _hdg(f: Sequence[str], ctx: Context) -> None:
 # -- time and position ------------------------------------------------------------------
 
 
-class _TimeOfDay(NamedTuple):
-    clock: time  # UTC
-    resolution_s: float
-
-    @property
-    def seconds(self) -> float:
-        c = self.clock
-        return c.hour * 3600.0 + c.minute * 60.0 + c.second + c.microsecond / 1e6
-
-
-def _time_of_day(f: Sequence[str], n: int) -> _TimeOfDay | None:
-    text = _text(f, n)
-    if text == "":
-        return None
-    m = _HHMMSS.fullmatch(text)
-    if m is None:
-        raise SentenceError(f"field {n} (UTC time) {text!r} is not hhmmss(.ss)")
-    hour, minute, second = int(m[1]), int(m[2]), int(m[3])
-    fraction = m[4] or ""
-    if hour > 23:
-        raise SentenceError(f"field {n} (UTC time) hour {hour} out of range 0..23")
-    if minute > 59:
-        raise SentenceError(f"field {n} (UTC time) minute {minute} out of range 0..59")
-    if second > 60:
-        raise SentenceError(f"field {n} (UTC time) second {second} out of range 0..60")
-    # Digits, not float arithmetic, so 22.10 s is exactly 100 000 µs.
-    microsecond = int((fraction + "000000")[:6])
-    if second == 60:  # a leap second: datetime has none, so hold the last instant before it
-        second, microsecond = 59, 999_000
-    resolution_s = 10.0 ** -len(fraction) if fraction else 1.0
-    return _TimeOfDay(time(hour, minute, second, microsecond, tzinfo=UTC), resolution_s)
-
-
-def _full_year(year: int, digits: int, reference_year: int) -> int:
-    """A two-digit year in the century that puts it nearest `reference_year`; a tie goes to
-    the past (a receiver reports the date now, not one 50 years ahead)."""
-    if digits != 2:
-        return year
-    century = reference_year // 100 * 100
-    candidates = (century - 100 + year, century + year, century + 100 + year)
-    return min(candidates, key=lambda y: (abs(y - reference_year), y))
-
-
-def _date(day: int, month: int, year: int, where: str) -> date:
-    if not 1 <= day <= 31:
-        raise SentenceError(f"{where} (date) day {day} out of range 1..31")
-    if not 1 <= month <= 12:
-        raise SentenceError(f"{where} (date) month {month} out of range 1..12")
-    try:
-        return date(year, month, day)
-    except ValueError:
-        raise SentenceError(
-            f"{where} (date) {year:04d}-{month:02d}-{day:02d} is not a calendar date"
-        ) from None
-
-
 def _time_update(
-    tod: _TimeOfDay | None, day: date | None, position_deg: tuple[float, float] | None = None
+    tod: TimeOfDay | None, day: date | None, position_deg: tuple[float, float] | None = None
 ) -> CockpitUpdate:
     if tod is not None and day is not None:
         return CockpitUpdate(
@@ -391,55 +292,33 @@ def _time_update(
 
 
 def _zda(f: Sequence[str], ctx: Context) -> CockpitUpdate:
-    tod = _time_of_day(f, 1)
-    day, month, year = _whole(f, 2, "day"), _whole(f, 3, "month"), _whole(f, 4, "year")
+    tod = time_of_day(f, 1)
+    day, month, year = whole(f, 2, "day"), whole(f, 3, "month"), whole(f, 4, "year")
     parts = (day, month, year)
     when: date | None = None
     if day is not None and month is not None and year is not None:
         digits = len(f[3])
         if digits not in (2, 4):
             raise SentenceError(f"field 4 (year) {f[3]!r} is not 2 or 4 digits")
-        when = _date(day, month, _full_year(year, digits, ctx.reference_year), "fields 2-4")
+        when = calendar_date(day, month, full_year(year, digits, ctx.reference_year), "fields 2-4")
     elif any(p is not None for p in parts):
         raise SentenceError("fields 2-4 (day, month, year) are partly empty")
     return _time_update(tod, when)
 
 
-def _coordinate(f: Sequence[str], n: int, what: str, max_deg: float, sides: str) -> float | None:
-    """ddmm.mmmm (latitude) or dddmm.mmmm (longitude) in field n, its side letter in n+1;
-    the second side letter is the negative one."""
-    text = _text(f, n)
-    if text == "":
-        return None
-    m = _DDMM.fullmatch(text)
-    if m is None:
-        raise SentenceError(f"field {n} ({what}) {text!r} is not (d)ddmm.mmmm")
-    degrees = float(m[1] or "0")
-    minutes = float(m[2])
-    if minutes >= 60.0:
-        raise SentenceError(f"field {n} ({what}) minutes {minutes:g} out of range 0..<60")
-    value_deg = degrees + minutes / 60.0
-    if value_deg > max_deg:
-        raise SentenceError(f"field {n} ({what}) {value_deg:g}° out of range 0..{max_deg:g}")
-    side = _text(f, n + 1)
-    if side not in (sides[0], sides[1]):
-        raise SentenceError(f"field {n + 1} ({what} side) {side!r}, expected {' or '.join(sides)}")
-    return -value_deg if side == sides[1] else value_deg
-
-
 def _rmc(f: Sequence[str], ctx: Context) -> CockpitUpdate:
     _status(f, 2, "receiver has no valid fix")
-    tod = _time_of_day(f, 1)
+    tod = time_of_day(f, 1)
     when: date | None = None
     date_text = f[8]
     if date_text:
-        m = _DDMMYY.fullmatch(date_text)
+        m = DDMMYY.fullmatch(date_text)
         if m is None:
             raise SentenceError(f"field 9 (date) {date_text!r} is not ddmmyy")
-        year = _full_year(int(m[3]), 2, ctx.reference_year)
-        when = _date(int(m[1]), int(m[2]), year, "field 9")
-    lat_deg = _coordinate(f, 3, "latitude", 90.0, "NS")
-    lon_deg = _coordinate(f, 5, "longitude", 180.0, "EW")
+        year = full_year(int(m[3]), 2, ctx.reference_year)
+        when = calendar_date(int(m[1]), int(m[2]), year, "field 9")
+    lat_deg = coordinate(f, 3, "latitude", 90.0, "NS")
+    lon_deg = coordinate(f, 5, "longitude", 180.0, "EW")
     if (lat_deg is None) != (lon_deg is None):
         raise SentenceError("fields 3 and 5 (latitude, longitude): one is empty")
     position = (lat_deg, lon_deg) if lat_deg is not None and lon_deg is not None else None
@@ -452,22 +331,22 @@ def _rmc(f: Sequence[str], ctx: Context) -> CockpitUpdate:
 def _pwxcl(f: Sequence[str], ctx: Context) -> CockpitUpdate:
     if len(f) > 5:
         raise SentenceError(f"{len(f)} fields, expected 4 or 5")
-    layer = _whole(f, 1, "layer")
+    layer = whole(f, 1, "layer")
     if layer is None:
         raise SentenceError("field 1 (layer) is empty; the layer is required")
     if not 1 <= layer <= COCKPIT_LAYERS:
         raise SentenceError(f"layer {layer} out of range 1..{COCKPIT_LAYERS}")
     values: dict[str, float | CloudType] = {}
-    oktas = _number(f, 2, "oktas")
+    oktas = number(f, 2, "oktas")
     if oktas is not None:
         key = layer_key(layer, LAYER_COVER)
         values[key] = _weather(key, oktas, f"layer {layer} cover", "oktas")
     for n, part, what in ((3, LAYER_BASE, "base"), (4, LAYER_THICKNESS, "thickness")):
-        ft = _number(f, n, f"{what} ft")
+        ft = number(f, n, f"{what} ft")
         if ft is not None:
             key = layer_key(layer, part)
             values[key] = _weather(key, ft * FT_TO_M, f"layer {layer} {what}", "m", f"{ft:g} ft")
-    type_name = _text(f, 5).strip()
+    type_name = text(f, 5).strip()
     cloud_type = CloudType.NONE  # empty or absent: the weather derives the type
     if type_name:
         if type_name.upper() == CloudType.NONE.name:
