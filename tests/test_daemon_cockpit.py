@@ -138,6 +138,10 @@ def test_serial_and_can_change_the_target(tmp_path: Path, pty: Pty) -> None:
                 assert entry["last_message_s"] is not None and entry["last_message_s"] < 30.0
             assert inputs["serial"]["messages"] == 3
             assert inputs["can"]["messages"] >= 7
+            # Reader threads stop within the daemon's shutdown budget, none abandoned.
+            code, took_s = daemon.stop()
+            assert code == 0 and took_s < 2.0, (code, took_s)
+            assert "abandoned" not in daemon.log()
     finally:
         bus.shutdown()
 
@@ -198,8 +202,8 @@ def test_pulled_serial_device_is_read_again(tmp_path: Path) -> None:
                 second.write(sentence("WIMWV,020.0,T,4.0,M,A"))
                 wait_target(c, lambda p: p["wind"][0]["dir_deg"] == 20.0)
             assert inputs_by_kind(daemon)["serial"]["reopens"] >= 1
-            code, _ = daemon.stop()
-            assert code == 0
+            code, took_s = daemon.stop()
+            assert code == 0 and took_s < 2.0, (code, took_s)
             log = daemon.log()
             assert log.count("lost") + log.count("cannot open") >= 1
     finally:
