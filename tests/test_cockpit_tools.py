@@ -54,7 +54,9 @@ def _load_tool(name: str) -> ModuleType:
     return module
 
 
-emulator = _load_tool("cockpit_emulator")  # first: replay_capture imports it by this name
+# Before the tools that import it, so they share this module rather than load a second copy.
+scenarios = _load_tool("cockpit_scenarios")
+emulator = _load_tool("cockpit_emulator")
 replay = _load_tool("replay_capture")
 
 
@@ -78,8 +80,8 @@ def _sample_times(length_s: float, n: int = 25) -> list[float]:
 
 
 def test_sweep_goes_where_it_says() -> None:
-    start, middle, end = (emulator.scenario_at(t, "sweep") for t in (0.0, 30.0, 60.0))
-    assert emulator.SCENARIOS["sweep"].length_s == 60.0
+    start, middle, end = (scenarios.scenario_at(t, "sweep") for t in (0.0, 30.0, 60.0))
+    assert scenarios.SCENARIOS["sweep"].length_s == 60.0
     assert (start.wind_dir_deg, start.wind_speed_mps, start.layers[0].oktas) == (0.0, 0.0, 0.0)
     assert (middle.wind_dir_deg, middle.wind_speed_mps, middle.layers[0].oktas) == (
         180.0,
@@ -91,12 +93,12 @@ def test_sweep_goes_where_it_says() -> None:
     assert middle.time_utc == datetime(2026, 6, 21, 12, 0, tzinfo=UTC)
     assert end.time_utc == datetime(2026, 6, 21, 20, 0, tzinfo=UTC)  # about sunset
     # Clamped outside its length, so a late tick sends the end state, not garbage.
-    assert emulator.scenario_at(99.0, "sweep") == end
+    assert scenarios.scenario_at(99.0, "sweep") == end
 
 
 @pytest.mark.parametrize("name", ["sweep", "front"])
 def test_every_knob_stays_in_the_range_wxsky_accepts(name: str) -> None:
-    scenario = emulator.SCENARIOS[name]
+    scenario = scenarios.SCENARIOS[name]
     times = [scenario.at(t).time_utc for t in _sample_times(scenario.length_s)]
     assert times == sorted(times), "the sky clock never runs backwards within a scenario"
     for t_s in _sample_times(scenario.length_s, 121):
@@ -115,7 +117,7 @@ def test_every_knob_stays_in_the_range_wxsky_accepts(name: str) -> None:
 
 
 def test_front_passes() -> None:
-    scenario = emulator.SCENARIOS["front"]
+    scenario = scenarios.SCENARIOS["front"]
     before, after = scenario.at(0.0), scenario.at(scenario.length_s)
     samples = [scenario.at(t) for t in _sample_times(scenario.length_s, 121)]
     low = [next(lay for lay in k.layers if lay.layer == 1) for k in samples]
@@ -152,11 +154,11 @@ def _assert_matches(update: CockpitUpdate, knobs: Any, *, tol: dict[str, float])
 @pytest.mark.parametrize("wind_sentence", ["mwd", "mwv"])
 @pytest.mark.parametrize("name", ["sweep", "front"])
 def test_nmea_lines_decode_to_the_knobs(name: str, wind_sentence: str) -> None:
-    scenario = emulator.SCENARIOS[name]
+    scenario = scenarios.SCENARIOS[name]
     for t_s in _sample_times(scenario.length_s):
         knobs = scenario.at(t_s)
         decoder = NmeaDecoder(reference_year=2026)
-        lines = emulator.nmea_lines(knobs, wind_sentence=wind_sentence)
+        lines = scenarios.nmea_lines(knobs, wind_sentence=wind_sentence)
         assert all(line.endswith(b"\r\n") and len(line) <= 82 for line in lines)
         decoded = decoder.feed(b"".join(lines), now_s=0.0)
         assert (decoder.stats.errors, decoder.stats.ignored) == (0, 0), decoded
@@ -166,17 +168,17 @@ def test_nmea_lines_decode_to_the_knobs(name: str, wind_sentence: str) -> None:
         assert VISIBILITY not in update.values  # NMEA 0183 has no field for it
         assert update.time_utc is not None
         assert abs((update.time_utc - knobs.time_utc).total_seconds()) < 0.01
-        without_time = emulator.nmea_lines(knobs, with_time=False, wind_sentence=wind_sentence)
+        without_time = scenarios.nmea_lines(knobs, with_time=False, wind_sentence=wind_sentence)
         assert len(without_time) == len(lines) - 1
 
 
 @pytest.mark.parametrize("name", ["sweep", "front"])
 def test_can_frames_decode_to_the_knobs(name: str) -> None:
-    scenario = emulator.SCENARIOS[name]
+    scenario = scenarios.SCENARIOS[name]
     decoder = CanasDecoder(frozenset({7}))
     for t_s in _sample_times(scenario.length_s):
         knobs = scenario.at(t_s)
-        frames = emulator.can_frames(knobs, node_id=7)
+        frames = scenarios.can_frames(knobs, node_id=7)
         decoded = [decoder.decode(can_id, data) for can_id, data in frames]
         assert not [d for d in decoded if d.error or d.ignored]
         update = _merged(decoded)
@@ -187,15 +189,15 @@ def test_can_frames_decode_to_the_knobs(name: str) -> None:
         when = knobs.time_utc
         assert update.time_of_day_s == when.hour * 3600 + when.minute * 60 + when.second
         assert update.date_utc == when.date()
-        ids = [can_id for can_id, _ in emulator.can_frames(knobs, with_time=False)]
+        ids = [can_id for can_id, _ in scenarios.can_frames(knobs, with_time=False)]
         assert 1200 not in ids and 1206 not in ids
 
 
 def test_message_codes_count_per_id() -> None:
-    codes = emulator.MessageCodes()
-    knobs = emulator.scenario_at(10.0, "front")
+    codes = scenarios.MessageCodes()
+    knobs = scenarios.scenario_at(10.0, "front")
     for round_ in range(3):
-        stamped = codes.stamp(emulator.can_frames(knobs))
+        stamped = codes.stamp(scenarios.can_frames(knobs))
         by_id: dict[int, list[int]] = {}
         for can_id, data in stamped:
             by_id.setdefault(can_id, []).append(data[3])
@@ -294,7 +296,7 @@ def test_emulator_on_a_virtual_can_bus(channel: str, capsys: pytest.CaptureFixtu
     assert not [d for d in decoded if d.error or d.ignored]
     final = _merged(decoded)
     # The last tick sends the scenario's end state, whatever the rate.
-    end = emulator.scenario_at(emulator.FRONT_LENGTH_S, "front")
+    end = scenarios.scenario_at(scenarios.FRONT_LENGTH_S, "front")
     _assert_matches(final, end, tol={"deg": 1e-4, "mps": 1e-5, "m": 1e-3})
     assert f"sent {len(frames)} frames" in capsys.readouterr().out
 

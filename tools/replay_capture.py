@@ -35,14 +35,8 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from cockpit_emulator import (
-    ByteSink,
-    PtyPort,
-    SerialPort,
-    open_can_bus,
-    positive_number,
-    stop_on_sigterm,
-)
+from cockpit_emulator import positive_number, stop_on_sigterm
+from cockpit_outputs import ByteSink, PtyPort, SerialPort, open_can_bus
 
 DEFAULT_RATE_HZ = 5.0
 DEFAULT_MAX_GAP_S = 60.0  # python-can MessageSync's default `skip`
