@@ -463,7 +463,8 @@ class Daemon:
 
     def status_line(self) -> str:
         inputs = ", ".join(
-            f"{s.name} {s.messages} msgs/{s.errors} errs" for s in self.inputs.values()
+            f"{s.name} {s.messages} msgs/{s.errors} errs" + ("" if s.ok else " DOWN")
+            for s in self.inputs.values()
         )
         return (
             f"{self.fps():.1f} fps, {self.frames_published} frames, "
