@@ -82,6 +82,11 @@ class Renderer:
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._targets: dict[str, _Target] = {}
         self._finish = gil_free_finish(self.ctx)
+        # A CPU renderer (llvmpipe) rasterises when the next GL call switches targets or
+        # rewrites a buffer, with the calling thread waiting, and so with the GIL held: finish
+        # after each draw instead. A GPU works asynchronously; there only the read-back waits.
+        renderer_name = str(self.ctx.info.get("GL_RENDERER", "")).lower()
+        self._finish_each_draw = any(cpu in renderer_name for cpu in ("llvmpipe", "softpipe"))
         self._check("initialising the renderer")
 
     # -- public API -------------------------------------------------------------------
@@ -124,6 +129,7 @@ class Renderer:
 
     def read_into(self, name: str, buffer: memoryview) -> None:
         """Copy a layer's pixels, top row first, into a writable buffer of w*h*4 bytes."""
+        self._finish()  # wait for the drawing GIL-free, so the read itself only copies
         self._targets[name].fbo.read_into(buffer, components=4, alignment=1)
 
     def read(self, name: str) -> npt.NDArray[np.uint8]:
@@ -175,7 +181,8 @@ class Renderer:
         _set(prog, "u_sun_rgb", sky.sun_rgb)
         _set(prog, "u_sun_cos_radius", math.cos(math.radians(SUN_RADIUS_DEG)))
         self._sky_vao.render(moderngl.TRIANGLES, vertices=3)
-        self._finish()
+        if self._finish_each_draw:
+            self._finish()
 
     def _upsample(self, source: _Target, dest: _Target) -> None:
         dest.fbo.use()
@@ -221,9 +228,10 @@ class Renderer:
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         self._sprite_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
         self.ctx.disable(moderngl.BLEND)
-        # The next draw rewrites the instance buffer this one reads: wait here, GIL-free,
-        # rather than inside that write with the GIL held (see gil_free_finish).
-        self._finish()
+        # Wait for this draw here, GIL-free, rather than inside the next GL call with the GIL
+        # held (see gil_free_finish).
+        if self._finish_each_draw:
+            self._finish()
 
     # -- plumbing ---------------------------------------------------------------------
 
