@@ -18,6 +18,7 @@ from wxsky.scene.clouds import (
     block_clouds,
     template_for,
 )
+from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM
 from wxsky.weather.state import CloudLayer, CloudType
 
 # The undecorated generator, so determinism is not just the lru_cache handing back one object.
@@ -289,7 +290,7 @@ def test_attributes_are_finite_and_in_range(kind: CloudType) -> None:
         assert np.all(np.isfinite(arr)), f"{name} has NaN/inf"
     assert batch.centre_m.dtype == np.float64 and batch.texture.dtype == np.int32
     assert set(np.unique(batch.texture)) <= set(range(16))
-    assert set(np.unique(batch.texture)) <= set(template_for(kind).textures) | {3}
+    assert set(np.unique(batch.texture)) <= set(template_for(kind).textures) | set(TEX_FLAT_BOTTOM)
     assert np.all(batch.size_m > 0.0)
     assert np.all((batch.rotation_rad >= 0.0) & (batch.rotation_rad <= 2 * np.pi))
     assert np.all((batch.height_frac >= 0.0) & (batch.height_frac <= 1.0))
@@ -301,7 +302,7 @@ def test_attributes_are_finite_and_in_range(kind: CloudType) -> None:
 
 def test_heaped_clouds_use_upright_flat_bottoms_low_down() -> None:
     batch = block_clouds(0, 0, 0, _layer(CloudType.CUMULUS, 5), 9)
-    flat = batch.texture == 3
+    flat = batch.texture == TEX_FLAT_BOTTOM[0]
     assert flat.any() and (~flat).any()
     assert np.all(batch.rotation_rad[flat] == 0.0)
     assert batch.height_frac[flat].mean() < batch.height_frac[~flat].mean()
@@ -326,6 +327,8 @@ def _batch(n: int, offset: float = 0.0) -> SpriteBatch:
         light_dir=np.tile(np.array([0, 0, 1], np.float32), (n, 1)),
         opacity=np.ones(n, np.float32),
         darkness=(i / 100).astype(np.float32),
+        cloud_id=np.arange(n, dtype=np.int64),
+        core_frac=np.full(n, 0.5, np.float32),
     )
 
 

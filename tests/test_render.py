@@ -26,6 +26,7 @@ from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.layout import FrameScene, RingScene, SceneSettings, SpriteDraw
 from wxsky.scene.ring import RING_SIZE, RingGeometry, bin_far_sprites
 from wxsky.scene.sky import SkyParams, sky_params
+from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM, TEX_FOG
 from wxsky.snapshot import LAYER_NAMES, take_snapshot
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
@@ -52,7 +53,9 @@ def _camera(**kw: object) -> Camera:
     return Camera(**args)
 
 
-def _sprites(centres: list, sizes: list, texture: int = 0, rotation: float = 0.0) -> SpriteBatch:
+def _sprites(
+    centres: list, sizes: list, texture: int = TEX_FOG[0], rotation: float = 0.0
+) -> SpriteBatch:
     n = len(centres)
     return SpriteBatch(
         centre_m=np.asarray(centres, np.float64).reshape(n, 3),
@@ -63,6 +66,8 @@ def _sprites(centres: list, sizes: list, texture: int = 0, rotation: float = 0.0
         light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
         opacity=np.ones(n, np.float32),
         darkness=np.zeros(n, np.float32),
+        cloud_id=np.zeros(n, np.int64),
+        core_frac=np.zeros(n, np.float32),
     )
 
 
@@ -185,7 +190,7 @@ def test_single_sprite_straight_ahead_is_centred_with_its_projected_size(
     renderer: Renderer, distance: float, size: float, scale: float, margin: float
 ) -> None:
     cam = _camera()
-    batch = _sprites([(0.0, distance, 1000.0)], [size], texture=0)  # round fog texture
+    batch = _sprites([(0.0, distance, 1000.0)], [size], texture=TEX_FOG[0])  # round fog texture
     with _near_scale(renderer, scale):
         renderer.render_frame(FrameScene(cam, _sky(), _draw(batch)))
     alpha = renderer.read("near")[..., 3]
@@ -203,9 +208,9 @@ def test_single_sprite_straight_ahead_is_centred_with_its_projected_size(
 
 @pytest.mark.parametrize(("scale", "margin"), SCALES)
 def test_sprite_textures_are_upright(renderer: Renderer, scale: float, margin: float) -> None:
-    # Slot 3 is the flat-bottomed cumulus base: cut off just below the middle of the sprite.
+    # The flat-bottomed cumulus base is cut off just below the middle of the sprite.
     cam = _camera()
-    batch = _sprites([(0.0, 2000.0, 1000.0)], [400.0], texture=3)
+    batch = _sprites([(0.0, 2000.0, 1000.0)], [400.0], texture=TEX_FLAT_BOTTOM[0])
     with _near_scale(renderer, scale):
         renderer.render_frame(FrameScene(cam, _sky(), _draw(batch)))
     r0, r1, _, _ = _bbox(renderer.read("near")[..., 3] > 2)
@@ -329,7 +334,7 @@ def test_compositor_through_the_ring_matches_a_direct_render(renderer: Renderer)
     sky = _sky()
     cam = _camera(position_m=RING_CENTRE, heading_deg=10.0, pitch_deg=4.0)
     centre = _from_ring_centre(2500.0, 18_000.0, 1500.0)
-    batch = _sprites([centre], [2500.0], texture=0)
+    batch = _sprites([centre], [2500.0], texture=TEX_FOG[0])
     geo, bins = bin_far_sprites(batch, RING_CENTRE, RING_R)
     ring = RingScene(geo, tuple(_draw(b) for b in bins), drift=())
     renderer.render_ring(ring)

@@ -40,6 +40,8 @@ def _sprites(centres: np.ndarray, sizes: np.ndarray, rotations: np.ndarray | Non
         light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
         opacity=np.ones(n, np.float32),
         darkness=np.zeros(n, np.float32),
+        cloud_id=np.zeros(n, np.int64),
+        core_frac=np.zeros(n, np.float32),
     )
 
 

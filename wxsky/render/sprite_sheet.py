@@ -1,10 +1,10 @@
 """The cloud texture sheet: 16 sprite textures on one 512x512 RGBA sheet (Wang's layout).
 
 Generated procedurally from a fixed seed, so every machine builds the same bytes. Slots, in
-row-major order on a 4 x 4 grid: 0-2 foggy (stratus), 3 flat-bottomed (cumulus bases),
-4-9 puffy, 10-12 wispy (cirrus), 13-15 ragged. Each texture's alpha falls to exactly zero
-before its cell border, so mip-mapping never bleeds one cell into the next and a sprite's
-footprint ends where its quad ends.
+row-major order on a 4 x 4 grid, as `wxsky.scene.texture_slots` lays them out: 0 flat-bottomed
+(cumulus bases), 1-3 foggy (stratus), 4-9 puffy, 10-15 wispy (cirrus; 13-15 more ragged).
+Each texture's alpha falls to exactly zero before its cell border, so mip-mapping never
+bleeds one cell into the next and a sprite's footprint ends where its quad ends.
 """
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-SHEET_CELLS = 4
+from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG, TEX_PUFFY, TEX_WISPY
+
 CELL_PX = 128
 SHEET_PX = SHEET_CELLS * CELL_PX
 SHEET_SEED = 20040101
@@ -25,13 +26,13 @@ def build_sheet(seed: int = SHEET_SEED) -> npt.NDArray[np.uint8]:
     rng = np.random.default_rng(seed)
     sheet = np.zeros((SHEET_PX, SHEET_PX, 4), np.float64)
     for slot in range(SHEET_CELLS * SHEET_CELLS):
-        if slot <= 2:
-            alpha = _fog(rng)
-        elif slot == 3:
+        if slot in TEX_FLAT_BOTTOM:
             alpha = _puffy(rng, flat_bottom=True)
-        elif slot <= 9:
+        elif slot in TEX_FOG:
+            alpha = _fog(rng)
+        elif slot in TEX_PUFFY:
             alpha = _puffy(rng, flat_bottom=False)
-        elif slot <= 12:
+        elif slot in TEX_WISPY[:3]:
             alpha = _wispy(rng)
         else:
             alpha = _ragged(rng)
@@ -41,7 +42,7 @@ def build_sheet(seed: int = SHEET_SEED) -> npt.NDArray[np.uint8]:
         cell = sheet[y * CELL_PX : (y + 1) * CELL_PX, x * CELL_PX : (x + 1) * CELL_PX]
         cell[..., 0] = lum
         cell[..., 1] = lum
-        cell[..., 2] = lum * (1.0 if slot > 2 else 1.03)  # Wang's fog textures: a bluish tinge
+        cell[..., 2] = lum * (1.03 if slot in TEX_FOG else 1.0)  # Wang's fog: a bluish tinge
         cell[..., 3] = alpha
     return np.round(np.clip(sheet, 0.0, 1.0) * 255.0).astype(np.uint8)
 

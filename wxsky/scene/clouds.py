@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM, TEX_FOG, TEX_PUFFY, TEX_WISPY
 from wxsky.weather.state import CloudLayer, CloudType
 
 BLOCK_SIZE_M = 4000.0
@@ -22,13 +23,10 @@ BLOCK_SIZE_M = 4000.0
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
 I32 = npt.NDArray[np.int32]
+I64 = npt.NDArray[np.int64]
 
-# Texture sheet slots (4 x 4 on one sheet, see render/sprite_sheet.py).
-TEX_FOG = (0, 1, 2)
-TEX_FLAT_BOTTOM = (3,)
-TEX_PUFFY = (4, 5, 6, 7, 8, 9)
-TEX_WISPY = (10, 11, 12)
-TEX_RAGGED = (13, 14, 15)
+# Until the sheet has ragged textures of its own, the second half of the wispy ones stand in.
+TEX_RAGGED = TEX_WISPY[3:]
 
 
 @dataclass(frozen=True)
@@ -43,6 +41,8 @@ class SpriteBatch:
     light_dir: F32  # (N, 3) unit vector from the cloud centre to the sprite's shading group
     opacity: F32  # (N,) 0..1: formation/dissipation and type transparency
     darkness: F32  # (N,) 0..1: how grey the cloud type's base is (stratus, Cb)
+    cloud_id: I64  # (N,) the sprite's cloud, the same in every frame and process
+    core_frac: F32  # (N,) horizontal distance from the cloud's axis over its radius: 0 core, 1 edge
 
     def __len__(self) -> int:
         return int(self.size_m.shape[0])
@@ -66,6 +66,8 @@ class SpriteBatch:
             light_dir=np.zeros((0, 3), np.float32),
             opacity=np.zeros(0, np.float32),
             darkness=np.zeros(0, np.float32),
+            cloud_id=np.zeros(0, np.int64),
+            core_frac=np.zeros(0, np.float32),
         )
 
     @staticmethod
@@ -244,6 +246,7 @@ def block_clouds(
                 (block_x * BLOCK_SIZE_M + cx, block_y * BLOCK_SIZE_M + cy, layer.base_m),
                 radius,
                 height,
+                int(cloud_seeds[cell]),
             )
         )
     batch = SpriteBatch.concat(batches)
@@ -258,6 +261,7 @@ def _cloud_sprites(
     base_centre: tuple[float, float, float],
     radius_m: float,
     height_m: float,
+    cloud_id: int,
 ) -> SpriteBatch:
     area_km2 = math.pi * radius_m * radius_m / 1e6
     n = max(tpl.min_sprites, round(tpl.sprites_per_km2 * area_km2))
@@ -303,4 +307,6 @@ def _cloud_sprites(
         light_dir=group_dir[group].astype(np.float32),
         opacity=np.full(n, tpl.opacity, np.float32),
         darkness=np.full(n, tpl.darkness, np.float32),
+        cloud_id=np.full(n, cloud_id, np.int64),
+        core_frac=np.clip(rad / max(radius_m, 1.0), 0.0, 1.0).astype(np.float32),
     )
