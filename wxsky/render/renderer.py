@@ -17,11 +17,12 @@ import numpy.typing as npt
 from wxsky.errors import RenderError
 from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.shaders import ShaderLibrary
-from wxsky.render.sprite_sheet import SHEET_CELLS, build_sheet
+from wxsky.render.sprite_sheet import build_sheet
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
 from wxsky.scene.ring import RING_SIZE
 from wxsky.scene.sky import SkyParams
+from wxsky.scene.texture_slots import SHEET_CELLS
 
 log = logging.getLogger(__name__)
 
