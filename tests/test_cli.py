@@ -74,6 +74,28 @@ def test_metar_decode_json() -> None:
         (("metar", "decode", "!!!! ???"), ("METAR",)),
         (("preset", "show", "../etc"), ("preset",)),
         (("snapshot", "--preset", "clear", "--time", "noon", "--out", "x.png"), ("noon",)),
+        (
+            ("snapshot", "--preset", "clear", "--elapsed-s", "60", "--out", "x.png"),
+            ("--elapsed-s",),
+        ),
+        (
+            ("snapshot", "--preset", "clear", "--transition-to", "no-such", "--out", "x.png"),
+            ("no-such",),
+        ),
+        (
+            (
+                "snapshot",
+                "--preset",
+                "clear",
+                "--transition-to",
+                "fair-cumulus",
+                "--elapsed-s",
+                "-5",
+                "--out",
+                "x.png",
+            ),
+            ("--elapsed-s", "-5"),
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(

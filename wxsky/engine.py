@@ -265,13 +265,7 @@ class SkyEngine:
     def advance(self, dt_wall_s: float) -> FramePlan:
         """Run the stages for a frame dt_wall_s after the previous one."""
         with self._lock:
-            self._transition(max(0.0, dt_wall_s))
-            dt_sim = max(0.0, dt_wall_s) * self.clock_rate
-            if dt_sim > 0.0:
-                self._state = dataclasses.replace(
-                    self._state, time_utc=self._state.time_utc + timedelta(seconds=dt_sim)
-                )
-                self._drift = advance_drift(self._state, self._drift, dt_sim)
+            self._step_weather(dt_wall_s)
             state, drift, camera = self._state, self._drift, self._camera
         # The scene stages read only the immutable values taken above: no lock from here on.
         sky = sky_params(state)
@@ -286,6 +280,28 @@ class SkyEngine:
             ring_drift=ring.drift,
         )
         return FramePlan(state, frame, ring, self._ring_version, changed)
+
+    def run_weather(self, duration_s: float) -> WeatherState:
+        """Advance the weather stages only (sources, transition, clock, drift) by duration_s
+        of wall time, in transition steps, without building a scene: for pictures of a
+        transition minutes in (`wxsky snapshot --elapsed-s`). Returns the applied weather."""
+        step_s = self.transition_step_s if self.transition_step_s > 0.0 else duration_s
+        left_s = max(0.0, duration_s)
+        with self._lock:
+            while left_s > 1e-9:
+                dt_s = min(step_s, left_s)
+                self._step_weather(dt_s)
+                left_s -= dt_s
+            return self._state
+
+    def _step_weather(self, dt_wall_s: float) -> None:
+        self._transition(max(0.0, dt_wall_s))
+        dt_sim = max(0.0, dt_wall_s) * self.clock_rate
+        if dt_sim > 0.0:
+            self._state = dataclasses.replace(
+                self._state, time_utc=self._state.time_utc + timedelta(seconds=dt_sim)
+            )
+            self._drift = advance_drift(self._state, self._drift, dt_sim)
 
     def _ring_for(
         self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams

@@ -6,18 +6,20 @@ picture: the same engine plan, the same renderer passes, the same compositor.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.engine import SkyEngine
+from wxsky.engine import DEFAULT_TRANSITION_STEP_S, SkyEngine
 from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.ring import RING_SIZE
-from wxsky.weather.state import WeatherState
+from wxsky.weather.state import Source, WeatherPatch, WeatherState
+from wxsky.weather.transition import TransitionRates
 
 LAYER_NAMES: tuple[str, ...] = ("sky", "near", *(f"ring_{i}" for i in range(RING_SIZE)))
 
@@ -29,6 +31,20 @@ class Snapshot:
     image: U8  # (H, W, 4) composited, opaque
     layers: dict[str, U8]  # raw premultiplied layers by name (LAYER_NAMES)
     ring_quads_m: npt.NDArray[np.float64]  # (8, 4, 3)
+    state: WeatherState  # the applied weather the picture shows
+
+
+@dataclass(frozen=True)
+class Transition:
+    """A picture taken `elapsed_s` after the weather target changed to `to`: the applied
+    weather has moved toward it at `rates`, in steps of `step_s`, as in the daemon. The clock
+    and the clouds' drift stand still meanwhile, so that only the change of weather differs
+    between pictures at different `elapsed_s`."""
+
+    to: WeatherPatch
+    elapsed_s: float
+    rates: TransitionRates = TransitionRates()
+    step_s: float = DEFAULT_TRANSITION_STEP_S
 
 
 def take_snapshot(
@@ -36,8 +52,20 @@ def take_snapshot(
     camera: Camera,
     settings: SceneSettings,
     renderer: Renderer | None = None,
+    transition: Transition | None = None,
 ) -> Snapshot:
-    plan = SkyEngine(state, camera, settings, clock_rate=0.0).advance(0.0)
+    engine = SkyEngine(state, camera, settings, clock_rate=0.0)
+    if transition is not None:
+        engine.rates = transition.rates
+        engine.transition_step_s = transition.step_s
+        # The new weather arrives as a run-time preset would and beats the picture's base; it
+        # changes this sky, so the site, the clock and the cloud seed stay the first one's.
+        change = dataclasses.replace(
+            transition.to, source=Source.CONTROL, time_utc=None, observer=None, seed=None
+        )
+        engine.apply(change)
+        engine.run_weather(transition.elapsed_s)
+    plan = engine.advance(0.0)
     own = renderer is None
     r = renderer if renderer is not None else Renderer(settings.ring_texture_px)
     try:
@@ -52,4 +80,5 @@ def take_snapshot(
         image=composite(layers_from_images(images, quads), camera),
         layers=images,
         ring_quads_m=quads,
+        state=plan.state,
     )

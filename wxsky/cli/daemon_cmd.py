@@ -68,6 +68,17 @@ def add_commands(sub: Subparsers) -> None:
     snap.add_argument("--fov-deg", type=float, default=60.0, help="horizontal field of view")
     snap.add_argument("--size", default="960x540", help="WIDTHxHEIGHT")
     snap.add_argument("--seed", type=int, help="cloud seed (default: the weather's)")
+    snap.add_argument(
+        "--transition-to",
+        metavar="PRESET",
+        help="picture the sky --elapsed-s after the weather target changed to this preset",
+    )
+    snap.add_argument(
+        "--elapsed-s",
+        type=float,
+        default=0.0,
+        help="seconds since the change (with --transition-to); rates from [transition]",
+    )
     snap.add_argument("--out", type=Path, required=True, help="output PNG")
     snap.add_argument("--layers-out", type=Path, metavar="DIR", help="also write the raw layers")
     snap.set_defaults(func=_cmd_snapshot)
@@ -187,12 +198,27 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         height_px=height,
     )
     settings = config.scene.settings()
-    shot = take_snapshot(state, camera, settings)
+    transition = None
+    if args.transition_to:
+        from wxsky.presets import load_preset
+        from wxsky.snapshot import Transition
+
+        if not 0.0 <= args.elapsed_s <= 86_400.0 or args.elapsed_s != args.elapsed_s:
+            raise ValueError(f"--elapsed-s must be in 0..86400, got {args.elapsed_s}")
+        transition = Transition(
+            to=load_preset(args.transition_to, config.presets.dirs),
+            elapsed_s=args.elapsed_s,
+            rates=config.transition.rates(),
+            step_s=config.transition.step_s,
+        )
+    elif args.elapsed_s:
+        raise ValueError("--elapsed-s goes with --transition-to")
+    shot = take_snapshot(state, camera, settings, transition=transition)
     write_png(args.out, shot.image)
     if args.layers_out:
         for name, image in shot.layers.items():
             write_png(args.layers_out / f"{name}.png", image)
-    print(f"wrote {args.out} ({width}x{height}): {state.summary()}")
+    print(f"wrote {args.out} ({width}x{height}): {shot.state.summary()}")
     return 0
 
 
