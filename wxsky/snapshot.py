@@ -43,7 +43,7 @@ class Transition:
 
     to: WeatherPatch
     elapsed_s: float
-    rates: TransitionRates = TransitionRates()
+    rates: TransitionRates = dataclasses.field(default_factory=TransitionRates)
     step_s: float = DEFAULT_TRANSITION_STEP_S
 
 

@@ -30,10 +30,10 @@ SUN_RADIUS_DEG = 0.27
 # The near sprites are drawn at this fraction of the viewport and upscaled: fill rate is what
 # limits a CPU renderer, and soft sprites look the same.
 NEAR_SCALE = 0.5
-# centre (3) + size + rotation + texture + rgba (4), float32
-_INSTANCE_FLOATS = 10
-_INSTANCE_FORMAT = "3f f f f 4f/i"
-_INSTANCE_ATTRS = ("in_centre", "in_size", "in_rotation", "in_texture", "in_rgba")
+# centre (3) + size + rotation + texture + rgba (4) + normal (3), float32
+_INSTANCE_FLOATS = 13
+_INSTANCE_FORMAT = "3f f f f 4f 3f/i"
+_INSTANCE_ATTRS = ("in_centre", "in_size", "in_rotation", "in_texture", "in_rgba", "in_normal")
 
 
 @dataclass
@@ -215,6 +215,8 @@ class Renderer:
         inst[:, 4] = s.rotation_rad
         inst[:, 5] = s.texture
         inst[:, 6:10] = draw.rgba
+        # A zero normal is a sprite that faces the camera; others keep their own orientation.
+        inst[:, 10:13] = 0.0 if draw.normals is None else draw.normals
         data = inst.tobytes()
         if len(data) > self._instance_buf.size:
             self._instance_buf.orphan(len(data) * 2)

@@ -37,6 +37,10 @@ class SpriteDraw:
 
     sprites: SpriteBatch
     rgba: npt.NDArray[np.float32]  # (N, 4) straight alpha
+    # (N, 3) unit normal of a quad with its own orientation (a flat cirrus sheet, a sprite
+    # whose facing locked while the camera is inside it); a zero row, or None for all, faces
+    # the camera.
+    normals: npt.NDArray[np.float32] | None = None
 
     def __len__(self) -> int:
         return len(self.sprites)

@@ -1,30 +1,47 @@
-// Camera-facing cloud sprites (Wang), instanced, drawn back to front, premultiplied alpha.
+// Cloud sprites (Wang), instanced, drawn back to front, premultiplied alpha. Most face the
+// camera; a sprite with a normal keeps that orientation (a flat cirrus sheet, or a sprite
+// whose facing locked while the camera is inside it) and fades as the eye sees it edge-on.
 // Sprite centres arrive relative to the eye so float32 keeps centimetre precision.
 
 #if defined VERTEX_SHADER
 in vec2 in_corner;        // per vertex: (-1..1, -1..1)
-in vec3 in_centre;        // per instance: centre minus eye, metres
+in vec3 in_centre;        // per instance: centre minus eye, metres (ENU)
 in float in_size;
 in float in_rotation;
 in float in_texture;
 in vec4 in_rgba;
+in vec3 in_normal;        // ENU unit normal, or zero: face the camera
 uniform mat3 u_view_rot;
 uniform mat4 u_proj;
 out vec2 v_uv;
 out vec4 v_rgba;
 void main() {
-    vec3 c = u_view_rot * in_centre;
     float s = sin(in_rotation), k = cos(in_rotation);
     vec2 corner = mat2(k, s, -s, k) * in_corner;
-    vec3 pos = c + vec3(corner * 0.5 * in_size, 0.0);
-    gl_Position = u_proj * vec4(pos, 1.0);
+    vec3 c;
+    float alpha = in_rgba.a;
+    if (dot(in_normal, in_normal) > 0.25) {
+        // Span the quad in the plane across the normal with a fixed "up": the world's up for
+        // a standing quad (so it reads as the facing sprite it was), north for a lying one.
+        vec3 n = normalize(in_normal);
+        vec3 ref = abs(n.z) < 0.9 ? vec3(0.0, 0.0, 1.0) : vec3(0.0, 1.0, 0.0);
+        vec3 u = normalize(cross(ref, n));
+        vec3 v = cross(n, u);
+        vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
+        c = u_view_rot * world;
+        // Seen edge-on a quad is a line: fade it by the angle to the eye (Wang's in-cloud rule).
+        alpha *= abs(dot(n, normalize(-in_centre)));
+    } else {
+        c = u_view_rot * in_centre + vec3(corner * 0.5 * in_size, 0.0);
+        // Sprites the eye is about to pass through fade out instead of filling the screen.
+        float dist = length(u_view_rot * in_centre);
+        alpha *= smoothstep(0.1 * in_size, 0.6 * in_size, dist);
+    }
+    gl_Position = u_proj * vec4(c, 1.0);
     float cell = in_texture;
     vec2 origin = vec2(mod(cell, float(SHEET_CELLS)), floor(cell / float(SHEET_CELLS)));
     v_uv = (origin + in_corner * vec2(0.5, -0.5) + 0.5) / float(SHEET_CELLS);
-    // Sprites the eye is about to pass through fade out instead of filling the screen.
-    float dist = length(c);
-    float near_fade = smoothstep(0.1 * in_size, 0.6 * in_size, dist);
-    v_rgba = vec4(in_rgba.rgb, in_rgba.a * near_fade);
+    v_rgba = vec4(in_rgba.rgb, alpha);
 }
 #endif
 
