@@ -1,0 +1,84 @@
+"""In-cloud: facing locks keyed by sprite identity, and in-cloud visibility."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.in_cloud import (
+    LOCK_FRAC,
+    NO_LOCKS,
+    VISIBILITY_CORE_M,
+    in_cloud,
+    lock_facing,
+)
+
+
+def batch(centres: list[tuple[float, float, float]], size_m: float = 400.0) -> SpriteBatch:
+    n = len(centres)
+    return SpriteBatch(
+        centre_m=np.asarray(centres, np.float64).reshape(n, 3),
+        size_m=np.full(n, size_m, np.float32),
+        rotation_rad=np.linspace(0.1, 1.0, n).astype(np.float32),
+        texture=np.zeros(n, np.int32),
+        height_frac=np.full(n, 0.5, np.float32),
+        light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
+        opacity=np.ones(n, np.float32),
+        darkness=np.zeros(n, np.float32),
+        cloud_id=np.arange(n, dtype=np.int64) + 7,
+        core_frac=np.zeros(n, np.float32),
+    )
+
+
+def test_far_from_every_sprite_nothing_locks() -> None:
+    normals, locks = lock_facing(batch([(0, 1000, 0), (0, 2000, 0)]), (0.0, 0.0, 0.0), NO_LOCKS)
+    assert normals is None and not locks
+
+
+def test_a_sprite_locks_within_half_its_radius_to_its_current_facing() -> None:
+    b = batch([(0, 1000, 0), (0, 50, 0)])  # the second is 50 m away: inside 0.25 * 400
+    normals, locks = lock_facing(b, (0.0, 0.0, 0.0), NO_LOCKS)
+    assert normals is not None
+    assert np.allclose(normals[0], 0.0)
+    assert np.allclose(normals[1], (0.0, -1.0, 0.0))  # from the sprite toward the eye
+    assert len(locks) == 1
+
+
+def test_a_lock_holds_while_the_camera_flies_through_and_ignores_reordering() -> None:
+    b = batch([(0, 1000, 0), (0, 50, 0)])
+    _, locks = lock_facing(b, (0.0, 0.0, 0.0), NO_LOCKS)
+    # The camera has passed the centre; the batch is sorted the other way round.
+    moved = b.take(np.array([1, 0]))
+    normals, locks2 = lock_facing(moved, (0.0, 120.0, 0.0), locks)
+    assert normals is not None
+    assert np.allclose(normals[0], (0.0, -1.0, 0.0))  # still the facing it locked with
+    assert locks2 == locks
+    # Out of the sprite's radius the lock is released.
+    normals, locks3 = lock_facing(moved, (0.0, 300.0, 0.0), locks2)
+    assert normals is None and not locks3
+
+
+def test_entering_the_unlock_zone_from_outside_does_not_lock_yet() -> None:
+    b = batch([(0, 150, 0)])  # 150 m: inside the radius (200) but not half of it (100)
+    normals, locks = lock_facing(b, (0.0, 0.0, 0.0), NO_LOCKS)
+    assert normals is None and not locks
+    assert LOCK_FRAC * 400.0 < 150.0
+
+
+def test_in_cloud_visibility_falls_toward_the_core() -> None:
+    b = batch([(0, 0, 0)])
+    assert not in_cloud(b, (0.0, 500.0, 0.0), 10_000.0).inside
+    edge = in_cloud(b, (0.0, 120.0, 0.0), 10_000.0)
+    core = in_cloud(b, (0.0, 0.0, 0.0), 10_000.0)
+    assert edge.inside and core.inside
+    assert core.visibility_m == pytest.approx(VISIBILITY_CORE_M)
+    assert edge.visibility_m is not None and edge.visibility_m > core.visibility_m
+    assert in_cloud(b, (0.0, 0.0, 0.0), 25.0).visibility_m == 25.0  # fog is worse still
+    assert core.to_dict() == {"in_cloud": True, "in_cloud_visibility_m": VISIBILITY_CORE_M}
+
+
+def test_empty_batch_is_outside() -> None:
+    empty = SpriteBatch.empty()
+    assert not in_cloud(empty, (0.0, 0.0, 0.0), 1000.0).inside
+    assert lock_facing(empty, (0.0, 0.0, 0.0), NO_LOCKS) == (None, NO_LOCKS)

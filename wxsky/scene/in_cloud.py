@@ -1,0 +1,107 @@
+"""Flying through a cloud (Wang, "In-Cloud Experience"): a sprite's facing locks when the camera
+comes within half its radius, so the camera passes through a fixed quad instead of a sprite
+that swings round to face it; the locked sprite then fades with the angle between its normal
+and the direction to the eye (see the sprite shader). Also: is the camera in cloud, and how
+far can it see there, for the host to fog its own scene.
+
+Locks are the only per-frame memory of the scene stage. They are keyed by a sprite's identity
+(its cloud, size and rotation, which generation fixes), not by its place in a batch, so a
+sprite keeps its lock while others form, dissipate or are sorted around it. Pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.clouds import SpriteBatch
+
+F32 = npt.NDArray[np.float32]
+SpriteKey = tuple[int, int, int]  # (cloud_id, size in cm, rotation in 1e-4 rad)
+Locks = Mapping[SpriteKey, tuple[float, float, float]]  # sprite -> locked unit normal (ENU)
+
+LOCK_FRAC = 0.25  # lock within half the sprite's radius (a quarter of its edge)
+UNLOCK_FRAC = 0.5  # release once the camera is out of the sprite's radius again
+INSIDE_FRAC = 0.35  # the camera is in cloud within this share of a sprite's edge length
+# In-cloud visibility runs from the edge of a sprite's dense part to its centre; 40 m is
+# about what a pilot sees inside a cumulus (a liquid water content near 0.5 g/m3).
+VISIBILITY_EDGE_M = 600.0
+VISIBILITY_CORE_M = 40.0
+NO_LOCKS: Locks = MappingProxyType({})
+
+
+@dataclass(frozen=True)
+class InCloud:
+    inside: bool
+    visibility_m: float | None  # None outside cloud
+
+    def to_dict(self) -> dict[str, object]:
+        return {"in_cloud": self.inside, "in_cloud_visibility_m": self.visibility_m}
+
+
+OUTSIDE = InCloud(False, None)
+
+
+def sprite_keys(batch: SpriteBatch) -> npt.NDArray[np.int64]:
+    """(N, 3) identity of each sprite, stable across frames and processes."""
+    return np.stack(
+        [
+            batch.cloud_id.astype(np.int64),
+            np.round(batch.size_m.astype(np.float64) * 100.0).astype(np.int64),
+            np.round(batch.rotation_rad.astype(np.float64) * 1e4).astype(np.int64),
+        ],
+        axis=1,
+    )
+
+
+def lock_facing(
+    batch: SpriteBatch, eye_m: tuple[float, float, float], locks: Locks
+) -> tuple[F32 | None, Locks]:
+    """(N, 3) normals for the batch (zero rows face the camera; None when no sprite is locked)
+    and the locks to keep for the next frame."""
+    n = len(batch)
+    if n == 0:
+        return None, NO_LOCKS
+    offset = np.asarray(eye_m, np.float64) - batch.centre_m  # (N, 3) sprite -> eye
+    dist = np.linalg.norm(offset, axis=1)
+    size = batch.size_m.astype(np.float64)
+    near = np.flatnonzero(dist < UNLOCK_FRAC * size)
+    if near.size == 0:
+        return None, NO_LOCKS
+    keys = sprite_keys(batch.take(near))
+    normals = np.zeros((n, 3), np.float32)
+    kept: dict[SpriteKey, tuple[float, float, float]] = {}
+    for row, i in enumerate(near):
+        key: SpriteKey = (int(keys[row, 0]), int(keys[row, 1]), int(keys[row, 2]))
+        normal = locks.get(key)
+        if normal is None and dist[i] < LOCK_FRAC * size[i] and dist[i] > 0.0:
+            # Lock to the facing it has now: the camera sees no jump at the moment of locking.
+            d = offset[i] / dist[i]
+            normal = (float(d[0]), float(d[1]), float(d[2]))
+        if normal is not None:
+            kept[key] = normal
+            normals[i] = normal
+    if not kept:
+        return None, NO_LOCKS
+    return normals, MappingProxyType(kept)
+
+
+def in_cloud(
+    batch: SpriteBatch, eye_m: tuple[float, float, float], weather_visibility_m: float
+) -> InCloud:
+    """Whether the eye is inside a cloud's dense part, and the visibility there."""
+    if len(batch) == 0:
+        return OUTSIDE
+    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+    reach = INSIDE_FRAC * batch.size_m.astype(np.float64)
+    depth = (1.0 - dist / reach) * batch.opacity.astype(np.float64)  # >0 inside; 1 at a centre
+    deepest = float(depth.max())
+    if deepest <= 0.0:
+        return OUTSIDE
+    depth_frac = min(1.0, deepest)
+    visibility_m = VISIBILITY_EDGE_M * (VISIBILITY_CORE_M / VISIBILITY_EDGE_M) ** depth_frac
+    return InCloud(True, min(visibility_m, weather_visibility_m))
