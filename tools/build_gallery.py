@@ -1,0 +1,116 @@
+"""Render every preset at dawn, noon, dusk and night into docs/gallery/, and a contact sheet.
+
+    .venv/bin/python tools/build_gallery.py [--size 320x180] [--preset NAME ...]
+
+Times come from the sun at the preset's own place and date: dawn and dusk with the sun 4° up
+(morning and evening), noon at the day's highest sun, night with the sun 20° down. The camera
+stands 2 m above the observer looking 12° up toward the sun's side of the sky (east at dawn,
+south at noon, west at dusk). Every picture goes through `wxsky.snapshot.take_snapshot`, the
+daemon's own stages, so the gallery shows what a host would get.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from datetime import datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from wxsky.cli.common import parse_size  # noqa: E402
+from wxsky.config import DaemonConfig  # noqa: E402
+from wxsky.png import write_png  # noqa: E402
+from wxsky.presets import list_presets, load_preset  # noqa: E402
+from wxsky.render.renderer import Renderer  # noqa: E402
+from wxsky.scene.camera import Camera  # noqa: E402
+from wxsky.scene.sky import sun_position  # noqa: E402
+from wxsky.snapshot import take_snapshot  # noqa: E402
+from wxsky.weather.state import WeatherState  # noqa: E402
+
+OUT = ROOT / "docs" / "gallery"
+MOMENTS = ("dawn", "noon", "dusk", "night")
+TWILIGHT_SUN_DEG = 4.0
+NIGHT_SUN_DEG = -20.0
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--size", default="320x180")
+    p.add_argument("--preset", action="append", help="only these presets (repeatable)")
+    args = p.parse_args()
+    width, height = parse_size(args.size)
+    config = DaemonConfig()
+    names = args.preset or [e.name for e in list_presets(()) if e.origin == "builtin"]
+    OUT.mkdir(parents=True, exist_ok=True)
+    rows = []
+    renderer = Renderer(config.scene.ring_texture_px)
+    try:
+        for name in names:
+            base = WeatherState().apply(load_preset(name, ()))
+            row = []
+            for moment in MOMENTS:
+                when, heading_deg = moment_time(base, moment)
+                state = dataclasses.replace(base, time_utc=when)
+                camera = Camera(
+                    position_m=(0.0, 0.0, state.observer.alt_m + 2.0),
+                    heading_deg=heading_deg,
+                    pitch_deg=12.0,
+                    width_px=width,
+                    height_px=height,
+                )
+                image = take_snapshot(state, camera, config.scene.settings(), renderer).image
+                write_png(OUT / f"{name}-{moment}.png", image)
+                row.append(image)
+                print(f"{name} {moment}: {when:%Y-%m-%d %H:%M}Z, heading {heading_deg:.0f}")
+            rows.append(np.concatenate(_spaced(row, axis=1), axis=1))
+    finally:
+        renderer.close()
+    sheet = np.concatenate(_spaced(rows, axis=0), axis=0)
+    write_png(OUT / "contact-sheet.png", sheet)
+    print(f"wrote {len(names) * len(MOMENTS)} pictures and {OUT / 'contact-sheet.png'}")
+    return 0
+
+
+def moment_time(state: WeatherState, moment: str) -> tuple[datetime, float]:
+    """The UTC time of a moment on the preset's date at its place, and the heading to face."""
+    obs = state.observer
+    midnight = state.time_utc.replace(hour=0, minute=0, second=0, microsecond=0)
+    minutes = [midnight + timedelta(minutes=m) for m in range(0, 24 * 60, 2)]
+    elevation = np.array([sun_position(t, obs.lat_deg, obs.lon_deg).elevation_deg for t in minutes])
+    noon_i = int(np.argmax(elevation))
+    if moment == "noon":
+        return minutes[noon_i], sun_position(minutes[noon_i], obs.lat_deg, obs.lon_deg).azimuth_deg
+    if moment == "night":
+        lowest = int(np.argmin(elevation))
+        # The first time the sun is 20° down after dusk (or the deepest night, if it never is).
+        after = [i for i in range(noon_i, len(minutes)) if elevation[i] <= NIGHT_SUN_DEG]
+        i = after[0] if after else lowest
+        return minutes[i], 180.0
+    if moment == "dawn":
+        before = [i for i in range(noon_i) if elevation[i] >= TWILIGHT_SUN_DEG]
+        i = before[0] if before else 0
+    else:
+        after = [i for i in range(noon_i, len(minutes)) if elevation[i] >= TWILIGHT_SUN_DEG]
+        i = after[-1] if after else len(minutes) - 1
+    return minutes[i], sun_position(minutes[i], obs.lat_deg, obs.lon_deg).azimuth_deg
+
+
+def _spaced(images: list[np.ndarray], axis: int) -> list[np.ndarray]:
+    """The images with a 4-pixel white gap between neighbours."""
+    out: list[np.ndarray] = []
+    for i, image in enumerate(images):
+        if i:
+            gap_shape = list(image.shape)
+            gap_shape[axis] = 4
+            out.append(np.full(gap_shape, 255, np.uint8))
+        out.append(image)
+    return out
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
