@@ -45,6 +45,9 @@ def gl_renderer() -> Iterator[Renderer]:
 def renderer(gl_renderer: Renderer) -> Iterator[Renderer]:
     """The session renderer, checked for a clean GL error state after each test."""
     ctx = gl_renderer.ctx
+    # A test may have made (and released) a context of its own on this thread: make the
+    # session's current again, or every GL call here would go to no context at all.
+    ctx.__enter__()
     before = ctx.error  # reading it clears it
     assert before == "GL_NO_ERROR", f"GL error left over from an earlier test: {before}"
     yield gl_renderer

@@ -1,26 +1,43 @@
 """Sun position against an independent reference, and the sky parameters derived from it.
 
-The reference is the NOAA Solar Calculator spreadsheet's algorithm (Meeus, Julian centuries,
-no refraction), written out below independently of `wxsky.scene.sky`, which uses NOAA's
-fractional-year Fourier series instead. The two agree to about half a degree.
+The reference is the NOAA Solar Calculator spreadsheet's algorithm (Meeus' low-precision
+sun through the equation of time, no refraction), written out below independently of
+`wxsky.scene.ephemeris`, which goes through right ascension and sidereal time. Without
+refraction the two agree to 0.015°; `sky.sun_position` is refracted, which lifts a sun on the
+horizon by about 0.6°. PyEphem comparisons for sun and moon are in tests/test_ephemeris.py.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import math
 from datetime import UTC, datetime, timedelta, timezone
 
 import numpy as np
 import pytest
 
-from wxsky.scene.sky import SunPosition, sky_params, sun_position
-from wxsky.weather.state import CloudLayer, CloudType, Observer, WeatherState
+from wxsky.scene import ephemeris
+from wxsky.scene.sky import (
+    DISTANT_CLOUD_M,
+    DomeControls,
+    MoonPosition,
+    SunPosition,
+    sky_params,
+    sun_position,
+)
+from wxsky.weather.state import CloudLayer, CloudType, Observer, WeatherState, WindLayer
 
 ZURICH = (47.4647, 8.5492)
 SYDNEY = (-33.87, 151.21)
-TOL_DEG = 0.5
+# Hand-worked values below are rounded to about 0.1°; the spreadsheet comparisons are tight.
+TOL_DEG = 0.15
+REF_TOL_DEG = 0.02
+
+
+def airless_sun(t: datetime, lat: float, lon: float) -> SunPosition:
+    return ephemeris.sun_position(t, lat, lon, refract=False)
 
 
 def noaa_spreadsheet(t: datetime, lat: float, lon: float) -> tuple[float, float]:
@@ -80,13 +97,18 @@ def _at(*args: int) -> datetime:
 def test_zurich_solar_noon_midsummer() -> None:
     # NOAA: solar noon 11:27:40 UTC, elevation 65.97°, azimuth 180.2°.
     # Noon elevation by hand: 90 - 47.4647 + 23.44 = 65.98.
-    sun = sun_position(_at(2026, 6, 21, 11, 28), *ZURICH)
+    sun = airless_sun(_at(2026, 6, 21, 11, 28), *ZURICH)
     assert sun.elevation_deg == pytest.approx(65.97, abs=TOL_DEG)
+    # Refraction at 66° is under an arcminute.
+    refracted = sun_position(_at(2026, 6, 21, 11, 28), *ZURICH)
+    assert 0.0 < refracted.elevation_deg - sun.elevation_deg < 0.01
     assert _az_diff(sun.azimuth_deg, 180.21) <= TOL_DEG
 
 
 def test_zurich_midnight_is_below_the_horizon_to_the_north() -> None:
     sun = sun_position(_at(2026, 6, 21, 0, 0), *ZURICH)
+    # No refraction this far below the horizon.
+    assert sun == airless_sun(_at(2026, 6, 21, 0, 0), *ZURICH)
     assert sun.elevation_deg == pytest.approx(-18.72, abs=TOL_DEG)
     assert _az_diff(sun.azimuth_deg, 7.86) <= 1.0
     assert sun.direction_enu[2] < 0.0
@@ -94,30 +116,31 @@ def test_zurich_midnight_is_below_the_horizon_to_the_north() -> None:
 
 def test_equator_equinox_noon_is_overhead() -> None:
     # Equinox 2026-03-20 14:46 UTC; solar noon at 0°E that day is 12:07 UTC.
-    sun = sun_position(_at(2026, 3, 20, 12, 7), 0.0, 0.0)
+    sun = airless_sun(_at(2026, 3, 20, 12, 7), 0.0, 0.0)
     assert sun.elevation_deg == pytest.approx(90.0, abs=1.0)
     np.testing.assert_allclose(sun.direction_enu, (0, 0, 1), atol=math.radians(1.0))
 
 
 def test_equator_equinox_morning_sun_is_due_east() -> None:
     # At the equator on the equinox the sun climbs straight up the east-west great circle.
-    sun = sun_position(_at(2026, 3, 20, 9, 0), 0.0, 0.0)
+    sun = airless_sun(_at(2026, 3, 20, 9, 0), 0.0, 0.0)
     assert _az_diff(sun.azimuth_deg, 90.0) <= 1.0
-    assert sun.elevation_deg == pytest.approx(43.13, abs=TOL_DEG)  # 3h07 before noon: ~46.9°
+    # 3h07 before noon, less the equinox's 0.4° declination's effect: 43.1°.
+    assert sun.elevation_deg == pytest.approx(43.13, abs=TOL_DEG)
     east, north, _ = sun.direction_enu
     assert east > 0.7 and abs(north) < 0.02
 
 
 def test_southern_hemisphere_winter_noon_sun_is_north() -> None:
     # Sydney, June solstice, solar noon about 01:53 UTC: elevation 90 - 33.87 - 23.44.
-    sun = sun_position(_at(2026, 6, 21, 1, 53), *SYDNEY)
+    sun = airless_sun(_at(2026, 6, 21, 1, 53), *SYDNEY)
     assert sun.elevation_deg == pytest.approx(32.68, abs=TOL_DEG)
     assert _az_diff(sun.azimuth_deg, 1.06) <= TOL_DEG
     assert sun.direction_enu[1] > 0.8
 
 
 def test_zurich_morning_sun_is_east_north_east() -> None:
-    sun = sun_position(_at(2026, 6, 21, 5, 0), *ZURICH)
+    sun = airless_sun(_at(2026, 6, 21, 5, 0), *ZURICH)
     assert sun.elevation_deg == pytest.approx(12.63, abs=TOL_DEG)
     assert _az_diff(sun.azimuth_deg, 68.98) <= TOL_DEG
 
@@ -136,22 +159,39 @@ def test_zurich_morning_sun_is_east_north_east() -> None:
 def test_sun_position_matches_noaa_spreadsheet(when: tuple, lat: float, lon: float) -> None:
     t = _at(*when)
     el, az = noaa_spreadsheet(t, lat, lon)
-    sun = sun_position(t, lat, lon)
-    assert sun.elevation_deg == pytest.approx(el, abs=TOL_DEG)
-    assert _az_diff(sun.azimuth_deg, az) <= TOL_DEG / max(math.cos(math.radians(el)), 0.2)
+    sun = airless_sun(t, lat, lon)
+    assert sun.elevation_deg == pytest.approx(el, abs=REF_TOL_DEG)
+    assert _az_diff(sun.azimuth_deg, az) <= REF_TOL_DEG / max(math.cos(math.radians(el)), 0.2)
+    # sky.sun_position is the same sun, refracted.
+    refracted = sun_position(t, lat, lon)
+    assert refracted.azimuth_deg == sun.azimuth_deg
+    expected = sun.elevation_deg + float(ephemeris.refraction_deg(sun.elevation_deg))
+    assert refracted.elevation_deg == pytest.approx(expected, abs=1e-9)
 
 
-def test_sun_position_sweep_within_six_tenths_of_a_degree() -> None:
-    """Over 2024-2030 and five latitudes the sun direction stays within 0.6° of the reference
-    (the fractional-year series drifts up to ~0.5° near the equinoxes)."""
+def test_sun_position_sweep_within_two_hundredths_of_a_degree() -> None:
+    """Over 2024-2030 and five latitudes the airless sun direction stays within 0.02° of the
+    reference (measured 0.015°: the spreadsheet's equation-of-time series)."""
     worst = 0.0
     t = _at(2024, 1, 1)
     while t.year < 2031:
         for lat, lon in [ZURICH, (0.0, 0.0), SYDNEY, (65.0, -20.0), (-60.0, -70.0)]:
             ref = SunPosition(*noaa_spreadsheet(t, lat, lon))
-            worst = max(worst, _separation_deg(ref, sun_position(t, lat, lon)))
+            worst = max(worst, _separation_deg(ref, airless_sun(t, lat, lon)))
         t += timedelta(hours=29, minutes=17)
-    assert worst <= 0.6
+    assert worst <= REF_TOL_DEG
+
+
+def test_refraction_lifts_the_setting_sun_by_about_half_a_degree() -> None:
+    # Saemundsson: 29' at the true horizon (the sun's whole disc is still visible when its
+    # centre is geometrically 0.8° down), under 0.1' at the zenith, none far below.
+    assert float(ephemeris.refraction_deg(0.0)) * 60 == pytest.approx(28.9, abs=0.3)
+    assert float(ephemeris.refraction_deg(45.0)) * 60 == pytest.approx(1.0, abs=0.05)
+    assert float(ephemeris.refraction_deg(90.0)) * 60 == pytest.approx(0.0, abs=0.01)
+    assert float(ephemeris.refraction_deg(-5.0)) == 0.0
+    # Apparent elevation never decreases as the true one grows: no folds in the sky.
+    true_el = np.linspace(-6.0, 90.0, 4000)
+    assert np.all(np.diff(true_el + ephemeris.refraction_deg(true_el)) > 0.0)
 
 
 def test_sun_position_accepts_non_utc_aware_times() -> None:
@@ -265,6 +305,13 @@ def test_sky_params_to_dict_is_plain_data() -> None:
     assert d["sun_direction_enu"] == list(sky.sun.direction_enu)
     assert d["zenith_rgb"] == list(sky.zenith_rgb)
     assert set(d) >= {"ambient", "sunset", "cover", "haze_m", "sun_rgb", "ground_rgb"}
+    assert d["moon_elevation_deg"] == sky.moon.elevation_deg
+    assert d["moon_azimuth_deg"] == sky.moon.azimuth_deg
+    assert d["moon_illuminated_fraction"] == sky.moon.illuminated_fraction
+    assert d["moon_direction_enu"] == list(sky.moon.direction_enu)
+    assert d["dome"] == sky.dome.to_dict()
+    assert set(sky.dome.to_dict()) >= {"cover", "height", "density", "sunset", "speed", "time"}
+    assert json.loads(json.dumps(d)) == d
 
 
 def test_sky_params_follow_the_observer() -> None:
@@ -272,3 +319,103 @@ def test_sky_params_follow_the_observer() -> None:
     zurich = sky_params(_state(t))
     sydney = sky_params(dataclasses.replace(_state(t), observer=Observer(*SYDNEY, 10.0)))
     assert zurich.sun.elevation_deg > 0.0 > sydney.sun.elevation_deg
+
+
+# -- moon, stars and the cloud dome ---------------------------------------------------------
+
+
+def test_sky_params_carry_the_ephemeris_moon() -> None:
+    t = _at(2026, 6, 21, 22, 0)
+    sky = sky_params(_state(t))
+    moon = ephemeris.moon_position(t, *ZURICH, 432.0)
+    assert isinstance(sky.moon, MoonPosition)
+    assert sky.moon == moon
+    assert moon.elevation_deg > 5.0  # a first-quarter moon in the south-west
+    assert 0.4 < moon.illuminated_fraction < 0.6
+    np.testing.assert_allclose(np.linalg.norm(moon.direction_enu), 1.0, atol=1e-12)
+
+
+def test_stars_come_out_through_twilight_and_hide_behind_cloud() -> None:
+    """Sampled every 10 minutes through a winter day: no stars while the sun is up or in
+    civil twilight, all of them once it is 15° down, more as it sinks."""
+    last_el, last_stars = None, None
+    for k in range(144):
+        sky = sky_params(_state(_at(2026, 12, 21) + timedelta(minutes=10 * k)))
+        el = sky.sun.elevation_deg
+        if el > -4.0:
+            assert sky.stars == 0.0, (el, sky.stars)
+        if el < -15.0:
+            assert sky.stars == 1.0, (el, sky.stars)
+        if last_el is not None and last_stars is not None and el < last_el:
+            assert sky.stars >= last_stars
+        last_el, last_stars = el, sky.stars
+    night = _at(2026, 12, 21, 22, 0)
+    overcast = sky_params(_state(night, layers=(CloudLayer(8, 800.0, 1300.0, CloudType.STRATUS),)))
+    broken = sky_params(_state(night, layers=(CloudLayer(6, 1500.0, 2200.0, CloudType.CUMULUS),)))
+    assert overcast.stars == 0.0 < broken.stars < 0.6
+
+
+def test_moon_is_faint_by_day_bright_by_night_and_gone_below_the_horizon() -> None:
+    def lum_of(sky: object) -> float:
+        return _lum(sky.moon_rgb)  # type: ignore[attr-defined]
+
+    # 2026-06-21: moon up in the afternoon (waxing), and late evening.
+    day = sky_params(_state(_at(2026, 6, 21, 14, 0)))
+    night = sky_params(_state(_at(2026, 6, 21, 22, 30)))
+    assert day.moon.elevation_deg > 10.0 and night.moon.elevation_deg > 5.0
+    assert 0.1 < lum_of(day) < 0.5 * lum_of(night)
+    below = sky_params(_state(_at(2026, 6, 22, 4, 0)))
+    assert below.moon.elevation_deg < -1.0 and below.moon_rgb == (0.0, 0.0, 0.0)
+
+
+def test_star_field_turns_with_sidereal_time_in_whole_seconds() -> None:
+    t = _at(2026, 6, 21, 22, 0, 0)
+    a = sky_params(_state(t))
+    b = sky_params(_state(t + timedelta(milliseconds=500)))
+    c = sky_params(_state(t + timedelta(hours=1)))
+    assert a.celestial_from_enu == b.celestial_from_enu
+    assert b.sky_time_s - a.sky_time_s == pytest.approx(0.5)
+    m = np.asarray(a.celestial_from_enu)
+    np.testing.assert_allclose(m @ m.T, np.eye(3), atol=1e-12)
+    # The celestial pole stands due north at the observer's latitude.
+    pole_enu = m.T @ np.array([0.0, 0.0, 1.0])
+    lat = math.radians(ZURICH[0])
+    np.testing.assert_allclose(pole_enu, [0.0, math.cos(lat), math.sin(lat)], atol=1e-12)
+    # An hour later a star on the celestial equator has moved 15.04° (one sidereal hour).
+    star = m @ np.array([0.0, 0.0, 1.0])  # the equatorial direction of the zenith at t
+    zenith_later = np.asarray(c.celestial_from_enu) @ np.array([0.0, 0.0, 1.0])
+    turned = math.degrees(
+        math.atan2(zenith_later[1], zenith_later[0]) - math.atan2(star[1], star[0])
+    )
+    assert turned % 360.0 == pytest.approx(15.041, abs=0.002)
+
+
+def test_dome_controls_from_the_weather() -> None:
+    t = _at(2026, 5, 20, 10, 0)
+    clear = sky_params(_state(t)).dome
+    assert clear.cover == 0.0 and clear.high_cover == 0.0
+    # Local mean solar time: 10:00 UTC at 8.55° E is 10:34.
+    assert clear.time == pytest.approx((10.0 + 8.5492 / 15.0) / 24.0)
+    cirrus = (
+        CloudLayer(2, 8500.0, 9600.0, CloudType.CIRRUS),
+        CloudLayer(1, 9900.0, 10600.0, CloudType.CIRROSTRATUS),
+    )
+    wind = (WindLayer(442.0, 220.0, 3.0), WindLayer(9000.0, 250.0, 38.0))
+    high = sky_params(_state(t, layers=cirrus, wind=wind)).dome
+    assert isinstance(high, DomeControls)
+    assert high.high_cover == pytest.approx(high.cover) == pytest.approx(1 - (6 / 8) * (7 / 8))
+    assert high.height == pytest.approx(9900.0 / 13_000.0)
+    assert high.density < 0.2  # ice veils are thin
+    assert high.speed == pytest.approx(38.0 / 60.0, abs=0.02)
+    assert high.drift_toward_deg == pytest.approx(70.0, abs=1.0)  # blown from 250°
+    low = sky_params(_state(t, layers=(CloudLayer(5, 1500.0, 2600.0, CloudType.CUMULUS),))).dome
+    assert low.high_cover == 0.0 and low.cover == pytest.approx(5 / 8)
+    assert low.density > high.density
+    edge = math.degrees(math.atan2(1500.0 - 432.0, DISTANT_CLOUD_M))
+    assert low.horizon_deg == pytest.approx(edge)
+    for dome in (clear, high, low):
+        for name in ("cover", "height", "density", "sunset", "speed", "time", "high_cover"):
+            assert 0.0 <= getattr(dome, name) <= 1.0, name
+    # The sunset control is the sky's.
+    evening = sky_params(_state(_at(2026, 6, 21, 19, 20), layers=cirrus))
+    assert evening.dome.sunset == evening.sunset > 0.3

@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 
 from wxsky import __version__
-from wxsky.cli import daemon_cmd, metar_cmd, preset_cmd
+from wxsky.cli import daemon_cmd, metar_cmd, preset_cmd, sun_cmd
 from wxsky.cli.common import EXIT_USAGE, parse_size
 from wxsky.errors import WxskyError
 
@@ -40,4 +40,5 @@ def build_parser() -> argparse.ArgumentParser:
     daemon_cmd.add_commands(sub)
     preset_cmd.add_commands(sub)
     metar_cmd.add_commands(sub)
+    sun_cmd.add_commands(sub)
     return p

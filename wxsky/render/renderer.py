@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.errors import RenderError
+from wxsky.render import sky_textures
 from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import build_sheet
@@ -67,7 +68,7 @@ class Renderer:
         self.near_scale = near_scale
         self.shaders = ShaderLibrary(self.ctx)
         defines = {"SHEET_CELLS": str(SHEET_CELLS)}
-        self._sky_prog = self.shaders.program("sky.glsl")
+        self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
         self._sprite_prog = self.shaders.program("sprites.glsl", defines)
         self._upsample_prog = self.shaders.program("upsample.glsl")
         sheet = build_sheet()
@@ -79,7 +80,6 @@ class Renderer:
         self._corner_buf = self.ctx.buffer(corners.tobytes())
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
         self._sprite_vao = self._make_sprite_vao()
-        self._sky_vao = self.ctx.vertex_array(self._sky_prog, [])
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._targets: dict[str, _Target] = {}
         self._finish = gil_free_finish(self.ctx)
@@ -148,7 +148,7 @@ class Renderer:
             target.release()
         self._targets.clear()
         self._sprite_vao.release()
-        self._sky_vao.release()
+        self._sky.release()
         self._upsample_vao.release()
         self._instance_buf.release()
         self._corner_buf.release()
@@ -170,7 +170,7 @@ class Renderer:
         target.fbo.use()
         self.ctx.disable(moderngl.BLEND)
         right, up, fwd = cam.basis()
-        prog = self._sky_prog
+        prog, vao, uniforms = self._sky.prepare(cam, sky)
         _set(prog, "u_right", tuple(right))
         _set(prog, "u_up", tuple(up))
         _set(prog, "u_forward", tuple(fwd))
@@ -181,7 +181,9 @@ class Renderer:
         _set(prog, "u_ground", sky.ground_rgb)
         _set(prog, "u_sun_rgb", sky.sun_rgb)
         _set(prog, "u_sun_cos_radius", math.cos(math.radians(SUN_RADIUS_DEG)))
-        self._sky_vao.render(moderngl.TRIANGLES, vertices=3)
+        for uniform, value in uniforms.items():
+            _set(prog, uniform, value)
+        vao.render(moderngl.TRIANGLES, vertices=3)
         if self._finish_each_draw:
             self._finish()
 

@@ -1,32 +1,101 @@
-"""Sun position and the sky-dome parameters derived from it (Roden & Parberry's controls).
+"""Sun, moon and stars for the sky pass, and the sky-dome parameters (Roden & Parberry's six
+controls) derived from the weather.
 
-The sun follows NOAA's low-precision solar position algorithm (about 0.01° in declination
-over 1950-2050), which is plenty for lighting clouds.
+Sun and moon come from `wxsky.scene.ephemeris` (Meeus: apparent topocentric places,
+refracted; within 0.01° of PyEphem in elevation). The star field and the cloud dome are drawn
+by the renderer from the values here: how dark the sky is for stars, the rotation that fixes
+stars to the celestial sphere, the clock their flicker runs on, and `DomeControls`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
 import numpy as np
 
-from wxsky.weather.state import WeatherState
+from wxsky.scene.ephemeris import (
+    Matrix3,
+    MoonPosition,
+    SunPosition,
+    celestial_from_enu,
+    sun_and_moon,
+)
+from wxsky.scene.ephemeris import sun_position as _ephemeris_sun_position
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+
+__all__ = [
+    "DomeControls",
+    "MoonPosition",
+    "SkyParams",
+    "SunPosition",
+    "sky_params",
+    "sun_position",
+]
 
 RGB = tuple[float, float, float]
 
+SKY_EPOCH_UTC = datetime(2000, 1, 1, tzinfo=UTC)
+# Ice clouds and anything based this high belong to the dome overhead, where the sprite
+# layer's thin cirrus sheets leave the sky between them bare.
+HIGH_TYPES = frozenset({CloudType.CIRRUS, CloudType.CIRROSTRATUS, CloudType.CIRROCUMULUS})
+HIGH_BASE_M = 6000.0
+# The dome's "height" control is a layer base between sea level and this (MSL).
+DOME_TOP_M = 13_000.0
+# The wind aloft that makes the dome's "speed" control 1.
+DOME_MAX_WIND_MPS = 60.0
+# Sprite clouds end here (SceneSettings.max_range_m's default); beyond, the dome stands in for
+# the distant part of every layer along the horizon.
+DISTANT_CLOUD_M = 40_000.0
+# How dense each type looks on the dome: thin ice veils let the sky through, water decks not.
+_TYPE_DENSITY = {
+    CloudType.CIRRUS: 0.05,
+    CloudType.CIRROCUMULUS: 0.2,
+    CloudType.CIRROSTRATUS: 0.35,
+    CloudType.ALTOCUMULUS: 0.45,
+    CloudType.CUMULUS: 0.5,
+    CloudType.STRATOCUMULUS: 0.6,
+    CloudType.ALTOSTRATUS: 0.75,
+    CloudType.STRATUS: 0.85,
+    CloudType.CUMULONIMBUS: 0.9,
+    CloudType.NIMBOSTRATUS: 0.95,
+}
+_IDENTITY: Matrix3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+_MOON_DOWN = MoonPosition(-90.0, 0.0, 0.0, 0.0, 0.0, 384_400.0)
+
 
 @dataclass(frozen=True)
-class SunPosition:
-    elevation_deg: float
-    azimuth_deg: float  # from true north, clockwise
+class DomeControls:
+    """Roden & Parberry's six controls of the cloud dome, each 0..1, plus where it shows.
 
-    @property
-    def direction_enu(self) -> tuple[float, float, float]:
-        """Unit vector from the observer towards the sun (east, north, up)."""
-        el, az = math.radians(self.elevation_deg), math.radians(self.azimuth_deg)
-        return (math.cos(el) * math.sin(az), math.cos(el) * math.cos(az), math.sin(el))
+    The dome is a textured plane at the highest layer's base: drawn overhead for thin high
+    cloud (`high_cover`) and, for every layer, along the horizon below `horizon_deg`, where
+    the sprite clouds have ended. Sprite clouds are composited over it.
+    """
+
+    cover: float = 0.0  # total cloud cover (SkyParams.cover)
+    height: float = 0.0  # highest layer's base / DOME_TOP_M: stretches the texture
+    density: float = 0.0  # cover-weighted by type: dense is smooth and opaque, thin is wispy
+    sunset: float = 0.0  # the red gradient's share (SkyParams.sunset)
+    speed: float = 0.0  # wind at the highest layer / DOME_MAX_WIND_MPS: moves the texture
+    time: float = 0.0  # local mean solar time as a fraction of the day
+    high_cover: float = 0.0  # cover of ice/high layers: the part shown overhead
+    horizon_deg: float = 0.0  # the sprites' far edge seen from the ground, elevation
+    drift_toward_deg: float = 0.0  # where the wind aloft carries the dome, true
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "cover": self.cover,
+            "height": self.height,
+            "density": self.density,
+            "sunset": self.sunset,
+            "speed": self.speed,
+            "time": self.time,
+            "high_cover": self.high_cover,
+            "horizon_deg": self.horizon_deg,
+            "drift_toward_deg": self.drift_toward_deg,
+        }
 
 
 @dataclass(frozen=True)
@@ -42,12 +111,28 @@ class SkyParams:
     sunset: float  # 0..1: how much of the red sunset gradient tints the sky and clouds
     cover: float  # 0..1: total cloud cover, Roden & Parberry's "cover" control
     haze_m: float  # distance over which clouds fade into the horizon colour
+    moon: MoonPosition = _MOON_DOWN
+    moon_rgb: RGB = (0.0, 0.0, 0.0)  # light of the moon's sunlit face over the sky
+    stars: float = 0.0  # 0 (day, overcast) .. 1 (clear astronomical night): star brightness
+    dome: DomeControls = field(default_factory=DomeControls)
+    # Clock of the star flicker and the dome drift: UTC seconds since SKY_EPOCH_UTC.
+    sky_time_s: float = 0.0
+    # Turns east-north-up into the equatorial frame of date, at the whole second, so that
+    # the star field is pixel-still within a second and only flickers (it turns 0.004° a
+    # second, far below a pixel).
+    celestial_from_enu: Matrix3 = _IDENTITY
 
     def to_dict(self) -> dict[str, object]:
         return {
             "sun_elevation_deg": self.sun.elevation_deg,
             "sun_azimuth_deg": self.sun.azimuth_deg,
             "sun_direction_enu": list(self.sun.direction_enu),
+            "moon_elevation_deg": self.moon.elevation_deg,
+            "moon_azimuth_deg": self.moon.azimuth_deg,
+            "moon_direction_enu": list(self.moon.direction_enu),
+            "moon_illuminated_fraction": self.moon.illuminated_fraction,
+            "moon_bright_limb_angle_deg": self.moon.bright_limb_angle_deg,
+            "moon_rgb": list(self.moon_rgb),
             "zenith_rgb": list(self.zenith_rgb),
             "horizon_rgb": list(self.horizon_rgb),
             "ground_rgb": list(self.ground_rgb),
@@ -56,45 +141,19 @@ class SkyParams:
             "sunset": self.sunset,
             "cover": self.cover,
             "haze_m": self.haze_m,
+            "stars": self.stars,
+            "dome": self.dome.to_dict(),
         }
 
 
 def sun_position(time_utc: datetime, lat_deg: float, lon_deg: float) -> SunPosition:
-    t = time_utc.astimezone(UTC)
-    day_of_year = t.timetuple().tm_yday
-    hours = t.hour + t.minute / 60.0 + (t.second + t.microsecond * 1e-6) / 3600.0
-    year_days = 366 if _is_leap(t.year) else 365
-    gamma = 2.0 * math.pi / year_days * (day_of_year - 1 + (hours - 12.0) / 24.0)
-    eqtime_min = 229.18 * (
-        0.000075
-        + 0.001868 * math.cos(gamma)
-        - 0.032077 * math.sin(gamma)
-        - 0.014615 * math.cos(2 * gamma)
-        - 0.040849 * math.sin(2 * gamma)
-    )
-    decl = (
-        0.006918
-        - 0.399912 * math.cos(gamma)
-        + 0.070257 * math.sin(gamma)
-        - 0.006758 * math.cos(2 * gamma)
-        + 0.000907 * math.sin(2 * gamma)
-        - 0.002697 * math.cos(3 * gamma)
-        + 0.00148 * math.sin(3 * gamma)
-    )
-    true_solar_min = hours * 60.0 + eqtime_min + 4.0 * lon_deg
-    hour_angle = math.radians(true_solar_min / 4.0 - 180.0)
-    lat = math.radians(lat_deg)
-    cos_zen = math.sin(lat) * math.sin(decl) + math.cos(lat) * math.cos(decl) * math.cos(hour_angle)
-    zen = math.acos(max(-1.0, min(1.0, cos_zen)))
-    # Azimuth from the east/north components of the sun vector, which stays stable at the poles.
-    east = -math.cos(decl) * math.sin(hour_angle)
-    north = math.cos(lat) * math.sin(decl) - math.sin(lat) * math.cos(decl) * math.cos(hour_angle)
-    az = math.degrees(math.atan2(east, north)) % 360.0
-    return SunPosition(elevation_deg=90.0 - math.degrees(zen), azimuth_deg=az)
+    """The sun as an observer at sea level sees it (refracted); see `wxsky.scene.ephemeris`."""
+    return _ephemeris_sun_position(time_utc, lat_deg, lon_deg)
 
 
 def sky_params(state: WeatherState) -> SkyParams:
-    sun = sun_position(state.time_utc, state.observer.lat_deg, state.observer.lon_deg)
+    obs = state.observer
+    sun, moon = sun_and_moon(state.time_utc, obs.lat_deg, obs.lon_deg, obs.alt_m)
     el = sun.elevation_deg
     day = _smoothstep(-6.0, 10.0, el)  # civil twilight to well-lit day
     sunset = _smoothstep(-8.0, 0.0, el) * (1.0 - _smoothstep(2.0, 18.0, el))
@@ -117,6 +176,20 @@ def sky_params(state: WeatherState) -> SkyParams:
     ground = _scale((0.30, 0.31, 0.28), 0.08 + 0.92 * day)
     sun_rgb = _mix((1.0, 0.98, 0.92), (1.0, 0.55, 0.25), sunset)
     sun_rgb = _scale(sun_rgb, _smoothstep(-2.0, 4.0, el))
+
+    # The first stars show at the end of civil twilight, all of them by astronomical night;
+    # cloud thins them with the share of sky it hides.
+    dark = 1.0 - _smoothstep(-15.0, -4.0, el)
+    stars = dark * math.sqrt(max(0.0, 1.0 - cover))
+    # By day the moon is a pale disc a little brighter than the blue around it; near the
+    # horizon the long path through the air reddens and dims it.
+    low = 1.0 - _smoothstep(0.0, 12.0, moon.elevation_deg)
+    moon_rgb = _mix((0.96, 0.94, 0.88), (1.0, 0.72, 0.48), low * 0.8)
+    moon_gain = (0.95 - 0.65 * day) * (1.0 - 0.35 * low)
+    moon_gain *= 1.0 - 0.85 * _smoothstep(0.6, 1.0, cover)
+    moon_rgb = _scale(moon_rgb, moon_gain * _smoothstep(-1.0, 0.0, moon.elevation_deg))
+
+    whole_second = state.time_utc.replace(microsecond=0)
     return SkyParams(
         sun=sun,
         zenith_rgb=zenith,
@@ -127,11 +200,53 @@ def sky_params(state: WeatherState) -> SkyParams:
         sunset=sunset,
         cover=cover,
         haze_m=max(2_000.0, 3.0 * state.visibility_m),
+        moon=moon,
+        moon_rgb=moon_rgb,
+        stars=stars,
+        dome=dome_controls(state, cover, sunset),
+        sky_time_s=(state.time_utc - SKY_EPOCH_UTC).total_seconds(),
+        celestial_from_enu=celestial_from_enu(whole_second, obs.lat_deg, obs.lon_deg),
     )
 
 
-def _is_leap(year: int) -> bool:
-    return year % 4 == 0 and (year % 100 != 0 or year % 400 == 0)
+def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeControls:
+    """The cloud dome's controls from the weather (cover and sunset as sky_params has them)."""
+    layers = state.layers
+    seconds_of_day = (
+        state.time_utc.hour * 3600.0 + state.time_utc.minute * 60.0 + state.time_utc.second
+    )
+    solar_time = (seconds_of_day / 86400.0 + state.observer.lon_deg / 360.0) % 1.0
+    if not layers:
+        return DomeControls(sunset=sunset, time=solar_time)
+    high = [lay for lay in layers if _is_high(lay)]
+    high_cover = 1.0 - math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in high)
+    weight = sum(lay.cover_oktas for lay in layers)
+    type_density = (
+        sum(_TYPE_DENSITY.get(lay.type, 0.5) * lay.cover_oktas for lay in layers) / weight
+        if weight > 0.0
+        else 0.0
+    )
+    top = max(layers, key=lambda lay: lay.base_m)
+    wind_e, wind_n = state.wind_at(0.5 * (top.base_m + top.top_m))
+    # Seen from the ground, the sprites' far edge lies lowest for the lowest layer; above the
+    # edge of the highest non-high layer every layer is still drawn as sprites.
+    low_layers = [lay for lay in layers if not _is_high(lay)] or layers
+    edge_m = max(lay.base_m for lay in low_layers) - state.observer.alt_m
+    return DomeControls(
+        cover=cover,
+        height=float(np.clip(top.base_m / DOME_TOP_M, 0.0, 1.0)),
+        density=type_density * (0.6 + 0.4 * cover),
+        sunset=sunset,
+        speed=min(1.0, math.hypot(wind_e, wind_n) / DOME_MAX_WIND_MPS),
+        time=solar_time,
+        high_cover=high_cover,
+        horizon_deg=math.degrees(math.atan2(max(edge_m, 0.0), DISTANT_CLOUD_M)),
+        drift_toward_deg=math.degrees(math.atan2(wind_e, wind_n)) % 360.0,
+    )
+
+
+def _is_high(layer: CloudLayer) -> bool:
+    return layer.type in HIGH_TYPES or layer.base_m >= HIGH_BASE_M
 
 
 def _smoothstep(lo: float, hi: float, x: float) -> float:

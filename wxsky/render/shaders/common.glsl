@@ -15,3 +15,18 @@ vec3 sky_colour(vec3 ray, vec3 sun_dir, vec3 zenith, vec3 horizon, vec3 ground, 
     col += sun_rgb * glow * (up >= 0.0 ? 1.0 : 0.2);
     return col;
 }
+
+// Integer hash (Chris Wellons' lowbias32): decorrelated bits from neighbouring cell indices,
+// for per-star details that the star texture has no channel left for.
+uint hash_u32(uint x) {
+    x ^= x >> 16;
+    x *= 0x7feb352du;
+    x ^= x >> 15;
+    x *= 0x846ca68bu;
+    x ^= x >> 16;
+    return x;
+}
+
+float hash_unit(uint x) {
+    return float(hash_u32(x) >> 8) / 16777216.0;
+}

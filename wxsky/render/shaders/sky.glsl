@@ -1,4 +1,9 @@
-// Sky dome for one camera: gradient by elevation and sun, sun disc. Full-screen triangle.
+// Sky dome for one camera, after Roden & Parberry: the day gradient, blended by the darkness
+// of the sky with a flickering star texture and a galaxy band; the sun and moon discs; and
+// the thin cloud dome for high and distant cover. Full-screen triangle.
+// Needs STAR_FACE_PX, STAR_JITTER, STAR_RATE_SCALE_HZ and the switches SKY_STARS, SKY_MOON,
+// SKY_DOME (wxsky/render/sky_textures.py): llvmpipe runs both sides of every branch under a
+// mask, so a feature a frame does not need is compiled out, not skipped.
 #include "common.glsl"
 
 #if defined VERTEX_SHADER
@@ -17,20 +22,213 @@ uniform vec3 u_right;
 uniform vec3 u_up;
 uniform vec3 u_forward;
 uniform vec2 u_tan_half_fov;
+uniform float u_pixel_rad;
 uniform vec3 u_sun_dir;
 uniform vec3 u_zenith;
 uniform vec3 u_horizon;
 uniform vec3 u_ground;
 uniform vec3 u_sun_rgb;
 uniform float u_sun_cos_radius;
+// Night sky
+uniform float u_stars;            // 0 (day) .. 1 (clear astronomical night)
+uniform mat3 u_celestial_from_enu;
+uniform mat3 u_galactic_from_celestial;
+uniform float u_star_clock_s;     // wraps where every star's sine repeats
+uniform vec2 u_star_sigma_gain;   // Gaussian width (radians), brightness gain
+uniform float u_star_floor;       // brightness lost to a not yet dark sky
+uniform sampler2D u_star_tex;     // R mean, G flicker rate, B variance, A phase
+uniform sampler2D u_galaxy_tex;
+// Moon
+uniform vec3 u_moon_dir;
+uniform float u_moon_sin_radius;
+uniform vec3 u_moon_rgb;
+uniform vec3 u_earthshine_rgb;
+// Cloud dome
+uniform sampler2D u_dome_tex;     // R, G cloud shapes; B detail; A maria
+uniform float u_dome_height_m;    // of the dome plane above the eye; 0 = none
+uniform vec4 u_dome_controls;     // high cover, total cover, density, sunset
+uniform vec2 u_dome_band;         // sin(elevation): distant cover full below x, none above y
+uniform mat2 u_dome_m0;
+uniform mat2 u_dome_m1;
+uniform mat2 u_dome_m2;
+uniform vec2 u_dome_off0;
+uniform vec2 u_dome_off1;
+uniform vec2 u_dome_off2;
+uniform vec3 u_dome_rgb;          // cloud lit by sky and sun
+uniform float u_haze_m;
+
+const float PI = 3.14159265358979;
+
+#if SKY_STARS
+// Celestial direction -> (face, continuous cell coordinates, face-plane coordinates) on
+// the equi-angular cube map (sky_textures.cube_cell_directions uses the same faces).
+void cube_cell(vec3 c, out int face, out vec2 grid, out vec2 uv) {
+    vec3 a = abs(c);
+    if (a.x >= a.y && a.x >= a.z) {
+        face = c.x > 0.0 ? 0 : 1;
+        uv = c.yz / a.x;
+    } else if (a.y >= a.z) {
+        face = c.y > 0.0 ? 2 : 3;
+        uv = c.xz / a.y;
+    } else {
+        face = c.z > 0.0 ? 4 : 5;
+        uv = c.xy / a.z;
+    }
+    grid = (atan(uv) * (2.0 / PI) + 0.5) * float(STAR_FACE_PX);
+}
+
+// The stars near a celestial direction: the four cells whose centres surround it hold every
+// star whose Gaussian can reach it (jitter plus three sigmas stay under one cell). Distances
+// are measured in cells through the map's local metric (per pixel, not per star: a CPU
+// renderer pays for every instruction of every pixel).
+vec3 star_light(vec3 c, float galaxy, float up) {
+    int face;
+    vec2 grid, uv;
+    cube_cell(c, face, grid, uv);
+    // Radians per cell along each grid axis, and the cosine of the angle between the axes,
+    // from the derivatives of normalize(1, tan a, tan b).
+    vec2 sec2 = 1.0 + uv * uv;
+    float norm2 = 1.0 + dot(uv, uv);
+    vec2 per_cell = sec2 * sqrt(sec2.yx) / norm2 * (PI / 2.0 / float(STAR_FACE_PX));
+    float shear = -uv.x * uv.y / sqrt(sec2.x * sec2.y);
+    float inv_two_sigma2 = 0.5 / (u_star_sigma_gain.x * u_star_sigma_gain.x);
+    ivec2 base = ivec2(floor(grid - 0.5));
+    // Air twinkles stars more on a long slant path.
+    float twinkle = 1.0 + (1.0 - up);
+    vec3 sum = vec3(0.0);
+    for (int k = 0; k < 4; ++k) {
+        ivec2 cell = base + ivec2(k & 1, k >> 1);
+        if (any(lessThan(cell, ivec2(0))) || any(greaterThanEqual(cell, ivec2(STAR_FACE_PX)))) {
+            continue;
+        }
+        vec4 s = texelFetch(u_star_tex, ivec2(cell.x, face * STAR_FACE_PX + cell.y), 0);
+        uint h = hash_u32(uint(cell.x) + hash_u32(uint(cell.y) + hash_u32(uint(face))));
+        vec2 jitter = (vec2(hash_unit(h), hash_unit(h + 1u)) - 0.5) * (2.0 * STAR_JITTER);
+        vec2 d = (grid - (vec2(cell) + 0.5 + jitter)) * per_cell;
+        float dist2 = dot(d, d) + 2.0 * d.x * d.y * shear;
+        float profile = exp(-dist2 * inv_two_sigma2);
+        float phase = s.g * STAR_RATE_SCALE_HZ * u_star_clock_s + s.a;
+        float brightness = s.r + s.b * twinkle * sin(2.0 * PI * phase);
+        // Against a twilight or hazy sky the faint stars are lost first (and an empty cell,
+        // all zeros, gives nothing).
+        brightness = max(brightness - u_star_floor, 0.0);
+        // Colour from blue-white to orange, most stars near white.
+        float temp = hash_unit(h + 2u);
+        vec3 tint = mix(vec3(1.0, 0.82, 0.66), vec3(0.82, 0.9, 1.0),
+                        temp * temp * (3.0 - 2.0 * temp));
+        sum += tint * brightness * profile;
+    }
+    // Roden & Parberry: stars inside the galaxy get brighter too.
+    return sum * u_star_sigma_gain.y * (1.0 + 1.5 * galaxy);
+}
+#endif
+
+#if SKY_MOON
+// The moon's light in a view ray, and how much of the pixel its disc covers.
+vec3 moon_light(vec3 ray, out float coverage) {
+    float cos_a = dot(ray, u_moon_dir);
+    vec3 q = ray - u_moon_dir * cos_a;
+    float sin_a = length(q);
+    coverage = clamp((u_moon_sin_radius - sin_a) / u_pixel_rad + 0.5, 0.0, 1.0);
+    coverage *= step(0.0, cos_a) * step(0.0, ray.z);
+    if (coverage <= 0.0) {
+        return vec3(0.0);
+    }
+    // The visible hemisphere's normal under this pixel; lit where it faces the sun (the sun
+    // is 400 times farther than the moon, so its direction from the moon is ours).
+    vec3 p = q / u_moon_sin_radius;
+    float r2 = min(dot(p, p), 1.0);
+    vec3 n = p - u_moon_dir * sqrt(1.0 - r2);
+    float l = dot(n, u_sun_dir);
+    float lit = smoothstep(-0.04, 0.08, l) * (0.85 + 0.15 * max(l, 0.0));
+    vec3 side = cross(u_moon_dir, vec3(0.0, 0.0, 1.0));
+    side = dot(side, side) > 1e-6 ? normalize(side) : vec3(1.0, 0.0, 0.0);
+    vec2 st = vec2(dot(p, side), dot(p, cross(side, u_moon_dir)));
+    float maria = textureLod(u_dome_tex, st * 0.3 + vec2(0.37, 0.61), 0.0).a;
+    float albedo = mix(1.0, 0.6, smoothstep(0.5, 0.8, maria));
+    return (u_moon_rgb * lit + u_earthshine_rgb * (1.0 - lit)) * albedo;
+}
+#endif
+
+#if SKY_DOME
+// Roden & Parberry's cloud dome as a plane at the dome height: two shape layers blended,
+// cover as a threshold, density smoothing and darkening, and the sunset gradient.
+vec4 cloud_dome(vec3 ray) {
+    float z = max(ray.z, 0.002);
+    vec2 plane_m = ray.xy / z * u_dome_height_m;
+    // Sampled in uniform control flow so the mip level comes from true derivatives; at the
+    // horizon the lowest mips average the clouds into a band.
+    float c0 = texture(u_dome_tex, u_dome_m0 * plane_m + u_dome_off0).r;
+    float c1 = texture(u_dome_tex, u_dome_m1 * plane_m + u_dome_off1).g;
+    float detail = texture(u_dome_tex, u_dome_m2 * plane_m + u_dome_off2).b;
+    float high_cover = u_dome_controls.x, cover = u_dome_controls.y;
+    float density = u_dome_controls.z, sunset = u_dome_controls.w;
+    // Distant parts of every layer show below the sprites' far edge; seen ever more
+    // obliquely towards the horizon, their gaps close.
+    float band = 1.0 - smoothstep(u_dome_band.x, u_dome_band.y, ray.z);
+    float distant = 1.0 - (1.0 - cover) * smoothstep(0.0, u_dome_band.y, ray.z);
+    float here = max(high_cover, distant * step(0.001, band));
+    // The mean of two uniform layers is triangular: keep the share `here` of it.
+    float c = 0.5 * (c0 + c1);
+    float threshold = here < 0.5 ? 1.0 - sqrt(0.5 * here) : sqrt(0.5 * (1.0 - here));
+    // Thin cloud is a soft-edged veil with fibres (detail cuts into it), dense cloud has
+    // firmer edges, is smooth and nearly opaque.
+    float softness = mix(0.22, 0.1, density);
+    float a = smoothstep(threshold - 0.3 * softness, threshold + softness, c) * step(0.001, here);
+    a *= mix(0.25 + 0.75 * detail, 1.0, density) * mix(0.45, 0.95, density);
+    // The distant band fades out upwards as a whole rather than by thinning its cover, which
+    // would cut a hard edge where the averaged far texture crosses the threshold.
+    a *= max(band, step(0.001, high_cover)) * smoothstep(0.0, 0.01, ray.z);
+    vec3 rgb = u_dome_rgb * mix(0.8, 1.05, detail) * (1.0 - 0.3 * density * a);
+    // Thin ice cloud glows around the sun.
+    float toward_sun = max(dot(ray, u_sun_dir), 0.0);
+    rgb += u_sun_rgb * pow(toward_sun, 8.0) * 0.35 * (1.0 - density);
+    vec2 flat_ray = normalize(ray.xy + vec2(1e-6, 0.0));
+    vec2 flat_sun = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
+    float sunward = 0.35 + 0.65 * max(dot(flat_ray, flat_sun), 0.0);
+    vec3 sunset_rgb = vec3(1.0, 0.52, 0.32) * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
+    rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
+    float haze = 1.0 - exp(-u_dome_height_m / z / u_haze_m);
+    rgb = mix(rgb, u_horizon, haze * 0.85);
+    return vec4(rgb, a);
+}
+#endif
+
 void main() {
     // NDC y is flipped with respect to the image (row 0 is the top), as in every projection.
     vec3 ray = normalize(u_forward + v_ndc.x * u_tan_half_fov.x * u_right
                          - v_ndc.y * u_tan_half_fov.y * u_up);
     vec3 col = sky_colour(ray, u_sun_dir, u_zenith, u_horizon, u_ground, u_sun_rgb);
+#if SKY_DOME
+    vec4 dome = cloud_dome(ray);
+#else
+    vec4 dome = vec4(0.0);
+#endif
+#if SKY_MOON
+    float moon_cover;
+    vec3 moon = moon_light(ray, moon_cover);
+#else
+    float moon_cover = 0.0;
+    vec3 moon = vec3(0.0);
+#endif
+#if SKY_STARS
+    if (ray.z > 0.0) {
+        vec3 c = normalize(u_celestial_from_enu * ray);
+        vec3 g = u_galactic_from_celestial * c;
+        vec2 gal_uv = vec2(atan(g.y, g.x) / (2.0 * PI) + 0.5,
+                           asin(clamp(g.z, -1.0, 1.0)) / PI + 0.5);
+        float galaxy = textureLod(u_galaxy_tex, gal_uv, 0.0).r;
+        // Starlight crosses more air low down: the horizon swallows the faint ones.
+        float extinction = smoothstep(0.0, 0.15, ray.z);
+        vec3 night = vec3(0.78, 0.84, 1.0) * galaxy * 0.1 + star_light(c, galaxy, ray.z);
+        col += night * (u_stars * extinction * (1.0 - moon_cover) * (1.0 - dome.a));
+    }
+#endif
+    col += moon * moon_cover * (1.0 - 0.85 * dome.a);
     float disc = smoothstep(u_sun_cos_radius - 0.00002, u_sun_cos_radius + 0.00002,
                             dot(ray, u_sun_dir));
     col = mix(col, vec3(1.0, 0.98, 0.9) * 1.2, disc * step(-0.01, ray.z) * length(u_sun_rgb));
+    col = mix(col, dome.rgb, dome.a);
     f_colour = vec4(clamp(col, 0.0, 1.0), 1.0);
 }
 #endif

@@ -1,0 +1,439 @@
+"""The sky pass's textures and the per-frame values that index them (Roden & Parberry).
+
+Textures are made procedurally when a renderer starts, from fixed seeds, so every process
+draws the same sky; nothing is shipped. Making all three takes about 0.1 s and is done once
+per process:
+
+- stars: one RGBA8 cell per direction on an equi-angular cube map of the celestial sphere,
+  six faces of STAR_FACE_PX² stacked vertically. Most cells are black (no star); a star's
+  cell holds R = mean intensity, G = flicker rate, B = variance, A = phase, and the shader
+  makes its brightness R + B·sin(2π·(G·STAR_RATE_SCALE_HZ·t + A)). A star sits at its cell
+  centre moved by a hash of the cell (up to STAR_JITTER cells), so the grid never shows, and is
+  drawn as a small Gaussian of constant on-screen size.
+- galaxy: the Milky Way's glow on an equirectangular map in galactic longitude and latitude,
+  with a bulge towards Sagittarius and a dark rift. Stars are denser inside it and the shader
+  brightens them there as well.
+- dome noise: four tileable noise fields (RGBA8, mipmapped): two cloud-shape layers, a
+  detail layer and the moon's maria.
+
+`SkyPass` uploads them, picks the compiled variant of sky.glsl a frame needs (`features`)
+and gives its uniforms (`frame_uniforms`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import moderngl
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.render.shaders import ShaderLibrary
+from wxsky.scene.camera import Camera
+from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
+
+U8 = npt.NDArray[np.uint8]
+F64 = npt.NDArray[np.float64]
+
+STAR_FACE_PX = 256  # cells along a cube face: 0.35° each
+STAR_JITTER = 0.3  # greatest offset of a star from its cell centre, in cells
+# A flicker rate of G = k/255 makes k/255 * 2.55 = k/100 cycles per second, so every star's
+# sine repeats after exactly 100 s: the shader's clock can wrap there without a jump while
+# keeping float32 precision.
+STAR_RATE_SCALE_HZ = 2.55
+STAR_CLOCK_PERIOD_S = 100.0
+# Stars are drawn as Gaussians this wide, in pixels: one star lights 3 x 3 pixels whatever
+# the field of view, unless a pixel is too wide to keep the Gaussian inside its 2 x 2 cells.
+STAR_SIGMA_PX = 0.6
+STAR_SIGMA_MAX_CELLS = (1.0 - STAR_JITTER) / 3.0
+# Starlight (R + B·sin) lost against a sky that is not yet dark: at SkyParams.stars = s the
+# stars fainter than this * (1 - s) are gone, so twilight and haze take the faint ones first.
+STAR_FLOOR_AT_DAY = 0.4
+GALAXY_SIZE_PX = (512, 256)  # longitude, latitude
+DOME_NOISE_PX = 256
+# Size on the cloud-dome plane of one repeat of the cloud-shape and the detail noise.
+DOME_TILE_M = 14_000.0
+DOME_DETAIL_TILE_M = 3_500.0
+# Below this height above the eye the dome would be a deck the eye is in or above: not drawn.
+DOME_MIN_CLEARANCE_M = 300.0
+EARTH_RADIUS_M = 6_371_000.0
+EARTHSHINE = 0.05  # of the sunlit face's brightness, on the dark part of a crescent at night
+
+SEED_STARS = 0x5EED_57A2
+SEED_GALAXY = 0x5EED_6A1A
+SEED_DOME = 0x5EED_D0E0
+
+# J2000 equatorial to galactic (rows: galactic x towards the centre, y, z to the north pole).
+GALACTIC_FROM_EQUATORIAL = np.array(
+    [
+        [-0.0548755604, -0.8734370902, -0.4838350155],
+        [0.4941094279, -0.4448296300, 0.7469822445],
+        [-0.8676661490, -0.1980763734, 0.4559837762],
+    ]
+)
+
+# Each cube face: the major axis and the two axes its (u, v) run along, as the shader has them.
+_FACES = (
+    ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
+    ((-1, 0, 0), (0, 1, 0), (0, 0, 1)),
+    ((0, 1, 0), (1, 0, 0), (0, 0, 1)),
+    ((0, -1, 0), (1, 0, 0), (0, 0, 1)),
+    ((0, 0, 1), (1, 0, 0), (0, 1, 0)),
+    ((0, 0, -1), (1, 0, 0), (0, 1, 0)),
+)
+
+
+def shader_defines(feats: SkyFeatures) -> dict[str, str]:
+    """The constants sky.glsl shares with this module, and its feature switches."""
+    return {
+        "STAR_FACE_PX": str(STAR_FACE_PX),
+        "STAR_JITTER": f"{STAR_JITTER:.6f}",
+        "STAR_RATE_SCALE_HZ": f"{STAR_RATE_SCALE_HZ:.6f}",
+        "SKY_STARS": str(int(feats.stars)),
+        "SKY_MOON": str(int(feats.moon)),
+        "SKY_DOME": str(int(feats.dome)),
+    }
+
+
+# -- textures --------------------------------------------------------------------------------
+
+
+@functools.cache
+def galaxy_texture() -> U8:
+    """(H, W) glow of the Milky Way: columns are galactic longitude -180°..180°, rows
+    latitude -90°..90° (row 0 at -90°)."""
+    w, h = GALAXY_SIZE_PX
+    rng = np.random.default_rng(SEED_GALAXY)
+    lon = ((np.arange(w) + 0.5) / w * 360.0 - 180.0)[None, :]
+    lat = ((np.arange(h) + 0.5) / h * 180.0 - 90.0)[:, None]
+    clumps = _spectral_noise(rng, (h, w), beta=2.4)
+    lanes = _spectral_noise(rng, (h, w), beta=2.0)
+    # Wider and brighter towards the centre (the bulge), a second bright stretch in Cygnus,
+    # fainter towards the anticentre.
+    width_deg = 5.0 + 9.0 * np.exp(-((lon / 30.0) ** 2))
+    strength = (
+        0.35 + 0.65 * np.exp(-((lon / 60.0) ** 2)) + 0.25 * np.exp(-(((lon - 80.0) / 25.0) ** 2))
+    )
+    band = np.exp(-((lat / width_deg) ** 2)) * strength * (0.35 + 1.1 * clumps)
+    # The Great Rift: dust along the plane from Cygnus to Sagittarius.
+    rift = np.exp(-(((lat - 1.0) / 2.5) ** 2)) * np.exp(-(((lon - 30.0) / 45.0) ** 2))
+    band *= 1.0 - 0.75 * rift * (0.4 + 0.6 * lanes)
+    band += 0.12 * np.exp(-((lat / 25.0) ** 2))
+    band /= band.max()
+    return np.round(np.clip(band, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+@functools.cache
+def star_texture() -> U8:
+    """(6·N, N, 4) star cells, faces stacked (face f's row j at f·N + j, column i)."""
+    n = STAR_FACE_PX
+    rng = np.random.default_rng(SEED_STARS)
+    dirs = cube_cell_directions(n)  # (6, n, n, 3)
+    glow = _galaxy_at(dirs.reshape(-1, 3)).reshape(6, n, n)
+    # About 31 000 stars over the sphere, three times as dense along the Milky Way.
+    chance = 0.065 + 0.13 * glow
+    has_star = rng.random((6, n, n)) < chance
+    count = int(has_star.sum())
+    # Brightness follows the usual star counts, three times as many stars per magnitude, so
+    # N(> I) ~ I^-1.2 between a faint floor and 1 (the power law truncated there, so that
+    # only a handful of stars come out at full white).
+    floor, slope = 0.028, 1.2
+    top = floor**slope
+    mean = floor * (1.0 - rng.random(count) * (1.0 - top)) ** (-1.0 / slope)
+    rate = rng.uniform(0.15, 1.0, count)
+    variance = mean * rng.uniform(0.15, 0.45, count)
+    phase = rng.random(count)
+    cells = np.zeros((6, n, n, 4), np.uint8)
+    values = np.stack([mean, rate, variance, phase], -1)
+    packed = np.round(np.clip(values, 0.0, 1.0) * 255.0).astype(np.uint8)
+    packed[:, 0] = np.maximum(packed[:, 0], 1)  # a star's R is never 0, which means "none"
+    cells[has_star] = packed
+    return cells.reshape(6 * n, n, 4)
+
+
+@functools.cache
+def dome_noise_texture() -> U8:
+    """(N, N, 4) tileable noise: R, G cloud shapes; B detail; A the moon's maria."""
+    n = DOME_NOISE_PX
+    rng = np.random.default_rng(SEED_DOME)
+    shape1 = _spectral_noise(rng, (n, n), beta=3.0, min_cycles=2)
+    shape2 = _spectral_noise(rng, (n, n), beta=2.7, min_cycles=2)
+    detail = _spectral_noise(rng, (n, n), beta=2.0, min_cycles=8)
+    maria = _spectral_noise(rng, (n, n), beta=3.4)
+    out = np.stack([shape1, shape2, detail, maria], -1)
+    return np.round(out * 255.0).astype(np.uint8)
+
+
+def cube_cell_directions(n: int) -> F64:
+    """(6, n, n, 3) unit vectors through the cell centres of the equi-angular cube map, indexed
+    [face, v, u]; the inverse of sky.glsl's cube_cell."""
+    w = ((np.arange(n) + 0.5) / n) * 2.0 - 1.0
+    t = np.tan(w * math.pi / 4.0)
+    tv, tu = np.meshgrid(t, t, indexing="ij")
+    out = np.empty((6, n, n, 3))
+    for f, (major, ax_u, ax_v) in enumerate(_FACES):
+        v = (
+            np.asarray(major, float)[None, None, :]
+            + tu[..., None] * np.asarray(ax_u, float)
+            + tv[..., None] * np.asarray(ax_v, float)
+        )
+        out[f] = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return out
+
+
+def _galaxy_at(celestial: F64) -> F64:
+    """The galaxy texture's value (0..1) in celestial directions (..., 3), nearest texel."""
+    g = celestial @ GALACTIC_FROM_EQUATORIAL.T
+    lon = np.degrees(np.arctan2(g[..., 1], g[..., 0]))
+    lat = np.degrees(np.arcsin(np.clip(g[..., 2], -1.0, 1.0)))
+    w, h = GALAXY_SIZE_PX
+    col = np.clip(((lon + 180.0) / 360.0 * w).astype(int), 0, w - 1)
+    row = np.clip(((lat + 90.0) / 180.0 * h).astype(int), 0, h - 1)
+    result: F64 = galaxy_texture()[row, col] / 255.0
+    return result
+
+
+def _spectral_noise(
+    rng: np.random.Generator, shape: tuple[int, int], beta: float, min_cycles: int = 1
+) -> F64:
+    """Tileable noise with a power spectrum falling as f^-beta, flattened to a uniform
+    distribution on 0..1 (so a threshold at 1 - x keeps a share x of the texels)."""
+    h, w = shape
+    fy = np.fft.fftfreq(h)[:, None] * h
+    fx = np.fft.rfftfreq(w)[None, :] * w
+    f = np.hypot(fx, fy)
+    amp = np.where(f >= min_cycles, np.maximum(f, 1e-9) ** (-beta / 2.0), 0.0)
+    spectrum = amp * (rng.standard_normal(amp.shape) + 1j * rng.standard_normal(amp.shape))
+    field = np.fft.irfft2(spectrum, s=shape)
+    ranks = np.empty(field.size)
+    ranks[np.argsort(field, axis=None)] = np.arange(field.size)
+    result: F64 = (ranks / (field.size - 1)).reshape(shape)
+    return result
+
+
+@dataclass(frozen=True)
+class SkyFeatures:
+    """What a frame's sky pass draws beyond the gradient and the sun: each is a compiled
+    variant of sky.glsl, because a CPU renderer pays for code it branches around."""
+
+    stars: bool
+    moon: bool
+    dome: bool
+
+
+class SkyPass:
+    """The sky pass's GL objects: the three textures (units 1-3; the sprite sheet keeps unit
+    0) and one program and vertex array per feature set, compiled on first use."""
+
+    UNITS: ClassVar[dict[str, int]] = {"u_star_tex": 1, "u_galaxy_tex": 2, "u_dome_tex": 3}
+
+    def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
+        self._ctx = ctx
+        self._shaders = shaders
+        self._variants: dict[SkyFeatures, tuple[moderngl.Program, moderngl.VertexArray]] = {}
+        stars = star_texture()
+        self.stars = ctx.texture((stars.shape[1], stars.shape[0]), 4, stars.tobytes())
+        # Cells are fetched one by one, never filtered.
+        self.stars.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        galaxy = galaxy_texture()
+        self.galaxy = ctx.texture((galaxy.shape[1], galaxy.shape[0]), 1, galaxy.tobytes())
+        self.galaxy.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.galaxy.repeat_x, self.galaxy.repeat_y = True, False
+        dome = dome_noise_texture()
+        self.dome = ctx.texture((dome.shape[1], dome.shape[0]), 4, dome.tobytes())
+        self.dome.build_mipmaps()
+        self.dome.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+        self.dome.repeat_x = self.dome.repeat_y = True
+
+    def prepare(
+        self, cam: Camera, sky: SkyParams
+    ) -> tuple[moderngl.Program, moderngl.VertexArray, dict[str, object]]:
+        """The program and vertex array for this frame, with the textures bound, and the
+        uniforms it needs beyond the camera, gradient and sun."""
+        feats = features(cam, sky)
+        variant = self._variants.get(feats)
+        if variant is None:
+            prog = self._shaders.program("sky.glsl", shader_defines(feats))
+            variant = (prog, self._ctx.vertex_array(prog, []))
+            self._variants[feats] = variant
+        self.stars.use(self.UNITS["u_star_tex"])
+        self.galaxy.use(self.UNITS["u_galaxy_tex"])
+        self.dome.use(self.UNITS["u_dome_tex"])
+        return variant[0], variant[1], frame_uniforms(cam, sky, feats)
+
+    def release(self) -> None:
+        for _prog, vao in self._variants.values():
+            vao.release()  # the programs belong to the shader library
+        self._variants.clear()
+        for tex in (self.stars, self.galaxy, self.dome):
+            tex.release()
+
+
+# -- per-frame values ------------------------------------------------------------------------
+
+
+def features(cam: Camera, sky: SkyParams) -> SkyFeatures:
+    """Which parts of the sky this frame shows: stars once the sky is dark enough, the moon
+    when it is up and inside the view, the dome when there is cover above the eye."""
+    moon = sky.moon
+    fwd = cam.basis()[2]
+    # Inside the cone around the view axis that holds the whole picture, plus the disc.
+    half_diagonal_rad = math.atan(math.hypot(cam.tan_half_fov_x, cam.tan_half_fov_y))
+    reach_rad = half_diagonal_rad + 2.0 * math.radians(moon.angular_radius_deg)
+    cos_off_axis = float(np.dot(fwd, moon.direction_enu))
+    moon_in_view = max(sky.moon_rgb) > 0.0 and cos_off_axis >= math.cos(min(reach_rad, math.pi))
+    dome = dome_frame(sky, cam.position_m[2]).height_m > 0.0
+    return SkyFeatures(stars=sky.stars > 0.0, moon=moon_in_view, dome=dome)
+
+
+def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str, object]:
+    """The sky pass's uniforms for the night sky, moon and cloud dome, those of the features
+    drawn (the camera, gradient and sun ones are set by the renderer)."""
+    out: dict[str, object] = {}
+    if feats.stars:
+        sigma, gain = star_sigma(cam)
+        out.update(
+            {
+                "u_star_tex": SkyPass.UNITS["u_star_tex"],
+                "u_galaxy_tex": SkyPass.UNITS["u_galaxy_tex"],
+                "u_stars": sky.stars,
+                "u_celestial_from_enu": column_major(sky.celestial_from_enu),
+                "u_galactic_from_celestial": column_major(GALACTIC_FROM_EQUATORIAL),
+                "u_star_clock_s": flicker_clock_s(sky.sky_time_s),
+                "u_star_sigma_gain": (sigma, gain),
+                "u_star_floor": STAR_FLOOR_AT_DAY * (1.0 - sky.stars),
+            }
+        )
+    if feats.moon:
+        moon = sky.moon
+        earthshine = EARTHSHINE * (1.0 - moon.illuminated_fraction) * sky.stars
+        out.update(
+            {
+                "u_dome_tex": SkyPass.UNITS["u_dome_tex"],
+                "u_pixel_rad": pixel_rad(cam),
+                "u_moon_dir": moon.direction_enu,
+                "u_moon_sin_radius": math.sin(math.radians(moon.angular_radius_deg)),
+                "u_moon_rgb": sky.moon_rgb,
+                "u_earthshine_rgb": tuple(earthshine * v for v in (0.85, 0.9, 1.0)),
+            }
+        )
+    if feats.dome:
+        dome = sky.dome
+        frame = dome_frame(sky, cam.position_m[2])
+        # The distant band is full up to a third of the sprites' edge and gone at twice it: a
+        # long fade, because the sprites themselves fade out over their last quarter of range.
+        band_lo = math.sin(math.radians(0.3 * dome.horizon_deg))
+        band_hi = math.sin(math.radians(2.0 * dome.horizon_deg + 0.5))
+        out.update(
+            {
+                "u_dome_tex": SkyPass.UNITS["u_dome_tex"],
+                "u_dome_height_m": frame.height_m,
+                "u_dome_controls": (dome.high_cover, dome.cover, dome.density, dome.sunset),
+                "u_dome_band": (band_lo, band_hi),
+                "u_dome_m0": frame.matrices[0],
+                "u_dome_m1": frame.matrices[1],
+                "u_dome_m2": frame.matrices[2],
+                "u_dome_off0": frame.offsets[0],
+                "u_dome_off1": frame.offsets[1],
+                "u_dome_off2": frame.offsets[2],
+                "u_dome_rgb": tuple(float(v) for v in dome_light_rgb(sky)),
+                "u_haze_m": sky.haze_m,
+            }
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class DomeFrame:
+    """Where the dome's textures sit this frame: each layer maps a point on the dome plane
+    (east, north metres) to texture coordinates by a 2 x 2 matrix and an offset."""
+
+    height_m: float  # of the dome plane above the eye; 0 = not drawn
+    matrices: tuple[tuple[float, float, float, float], ...]  # 3 layers, column-major mat2
+    offsets: tuple[tuple[float, float], ...]  # 3 layers, wrapped into 0..1
+
+
+def dome_frame(sky: SkyParams, eye_alt_m: float) -> DomeFrame:
+    """Roden & Parberry's "height" and "speed" controls turned into texture coordinates: the
+    two shape layers drift with the wind aloft in slightly different directions and at
+    slightly different speeds, so the clouds change shape as they go; thin ice cloud is
+    stretched along the wind into streaks."""
+    dome = sky.dome
+    clearance_m = dome.height * DOME_TOP_M - eye_alt_m
+    visible = dome.cover > 0.0 and clearance_m >= DOME_MIN_CLEARANCE_M
+    if not visible:
+        none = (1.0, 0.0, 0.0, 1.0)
+        return DomeFrame(0.0, (none, none, none), ((0.0, 0.0),) * 3)
+    speed_mps = dome.speed * DOME_MAX_WIND_MPS
+    toward = math.radians(dome.drift_toward_deg)
+    stretch = 1.0 + 4.0 * (1.0 - min(1.0, dome.density / 0.5))
+    layers = (
+        (DOME_TILE_M, 0.0, 1.0, stretch),
+        (DOME_TILE_M * 0.8, math.radians(9.0), 1.15, stretch),
+        (DOME_DETAIL_TILE_M, math.radians(-6.0), 0.9, 1.0 + 1.5 * (stretch - 1.0)),
+    )
+    matrices = []
+    offsets = []
+    for tile_m, turn_rad, speed_k, stretch_k in layers:
+        angle = toward + turn_rad
+        # Rows: along the wind (compressed by the stretch, so features lengthen), across it.
+        along = np.array([math.sin(angle), math.cos(angle)]) / (tile_m * stretch_k)
+        across = np.array([math.cos(angle), -math.sin(angle)]) / tile_m
+        m = np.stack([along, across])
+        velocity = speed_k * speed_mps * np.array([math.sin(angle), math.cos(angle)])
+        # The texture moves with the air: sample where the air now overhead was at time 0.
+        offset = (m @ (-velocity * sky.sky_time_s)) % 1.0
+        matrices.append((float(m[0, 0]), float(m[1, 0]), float(m[0, 1]), float(m[1, 1])))
+        offsets.append((float(offset[0]), float(offset[1])))
+    return DomeFrame(clearance_m, tuple(matrices), tuple(offsets))
+
+
+def dome_light_rgb(sky: SkyParams) -> F64:
+    """Roden & Parberry's "amount of sunlight" on the dome: the sky's ambient level on a
+    near-white cloud plus direct sun. The dome's cloud is high, so it sees the sun after
+    sunset (by the dip of the horizon from its height, 3° at 9 km), red at first."""
+    height_m = sky.dome.height * DOME_TOP_M
+    dip_deg = math.degrees(math.acos(EARTH_RADIUS_M / (EARTH_RADIUS_M + max(height_m, 0.0))))
+    sun_el = sky.sun.elevation_deg + dip_deg
+    sunlit = _smoothstep(-1.0, 3.0, sun_el)
+    redness = 1.0 - _smoothstep(0.0, 14.0, sun_el)
+    sun_rgb = np.array([1.0, 0.97, 0.92]) + redness * (
+        np.array([1.0, 0.5, 0.3]) - [1.0, 0.97, 0.92]
+    )
+    ambient_rgb = np.array([0.9, 0.92, 0.97]) * (0.45 * sky.ambient)
+    result: F64 = ambient_rgb + 0.6 * sunlit * sun_rgb
+    return result
+
+
+def _smoothstep(lo: float, hi: float, x: float) -> float:
+    t = min(1.0, max(0.0, (x - lo) / (hi - lo)))
+    return t * t * (3.0 - 2.0 * t)
+
+
+def star_sigma(cam: Camera) -> tuple[float, float]:
+    """(sigma in radians, gain) of a star's Gaussian: STAR_SIGMA_PX of the camera's centre
+    pixel, or the widest the cell grid allows, made brighter to keep its light the same."""
+    pixel_rad = 2.0 * cam.tan_half_fov_x / cam.width_px
+    wanted = STAR_SIGMA_PX * pixel_rad
+    limit = STAR_SIGMA_MAX_CELLS * (math.pi / 2.0) / STAR_FACE_PX
+    sigma = min(wanted, limit)
+    return sigma, min(4.0, (wanted / sigma) ** 2)
+
+
+def pixel_rad(cam: Camera) -> float:
+    return 2.0 * cam.tan_half_fov_x / cam.width_px
+
+
+def column_major(m: tuple[tuple[float, float, float], ...] | F64) -> tuple[float, ...]:
+    """A row-major 3 x 3 as GLSL's mat3 takes it."""
+    a = np.asarray(m, dtype=np.float64)
+    return tuple(float(v) for v in a.T.ravel())
+
+
+def flicker_clock_s(sky_time_s: float) -> float:
+    """The shader's flicker clock: the sky time wrapped at the flicker period (see
+    STAR_RATE_SCALE_HZ), which keeps every star's phase and float32 precision."""
+    return sky_time_s % STAR_CLOCK_PERIOD_S
