@@ -1,8 +1,10 @@
-"""Clouds of one 4 km block: Wang's sprite clouds, generated from the block's own seed.
+"""Clouds of one 4 km block: Wang's sprite clouds built from a cloud model's artist boxes.
 
-A block's clouds depend only on (block x, block y, layer key, layer, weather seed), so the
-same weather gives the same sky in any process on any machine (numpy's PCG64 is portable).
-Cover decides how many of the block's cells hold a cloud; the cloud type picks a template.
+A block's clouds depend only on (block x, block y, layer key, model, layer thickness, weather
+seed), so the same weather gives the same sky in any process on any machine (numpy's PCG64 is
+portable). Every cell of the block holds a cloud here, whatever the cover: cover only decides
+which of them show and how far they have formed (`formation.py`), so a cover that changes
+every second never regenerates a block and a cloud keeps its shape while it forms.
 """
 
 from __future__ import annotations
@@ -11,176 +13,42 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
-import numpy.typing as npt
 
-from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM, TEX_FOG, TEX_PUFFY, TEX_WISPY
+from wxsky.scene.cloud_models import BoxTemplate, CloudModel
+from wxsky.scene.sprite_cull import cull_mask
+from wxsky.scene.sprites import F32, F64, I32, I64, SpriteBatch
+from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM
 from wxsky.weather.state import CloudLayer, CloudType
 
+__all__ = [
+    "BLOCK_SIZE_M",
+    "BlockClouds",
+    "SpriteBatch",
+    "block_clouds",
+    "block_seed",
+    "layer_keys",
+]
+
 BLOCK_SIZE_M = 4000.0
-
-F32 = npt.NDArray[np.float32]
-F64 = npt.NDArray[np.float64]
-I32 = npt.NDArray[np.int32]
-I64 = npt.NDArray[np.int64]
-
-# Until the sheet has ragged textures of its own, the second half of the wispy ones stand in.
-TEX_RAGGED = TEX_WISPY[3:]
+# Shading groups 1..31 come from the model; sprites of group 0 boxes are grouped by their
+# octant around the cloud's centre, as keys 32..39.
+_OCTANT_GROUP = 32
+_GROUP_KEYS = 40
 
 
 @dataclass(frozen=True)
-class SpriteBatch:
-    """N cloud sprites as parallel arrays."""
+class BlockClouds:
+    """Every cloud a block can hold, fully formed, in the layer's drifting frame with z above
+    the layer's base. Cloud k forms k-th as cover rises (`formation.visible_sprites`)."""
 
-    centre_m: F64  # (N, 3) ENU
-    size_m: F32  # (N,) edge length of the square sprite
-    rotation_rad: F32  # (N,)
-    texture: I32  # (N,) slot on the texture sheet
-    height_frac: F32  # (N,) 0 at the cloud's base .. 1 at its top: picks the colour level
-    light_dir: F32  # (N, 3) unit vector from the cloud centre to the sprite's shading group
-    opacity: F32  # (N,) 0..1: formation/dissipation and type transparency
-    darkness: F32  # (N,) 0..1: how grey the cloud type's base is (stratus, Cb)
-    cloud_id: I64  # (N,) the sprite's cloud, the same in every frame and process
-    core_frac: F32  # (N,) horizontal distance from the cloud's axis over its radius: 0 core, 1 edge
-
-    def __len__(self) -> int:
-        return int(self.size_m.shape[0])
-
-    def take(self, index: npt.NDArray[np.intp] | npt.NDArray[np.bool_]) -> SpriteBatch:
-        return SpriteBatch(**{f.name: getattr(self, f.name)[index] for f in _FIELDS})
-
-    def shifted(self, offset_m: tuple[float, float, float]) -> SpriteBatch:
-        return dataclasses.replace(
-            self, centre_m=self.centre_m + np.asarray(offset_m, dtype=np.float64)
-        )
-
-    @staticmethod
-    def empty() -> SpriteBatch:
-        return SpriteBatch(
-            centre_m=np.zeros((0, 3)),
-            size_m=np.zeros(0, np.float32),
-            rotation_rad=np.zeros(0, np.float32),
-            texture=np.zeros(0, np.int32),
-            height_frac=np.zeros(0, np.float32),
-            light_dir=np.zeros((0, 3), np.float32),
-            opacity=np.zeros(0, np.float32),
-            darkness=np.zeros(0, np.float32),
-            cloud_id=np.zeros(0, np.int64),
-            core_frac=np.zeros(0, np.float32),
-        )
-
-    @staticmethod
-    def concat(batches: list[SpriteBatch]) -> SpriteBatch:
-        batches = [b for b in batches if len(b)]
-        if not batches:
-            return SpriteBatch.empty()
-        if len(batches) == 1:
-            return batches[0]
-        return SpriteBatch(
-            **{f.name: np.concatenate([getattr(b, f.name) for b in batches]) for f in _FIELDS}
-        )
-
-
-_FIELDS = dataclasses.fields(SpriteBatch)
-
-
-@dataclass(frozen=True)
-class CloudTemplate:
-    """How one cloud type fills a block: Wang's artist boxes, reduced to a few numbers."""
-
-    cell_m: float  # one cloud per occupied cell
-    radius_frac: tuple[float, float]  # cloud radius as a fraction of the cell
-    height_frac: tuple[float, float]  # cloud height as a fraction of the layer thickness
-    sprites_per_km2: float  # sprite density over the cloud's footprint
-    min_sprites: int
-    size_frac: tuple[float, float]  # sprite size as a fraction of the cloud radius
-    textures: tuple[int, ...]
-    dome: bool  # heaped (cumulus) rather than a slab (stratus)
-    opacity: float
-    darkness: float
-
-
-_HEAPED = CloudTemplate(
-    1000.0, (0.36, 0.52), (0.55, 1.0), 70.0, 10, (0.55, 0.85), TEX_PUFFY, True, 1.0, 0.35
-)
-_SLAB = CloudTemplate(
-    1000.0, (0.62, 0.72), (0.7, 1.0), 5.0, 4, (0.85, 1.15), TEX_FOG + TEX_RAGGED, False, 0.9, 0.45
-)
-
-TEMPLATES: dict[CloudType, CloudTemplate] = {
-    CloudType.CUMULUS: _HEAPED,
-    CloudType.CUMULONIMBUS: CloudTemplate(
-        4000.0,
-        (0.35, 0.45),
-        (0.9, 1.0),
-        30.0,
-        60,
-        (0.3, 0.5),
-        TEX_PUFFY + TEX_RAGGED,
-        True,
-        1.0,
-        0.7,
-    ),
-    CloudType.ALTOCUMULUS: CloudTemplate(
-        600.0, (0.35, 0.5), (0.6, 1.0), 60.0, 5, (0.6, 0.9), TEX_PUFFY + TEX_RAGGED, True, 0.9, 0.25
-    ),
-    CloudType.CIRROCUMULUS: CloudTemplate(
-        500.0,
-        (0.3, 0.45),
-        (0.5, 1.0),
-        50.0,
-        4,
-        (0.7, 1.0),
-        TEX_WISPY + TEX_RAGGED,
-        False,
-        0.6,
-        0.05,
-    ),
-    CloudType.STRATOCUMULUS: CloudTemplate(
-        1000.0,
-        (0.5, 0.68),
-        (0.6, 1.0),
-        22.0,
-        6,
-        (0.6, 0.9),
-        TEX_RAGGED + TEX_PUFFY,
-        True,
-        0.95,
-        0.45,
-    ),
-    CloudType.STRATUS: _SLAB,
-    CloudType.NIMBOSTRATUS: CloudTemplate(
-        1000.0,
-        (0.65, 0.75),
-        (0.8, 1.0),
-        6.0,
-        4,
-        (0.85, 1.15),
-        TEX_FOG + TEX_RAGGED,
-        False,
-        1.0,
-        0.65,
-    ),
-    CloudType.ALTOSTRATUS: CloudTemplate(
-        1000.0, (0.62, 0.72), (0.7, 1.0), 5.0, 4, (0.9, 1.2), TEX_FOG, False, 0.75, 0.3
-    ),
-    CloudType.CIRRUS: CloudTemplate(
-        2000.0, (0.4, 0.6), (0.3, 1.0), 3.0, 4, (0.8, 1.2), TEX_WISPY, False, 0.55, 0.0
-    ),
-    CloudType.CIRROSTRATUS: CloudTemplate(
-        2000.0, (0.6, 0.72), (0.3, 1.0), 3.0, 5, (1.0, 1.3), TEX_WISPY + TEX_FOG, False, 0.45, 0.0
-    ),
-}
-
-
-def template_for(cloud_type: CloudType) -> CloudTemplate:
-    return TEMPLATES.get(cloud_type, _HEAPED)
-
-
-def occupied_fraction(cover_oktas: float) -> float:
-    """Share of a block's cells that hold a cloud for a cover in oktas."""
-    return min(1.0, cover_oktas / 8.0)
+    sprites: SpriteBatch  # (N,) opacity is the model's
+    cloud_rank: I32  # (N,) the sprite's cloud's place in the block's formation order
+    n_clouds: int
+    rank_offset: float  # 0..1, this block's share of a rank: spreads coarse models over blocks
+    spread_oktas: float  # cover change over which one cloud forms
 
 
 def layer_keys(layers: tuple[CloudLayer, ...]) -> tuple[int, ...]:
@@ -205,108 +73,137 @@ def block_seed(seed: int, layer_key: int, block_x: int, block_y: int) -> np.rand
 
 @functools.lru_cache(maxsize=4096)
 def block_clouds(
-    block_x: int, block_y: int, layer_key: int, layer: CloudLayer, seed: int
-) -> SpriteBatch:
-    """Sprites of one block in the layer's drifting frame: x, y absolute in that frame, z MSL.
-    layer_key comes from `layer_keys`."""
+    block_x: int, block_y: int, layer_key: int, model: CloudModel, thickness_m: float, seed: int
+) -> BlockClouds:
+    """All clouds of one block; layer_key comes from `layer_keys`, the model from
+    `CloudModels.for_layer`. Not the cover nor the base: the cache stays hot while they move."""
     rng = np.random.default_rng(block_seed(seed, layer_key, block_x, block_y))
-    tpl = template_for(layer.type)
-    cells_per_side = max(1, round(BLOCK_SIZE_M / tpl.cell_m))
-    cell_m = BLOCK_SIZE_M / cells_per_side
-    n_cells = cells_per_side * cells_per_side
-    # Draw every random number even for empty cells so a cover change keeps the other clouds.
-    order = rng.permutation(n_cells)
-    jitter = rng.uniform(-0.3, 0.3, size=(n_cells, 2))
-    radius_u = rng.uniform(size=n_cells)
-    height_u = rng.uniform(size=n_cells)
-    cloud_seeds = rng.integers(0, 2**63 - 1, size=n_cells)
-    # Round the expected cloud count up or down by the block's own coin, so a coarse template
-    # (one cumulonimbus cell per block) still shows its cover on average across blocks.
-    expected = occupied_fraction(layer.cover_oktas) * n_cells
-    n_clouds = int(expected) + int(rng.uniform() < expected - int(expected))
-    if n_clouds == 0:
-        return SpriteBatch.empty()
-    chosen = np.sort(order[:n_clouds])
-    full = layer.cover_oktas >= 7
-    r_lo, r_hi = tpl.radius_frac
-    if full:
-        # Overcast cells must overlap their neighbours or the sky shows a lattice of holes.
-        r_lo, r_hi = max(r_lo, 0.72), max(r_hi, 0.8)
-    batches = []
-    for cell in chosen:
-        cx = (cell % cells_per_side + 0.5 + jitter[cell, 0] * (0.3 if full else 1.0)) * cell_m
-        cy = (cell // cells_per_side + 0.5 + jitter[cell, 1] * (0.3 if full else 1.0)) * cell_m
-        radius = cell_m * (r_lo + (r_hi - r_lo) * radius_u[cell])
-        h_lo, h_hi = tpl.height_frac
-        height = layer.thickness_m * (h_lo + (h_hi - h_lo) * height_u[cell])
-        batches.append(
-            _cloud_sprites(
-                np.random.default_rng(int(cloud_seeds[cell])),
-                tpl,
-                (block_x * BLOCK_SIZE_M + cx, block_y * BLOCK_SIZE_M + cy, layer.base_m),
-                radius,
-                height,
-                int(cloud_seeds[cell]),
-            )
-        )
-    batch = SpriteBatch.concat(batches)
-    for arr in (batch.centre_m, batch.size_m, batch.rotation_rad, batch.texture):
-        arr.flags.writeable = False
-    return batch
-
-
-def _cloud_sprites(
-    rng: np.random.Generator,
-    tpl: CloudTemplate,
-    base_centre: tuple[float, float, float],
-    radius_m: float,
-    height_m: float,
-    cloud_id: int,
-) -> SpriteBatch:
-    area_km2 = math.pi * radius_m * radius_m / 1e6
-    n = max(tpl.min_sprites, round(tpl.sprites_per_km2 * area_km2))
-    size = radius_m * rng.uniform(*tpl.size_frac, size=n)
-    z_frac = rng.uniform(size=n)
-    if tpl.dome:
-        # Heaped clouds: sprites denser low, narrowing towards the top (a half-ellipsoid).
-        z_frac = z_frac**1.4
-        reach = np.sqrt(np.clip(1.0 - z_frac**2, 0.05, 1.0))
-    else:
-        reach = np.ones(n)
-    ang = rng.uniform(0.0, 2.0 * math.pi, size=n)
-    rad = np.sqrt(rng.uniform(size=n)) * reach * np.maximum(radius_m - 0.35 * size, 0.2 * radius_m)
-    x = base_centre[0] + rad * np.cos(ang)
-    y = base_centre[1] + rad * np.sin(ang)
-    # Keep sprite discs inside the layer: centres a third of a sprite from base and top, or
-    # the middle of a cloud too thin for that, never outside it.
-    margin = np.minimum(0.3 * size, 0.5 * height_m)
-    z_lo = base_centre[2] + margin
-    z_hi = base_centre[2] + height_m - margin
-    z = z_lo + (z_hi - z_lo) * z_frac
-    textures = np.asarray(tpl.textures, dtype=np.int32)[rng.integers(0, len(tpl.textures), size=n)]
-    if tpl.dome:
-        textures = np.where(z_frac < 0.12, TEX_FLAT_BOTTOM[0], textures).astype(np.int32)
-    rotation = rng.uniform(0.0, 2.0 * math.pi, size=n)
-    if tpl.dome:
-        # The flat-bottomed texture only works upright.
-        rotation = np.where(textures == TEX_FLAT_BOTTOM[0], 0.0, rotation)
-    # Shading groups: the octant of the sprite around the cloud's centre of mass (Wang's clumps).
-    centre = np.array([x.mean(), y.mean(), z.mean()])
-    offs = np.stack([x, y, z], axis=1) - centre
-    group = (offs[:, 0] > 0).astype(int) + 2 * (offs[:, 1] > 0) + 4 * (offs[:, 2] > 0)
-    group_dir = np.zeros((8, 3))
-    np.add.at(group_dir, group, offs)
-    norms = np.linalg.norm(group_dir, axis=1, keepdims=True)
-    group_dir = np.divide(group_dir, norms, out=np.zeros_like(group_dir), where=norms > 0)
-    return SpriteBatch(
-        centre_m=np.stack([x, y, z], axis=1),
-        size_m=size.astype(np.float32),
-        rotation_rad=rotation.astype(np.float32),
-        texture=textures,
-        height_frac=np.clip((z - base_centre[2]) / max(height_m, 1.0), 0.0, 1.0).astype(np.float32),
-        light_dir=group_dir[group].astype(np.float32),
-        opacity=np.full(n, tpl.opacity, np.float32),
-        darkness=np.full(n, tpl.darkness, np.float32),
-        cloud_id=np.full(n, cloud_id, np.int64),
-        core_frac=np.clip(rad / max(radius_m, 1.0), 0.0, 1.0).astype(np.float32),
+    per_side = max(1, round(BLOCK_SIZE_M / model.cell_m))
+    cell_m = BLOCK_SIZE_M / per_side
+    n = per_side * per_side
+    rank = np.empty(n, np.int32)
+    rank[rng.permutation(n)] = np.arange(n, dtype=np.int32)
+    rank_offset = float(rng.uniform())
+    jitter = rng.uniform(-1.0, 1.0, size=(n, 2)) * model.jitter_frac
+    width_m = cell_m * _lerp(model.width_frac, rng.uniform(size=n))  # (n,)
+    height_m = thickness_m * _lerp(model.height_frac, rng.uniform(size=n))  # (n,)
+    cloud_id = rng.integers(0, 2**63 - 1, size=n, dtype=np.int64)
+    cells = np.arange(n)
+    axis_m = np.stack(  # (n, 2) each cloud's axis in the drifting frame
+        [
+            block_x * BLOCK_SIZE_M + (cells % per_side + 0.5 + jitter[:, 0]) * cell_m,
+            block_y * BLOCK_SIZE_M + (cells // per_side + 0.5 + jitter[:, 1]) * cell_m,
+        ],
+        axis=1,
     )
+    parts = [_box_sprites(rng, box, axis_m, width_m, height_m) for box in model.boxes]
+    # Cloud-major order, boxes in file order within a cloud: the order Wang's cull walks.
+    per_cloud = sum(p.size.shape[1] for p in parts)
+    pos: F64 = np.concatenate([p.pos for p in parts], axis=1).reshape(-1, 3)
+    size: F64 = np.concatenate([p.size for p in parts], axis=1).reshape(-1)
+    rot: F64 = np.concatenate([p.rot for p in parts], axis=1).reshape(-1)
+    tex: I64 = np.concatenate([p.tex for p in parts], axis=1).reshape(-1)
+    group: I64 = np.concatenate([p.group for p in parts], axis=1).reshape(-1)
+    cloud: I64 = np.repeat(cells, per_cloud)
+    # Keep sprite discs inside the layer: centres a third of a sprite from base and top, or
+    # the middle of a layer too thin for that, never outside it.
+    margin = np.minimum(0.3 * size, 0.5 * thickness_m)
+    pos[:, 2] = np.clip(pos[:, 2], margin, thickness_m - margin)
+    keep = cull_mask(pos, model.cull_frac * size, cloud)
+    pos, size, rot = pos[keep], size[keep], rot[keep]
+    tex, group, cloud = tex[keep], group[keep], cloud[keep]
+    # The flat-bottomed texture only works upright.
+    rot = np.where(tex == TEX_FLAT_BOTTOM[0], 0.0, rot)
+    radial = np.hypot(pos[:, 0] - axis_m[cloud, 0], pos[:, 1] - axis_m[cloud, 1])
+    core = radial / np.maximum(0.5 * width_m[cloud], 1.0)
+    if model.grows_up:
+        # A heaped cloud's core is its low middle: it forms from the base up and dissipates
+        # from the top down, so a half-formed tower is a shorter tower, not a thin column.
+        core = np.maximum(core, pos[:, 2] / np.maximum(height_m[cloud], 1.0))
+    count = len(size)
+    sprites = SpriteBatch(
+        centre_m=pos,
+        size_m=size.astype(np.float32),
+        rotation_rad=rot.astype(np.float32),
+        texture=tex.astype(np.int32),
+        height_frac=np.clip(pos[:, 2] / np.maximum(height_m[cloud], 1.0), 0.0, 1.0).astype(
+            np.float32
+        ),
+        light_dir=_light_dirs(pos, group, cloud, n),
+        opacity=np.full(count, model.opacity, np.float32),
+        darkness=np.full(count, model.darkness, np.float32),
+        cloud_id=cloud_id[cloud],
+        core_frac=np.clip(core, 0.0, 1.0).astype(np.float32),
+        flat=np.full(count, model.flat, np.bool_),
+    )
+    for f in dataclasses.fields(sprites):
+        getattr(sprites, f.name).flags.writeable = False
+    return BlockClouds(sprites, rank[cloud], n, rank_offset, model.formation_spread_oktas)
+
+
+class _BoxDraw(NamedTuple):
+    """One box's sprites in every one of n clouds, k each."""
+
+    pos: F64  # (n, k, 3) centres, z above the layer base
+    size: F64  # (n, k)
+    rot: F64  # (n, k)
+    tex: I64  # (n, k) texture slots
+    group: I64  # (n, k) the box's shading group
+
+
+def _lerp(span: tuple[float, float], u: F64) -> F64:
+    return span[0] + (span[1] - span[0]) * u
+
+
+def _box_sprites(
+    rng: np.random.Generator, box: BoxTemplate, axis_m: F64, width_m: F64, height_m: F64
+) -> _BoxDraw:
+    """Draws the same numbers whatever the cover, so a cloud's shape never depends on it."""
+    n, k = int(axis_m.shape[0]), box.count
+    scale = np.stack([width_m, width_m, height_m], axis=1)  # (n, 3) cloud units to metres
+    extent = np.stack(
+        [_lerp(span, rng.uniform(size=n)) for span in (box.width, box.depth, box.height)], axis=1
+    )
+    extent_m = extent * scale  # (n, 3)
+    centre_m = np.asarray(box.centre) * scale
+    centre_m[:, :2] += axis_m
+    if box.sprites:
+        unit = rng.uniform(-0.5, 0.5, size=(n, k, 3))
+    else:
+        nx, ny = box.grid
+        gx, gy = np.meshgrid((np.arange(nx) + 0.5) / nx - 0.5, (np.arange(ny) + 0.5) / ny - 0.5)
+        unit = np.zeros((n, k, 3))
+        unit[:, :, 0] = gx.ravel()[None, :]
+        unit[:, :, 1] = gy.ravel()[None, :]
+        step = np.array([1.0 / nx, 1.0 / ny])
+        unit[:, :, :2] += rng.uniform(-1.0, 1.0, size=(n, k, 2)) * box.grid_jitter * step
+        unit[:, :, 2] = rng.uniform(-0.5, 0.5, size=(n, k))
+    pos = centre_m[:, None, :] + unit * extent_m[:, None, :]
+    size = width_m[:, None] * _lerp(box.sprite_size, rng.uniform(size=(n, k)))
+    rot = np.mod(np.radians(_lerp(box.rotation_deg, rng.uniform(size=(n, k)))), 2.0 * math.pi)
+    slots = np.asarray(box.textures, np.int64)
+    tex = slots[rng.integers(0, len(slots), size=(n, k))]
+    group = np.full((n, k), box.shading_group, np.int64)
+    return _BoxDraw(pos, size, rot, tex, group)
+
+
+def _light_dirs(pos: F64, group: I64, cloud: I64, n_clouds: int) -> F32:
+    """(N, 3) unit vector from each sprite's cloud centre to its shading group's centre (Wang:
+    sprites of a group shade as one clump); zero where the two coincide."""
+    count = np.bincount(cloud, minlength=n_clouds).astype(np.float64)
+    centroid = (
+        np.stack(
+            [np.bincount(cloud, weights=pos[:, a], minlength=n_clouds) for a in range(3)], axis=1
+        )
+        / np.maximum(count, 1.0)[:, None]
+    )
+    offs = pos - centroid[cloud]
+    octant = (offs[:, 0] > 0) + 2 * (offs[:, 1] > 0) + 4 * (offs[:, 2] > 0)
+    key = np.where(group > 0, group, _OCTANT_GROUP + octant) + cloud * _GROUP_KEYS
+    _, inverse = np.unique(key, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    sums = np.stack([np.bincount(inverse, weights=offs[:, a]) for a in range(3)], axis=1)
+    norms = np.linalg.norm(sums, axis=1, keepdims=True)
+    dirs = np.divide(sums, norms, out=np.zeros_like(sums), where=norms > 1e-9)
+    out: F32 = dirs[inverse].astype(np.float32)
+    return out

@@ -15,7 +15,8 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.camera import Camera
-from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds, layer_keys
+from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
+from wxsky.scene.formation import layer_block
 from wxsky.scene.ring import RingGeometry, bin_far_sprites
 from wxsky.scene.shading import sprite_colours
 from wxsky.scene.sky import SkyParams
@@ -117,9 +118,11 @@ def gather_blocks(
                 near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
                 d = math.hypot(near_x - qx, near_y - qy)
                 if min_range_m <= d < max_range_m:
-                    block = block_clouds(bx, by, key, layer, state.seed)
+                    # Cover only fades whole clouds in and out, so the cached generation
+                    # of the block is reused while the weather forms or dissipates it.
+                    block = layer_block(bx, by, key, layer, state.seed, (dx, dy))
                     if len(block):
-                        batches.append(block.shifted((dx, dy, 0.0)))
+                        batches.append(block)
     return SpriteBatch.concat(batches)
 
 

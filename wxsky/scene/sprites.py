@@ -1,0 +1,93 @@
+"""The sprite batch: every cloud sprite the scene hands on, as parallel arrays.
+
+Split out of `clouds.py` (which re-exports it) so the generator, formation and the layout
+stages share one type without importing each other.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+I32 = npt.NDArray[np.int32]
+I64 = npt.NDArray[np.int64]
+B = npt.NDArray[np.bool_]
+
+
+def _no_flags() -> B:
+    return np.zeros(0, np.bool_)
+
+
+@dataclass(frozen=True)
+class SpriteBatch:
+    """N cloud sprites as parallel arrays."""
+
+    centre_m: F64  # (N, 3) ENU
+    size_m: F32  # (N,) edge length of the square sprite
+    rotation_rad: F32  # (N,) in-plane turn: on screen, or about the vertical for flat sprites
+    texture: I32  # (N,) slot on the texture sheet
+    height_frac: F32  # (N,) 0 at the cloud's base .. 1 at its top: picks the colour level
+    light_dir: F32  # (N, 3) unit vector from the cloud centre to the sprite's shading group
+    opacity: F32  # (N,) 0..1: formation/dissipation and type transparency
+    darkness: F32  # (N,) 0..1: how grey the cloud type's base is (stratus, Cb)
+    cloud_id: I64  # (N,) the sprite's cloud, the same in every frame and process
+    # (N,) 0 core .. 1 edge: horizontal distance from the cloud's axis over its radius, or for
+    # heaped clouds (cumulus, Cb) the larger of that and the height over the cloud's height.
+    core_frac: F32
+    # (N,) True: a horizontal quad in the layer (cirrus family), edge size_m, its texture's
+    # u axis turned rotation_rad from east toward north; False: a camera-facing sprite.
+    # Batches built without it (older callers) are all camera-facing.
+    flat: B = field(default_factory=_no_flags)
+
+    def __post_init__(self) -> None:
+        n = int(self.size_m.shape[0])
+        if self.flat.shape[0] != n:
+            if self.flat.shape[0] != 0:
+                raise ValueError(f"flat has {self.flat.shape[0]} entries for {n} sprites")
+            object.__setattr__(self, "flat", np.zeros(n, np.bool_))
+
+    def __len__(self) -> int:
+        return int(self.size_m.shape[0])
+
+    def take(self, index: npt.NDArray[np.intp] | B) -> SpriteBatch:
+        return SpriteBatch(**{f.name: getattr(self, f.name)[index] for f in _FIELDS})
+
+    def shifted(self, offset_m: tuple[float, float, float]) -> SpriteBatch:
+        return dataclasses.replace(
+            self, centre_m=self.centre_m + np.asarray(offset_m, dtype=np.float64)
+        )
+
+    @staticmethod
+    def empty() -> SpriteBatch:
+        return SpriteBatch(
+            centre_m=np.zeros((0, 3)),
+            size_m=np.zeros(0, np.float32),
+            rotation_rad=np.zeros(0, np.float32),
+            texture=np.zeros(0, np.int32),
+            height_frac=np.zeros(0, np.float32),
+            light_dir=np.zeros((0, 3), np.float32),
+            opacity=np.zeros(0, np.float32),
+            darkness=np.zeros(0, np.float32),
+            cloud_id=np.zeros(0, np.int64),
+            core_frac=np.zeros(0, np.float32),
+            flat=np.zeros(0, np.bool_),
+        )
+
+    @staticmethod
+    def concat(batches: list[SpriteBatch]) -> SpriteBatch:
+        batches = [b for b in batches if len(b)]
+        if not batches:
+            return SpriteBatch.empty()
+        if len(batches) == 1:
+            return batches[0]
+        return SpriteBatch(
+            **{f.name: np.concatenate([getattr(b, f.name) for b in batches]) for f in _FIELDS}
+        )
+
+
+_FIELDS = dataclasses.fields(SpriteBatch)
