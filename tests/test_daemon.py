@@ -194,3 +194,15 @@ def test_client_reports_a_missing_daemon(tmp_path: Path) -> None:
 
     with pytest.raises(WxskyError, match="cannot connect"):
         ControlClient.connect(f"unix:{tmp_path / 'nobody.sock'}")
+
+
+def test_frame_notifications_say_whether_the_camera_is_in_cloud(tmp_path: Path) -> None:
+    with running_daemon(tmp_path) as d, d.client() as c:
+        c.subscribe(["frame"])
+        note = c.next_notification(timeout_s=10.0)
+        while note is not None and note.method != "frame":
+            note = c.next_notification(timeout_s=10.0)
+        assert note is not None
+        # On the ground under fair cumulus: out of cloud, so no in-cloud visibility.
+        assert note.params["in_cloud"] is False
+        assert note.params["in_cloud_visibility_m"] is None

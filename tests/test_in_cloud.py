@@ -5,14 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.in_cloud import (
     LOCK_FRAC,
     NO_LOCKS,
     VISIBILITY_CORE_M,
+    Locks,
     in_cloud,
     lock_facing,
 )
+from wxsky.scene.layout import FrameScene, SceneSettings, build_frame, zero_drift
+from wxsky.scene.sky import sky_params
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
 
 def batch(centres: list[tuple[float, float, float]], size_m: float = 400.0) -> SpriteBatch:
@@ -82,3 +87,52 @@ def test_empty_batch_is_outside() -> None:
     empty = SpriteBatch.empty()
     assert not in_cloud(empty, (0.0, 0.0, 0.0), 1000.0).inside
     assert lock_facing(empty, (0.0, 0.0, 0.0), NO_LOCKS) == (None, NO_LOCKS)
+
+
+# -- through the layout stage ---------------------------------------------------------
+
+
+def _frame(eye: tuple[float, float, float], locks: Locks = NO_LOCKS) -> FrameScene:
+    state = WeatherState(layers=(CloudLayer(8.0, 1000.0, 1600.0, CloudType.STRATUS),), wind=())
+    camera = Camera(position_m=eye)
+    # The ring centre stays put, as it does between ring rebuilds.
+    return build_frame(
+        state,
+        zero_drift(state),
+        camera,
+        (0.0, 0.0, 1300.0),
+        sky_params(state),
+        SceneSettings(),
+        locks=locks,
+    )
+
+
+def test_a_camera_inside_a_deck_is_in_cloud_and_locks_sprites() -> None:
+    # Fly to 20 m from one sprite's centre, well inside half its radius.
+    first = _frame((0.0, 0.0, 1300.0))
+    assert first.in_cloud.inside
+    target = first.near.sprites.centre_m[len(first.near) // 2]
+    eye = (float(target[0]), float(target[1]) + 20.0, float(target[2]))
+    inside = _frame(eye)
+    assert inside.in_cloud.inside
+    assert inside.in_cloud.visibility_m is not None and inside.in_cloud.visibility_m < 600.0
+    assert inside.locks
+    assert inside.near.normals is not None
+    locked = np.linalg.norm(inside.near.normals, axis=1) > 0.5
+    assert 0 < int(locked.sum()) < len(inside.near)
+    # The next frame, a little farther on, keeps the same sprites locked.
+    later = _frame((eye[0], eye[1] + 30.0, eye[2]), inside.locks)
+    assert set(inside.locks) <= set(later.locks)
+    below = _frame((0.0, 0.0, 200.0))
+    assert not below.in_cloud.inside and not below.locks
+
+
+def test_flat_cirrus_lies_in_its_layer() -> None:
+    state = WeatherState(layers=(CloudLayer(6.0, 9000.0, 9800.0, CloudType.CIRRUS),), wind=())
+    eye = (0.0, 0.0, 500.0)
+    frame = build_frame(
+        state, zero_drift(state), Camera(position_m=eye), eye, sky_params(state), SceneSettings()
+    )
+    assert len(frame.near) > 0 and frame.near.sprites.flat.all()
+    assert frame.near.normals is not None
+    assert np.allclose(frame.near.normals, (0.0, 0.0, 1.0))

@@ -439,6 +439,7 @@ class Daemon:
                 "ring_version": meta.ring_version,
                 "camera": camera_to_dict(meta.camera),
                 "sun_direction_enu": list(meta.sun_direction_enu),
+                **plan.frame.in_cloud.to_dict(),
             },
         )
 

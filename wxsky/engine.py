@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 
 from wxsky.scene.camera import Camera
+from wxsky.scene.in_cloud import NO_LOCKS, Locks
 from wxsky.scene.layout import (
     Drift,
     FrameScene,
@@ -99,6 +100,7 @@ class SkyEngine:
         self._ring_state: WeatherState | None = None
         self._ring_sun_dir: tuple[float, float, float] = (0.0, 0.0, 1.0)
         self._ring_version = 0
+        self._locks: Locks = NO_LOCKS  # in-cloud facing locks, carried frame to frame
         self.weather_version = 0  # bumped when the applied weather or the target changes
         self.target_version = 0  # bumped when the target (or the clock, set from outside) changes
 
@@ -278,7 +280,9 @@ class SkyEngine:
             sky,
             self.settings,
             ring_drift=ring.drift,
+            locks=self._locks,
         )
+        self._locks = frame.locks
         return FramePlan(state, frame, ring, self._ring_version, changed)
 
     def run_weather(self, duration_s: float) -> WeatherState:

@@ -9,7 +9,7 @@ live in a frame moved by the integrated wind, so the clouds travel but never cha
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +17,7 @@ import numpy.typing as npt
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
+from wxsky.scene.in_cloud import NO_LOCKS, OUTSIDE, InCloud, Locks, in_cloud, lock_facing
 from wxsky.scene.ring import RingGeometry, bin_far_sprites
 from wxsky.scene.shading import sprite_colours
 from wxsky.scene.sky import SkyParams
@@ -59,6 +60,9 @@ class FrameScene:
     camera: Camera
     sky: SkyParams
     near: SpriteDraw
+    in_cloud: InCloud = OUTSIDE
+    # in-cloud facing locks to carry into the next frame
+    locks: Locks = field(default_factory=lambda: NO_LOCKS)
 
 
 def zero_drift(state: WeatherState) -> Drift:
@@ -158,6 +162,24 @@ def shade_for_eye(
     return SpriteDraw(ordered, rgba)
 
 
+def oriented(
+    draw: SpriteDraw, eye_m: tuple[float, float, float], locks: Locks = NO_LOCKS
+) -> tuple[SpriteDraw, Locks]:
+    """The draw with each sprite's normal: flat ones lie in their layer (normal up), sprites
+    the eye is inside keep the facing they locked with, the rest face the camera."""
+    sprites = draw.sprites
+    flat = sprites.flat
+    standing = sprites.take(~flat) if flat.any() else sprites
+    lock_normals, kept = lock_facing(standing, eye_m, locks)
+    if not flat.any() and lock_normals is None:
+        return draw, kept
+    normals = np.zeros((len(sprites), 3), np.float32)
+    normals[flat] = (0.0, 0.0, 1.0)
+    if lock_normals is not None:
+        normals[~flat] = lock_normals
+    return SpriteDraw(sprites, draw.rgba, normals), kept
+
+
 def build_ring(
     state: WeatherState,
     drift: Drift,
@@ -167,7 +189,9 @@ def build_ring(
 ) -> RingScene:
     far = gather_blocks(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m)
     geometry, bins = bin_far_sprites(far, centre_m, settings.ring_radius_m)
-    impostors = tuple(shade_for_eye(b, centre_m, sky, settings.max_range_m) for b in bins)
+    impostors = tuple(
+        oriented(shade_for_eye(b, centre_m, sky, settings.max_range_m), centre_m)[0] for b in bins
+    )
     return RingScene(geometry=geometry, impostors=impostors, drift=drift)
 
 
@@ -179,12 +203,18 @@ def build_frame(
     sky: SkyParams,
     settings: SceneSettings,
     ring_drift: Drift | None = None,
+    locks: Locks = NO_LOCKS,
 ) -> FrameScene:
+    """The near sprites for the camera; `locks` are the previous frame's in-cloud locks."""
     near = gather_blocks(
         state, drift, ring_centre_m, 0.0, settings.ring_radius_m, select_drift=ring_drift
     )
+    eye = camera.position_m
+    draw, kept = oriented(shade_for_eye(near, eye, sky, settings.max_range_m), eye, locks)
     return FrameScene(
         camera=camera,
         sky=sky,
-        near=shade_for_eye(near, camera.position_m, sky, settings.max_range_m),
+        near=draw,
+        in_cloud=in_cloud(near, eye, state.visibility_m),
+        locks=kept,
     )
