@@ -44,6 +44,7 @@ from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
 from wxsky.scene.camera import Camera
+from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.ring import RING_SIZE
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
@@ -101,6 +102,9 @@ class Daemon:
             _parse(config.output.control) if config.output.control else default_address()
         )
         self.preview_dir = preview_dir
+        # Read the cloud models now: a broken model file stops the start with its name and
+        # key, not the first frame.
+        default_models()
         # Presets are the base; a METAR given on the command line is the METAR source, so a
         # feed's reports replace it and a control override beats it.
         state = WeatherState()
