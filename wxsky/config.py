@@ -20,6 +20,7 @@ from typing import Any, ClassVar, TypeVar
 
 from wxsky.errors import ConfigError, WxskyError
 from wxsky.scene.layout import SceneSettings
+from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
 from wxsky.weather.cockpit import ALL_GROUPS
 from wxsky.weather.transition import TransitionRates
 
@@ -109,6 +110,7 @@ class SceneSection(_Section):
         BLOCK_SIZE_M,
         _Rule(fixed_reason="the cloud field is generated in 4 km blocks by design"),
     )
+    shading: str = _opt(DEFAULT_SHADING, _Rule(choices=SHADING_MODELS))
 
     def settings(self) -> SceneSettings:
         """The scene stage's view of this section."""
@@ -116,6 +118,7 @@ class SceneSection(_Section):
             ring_radius_m=self.ring_radius_m,
             max_range_m=self.max_range_m,
             ring_texture_px=self.ring_texture_px,
+            shading=self.shading,
         )
 
 

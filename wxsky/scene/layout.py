@@ -19,7 +19,7 @@ from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
 from wxsky.scene.in_cloud import NO_LOCKS, OUTSIDE, InCloud, Locks, in_cloud, lock_facing
 from wxsky.scene.ring import RingGeometry, bin_far_sprites
-from wxsky.scene.shading import sprite_colours
+from wxsky.scene.shading import DEFAULT_SHADING, ParticleLight, prepare_lighting, sprite_colours
 from wxsky.scene.sky import SkyParams
 from wxsky.weather.state import WeatherState
 
@@ -31,6 +31,7 @@ class SceneSettings:
     ring_radius_m: float = 8000.0
     max_range_m: float = 40000.0
     ring_texture_px: int = 256
+    shading: str = DEFAULT_SHADING  # "wang" or "harris" (wxsky.scene.shading)
 
 
 @dataclass(frozen=True)
@@ -155,11 +156,17 @@ def fade_by_range(
 
 
 def shade_for_eye(
-    batch: SpriteBatch, eye_m: tuple[float, float, float], sky: SkyParams, max_range_m: float
+    batch: SpriteBatch,
+    eye_m: tuple[float, float, float],
+    sky: SkyParams,
+    max_range_m: float,
+    shading: str = DEFAULT_SHADING,
+    light: ParticleLight | None = None,
 ) -> SpriteDraw:
+    """`light`: a precompute (`prepare_lighting`) of a batch holding these sprites."""
     ordered = sort_back_to_front(batch, eye_m)
-    rgba = fade_by_range(sprite_colours(ordered, sky), ordered, eye_m, sky, max_range_m)
-    return SpriteDraw(ordered, rgba)
+    rgba = sprite_colours(ordered, sky, eye_m, shading, light)
+    return SpriteDraw(ordered, fade_by_range(rgba, ordered, eye_m, sky, max_range_m))
 
 
 def oriented(
@@ -189,8 +196,14 @@ def build_ring(
 ) -> RingScene:
     far = gather_blocks(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m)
     geometry, bins = bin_far_sprites(far, centre_m, settings.ring_radius_m)
+    # Light the far clouds whole, before the bins cut those that straddle two impostors.
+    light = prepare_lighting(far, sky, settings.shading)
     impostors = tuple(
-        oriented(shade_for_eye(b, centre_m, sky, settings.max_range_m), centre_m)[0] for b in bins
+        oriented(
+            shade_for_eye(b, centre_m, sky, settings.max_range_m, settings.shading, light),
+            centre_m,
+        )[0]
+        for b in bins
     )
     return RingScene(geometry=geometry, impostors=impostors, drift=drift)
 
@@ -210,7 +223,8 @@ def build_frame(
         state, drift, ring_centre_m, 0.0, settings.ring_radius_m, select_drift=ring_drift
     )
     eye = camera.position_m
-    draw, kept = oriented(shade_for_eye(near, eye, sky, settings.max_range_m), eye, locks)
+    shaded = shade_for_eye(near, eye, sky, settings.max_range_m, settings.shading)
+    draw, kept = oriented(shaded, eye, locks)
     return FrameScene(
         camera=camera,
         sky=sky,

@@ -1,40 +1,55 @@
-"""Wang's artist shading: colour levels by height in the cloud, time-of-day ambient, and a
-directional term per shading group. No scattering is simulated (Wang, "Every Cloud Has a
-Silver Lining")."""
+"""Cloud shading, by model: Wang's artist model (`shading_wang`) or Harris's multiple forward
+scattering (`shading_harris`, `scattering`). Both light every sprite from dawn to night from
+the same SkyParams; `[scene] shading` picks one.
+
+Harris's model has an eye-independent part (the light reaching each particle) that the ring
+computes once for all its far sprites (`prepare_lighting`), before they are cut into the eight
+impostor bins, so a cloud straddling two impostors is shaded as one cloud in both.
+"""
 
 from __future__ import annotations
 
-import numpy as np
-import numpy.typing as npt
-
-from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.shading_harris import ParticleLight, harris_colours, particle_light, scene_lights
+from wxsky.scene.shading_wang import wang_colours
 from wxsky.scene.sky import SkyParams
+from wxsky.scene.sprites import F32, SpriteBatch
 
-# Five colour levels from the cloud's base (0) to its top (1): darker bottoms.
-LEVEL_HEIGHTS = np.array([0.0, 0.2, 0.45, 0.75, 1.0])
-LEVEL_RGB = np.array(
-    [
-        [0.50, 0.53, 0.60],
-        [0.62, 0.65, 0.71],
-        [0.76, 0.78, 0.82],
-        [0.86, 0.87, 0.90],
-        [0.93, 0.93, 0.95],
-    ]
-)
-DIRECTIONAL_MIN, DIRECTIONAL_MAX = 0.05, 0.45
+SHADING_MODELS = ("wang", "harris")
+# Harris by default: self-shadowed cumulus with grey bases and silver-lined rims, at a few
+# milliseconds a frame for the near sprites (none while the sun stands still; see
+# shading_harris's cache); "wang" is the lighter fallback.
+DEFAULT_SHADING = "harris"
+
+__all__ = [
+    "DEFAULT_SHADING",
+    "SHADING_MODELS",
+    "ParticleLight",
+    "prepare_lighting",
+    "sprite_colours",
+]
 
 
-def sprite_colours(batch: SpriteBatch, sky: SkyParams) -> npt.NDArray[np.float32]:
-    """(N, 4) straight-alpha RGBA for each sprite."""
-    level = np.stack(
-        [np.interp(batch.height_frac, LEVEL_HEIGHTS, LEVEL_RGB[:, c]) for c in range(3)], axis=1
-    )
-    # Grey cloud types pull the lower levels down more than the tops.
-    grey = 1.0 - batch.darkness[:, None] * 0.55 * (1.0 - 0.6 * batch.height_frac[:, None])
-    ambient = level * grey * sky.ambient
-    sun = np.asarray(sky.sun.direction_enu)
-    facing = np.clip(batch.light_dir @ sun, -1.0, 1.0)
-    amount = DIRECTIONAL_MIN + (DIRECTIONAL_MAX - DIRECTIONAL_MIN) * (0.5 + 0.5 * facing)
-    directional = amount[:, None] * np.asarray(sky.sun_rgb)[None, :]
-    rgb = np.clip(ambient + directional * (1.0 - 0.5 * batch.darkness[:, None]), 0.0, 1.0)
-    return np.concatenate([rgb, batch.opacity[:, None]], axis=1).astype(np.float32)
+def prepare_lighting(batch: SpriteBatch, sky: SkyParams, model: str) -> ParticleLight | None:
+    """The model's eye-independent precompute for the batch (None for Wang, who has none)."""
+    _check(model)
+    return particle_light(batch, scene_lights(sky)) if model == "harris" else None
+
+
+def sprite_colours(
+    batch: SpriteBatch,
+    sky: SkyParams,
+    eye_m: tuple[float, float, float],
+    model: str = DEFAULT_SHADING,
+    light: ParticleLight | None = None,
+) -> F32:
+    """(N, 4) straight-alpha RGBA for each sprite seen from eye_m. `light` is a precompute
+    from `prepare_lighting` over these sprites or a batch holding them."""
+    _check(model)
+    if model == "harris":
+        return harris_colours(batch, sky, eye_m, light)
+    return wang_colours(batch, sky)
+
+
+def _check(model: str) -> None:
+    if model not in SHADING_MODELS:
+        raise ValueError(f"shading must be one of {', '.join(SHADING_MODELS)}, got {model!r}")

@@ -1,0 +1,231 @@
+"""Harris's cloud shading for sprites: light reaching each particle from the sun (or the moon)
+and a few skylights, precomputed by multiple forward scattering (`scattering.incident_light`),
+then scattered toward the eye through the phase function at render time (eq. 9).
+
+The precompute depends on the sprites and the light directions only, so it is kept per batch
+of particles in a small cache keyed by the batch's content; a sprite finds its light by its
+identity (`particle_keys`), so a ring impostor's bin reads the light its whole cloud received.
+Light directions are rounded to 0.001 (0.06°) before use, so a slowly moving sun reuses the
+precompute for half a minute of simulated time and the result never depends on the cache.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.scattering import ALBEDO, HG_G, hg_phase, incident_light
+from wxsky.scene.sky import SkyParams
+from wxsky.scene.sprites import F32, F64, SpriteBatch
+
+U64 = npt.NDArray[np.uint64]
+
+TAU_PER_SPRITE = 2.0  # optical depth through a fully formed sprite's centre
+DARK_TAU = 1.0  # grey types (stratus, Cb: darkness 0.5-0.7) are this much denser per darkness
+SHADOW_REACH = 0.55  # a sprite's shadow radius over its edge: its texture is soft to the rim
+# Harris's forward-only scattering drops the light that many scattering events send back to a
+# sun-facing eye (why a cloud's sunlit side is white); he adds an ambient term for it. We add it
+# as an isotropic share of the eye phase function: 4 pi p = (1 - w) 4 pi p_HG + w.
+DIFFUSE_SHARE = 0.6
+OCTAVES, OCTAVE_GAIN = 3, 0.5  # see multiple_scattering
+EXPOSURE = 2.8  # radiance to display: 1 - exp(-EXPOSURE L) keeps 0..1, rolls off highlights
+# Skylights (Harris 2.3.1): the zenith and three points a quarter up the sky, one on the sun's
+# side and two away from it, so sky-lit shadow sides are not black.
+SKY_ELEVATION_DEG = 25.0
+SKY_AZIMUTHS_DEG = (0.0, 120.0, 240.0)  # from the sun's azimuth
+SKY_GAIN = (0.22, 0.14, 0.14, 0.14)  # zenith, then the three; of the sky colour there
+SKY_SATURATION = 0.5  # see _greyer
+SKY_HORIZON_MIX = 0.6  # the low skylights take this much of the horizon colour
+MOON_TAKES_OVER_DEG = -3.0  # sun elevation below which the moon is the key light
+MOONLIGHT_GAIN = 0.12  # moonlight on clouds, per the sky pass's moon colour, at full moon
+# Starlight, airglow and the glow of towns: clouds at night are dark, never black.
+NIGHT_FLOOR_RGB = np.array([0.014, 0.016, 0.022])
+AMBIENT_SHARE = 0.12  # Harris's small ambient term, of the mean sky colour
+_QUANTUM = 1e-3
+_CACHE_SIZE = 8
+
+
+@dataclass(frozen=True)
+class Lights:
+    """The lights a batch is shaded with: the key light (sun or moon) first, then the sky."""
+
+    directions: F64  # (L, 3) unit vectors towards each light, rounded to _QUANTUM
+    rgb: F64  # (L, 3) each light's colour and strength
+    ambient_rgb: F64  # (3,)
+
+
+@dataclass(frozen=True)
+class ParticleLight:
+    """Precomputed light per particle, found by particle identity."""
+
+    keys: U64  # (M,) sorted
+    incident: F32  # (M, L) share of each light reaching the particle, in key order
+    directions: F64  # (L, 3) the light directions it was computed for
+
+    def lookup(self, batch: SpriteBatch) -> F32 | None:
+        """(N, L) for the batch's sprites, or None if one of them was not in the precompute."""
+        keys = particle_keys(batch)
+        if len(self.keys) == 0:
+            return None if len(keys) else np.zeros((0, len(self.directions)), np.float32)
+        pos = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
+        if not np.array_equal(self.keys[pos], keys):
+            return None
+        out: F32 = self.incident[pos]
+        return out
+
+
+def scene_lights(sky: SkyParams) -> Lights:
+    """The key light, four skylights and the ambient term for this sky."""
+    sun_el = sky.sun.elevation_deg
+    if sun_el > MOON_TAKES_OVER_DEG:
+        key_dir, key_rgb = np.asarray(sky.sun.direction_enu), np.asarray(sky.sun_rgb)
+    else:
+        # The sky pass's moon colour is for a disc seen in the sky; fade it in as the sun's
+        # light has gone (sun_rgb is 0 below -2°), so the key light never jumps.
+        night = _smoothstep(MOON_TAKES_OVER_DEG, MOON_TAKES_OVER_DEG - 5.0, sun_el)
+        key_dir = np.asarray(sky.moon.direction_enu)
+        gain = MOONLIGHT_GAIN * sky.moon.illuminated_fraction * night
+        key_rgb = np.asarray(sky.moon_rgb) * gain
+    zenith, horizon = _greyer(np.asarray(sky.zenith_rgb)), _greyer(np.asarray(sky.horizon_rgb))
+    low = zenith + (horizon - zenith) * SKY_HORIZON_MIX
+    dirs = [key_dir, np.array([0.0, 0.0, 1.0])]
+    rgbs = [key_rgb, zenith * SKY_GAIN[0]]
+    el = math.radians(SKY_ELEVATION_DEG)
+    for offset, gain in zip(SKY_AZIMUTHS_DEG, SKY_GAIN[1:], strict=True):
+        az = math.radians(sky.sun.azimuth_deg + offset)
+        horizontal = np.array([math.sin(az), math.cos(az), 0.0]) * math.cos(el)
+        dirs.append(horizontal + np.array([0.0, 0.0, math.sin(el)]))
+        rgbs.append(low * gain)
+    ambient = NIGHT_FLOOR_RGB + AMBIENT_SHARE * 0.5 * (zenith + horizon)
+    return Lights(_quantised(np.stack(dirs)), np.stack(rgbs), ambient)
+
+
+def particle_light(batch: SpriteBatch, lights: Lights) -> ParticleLight:
+    """The precompute for a whole batch, cached by its content and the light directions."""
+    all_keys = particle_keys(batch)
+    canon = np.lexsort((all_keys, batch.cloud_id))
+    cid = batch.cloud_id[canon]
+    starts = np.flatnonzero(np.r_[True, cid[1:] != cid[:-1]]) if len(cid) else np.zeros(0, int)
+    counts = np.diff(np.r_[starts, len(cid)])
+    centre = batch.centre_m[canon]
+    # Relative to each cloud's first sprite, to the centimetre: the layer's drift moves every
+    # sprite of a cloud alike and must not miss the cache, nor change the result.
+    rel = np.round((centre - np.repeat(centre[starts], counts, axis=0)) * 100.0) / 100.0
+    tau = tau_of(batch)[canon]
+    radius = (SHADOW_REACH * batch.size_m[canon]).astype(np.float32)
+    keys = all_keys[canon]
+    h = hashlib.blake2b(digest_size=16)
+    for arr in (cid, keys, rel, tau, radius, lights.directions):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    digest = h.digest()
+    with _LOCK:
+        hit = _CACHE.get(digest)
+        if hit is not None:
+            _CACHE.move_to_end(digest)
+            return hit
+    incident = incident_light(rel, radius, tau, cid, lights.directions)
+    by_key = np.argsort(keys, kind="stable")
+    out = ParticleLight(keys[by_key], incident[by_key], lights.directions)
+    with _LOCK:
+        _CACHE[digest] = out
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return out
+
+
+def harris_colours(
+    batch: SpriteBatch,
+    sky: SkyParams,
+    eye_m: tuple[float, float, float],
+    light: ParticleLight | None = None,
+) -> F32:
+    """(N, 4) straight-alpha RGBA: each sprite's light scattered toward the eye (eq. 9). The
+    renderer's back-to-front blending is eq. 9's recurrence, with alpha as 1 - T."""
+    lights = scene_lights(sky)
+    incident = None
+    if light is not None and np.array_equal(light.directions, lights.directions):
+        incident = light.lookup(batch)
+    if incident is None:
+        incident = particle_light(batch, lights).lookup(batch)
+        assert incident is not None  # the batch's own precompute holds every sprite
+    incident = multiple_scattering(incident)
+    view = batch.centre_m - np.asarray(eye_m, np.float64)  # (N, 3)
+    dist = np.linalg.norm(view, axis=1, keepdims=True)
+    view = np.divide(view, dist, out=np.zeros_like(view), where=dist > 1e-6)
+    # Phase angle: between the light's travel and the way to the eye, i.e. between the
+    # direction to the light and the view ray: cos 1 with the sprite right before the sun.
+    cos = view @ lights.directions.T  # (N, L)
+    phase = (1.0 - DIFFUSE_SHARE) * 4.0 * math.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
+    radiance = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb  # (N, 3)
+    # Exposure on the brightest channel, the others in proportion: a sunset-lit rim stays
+    # orange instead of washing out to white as every channel saturates.
+    peak = np.maximum(radiance.max(axis=1, keepdims=True), 1e-6)
+    rgb = radiance * ((1.0 - np.exp(-EXPOSURE * peak)) / peak)
+    return np.concatenate([rgb, batch.opacity[:, None]], axis=1).astype(np.float32)
+
+
+def multiple_scattering(incident: F32) -> F32:
+    """Light inside a cloud that has been scattered many times, in every direction, fades
+    far more slowly with depth than the forward beam. Harris has only the beam; we add
+    Wrenninge's octaves (each half as strong and half as attenuated as the one before) on
+    its optical depth L = -ln I: I' = sum_i a^i exp(-b^i L) / sum_i a^i."""
+    i = np.clip(incident, 0.0, 1.0)
+    out = np.zeros_like(i)
+    for k in range(OCTAVES):
+        out += OCTAVE_GAIN**k * i ** (OCTAVE_GAIN**k)
+    out /= sum(OCTAVE_GAIN**k for k in range(OCTAVES))
+    return out
+
+
+def tau_of(batch: SpriteBatch) -> F32:
+    """(N,) optical depth per sprite: forming clouds (low opacity) let more light through."""
+    out: F32 = (TAU_PER_SPRITE * batch.opacity * (1.0 + DARK_TAU * batch.darkness)).astype(
+        np.float32
+    )
+    return out
+
+
+def particle_keys(batch: SpriteBatch) -> U64:
+    """(N,) a 64-bit identity per sprite from what never changes with drift, eye or cover:
+    its cloud, size, height in the cloud, rotation and texture."""
+    k = batch.cloud_id.astype(np.int64).view(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+    for arr, mul in (
+        (np.asarray(batch.size_m, np.float32), 0xC2B2AE3D27D4EB4F),
+        (np.asarray(batch.height_frac, np.float32), 0x165667B19E3779F9),
+        (np.asarray(batch.rotation_rad, np.float32), 0xD6E8FEB86659FD93),
+        (np.asarray(batch.texture, np.int32), 0xFF51AFD7ED558CCD),
+    ):
+        bits = np.ascontiguousarray(arr).view(np.uint32).astype(np.uint64)
+        k = (k ^ (bits * np.uint64(mul))) * np.uint64(0x94D049BB133111EB)
+        k ^= k >> np.uint64(31)
+    out: U64 = k
+    return out
+
+
+def _greyer(rgb: F64) -> F64:
+    """Sky colour as it lights a cloud: light scattered many times inside the cloud mixes
+    sky and sun, so the blue of the sky tints shadow sides less than it colours the sky."""
+    grey = float(rgb @ np.array([0.2126, 0.7152, 0.0722]))
+    out: F64 = grey + (rgb - grey) * SKY_SATURATION
+    return out
+
+
+def _quantised(dirs: F64) -> F64:
+    q = np.round(dirs / _QUANTUM) * _QUANTUM
+    out: F64 = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return out
+
+
+def _smoothstep(lo: float, hi: float, x: float) -> float:
+    t = min(1.0, max(0.0, (x - lo) / (hi - lo)))
+    return t * t * (3.0 - 2.0 * t)
+
+
+_CACHE: OrderedDict[bytes, ParticleLight] = OrderedDict()
+_LOCK = threading.Lock()
