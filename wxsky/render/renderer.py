@@ -18,7 +18,7 @@ from wxsky.errors import RenderError
 from wxsky.render import sky_textures
 from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.shaders import ShaderLibrary
-from wxsky.render.sprite_sheet import build_sheet
+from wxsky.render.sprite_sheet import load_sheet
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
 from wxsky.scene.ring import RING_SIZE
@@ -71,9 +71,14 @@ class Renderer:
         self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
         self._sprite_prog = self.shaders.program("sprites.glsl", defines)
         self._upsample_prog = self.shaders.program("upsample.glsl")
-        sheet = build_sheet()
-        self._sheet = self.ctx.texture((sheet.shape[1], sheet.shape[0]), 4, sheet.tobytes())
-        self._sheet.build_mipmaps(0, 4)  # 512 down to 32, as Wang's sheet
+        levels = load_sheet()  # 512 down to 32, as Wang's sheet
+        size = (levels[0].shape[1], levels[0].shape[0])
+        self._sheet = self.ctx.texture(size, 4, levels[0].tobytes())
+        # This allocates the chain and stops it at 32 px; the shipped levels then replace GL's,
+        # which average straight colour and would darken the soft edges.
+        self._sheet.build_mipmaps(0, len(levels) - 1)
+        for i, level in enumerate(levels[1:], start=1):
+            self._sheet.write(level.tobytes(), level=i)
         self._sheet.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self._sheet.repeat_x = self._sheet.repeat_y = False
         corners = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype=np.float32)
