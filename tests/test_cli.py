@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import tomllib
+from datetime import datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -164,12 +166,16 @@ def test_scattered_cumulus_leaves_blue_sky(tmp_path: Path) -> None:
 
 
 @pytest.mark.gl
-def test_snapshot_layers_are_byte_identical_across_processes(tmp_path: Path) -> None:
+@pytest.mark.parametrize("time", [None, "2026-07-08T12:30:00Z"], ids=["preset-time", "drifted"])
+def test_snapshot_layers_are_byte_identical_across_processes(
+    tmp_path: Path, time: str | None
+) -> None:
     runs = []
     for n in range(2):
         out = tmp_path / f"run{n}"
         wxsky(
             "snapshot",
+            *(("--time", time) if time else ()),
             "--preset",
             "broken-stratocumulus",
             "--size",
@@ -191,3 +197,30 @@ def test_snapshot_layers_are_byte_identical_across_processes(tmp_path: Path) -> 
     # And the layers hold something: clouds in the near layer and in several impostors.
     assert read_png(runs[0] / "near.png")[..., 3].max() > 0
     assert sum(read_png(runs[0] / f"ring_{i}.png")[..., 3].max() > 0 for i in range(8)) >= 4
+
+
+def test_a_later_time_shows_the_clouds_blown_on(tmp_path: Path) -> None:
+    preset_time = tomllib.loads(
+        (Path(__file__).resolve().parents[1] / "configs/presets/fair-cumulus.toml").read_text()
+    )["time_utc"]
+    base = datetime.fromisoformat(preset_time.replace("Z", "+00:00"))
+    later = (base + timedelta(seconds=0.5)).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    much_later = (base + timedelta(minutes=10)).strftime("%Y-%m-%dT%H:%M:%SZ")
+    near = {}
+    for name, when in (("at", None), ("later", later), ("much", much_later)):
+        out = tmp_path / name
+        wxsky(
+            "snapshot",
+            "--preset",
+            "fair-cumulus",
+            "--size",
+            "320x180",
+            *(("--time", when) if when else ()),
+            "--out",
+            str(out / "sky.png"),
+            "--layers-out",
+            str(out / "layers"),
+        )
+        near[name] = read_png(out / "layers" / "near.png")[..., 3].astype(int)
+    moved = np.abs(near["much"] - near["at"]).mean()
+    assert moved > 5.0 * max(np.abs(near["later"] - near["at"]).mean(), 0.01)

@@ -285,6 +285,12 @@ class SkyEngine:
         self._locks = frame.locks
         return FramePlan(state, frame, ring, self._ring_version, changed)
 
+    def drift_for(self, seconds: float) -> None:
+        """Move every layer as the wind would have in `seconds` (negative: back), at once: a
+        picture at a later time than its weather's shows the clouds blown on."""
+        with self._lock:
+            self._drift = advance_drift(self._state, self._drift, seconds)
+
     def run_weather(self, duration_s: float) -> WeatherState:
         """Advance the weather stages only (sources, transition, clock, drift) by duration_s
         of wall time, in transition steps, without building a scene: for pictures of a

@@ -53,8 +53,13 @@ def take_snapshot(
     settings: SceneSettings,
     renderer: Renderer | None = None,
     transition: Transition | None = None,
+    drift_s: float = 0.0,
 ) -> Snapshot:
+    """`drift_s`: how long the wind has blown the clouds since the weather was set (a picture
+    later than its preset's time shows them moved on, the same in every process)."""
     engine = SkyEngine(state, camera, settings, clock_rate=0.0)
+    if drift_s:
+        engine.drift_for(drift_s)
     if transition is not None:
         engine.rates = transition.rates
         engine.transition_step_s = transition.step_s

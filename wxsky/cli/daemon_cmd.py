@@ -175,6 +175,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     width, height = parse_size(args.size)
     state = WeatherState().apply(_weather_patch(args, config.presets.dirs))
+    weather_time = state.time_utc
     overrides = WeatherPatch(
         source=Source.CONTROL,
         time_utc=parse_time_utc(args.time) if args.time else None,
@@ -213,7 +214,10 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         )
     elif args.elapsed_s:
         raise ValueError("--elapsed-s goes with --transition-to")
-    shot = take_snapshot(state, camera, settings, transition=transition)
+    # The weather was set at its own time (a preset's time_utc): a later --time sees the
+    # clouds blown on by the wind since then.
+    drift_s = (state.time_utc - weather_time).total_seconds()
+    shot = take_snapshot(state, camera, settings, transition=transition, drift_s=drift_s)
     write_png(args.out, shot.image)
     if args.layers_out:
         for name, image in shot.layers.items():
