@@ -14,7 +14,7 @@ from typing import Any
 
 import can
 import pytest
-from cockpit_helpers import wait_until
+from cockpit_helpers import Pty, wait_until
 from daemon_harness import RunningDaemon, running_daemon
 
 from wxsky.host.client import ControlClient
@@ -22,22 +22,6 @@ from wxsky.protocols.canaerospace import encode_date, encode_float, encode_time
 from wxsky.protocols.nmea import sentence
 
 GROUP = f"239.74.163.{random.Random(os.getpid()).randrange(10, 250)}"
-
-
-class Pty:
-    def __init__(self) -> None:
-        self.master, self.slave = os.openpty()
-        self.path = os.ttyname(self.slave)
-        self.open = True
-
-    def write(self, data: bytes) -> None:
-        os.write(self.master, data)
-
-    def close(self) -> None:
-        if self.open:
-            self.open = False
-            os.close(self.master)
-            os.close(self.slave)
 
 
 @pytest.fixture

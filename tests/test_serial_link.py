@@ -3,7 +3,6 @@ bad input is counted, a pulled device is reopened, and close() stops the reader.
 
 from __future__ import annotations
 
-import os
 import random
 import socket
 import threading
@@ -11,29 +10,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from cockpit_helpers import Posted, wait_until
+from cockpit_helpers import Posted, Pty, wait_until
 
 from wxsky.inputs.serial_link import SerialLink
 from wxsky.protocols.nmea import sentence
 from wxsky.weather.cockpit import TEMPERATURE, WIND_DIR, WIND_SPEED, layer_key
-
-
-class Pty:
-    """A pty pair whose slave a link opens; writing to the master is the device talking."""
-
-    def __init__(self) -> None:
-        self.master, self.slave = os.openpty()
-        self.path = os.ttyname(self.slave)
-        self.closed = False
-
-    def write(self, data: bytes) -> None:
-        os.write(self.master, data)
-
-    def close(self) -> None:
-        if not self.closed:
-            self.closed = True
-            os.close(self.master)
-            os.close(self.slave)
 
 
 @pytest.fixture
