@@ -1,20 +1,24 @@
 """The sky pass's textures and the per-frame values that index them (Roden & Parberry).
 
-Textures are made procedurally when a renderer starts, from fixed seeds, so every process
-draws the same sky; nothing is shipped. Making all three takes about 0.1 s and is done once
-per process:
+The textures are made procedurally from fixed seeds by one generator, `build_sky_textures`, and
+shipped as package data: `tools/build_sky_textures.py` writes its output to `data/sky_*.png`
+(`--check` there, and tests/test_sky_texture_files.py, keep the files equal to it), and the
+renderer only loads them, once per process (`star_texture`, `galaxy_texture`,
+`dome_noise_texture`). Every file is 8-bit RGBA, so all are stored losslessly:
 
 - stars: one RGBA8 cell per direction on an equi-angular cube map of the celestial sphere,
   six faces of STAR_FACE_PX² stacked vertically. Most cells are black (no star); a star's
   cell holds R = mean intensity, G = flicker rate, B = variance, A = phase, and the shader
   makes its brightness R + B·sin(2π·(G·STAR_RATE_SCALE_HZ·t + A)). A star sits at its cell
   centre moved by a hash of the cell (up to STAR_JITTER cells), so the grid never shows, and is
-  drawn as a small Gaussian of constant on-screen size.
+  drawn as a small Gaussian of constant on-screen size. `sky_stars.png`: the six faces as one
+  vertical strip, (6·256) x 256, exactly the texture's bytes.
 - galaxy: the Milky Way's glow on an equirectangular map in galactic longitude and latitude,
   with a bulge towards Sagittarius and a dark rift. Stars are denser inside it and the shader
-  brightens them there as well.
+  brightens them there as well. It is one 8-bit channel; `sky_galaxy.png` (512 x 256) holds it
+  in R, G and B alike with A = 255, and loading keeps R.
 - dome noise: four tileable noise fields (RGBA8, mipmapped): two cloud-shape layers, a
-  detail layer and the moon's maria.
+  detail layer and the moon's maria. `sky_dome_noise.png` (256 x 256): the texture's bytes.
 
 `SkyPass` uploads them, picks the compiled variant of sky.glsl a frame needs (`features`)
 and gives its uniforms (`frame_uniforms`).
@@ -25,12 +29,14 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from importlib import resources
 from typing import ClassVar
 
 import moderngl
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.png import read_png
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.scene.camera import Camera
 from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
@@ -65,6 +71,14 @@ EARTHSHINE = 0.05  # of the sunlit face's brightness, on the dark part of a cres
 SEED_STARS = 0x5EED_57A2
 SEED_GALAXY = 0x5EED_6A1A
 SEED_DOME = 0x5EED_D0E0
+
+# The shipped files: wxsky/render/data/, written by tools/build_sky_textures.py.
+DATA_PACKAGE = "wxsky.render"
+DATA_DIR = "data"
+STAR_FILE = "sky_stars.png"
+GALAXY_FILE = "sky_galaxy.png"
+DOME_FILE = "sky_dome_noise.png"
+SKY_FILES = (STAR_FILE, GALAXY_FILE, DOME_FILE)
 
 # J2000 equatorial to galactic (rows: galactic x towards the centre, y, z to the north pole).
 GALACTIC_FROM_EQUATORIAL = np.array(
@@ -101,8 +115,57 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
 # -- textures --------------------------------------------------------------------------------
 
 
+def build_sky_textures() -> dict[str, U8]:
+    """The one generator: every sky file's image, (H, W, 4) uint8 as shipped, by file name.
+    Deterministic (seeded PCG64, numpy only), about 0.1 s."""
+    galaxy = _make_galaxy()
+    return {
+        STAR_FILE: _make_stars(galaxy),
+        GALAXY_FILE: np.concatenate(
+            [np.repeat(galaxy[..., None], 3, axis=-1), np.full((*galaxy.shape, 1), 255, np.uint8)],
+            axis=-1,
+        ),
+        DOME_FILE: _make_dome_noise(),
+    }
+
+
+@functools.cache
+def star_texture() -> U8:
+    """(6·N, N, 4) star cells, faces stacked (face f's row j at f·N + j, column i); shipped,
+    read-only."""
+    n = STAR_FACE_PX
+    return _load(STAR_FILE, (6 * n, n, 4))
+
+
 @functools.cache
 def galaxy_texture() -> U8:
+    """(H, W) glow of the Milky Way: columns are galactic longitude -180°..180°, rows
+    latitude -90°..90° (row 0 at -90°); shipped, read-only."""
+    w, h = GALAXY_SIZE_PX
+    img = _load(GALAXY_FILE, (h, w, 4))
+    out = np.ascontiguousarray(img[..., 0])
+    out.flags.writeable = False
+    return out
+
+
+@functools.cache
+def dome_noise_texture() -> U8:
+    """(N, N, 4) tileable noise: R, G cloud shapes; B detail; A the moon's maria; shipped,
+    read-only."""
+    return _load(DOME_FILE, (DOME_NOISE_PX, DOME_NOISE_PX, 4))
+
+
+def _load(name: str, shape: tuple[int, int, int]) -> U8:
+    root = resources.files(DATA_PACKAGE).joinpath(DATA_DIR)
+    with resources.as_file(root.joinpath(name)) as path:
+        img = read_png(path)
+    if img.shape != shape:
+        raise ValueError(f"{name}: expected {shape[1]}x{shape[0]} RGBA, got {img.shape}")
+    img.flags.writeable = False  # shared by every caller through the cache
+    return img
+
+
+def _make_galaxy() -> U8:
     """(H, W) glow of the Milky Way: columns are galactic longitude -180°..180°, rows
     latitude -90°..90° (row 0 at -90°)."""
     w, h = GALAXY_SIZE_PX
@@ -126,13 +189,13 @@ def galaxy_texture() -> U8:
     return np.round(np.clip(band, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-@functools.cache
-def star_texture() -> U8:
-    """(6·N, N, 4) star cells, faces stacked (face f's row j at f·N + j, column i)."""
+def _make_stars(galaxy: U8) -> U8:
+    """(6·N, N, 4) star cells, faces stacked (face f's row j at f·N + j, column i), denser
+    where `galaxy` (the generated glow) is bright."""
     n = STAR_FACE_PX
     rng = np.random.default_rng(SEED_STARS)
     dirs = cube_cell_directions(n)  # (6, n, n, 3)
-    glow = _galaxy_at(dirs.reshape(-1, 3)).reshape(6, n, n)
+    glow = _galaxy_at(dirs.reshape(-1, 3), galaxy).reshape(6, n, n)
     # About 31 000 stars over the sphere, three times as dense along the Milky Way.
     chance = 0.065 + 0.13 * glow
     has_star = rng.random((6, n, n)) < chance
@@ -154,8 +217,7 @@ def star_texture() -> U8:
     return cells.reshape(6 * n, n, 4)
 
 
-@functools.cache
-def dome_noise_texture() -> U8:
+def _make_dome_noise() -> U8:
     """(N, N, 4) tileable noise: R, G cloud shapes; B detail; A the moon's maria."""
     n = DOME_NOISE_PX
     rng = np.random.default_rng(SEED_DOME)
@@ -184,7 +246,7 @@ def cube_cell_directions(n: int) -> F64:
     return out
 
 
-def _galaxy_at(celestial: F64) -> F64:
+def _galaxy_at(celestial: F64, galaxy: U8) -> F64:
     """The galaxy texture's value (0..1) in celestial directions (..., 3), nearest texel."""
     g = celestial @ GALACTIC_FROM_EQUATORIAL.T
     lon = np.degrees(np.arctan2(g[..., 1], g[..., 0]))
@@ -192,7 +254,7 @@ def _galaxy_at(celestial: F64) -> F64:
     w, h = GALAXY_SIZE_PX
     col = np.clip(((lon + 180.0) / 360.0 * w).astype(int), 0, w - 1)
     row = np.clip(((lat + 90.0) / 180.0 * h).astype(int), 0, h - 1)
-    result: F64 = galaxy_texture()[row, col] / 255.0
+    result: F64 = galaxy[row, col] / 255.0
     return result
 
 

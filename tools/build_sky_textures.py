@@ -1,0 +1,73 @@
+#!/usr/bin/env python3
+"""Build the sky pass's textures shipped in wxsky/render/data/.
+
+    .venv/bin/python tools/build_sky_textures.py            # write the files
+    .venv/bin/python tools/build_sky_textures.py --check    # exit 1 if the shipped PNGs drift
+
+Writes wxsky/render/data/sky_stars.png (the star cube map, six faces in one vertical strip),
+sky_galaxy.png (the Milky Way's glow, grey in RGB, A = 255) and sky_dome_noise.png (the cloud
+dome's four noise fields), all RGBA8, from the one generator,
+`wxsky.render.sky_textures.build_sky_textures`, with its fixed seeds. `--check` regenerates in
+memory and byte-compares the shipped PNGs, so CI catches a generator change whose files were
+not rebuilt; `--out DIR` writes to (or checks) another folder. After rebuilding, regenerate the
+goldens (tools/regen_goldens.py): the sky is drawn with these textures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run from a checkout without installing
+    sys.path.insert(0, str(ROOT))
+
+from wxsky.png import encode_png  # noqa: E402
+from wxsky.render.sky_textures import DATA_DIR, SKY_FILES, build_sky_textures  # noqa: E402
+
+DATA = ROOT / "wxsky" / "render" / DATA_DIR
+
+
+def _shown(path: Path) -> str:
+    path = path.resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--check", action="store_true", help="compare with the shipped files, write nothing"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="folder to write or check (default: the package's)"
+    )
+    args = parser.parse_args(argv)
+    out: Path = args.out if args.out is not None else DATA
+    files = {name: encode_png(img) for name, img in build_sky_textures().items()}
+    assert tuple(files) == SKY_FILES
+    if args.check:
+        stale = [
+            name
+            for name, data in files.items()
+            if not (out / name).exists() or (out / name).read_bytes() != data
+        ]
+        if stale:
+            print(
+                f"out of date: {', '.join(stale)} (run tools/build_sky_textures.py)",
+                file=sys.stderr,
+            )
+            return 1
+        print(f"up to date: {len(files)} files in {_shown(out)}")
+        return 0
+    out.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        tmp = out / (name + ".tmp")
+        tmp.write_bytes(data)
+        tmp.replace(out / name)
+        print(f"wrote {_shown(out / name)} ({len(data):,} bytes)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
