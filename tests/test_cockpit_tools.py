@@ -5,7 +5,6 @@ python-can virtual bus, at the recorded pace or faster."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import subprocess
 import sys
@@ -14,12 +13,12 @@ import uuid
 from collections.abc import Iterator
 from datetime import UTC, date, datetime
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import can
 import pytest
 import serial
+from tool_loader import load_tool
 
 from wxsky.protocols.canaerospace import CanasDecoder
 from wxsky.protocols.nmea import NmeaDecoder, NmeaStats
@@ -45,19 +44,10 @@ CAN_LOG = DATA / "canaerospace.log"
 CAN_ASC = DATA / "canaerospace.asc"
 
 
-def _load_tool(name: str) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
-
-
 # Before the tools that import it, so they share this module rather than load a second copy.
-scenarios = _load_tool("cockpit_scenarios")
-emulator = _load_tool("cockpit_emulator")
-replay = _load_tool("replay_capture")
+scenarios = load_tool("cockpit_scenarios")
+emulator = load_tool("cockpit_emulator")
+replay = load_tool("replay_capture")
 
 
 def _merged(decoded: list[Decoded]) -> CockpitUpdate:

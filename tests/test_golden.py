@@ -6,15 +6,13 @@ leaves tests/_failures/<case>_{actual,expected,diff}.png behind and names them.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 import pytest
+from tool_loader import load_tool
 
 from wxsky.png import read_png, write_png
 
@@ -33,17 +31,7 @@ MAX_FAR_OFF_SHARE = 0.005
 DIFF_GAIN = 8
 
 
-def _load_tool() -> ModuleType:
-    path = ROOT / "tools" / "regen_goldens.py"
-    spec = importlib.util.spec_from_file_location("regen_goldens", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("regen_goldens", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-TOOL = _load_tool()
+TOOL = load_tool("regen_goldens")
 CASES = {case.name: case for case in TOOL.CASES}
 
 

@@ -10,14 +10,12 @@ Then the AWC conventions and the rules that put a disagreement down to AWC, on s
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
-import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import pytest
+from tool_loader import load_tool
 
 from wxsky.weather.feeds import Report
 
@@ -28,18 +26,7 @@ CACHE_2020 = DATA / "awc_cache_2020-05-02_luasamples.csv.gz"
 SAMPLE_STRIDE = 16
 
 
-def _load_tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "metar_agreement", ROOT / "tools" / "metar_agreement.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
-
-
-ma = _load_tool()
+ma = load_tool("metar_agreement")
 
 
 @pytest.fixture(scope="module")

@@ -6,15 +6,13 @@ B variance, A phase).
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import numpy.typing as npt
 import pytest
+from tool_loader import load_tool
 
 from wxsky.png import encode_png
 from wxsky.render.sky_textures import (
@@ -37,18 +35,7 @@ DATA = ROOT / "wxsky" / "render" / "data"
 U8 = npt.NDArray[np.uint8]
 
 
-def _load_tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "build_sky_textures", ROOT / "tools" / "build_sky_textures.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-TOOL = _load_tool()
+TOOL = load_tool("build_sky_textures")
 
 
 @pytest.fixture(scope="module")

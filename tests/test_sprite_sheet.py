@@ -6,17 +6,16 @@ what it claims to be. Figures in comments are what the shipped sheet measures.
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import os
 import subprocess
 import sys
 from pathlib import Path
-from types import ModuleType
 
 import moderngl
 import numpy as np
 import numpy.typing as npt
 import pytest
+from tool_loader import load_tool
 
 from wxsky.png import encode_png
 from wxsky.render.renderer import Renderer
@@ -40,18 +39,7 @@ F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
 
 
-def _load_tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "build_sprite_sheet", ROOT / "tools" / "build_sprite_sheet.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-TOOL = _load_tool()
+TOOL = load_tool("build_sprite_sheet")
 
 
 @pytest.fixture(scope="module")

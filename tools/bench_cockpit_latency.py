@@ -16,13 +16,8 @@ from __future__ import annotations
 import argparse
 import os
 import random
-import signal
 import statistics
-import subprocess
-import sys
-import tempfile
 import time
-import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
@@ -30,12 +25,12 @@ from pathlib import Path
 from typing import Any
 
 import can
+from cockpit_daemon import cockpit_daemon
 
 from wxsky.host.client import ControlClient
 from wxsky.protocols.canaerospace import encode_date, encode_float, encode_time
 from wxsky.protocols.nmea import sentence
-
-FT_TO_M = 0.3048
+from wxsky.units import FT_TO_M
 
 
 @dataclass
@@ -52,36 +47,13 @@ def main() -> int:
     p.add_argument("--group", default="239.74.163.77", help="udp_multicast group for CAN")
     p.add_argument("--png", type=Path, help="also draw the distributions into this PNG")
     args = p.parse_args()
-    master, slave = os.openpty()
-    bus = _multicast_bus(args.group)
-    with tempfile.TemporaryDirectory() as tmp:
-        sock = Path(tmp) / "wx.sock"
-        cfg = Path(tmp) / "wxsky.toml"
-        shm_name = f"wxsky-bench-{uuid.uuid4().hex[:8]}"
-        cfg.write_text(f'[daemon]\ntick_hz = {args.tick_hz}\n[output]\nshm_name = "{shm_name}"\n')
-        cmd = [sys.executable, "-m", "wxsky", "run", "--config", str(cfg)]
-        cmd += ["--control", f"unix:{sock}", "--serial", os.ttyname(slave)]
-        if bus is not None:
-            cmd += ["--can", f"udp_multicast:{args.group}"]
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        try:
-            client = _connect(sock, proc)
-            client.subscribe(["target"])
-            time.sleep(2.0)  # past start-up and the first ring build
-            cases = _serial_cases(master) + (_can_cases(bus) if bus is not None else [])
-            results = {case.name: _measure(client, case, args.changes) for case in cases}
-            fps = client.call("status")["fps"]
-            client.close()
-        finally:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-            if bus is not None:
-                bus.shutdown()
-            os.close(master)
-            os.close(slave)
+    with cockpit_daemon(args.group, f"[daemon]\ntick_hz = {args.tick_hz}") as daemon:
+        client, bus = daemon.client, daemon.bus
+        client.subscribe(["target"])
+        time.sleep(2.0)  # past start-up and the first ring build
+        cases = _serial_cases(daemon.master) + (_can_cases(bus) if bus is not None else [])
+        results = {case.name: _measure(client, case, args.changes) for case in cases}
+        fps = client.call("status")["fps"]
     budget_ms = 1000.0 / args.tick_hz + 20.0
     print(f"cpu: {os.cpu_count()} cores; tick {args.tick_hz:g} Hz; daemon at {fps:.1f} fps")
     print(f"budget: one tick + 20 ms = {budget_ms:.1f} ms")
@@ -250,29 +222,6 @@ def _layer_shows(i: int, target: dict[str, Any]) -> bool:
         abs(lay["base_m"] - base_m) < 0.5 and abs(lay["cover_oktas"] - (1 + i % 8)) < 1e-6
         for lay in target["layers"]
     )
-
-
-def _multicast_bus(group: str) -> can.BusABC | None:
-    try:
-        bus = can.Bus(interface="udp_multicast", channel=group)
-        bus.send(can.Message(arbitration_id=0x7FF, data=b"", is_extended_id=False))
-    except (can.CanError, OSError):
-        return None
-    return bus
-
-
-def _connect(sock: Path, proc: subprocess.Popen[bytes]) -> ControlClient:
-    deadline = time.monotonic() + 60.0
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise SystemExit("daemon exited early")
-        if sock.exists():
-            try:
-                return ControlClient.connect(f"unix:{sock}")
-            except OSError:
-                pass
-        time.sleep(0.1)
-    raise SystemExit("daemon did not start")
 
 
 def _p99(values: list[float]) -> float:

@@ -20,18 +20,16 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # run from a checkout without installing
-    sys.path.insert(0, str(ROOT))
+for _path in (ROOT, ROOT / "tools"):  # run from a checkout without installing
+    if str(_path) not in sys.path:
+        sys.path.insert(0, str(_path))
+
+from shipped_files import write_or_check  # noqa: E402
 
 from wxsky.png import encode_png  # noqa: E402
 from wxsky.render.sky_textures import DATA_DIR, SKY_FILES, build_sky_textures  # noqa: E402
 
 DATA = ROOT / "wxsky" / "render" / DATA_DIR
-
-
-def _shown(path: Path) -> str:
-    path = path.resolve()
-    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,27 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     out: Path = args.out if args.out is not None else DATA
     files = {name: encode_png(img) for name, img in build_sky_textures().items()}
     assert tuple(files) == SKY_FILES
-    if args.check:
-        stale = [
-            name
-            for name, data in files.items()
-            if not (out / name).exists() or (out / name).read_bytes() != data
-        ]
-        if stale:
-            print(
-                f"out of date: {', '.join(stale)} (run tools/build_sky_textures.py)",
-                file=sys.stderr,
-            )
-            return 1
-        print(f"up to date: {len(files)} files in {_shown(out)}")
-        return 0
-    out.mkdir(parents=True, exist_ok=True)
-    for name, data in files.items():
-        tmp = out / (name + ".tmp")
-        tmp.write_bytes(data)
-        tmp.replace(out / name)
-        print(f"wrote {_shown(out / name)} ({len(data):,} bytes)")
-    return 0
+    return write_or_check(files, out, check=args.check, tool="tools/build_sky_textures.py")
 
 
 if __name__ == "__main__":

@@ -23,8 +23,11 @@ import numpy as np
 import numpy.typing as npt
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # run from a checkout without installing
-    sys.path.insert(0, str(ROOT))
+for _path in (ROOT, ROOT / "tools"):  # run from a checkout without installing
+    if str(_path) not in sys.path:
+        sys.path.insert(0, str(_path))
+
+from shipped_files import shown, write_or_check  # noqa: E402
 
 from wxsky.png import encode_png, write_png  # noqa: E402
 from wxsky.render.sheet_textures import build_levels  # noqa: E402
@@ -42,10 +45,6 @@ BACKGROUND = (0.42, 0.52, 0.66)  # a hazy mid-day sky: white and grey both read 
 GAP = 8
 
 U8 = npt.NDArray[np.uint8]
-
-
-def _shown(path: Path) -> str:
-    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 def preview(levels: list[U8]) -> U8:
@@ -82,28 +81,11 @@ def main(argv: list[str] | None = None) -> int:
     levels = build_levels(SHEET_SEED)
     files = {level_filename(i): encode_png(img) for i, img in enumerate(levels)}
     assert len(files) == MIP_LEVELS
-    if args.check:
-        stale = [
-            name
-            for name, data in files.items()
-            if not (DATA / name).exists() or (DATA / name).read_bytes() != data
-        ]
-        if stale:
-            print(
-                f"out of date: {', '.join(stale)} (run tools/build_sprite_sheet.py)",
-                file=sys.stderr,
-            )
-            return 1
-        print(f"up to date: {len(files)} files in {_shown(DATA)}")
-        return 0
-    DATA.mkdir(parents=True, exist_ok=True)
-    for name, data in files.items():
-        tmp = DATA / (name + ".tmp")
-        tmp.write_bytes(data)
-        tmp.replace(DATA / name)
-        print(f"wrote {_shown(DATA / name)} ({len(data):,} bytes)")
+    status = write_or_check(files, DATA, check=args.check, tool="tools/build_sprite_sheet.py")
+    if status or args.check:
+        return status
     write_png(PREVIEW, preview(levels))
-    print(f"wrote {_shown(PREVIEW)}")
+    print(f"wrote {shown(PREVIEW)}")
     return 0
 
 

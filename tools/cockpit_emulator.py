@@ -41,7 +41,15 @@ from types import FrameType
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from cockpit_outputs import CanOut, NmeaOut, Output, PtyPort, SerialPort, open_can_bus
+from cockpit_outputs import (
+    CanOut,
+    NmeaOut,
+    Output,
+    PtyPort,
+    SerialPort,
+    add_output_arguments,
+    open_can_bus,
+)
 from cockpit_scenarios import SCENARIOS, Knobs, Scenario, nmea_lines
 
 SERIAL_BITS_PER_BYTE = 10  # 8N1: start + 8 data + stop
@@ -154,14 +162,7 @@ def positive_number(text: str) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    where = p.add_mutually_exclusive_group(required=True)
-    where.add_argument("--serial", metavar="URL[@BAUD]", help="a serial device or pyserial URL")
-    where.add_argument(
-        "--pty", action="store_true", help="make a pseudo-terminal, print its path, send there"
-    )
-    where.add_argument(
-        "--can", metavar="INTERFACE:CHANNEL", help="a python-can bus, e.g. socketcan:vcan0"
-    )
+    add_output_arguments(p)
     p.add_argument("--scenario", choices=sorted(SCENARIOS), default="sweep")
     p.add_argument(
         "--rate-hz", type=positive_number, default=5.0, help="value updates per second (default 5)"

@@ -3,6 +3,7 @@ python-can bus, wrapped as NMEA or CANaerospace outputs."""
 
 from __future__ import annotations
 
+import argparse
 import fcntl
 import os
 import queue
@@ -206,3 +207,15 @@ class Output(Protocol):
     def send(self, knobs: Knobs, with_time: bool) -> tuple[int, int]: ...
 
     def close(self) -> None: ...
+
+
+def add_output_arguments(p: argparse.ArgumentParser) -> None:
+    """The one required choice of where to send: --serial, --pty or --can."""
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--serial", metavar="URL[@BAUD]", help="a serial device or pyserial URL")
+    where.add_argument(
+        "--pty", action="store_true", help="make a pseudo-terminal, print its path, send there"
+    )
+    where.add_argument(
+        "--can", metavar="INTERFACE:CHANNEL", help="a python-can bus, e.g. socketcan:vcan0"
+    )

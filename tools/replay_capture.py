@@ -36,7 +36,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from cockpit_emulator import positive_number, stop_on_sigterm
-from cockpit_outputs import ByteSink, PtyPort, SerialPort, open_can_bus
+from cockpit_outputs import ByteSink, PtyPort, SerialPort, add_output_arguments, open_can_bus
 
 DEFAULT_RATE_HZ = 5.0
 DEFAULT_MAX_GAP_S = 60.0  # python-can MessageSync's default `skip`
@@ -205,14 +205,7 @@ def main(argv: list[str] | None = None, *, log: Callable[[str], None] | None = N
     say = log or (lambda line: print(line, flush=True))
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("capture", type=Path, help="NMEA text (serial, pty) or a CAN log (can)")
-    where = p.add_mutually_exclusive_group(required=True)
-    where.add_argument("--serial", metavar="URL[@BAUD]", help="a serial device or pyserial URL")
-    where.add_argument(
-        "--pty", action="store_true", help="make a pseudo-terminal, print its path, send there"
-    )
-    where.add_argument(
-        "--can", metavar="INTERFACE:CHANNEL", help="a python-can bus, e.g. socketcan:vcan0"
-    )
+    add_output_arguments(p)
     p.add_argument("--fast", action="store_true", help="send as fast as possible")
     p.add_argument(
         "--speed", type=positive_number, default=1.0, help="times the recorded pace (default 1)"

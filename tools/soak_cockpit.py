@@ -22,13 +22,9 @@ import argparse
 import math
 import os
 import random
-import signal
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
-import uuid
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +35,7 @@ from wxsky.protocols.canaerospace import encode_float, encode_raw, encode_time
 from wxsky.protocols.nmea import NmeaDecoder, sentence
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_cockpit_latency import _connect, _multicast_bus
+from cockpit_daemon import cockpit_daemon
 
 
 def main() -> int:
@@ -48,36 +44,14 @@ def main() -> int:
     p.add_argument("--period-s", type=float, default=0.1)
     p.add_argument("--group", default="239.74.163.78")
     args = p.parse_args()
-    master, slave = os.openpty()
-    bus = _multicast_bus(args.group)
     rng = random.Random(1)
-    with tempfile.TemporaryDirectory() as tmp:
-        sock = Path(tmp) / "wx.sock"
-        cfg = Path(tmp) / "wxsky.toml"
-        cfg.write_text(f'[output]\nshm_name = "wxsky-soak-{uuid.uuid4().hex[:8]}"\n')
-        cmd = [sys.executable, "-m", "wxsky", "run", "--config", str(cfg)]
-        cmd += ["--control", f"unix:{sock}", "--serial", os.ttyname(slave)]
-        if bus is not None:
-            cmd += ["--can", f"udp_multicast:{args.group}"]
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        try:
-            client = _connect(sock, proc)
-            baseline = _fps_samples(client, 6.0)
-            client.subscribe(["target"])
-            report = _soak(client, master, bus, rng, args.seconds, args.period_s)
-            status = client.call("status")
-            alive = proc.poll() is None
-            client.close()
-        finally:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-            if bus is not None:
-                bus.shutdown()
-            os.close(master)
-            os.close(slave)
+    with cockpit_daemon(args.group) as daemon:
+        client, bus = daemon.client, daemon.bus
+        baseline = _fps_samples(client, 6.0)
+        client.subscribe(["target"])
+        report = _soak(client, daemon.master, bus, rng, args.seconds, args.period_s)
+        status = client.call("status")
+        alive = daemon.alive()
     return _print(report, status, baseline, alive, bus is not None)
 
 
