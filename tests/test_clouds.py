@@ -223,7 +223,9 @@ def test_attributes_are_finite_and_in_range(name: str) -> None:
     for f in FIELDS:
         arr = getattr(batch, f)
         assert arr.shape[0] == n, f
-        if arr.dtype != np.bool_:
+        if f == "slab_m":  # NaN marks sprites shaded as particles
+            assert np.all(np.isnan(arr) != model.slab), f
+        elif arr.dtype != np.bool_:
             assert np.all(np.isfinite(arr)), f"{f} has NaN/inf"
     assert batch.centre_m.dtype == np.float64 and batch.texture.dtype == np.int32
     slots = {s for box in model.boxes for s in box.textures}

@@ -147,6 +147,8 @@ def test_goldens_show_sky_and_clouds() -> None:
     cases greyer than the clear one (guards against regenerating garbage)."""
     images = {name: read_png(GOLDEN_DIR / f"{name}.png").astype(int) for name in CASES}
     for name, img in images.items():
+        if CASES[name].eye_alt_m is not None or name.endswith(("-dawn", "-night")):
+            continue  # see test_the_other_goldens_show_their_moment
         top, bottom = img[:10, :, :3].mean(axis=(0, 1)), img[-2:, :, :3].mean(axis=(0, 1))
         assert bottom.sum() < top.sum(), f"{name}: ground should be darker than the sky"
         assert img[..., :3].std() > 5.0, f"{name}: featureless"
@@ -159,3 +161,42 @@ def test_goldens_show_sky_and_clouds() -> None:
 
     assert saturation(images["overcast-stratus"]) < 0.4 * saturation(images["clear"])
     assert saturation(images["fair-cumulus"]) < saturation(images["clear"])
+
+
+def test_the_other_goldens_show_their_moment() -> None:
+    def rgb(name: str) -> np.ndarray:
+        return read_png(GOLDEN_DIR / f"{name}.png")[..., :3].astype(float)
+
+    # Night: a dark sky with stars, each a few bright pixels.
+    night = rgb("clear-night")
+    assert night.mean() < 30.0
+    stars = night.max(axis=2) > np.median(night.max(axis=2)) + 60.0
+    assert 30 < stars.sum() < 0.02 * stars.size
+    # Under the deck at dawn: dim and grey, not orange (the deck's underside is lit through it).
+    deck = rgb("overcast-stratus-dawn")[:60]
+    assert deck.mean() < 90.0 and deck[..., 0].mean() < 1.15 * deck[..., 2].mean()
+    # Above the deck: blue sky over a bright white top.
+    above = rgb("overcast-stratus-above")
+    sky, top = above[:6].mean(axis=(0, 1)), above[-40:].mean(axis=(0, 1))
+    assert sky[2] > 1.3 * sky[0] and top.min() > 170.0 and top[2] < 1.15 * top[0]
+    # Dusk: cumulus lit orange by the low sun.
+    dusk = rgb("scattered-cumulus-dusk")
+    assert dusk[..., 0].mean() > 1.2 * dusk[..., 2].mean()
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_each_case_shows_the_moment_its_name_says(name: str) -> None:
+    # Dawn and dusk: the sun 3-5° up, ahead of the camera; night: 20° and more down.
+    from wxsky.scene.sky import sun_position
+
+    case = CASES[name]
+    obs = TOOL.case_state(case).observer
+    sun = sun_position(case.time_utc, obs.lat_deg, obs.lon_deg)
+    if name.endswith(("-dawn", "-dusk")):
+        assert 3.0 <= sun.elevation_deg <= 5.0
+        assert abs((sun.azimuth_deg - case.heading_deg + 180.0) % 360.0 - 180.0) < 30.0
+        assert (sun.azimuth_deg < 180.0) == name.endswith("-dawn")
+    elif name.endswith("-night"):
+        assert sun.elevation_deg <= -20.0
+    else:
+        assert sun.elevation_deg > 30.0

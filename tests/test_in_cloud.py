@@ -10,9 +10,11 @@ from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.in_cloud import (
     LOCK_FRAC,
     NO_LOCKS,
+    NO_VEIL,
     VISIBILITY_CORE_M,
     Locks,
     in_cloud,
+    in_cloud_fog,
     lock_facing,
 )
 from wxsky.scene.layout import FrameScene, SceneSettings, build_frame, zero_drift
@@ -136,3 +138,43 @@ def test_flat_cirrus_lies_in_its_layer() -> None:
     assert len(frame.near) > 0 and frame.near.sprites.flat.all()
     assert frame.near.normals is not None
     assert np.allclose(frame.near.normals, (0.0, 0.0, 1.0))
+
+
+# -- the fog on our own layers ------------------------------------------------------------
+
+
+def _fog_case(eye_y: float) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    # The eye on the axis of a 400 m sprite at y = 0, a second sprite 1.5 km on.
+    b = batch([(0, 0, 0), (0, 1500, 0)])
+    rgba = np.array([[0.3, 0.4, 0.5, 1.0], [0.9, 0.9, 0.9, 1.0]], np.float32)
+    eye = (0.0, eye_y, 0.0)
+    return in_cloud_fog(b, rgba, eye, in_cloud(b, eye, 9999.0))
+
+
+def test_outside_a_cloud_nothing_is_fogged() -> None:
+    b = batch([(0, 1000, 0)])
+    rgba = np.full((1, 4), 0.5, np.float32)
+    out, veil = in_cloud_fog(b, rgba, (0.0, 0.0, 0.0), in_cloud(b, (0.0, 0.0, 0.0), 9999.0))
+    assert veil == NO_VEIL and out is rgba
+
+
+def test_the_fog_thickens_smoothly_from_the_edge_to_the_core() -> None:
+    # Inside reach 0.35 * 400 = 140 m; from the edge inward the veil rises without a jump.
+    alphas = [_fog_case(float(y))[1][3] for y in np.arange(139.0, -1.0, -1.0)]
+    assert alphas[0] < 0.01
+    assert alphas == sorted(alphas) and alphas[-1] == 1.0
+    assert max(np.diff(alphas)) < 0.05  # a metre further in never changes it by much
+
+
+def test_the_fog_is_the_colour_of_the_cloud_the_eye_is_in() -> None:
+    out, veil = _fog_case(0.0)
+    np.testing.assert_allclose(veil, (0.3, 0.4, 0.5, 1.0), atol=1e-6)
+    # The far sprite, 1.5 km off at 40 m visibility, is all fog; the alpha is untouched.
+    np.testing.assert_allclose(out[1, :3], (0.3, 0.4, 0.5), atol=1e-4)
+    assert out[1, 3] == 1.0
+    # Halfway in, a sprite is fogged by its distance: the far one more than the near one.
+    out, veil = _fog_case(80.0)
+    assert 0.0 < veil[3] < 1.0
+    near_shift = np.abs(out[0, :3] - [0.3, 0.4, 0.5]).max()
+    far_shift = np.abs(out[1, :3] - [0.9, 0.9, 0.9]).max()
+    assert near_shift < 1e-6 and far_shift > 0.3  # the eye's own sprite is the fog colour

@@ -219,6 +219,46 @@ def test_sprite_textures_are_upright(renderer: Renderer, scale: float, margin: f
     assert r0 <= CR - 0.8 * half_px
 
 
+def test_a_flat_bottomed_sprite_seen_from_below_turns_into_the_round_one(
+    renderer: Renderer,
+) -> None:
+    # Straight overhead, a flat-bottomed base sprite would be a grey bar across the cloud: it
+    # draws as the round fog texture there, and as itself a little above the horizon.
+    def near(texture: int, pitch_deg: float) -> np.ndarray:
+        cam = _camera(pitch_deg=pitch_deg)
+        el = math.radians(pitch_deg)
+        centre = (0.0, 2000.0 * math.cos(el), 1000.0 + 2000.0 * math.sin(el))
+        batch = _sprites([centre], [400.0], texture=texture)
+        with _near_scale(renderer, 1.0):
+            renderer.render_frame(FrameScene(cam, _sky(), _draw(batch)))
+        return renderer.read("near").astype(int)
+
+    overhead = near(TEX_FLAT_BOTTOM[0], 85.0)
+    assert np.abs(overhead - near(TEX_FOG[0], 85.0)).max() <= 1
+    low_flat, low_fog = near(TEX_FLAT_BOTTOM[0], 10.0), near(TEX_FOG[0], 10.0)
+    assert np.abs(low_flat - low_fog)[..., 3].max() > 100  # the flat bottom still shows
+    # Between the two it is a blend of both, never a hole: as much cover as the lesser.
+    mid = near(TEX_FLAT_BOTTOM[0], 36.0)[..., 3].sum()
+    ends = near(TEX_FLAT_BOTTOM[0], 36.0 - 36.0)[..., 3].sum(), overhead[..., 3].sum()
+    assert mid >= 0.95 * min(ends)
+
+
+@pytest.mark.parametrize("scale", [1.0, NEAR_SCALE])
+def test_the_in_cloud_veil_covers_the_near_layer_under_the_sprites(
+    renderer: Renderer, scale: float
+) -> None:
+    veil = (0.2, 0.3, 0.4, 0.5)  # premultiplied
+    batch = _sprites([(0.0, 2000.0, 1000.0)], [400.0])
+    with _near_scale(renderer, scale):
+        renderer.render_frame(FrameScene(_camera(), _sky(), _draw(batch), veil_rgba=veil))
+    near = renderer.read("near").astype(int)
+    expected = np.round(np.asarray(veil) * 255.0)
+    assert np.abs(near[0, 0] - expected).max() <= 1  # a corner: no sprite, only the veil
+    assert near[CR, CC, 3] > expected[3] + 50  # the sprite is drawn over it
+    renderer.render_frame(FrameScene(_camera(), _sky(), _draw(batch)))
+    assert renderer.read("near")[0, 0, 3] == 0  # and the next frame out of cloud is clear
+
+
 def test_reduced_near_layer_matches_the_full_resolution_one(renderer: Renderer) -> None:
     cam = _camera(heading_deg=15.0, pitch_deg=5.0)
     centres = [(600.0 * k - 1200.0, 4000.0 + 300.0 * k, 1300.0 + 50.0 * k) for k in range(5)]
@@ -454,7 +494,8 @@ def test_compile_error_names_the_file(renderer: Renderer, shader_dir: Path) -> N
 def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -> None:
     lib = ShaderLibrary(renderer.ctx)
     with pytest.raises(RenderError, match=r"shaders/sprites\.glsl"):
-        lib.program("sprites.glsl")  # needs SHEET_CELLS
-    prog = lib.program("sprites.glsl", {"SHEET_CELLS": "4"})
-    assert lib.program("sprites.glsl", {"SHEET_CELLS": "4"}) is prog  # compiled once
+        lib.program("sprites.glsl")  # needs SHEET_CELLS and the two slots
+    defines = {"SHEET_CELLS": "4", "FLAT_BOTTOM_SLOT": "0", "ROUND_SLOT": "1"}
+    prog = lib.program("sprites.glsl", defines)
+    assert lib.program("sprites.glsl", dict(defines)) is prog  # compiled once
     lib.release()

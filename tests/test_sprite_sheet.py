@@ -250,8 +250,9 @@ def test_fog_is_soft_even_and_broad() -> None:
         # 33-37 % of the cell; the margin leaves at most 60 %).
         assert a.max() > 0.8
         assert np.mean(a > 0.25) > 0.3
-        # Wang's bluish-grey tinge: blue above red by 0.075.
-        assert cell[..., 2][a > 0.25].mean() > cell[..., 0][a > 0.25].mean() + 0.02
+        # Neutral grey: the shading model colours a deck; a tint here would tint every one.
+        dense = a > 0.25
+        assert abs(cell[..., 2][dense].mean() - cell[..., 0][dense].mean()) < 0.005
 
 
 def test_flat_bottom_has_a_sharp_level_base() -> None:

@@ -1,11 +1,12 @@
 """Render every preset at dawn, noon, dusk and night into docs/gallery/, and a contact sheet.
 
-    .venv/bin/python tools/build_gallery.py [--size 320x180] [--preset NAME ...]
+    .venv/bin/python tools/build_gallery.py [--size 240x135] [--preset NAME ...]
 
 Times come from the sun at the preset's own place and date: dawn and dusk with the sun 4° up
 (morning and evening), noon at the day's highest sun, night with the sun 20° down. The camera
 stands 2 m above the observer looking 12° up toward the sun's side of the sky (east at dawn,
-south at noon, west at dusk). Every picture goes through `wxsky.snapshot.take_snapshot`, the
+south at noon, west at dusk); overcast-stratus also from above its top, at dawn, noon and dusk
+(overcast-stratus-above.png). Every picture goes through `wxsky.snapshot.take_snapshot`, the
 daemon's own stages, so the gallery shows what a host would get.
 """
 
@@ -40,7 +41,7 @@ NIGHT_SUN_DEG = -20.0
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--size", default="320x180")
+    p.add_argument("--size", default="240x135")
     p.add_argument("--preset", action="append", help="only these presets (repeatable)")
     args = p.parse_args()
     width, height = parse_size(args.size)
@@ -68,12 +69,36 @@ def main() -> int:
                 row.append(image)
                 print(f"{name} {moment}: {when:%Y-%m-%d %H:%M}Z, heading {heading_deg:.0f}")
             rows.append(np.concatenate(_spaced(row, axis=1), axis=1))
+        if "overcast-stratus" in names:
+            above = above_the_deck(renderer, config, width, height)
+            write_png(OUT / "overcast-stratus-above.png", above)
+            print(f"wrote {OUT / 'overcast-stratus-above.png'}")
     finally:
         renderer.close()
     sheet = np.concatenate(_spaced(rows, axis=0), axis=0)
     write_png(OUT / "contact-sheet.png", sheet)
     print(f"wrote {len(names) * len(MOMENTS)} pictures and {OUT / 'contact-sheet.png'}")
     return 0
+
+
+def above_the_deck(renderer: Renderer, config: DaemonConfig, width: int, height: int) -> np.ndarray:
+    """overcast-stratus at dawn, noon and dusk from 1,250 m above its top, looking 12° down
+    toward the sun's side: the deck's sunlit top under a clear sky."""
+    base = WeatherState().apply(load_preset("overcast-stratus", ()))
+    eye_m = max(layer.top_m for layer in base.layers) + 1250.0
+    row = []
+    for moment in ("dawn", "noon", "dusk"):
+        when, heading_deg = moment_time(base, moment)
+        camera = Camera(
+            position_m=(0.0, 0.0, eye_m),
+            heading_deg=heading_deg,
+            pitch_deg=-12.0,
+            width_px=width,
+            height_px=height,
+        )
+        state = dataclasses.replace(base, time_utc=when)
+        row.append(take_snapshot(state, camera, config.scene.settings(), renderer).image)
+    return np.concatenate(_spaced(row, axis=1), axis=1)
 
 
 def moment_time(state: WeatherState, moment: str) -> tuple[datetime, float]:

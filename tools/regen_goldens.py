@@ -51,25 +51,56 @@ class Case:
     preset: str
     heading_deg: float = 200.0
     pitch_deg: float = 15.0
+    time_utc: datetime = TIME_UTC
+    eye_alt_m: float | None = None  # MSL; None: EYE_ABOVE_GROUND_M over the observer
 
 
+# Every preset is at Zurich; the twilight cases face the sun 3-5° up, the night one has the
+# sun 20° and more down (tests/test_golden.py checks both).
 CASES = (
     Case("fair-cumulus", "fair-cumulus"),
     Case("overcast-stratus", "overcast-stratus"),
     Case("clear", "clear"),
     Case("broken-stratocumulus", "broken-stratocumulus"),
+    Case(
+        "overcast-stratus-dawn",
+        "overcast-stratus",
+        heading_deg=60.0,
+        time_utc=datetime(2026, 6, 21, 4, 5, tzinfo=UTC),
+    ),
+    Case(
+        "overcast-stratus-above",
+        "overcast-stratus",
+        pitch_deg=-15.0,
+        eye_alt_m=2600.0,
+    ),
+    Case(
+        "scattered-cumulus-dusk",
+        "scattered-cumulus",
+        heading_deg=300.0,
+        pitch_deg=10.0,
+        time_utc=datetime(2026, 6, 21, 18, 50, tzinfo=UTC),
+    ),
+    Case(
+        "clear-night",
+        "clear",
+        heading_deg=180.0,
+        pitch_deg=40.0,
+        time_utc=datetime(2026, 11, 18, 20, 0, tzinfo=UTC),
+    ),
 )
 
 
 def case_state(case: Case) -> WeatherState:
-    """The preset's weather at the fixed golden time."""
+    """The preset's weather at the case's time."""
     state = WeatherState().apply(load_preset(case.preset))
-    return dataclasses.replace(state, time_utc=TIME_UTC)
+    return dataclasses.replace(state, time_utc=case.time_utc)
 
 
 def case_camera(case: Case, state: WeatherState) -> Camera:
+    eye_m = state.observer.alt_m + EYE_ABOVE_GROUND_M if case.eye_alt_m is None else case.eye_alt_m
     return Camera(
-        position_m=(0.0, 0.0, state.observer.alt_m + EYE_ABOVE_GROUND_M),
+        position_m=(0.0, 0.0, eye_m),
         heading_deg=case.heading_deg,
         pitch_deg=case.pitch_deg,
         fov_deg=FOV_DEG,
@@ -95,7 +126,10 @@ def golden_path(case: Case) -> Path:
 
 def _readme(renderer_name: str) -> str:
     rows = "\n".join(
-        f"| `{c.name}.png` | `{c.preset}` | {c.heading_deg:g}° | {c.pitch_deg:g}° |" for c in CASES
+        f"| `{c.name}.png` | `{c.preset}` | {c.time_utc:%Y-%m-%dT%H:%MZ} | "
+        f"{'ground' if c.eye_alt_m is None else f'{c.eye_alt_m:g} m'} | {c.heading_deg:g}° | "
+        f"{c.pitch_deg:g}° |"
+        for c in CASES
     )
     return f"""# Golden images
 
@@ -104,11 +138,11 @@ Reference pictures for `tests/test_golden.py`: each is a shipped preset rendered
 host) and compared with a tolerance (mean absolute difference and share of pixels far off).
 
 Made on: **{renderer_name}** (headless EGL), ring textures {RING_PX} px, near layer at
-{NEAR_SCALE:g} scale, {WIDTH}x{HEIGHT} px, horizontal fov {FOV_DEG:g}°, time
-{TIME_UTC:%Y-%m-%dT%H:%M:%SZ}, eye {EYE_ABOVE_GROUND_M:g} m above the observer, preset seeds.
+{NEAR_SCALE:g} scale, {WIDTH}x{HEIGHT} px, horizontal fov {FOV_DEG:g}°, preset seeds; the eye
+{EYE_ABOVE_GROUND_M:g} m above the observer ("ground") or at the altitude given.
 
-| file | preset | heading | pitch |
-|---|---|---|---|
+| file | preset | time | eye | heading | pitch |
+|---|---|---|---|---|---|
 {rows}
 
 ## Regenerating

@@ -270,7 +270,7 @@ class SkyEngine:
             self._step_weather(dt_wall_s)
             state, drift, camera = self._state, self._drift, self._camera
         # The scene stages read only the immutable values taken above: no lock from here on.
-        sky = sky_params(state)
+        sky = sky_params(state, camera.position_m[2])
         ring, changed = self._ring_for(state, drift, camera, sky)
         frame = build_frame(
             state,

@@ -23,7 +23,7 @@ from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
 from wxsky.scene.ring import RING_SIZE
 from wxsky.scene.sky import SkyParams
-from wxsky.scene.texture_slots import SHEET_CELLS
+from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +67,11 @@ class Renderer:
         self.ring_px = ring_texture_px
         self.near_scale = near_scale
         self.shaders = ShaderLibrary(self.ctx)
-        defines = {"SHEET_CELLS": str(SHEET_CELLS)}
+        defines = {
+            "SHEET_CELLS": str(SHEET_CELLS),
+            "FLAT_BOTTOM_SLOT": str(TEX_FLAT_BOTTOM[0]),
+            "ROUND_SLOT": str(TEX_FOG[0]),
+        }
         self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
         self._sprite_prog = self.shaders.program("sprites.glsl", defines)
         self._upsample_prog = self.shaders.program("upsample.glsl")
@@ -110,7 +114,12 @@ class Renderer:
                 max(1, round(cam.height_px * self.near_scale)),
             )
         self._draw_sprites(
-            target, frame.near, cam.position_m, cam.view_matrix(), cam.projection_matrix()
+            target,
+            frame.near,
+            cam.position_m,
+            cam.view_matrix(),
+            cam.projection_matrix(),
+            clear_rgba=frame.veil_rgba,
         )
         if self.near_scale < 1.0:
             self._upsample(target, self._target("near", cam.width_px, cam.height_px))
@@ -209,9 +218,11 @@ class Renderer:
         eye_m: tuple[float, float, float],
         view: npt.NDArray[np.float64],
         proj: npt.NDArray[np.float64],
+        clear_rgba: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
     ) -> None:
+        """`clear_rgba`: premultiplied colour under the sprites (the in-cloud fog veil)."""
         target.fbo.use()
-        target.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        target.fbo.clear(*clear_rgba)
         n = len(draw)
         if n == 0:
             return

@@ -31,7 +31,6 @@ Painter = Callable[[np.random.Generator], tuple[F64, F64]]
 
 ERODE = 0.06  # how far inside a lobe its alpha reaches one half
 LIGHT = np.array([-0.3, 0.8, 0.52]) / np.linalg.norm([-0.3, 0.8, 0.52])
-FOG_TINT = np.array([0.90, 0.93, 0.98])
 
 
 # -- cumulus ----------------------------------------------------------------------------
@@ -227,7 +226,9 @@ def _fog(rx: float, ry: float, p: float, lump: float, texture: float) -> Painter
         alpha *= 1.0 + texture * noise.fbm(X * 3.0 + 5.0, Y * 3.0, 4)
         shade = 0.95 + 0.03 * noise.fbm(X * 2.5 - 3.0, Y * 2.5, 3)
         shade = shade * (0.96 + 0.04 * smoothstep(-0.8, 0.6, Y))
-        return shade[..., None] * FOG_TINT, alpha
+        # Neutral: the shading model colours a deck (a blue tint here turned every overcast
+        # blue-grey whatever the light); the texture only carries its brightness texture.
+        return np.repeat(shade[..., None], 3, axis=-1), alpha
 
     return paint
 

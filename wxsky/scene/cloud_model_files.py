@@ -49,6 +49,7 @@ MODEL_KEYS = {
     "opacity": float,
     "darkness": float,
     "flat": bool,
+    "slab": bool,
     "grows_up": bool,
     "formation_spread_oktas": float,
     "box": list,
@@ -60,6 +61,7 @@ MODEL_DEFAULTS: dict[str, Any] = {
     "opacity": 1.0,
     "darkness": 0.0,
     "flat": False,
+    "slab": False,
     "grows_up": False,
     "formation_spread_oktas": 1.5,
 }
@@ -171,6 +173,7 @@ def parse_cloud_model(data: dict[str, Any], name: str) -> CloudModel:
         opacity=top["opacity"],
         darkness=top["darkness"],
         flat=top["flat"],
+        slab=top["slab"],
         grows_up=top["grows_up"],
         formation_spread_oktas=top["formation_spread_oktas"],
         boxes=boxes,

@@ -60,6 +60,7 @@ class CloudModel:
     opacity: float
     darkness: float  # 0..1, how grey the base is
     flat: bool  # horizontal quads (cirrus family) instead of camera-facing sprites
+    slab: bool  # stratiform: shaded as a plane-parallel slab (Bouthors), not particle by particle
     grows_up: bool  # heaped: the core is the cloud's low middle, so it forms from the base up
     formation_spread_oktas: float  # cover change over which one cloud forms
     boxes: tuple[BoxTemplate, ...]

@@ -135,6 +135,11 @@ def block_clouds(
         cloud_id=cloud_id[cloud],
         core_frac=np.clip(core, 0.0, 1.0).astype(np.float32),
         flat=np.full(count, model.flat, np.bool_),
+        # The slab is the whole layer, base (z = 0 here) to top, whatever each cloud's height.
+        slab_m=np.tile(
+            np.array([0.0, thickness_m] if model.slab else [np.nan, np.nan], np.float32),
+            (count, 1),
+        ),
     )
     for f in dataclasses.fields(sprites):
         getattr(sprites, f.name).flags.writeable = False

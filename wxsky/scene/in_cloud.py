@@ -2,7 +2,9 @@
 comes within half its radius, so the camera passes through a fixed quad instead of a sprite
 that swings round to face it; the locked sprite then fades with the angle between its normal
 and the direction to the eye (see the sprite shader). Also: is the camera in cloud, and how
-far can it see there, for the host to fog its own scene.
+far can it see there, for the host to fog its own scene; and the same fog on our own layers
+(`in_cloud_fog`), so the sprites beyond the visibility and the ring and sky behind them vanish
+into the cloud instead of showing clear through it.
 
 Locks are the only per-frame memory of the scene stage. They are keyed by a sprite's identity
 (its cloud, size and rotation, which generation fixes), not by its place in a batch, so a
@@ -11,6 +13,7 @@ sprite keeps its lock while others form, dissipate or are sorted around it. Pure
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -31,7 +34,12 @@ INSIDE_FRAC = 0.35  # the camera is in cloud within this share of a sprite's edg
 # about what a pilot sees inside a cumulus (a liquid water content near 0.5 g/m3).
 VISIBILITY_EDGE_M = 600.0
 VISIBILITY_CORE_M = 40.0
+# The fog thickens from nothing at the edge of a cloud's dense part to all-hiding this far
+# in (as a share of the way to the centre), so entering a cloud never pops.
+VEIL_FULL_DEPTH = 0.5
+KOSCHMIEDER = 3.912  # extinction times visibility, at the 2 % contrast threshold
 NO_LOCKS: Locks = MappingProxyType({})
+NO_VEIL = (0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -96,12 +104,45 @@ def in_cloud(
     """Whether the eye is inside a cloud's dense part, and the visibility there."""
     if len(batch) == 0:
         return OUTSIDE
-    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
-    reach = INSIDE_FRAC * batch.size_m.astype(np.float64)
-    depth = (1.0 - dist / reach) * batch.opacity.astype(np.float64)  # >0 inside; 1 at a centre
-    deepest = float(depth.max())
+    deepest = float(_depths(batch, eye_m).max())
     if deepest <= 0.0:
         return OUTSIDE
     depth_frac = min(1.0, deepest)
     visibility_m = VISIBILITY_EDGE_M * (VISIBILITY_CORE_M / VISIBILITY_EDGE_M) ** depth_frac
     return InCloud(True, min(visibility_m, weather_visibility_m))
+
+
+def in_cloud_fog(
+    batch: SpriteBatch,
+    rgba: F32,
+    eye_m: tuple[float, float, float],
+    cloud: InCloud,
+) -> tuple[F32, tuple[float, float, float, float]]:
+    """The sprites' (N, 4) straight-alpha colours fogged by the cloud the eye is in, and the
+    premultiplied veil over everything behind them (ring and sky). The fog is the colour of
+    the sprite the eye is deepest in, thickening with distance at the in-cloud visibility
+    (Koschmieder), and with depth into the cloud (VEIL_FULL_DEPTH)."""
+    if not cloud.inside or cloud.visibility_m is None or len(batch) == 0:
+        return rgba, NO_VEIL
+    depth_frac = math.log(cloud.visibility_m / VISIBILITY_EDGE_M) / math.log(
+        VISIBILITY_CORE_M / VISIBILITY_EDGE_M
+    )
+    t = min(1.0, max(0.0, depth_frac / VEIL_FULL_DEPTH))
+    strength = t * t * (3.0 - 2.0 * t)
+    if strength <= 0.0:
+        return rgba, NO_VEIL
+    fog_rgb = rgba[int(np.argmax(_depths(batch, eye_m))), :3].astype(np.float64)
+    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+    f = strength * (1.0 - np.exp(-KOSCHMIEDER * dist / cloud.visibility_m))  # (N,)
+    out = rgba.copy()
+    out[:, :3] = (rgba[:, :3] * (1.0 - f[:, None]) + fog_rgb * f[:, None]).astype(np.float32)
+    r, g, b = (float(c) * strength for c in fog_rgb)
+    return out, (r, g, b, strength)
+
+
+def _depths(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDArray[np.float64]:
+    """(N,) how deep the eye is in each sprite's dense part: > 0 inside, 1 at its centre."""
+    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+    reach = INSIDE_FRAC * batch.size_m.astype(np.float64)
+    out: npt.NDArray[np.float64] = (1.0 - dist / reach) * batch.opacity.astype(np.float64)
+    return out

@@ -17,7 +17,16 @@ import numpy.typing as npt
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
-from wxsky.scene.in_cloud import NO_LOCKS, OUTSIDE, InCloud, Locks, in_cloud, lock_facing
+from wxsky.scene.in_cloud import (
+    NO_LOCKS,
+    NO_VEIL,
+    OUTSIDE,
+    InCloud,
+    Locks,
+    in_cloud,
+    in_cloud_fog,
+    lock_facing,
+)
 from wxsky.scene.ring import RingGeometry, bin_far_sprites
 from wxsky.scene.shading import DEFAULT_SHADING, ParticleLight, prepare_lighting, sprite_colours
 from wxsky.scene.sky import SkyParams
@@ -64,6 +73,8 @@ class FrameScene:
     in_cloud: InCloud = OUTSIDE
     # in-cloud facing locks to carry into the next frame
     locks: Locks = field(default_factory=lambda: NO_LOCKS)
+    # premultiplied RGBA of the in-cloud fog over everything behind the near sprites
+    veil_rgba: tuple[float, float, float, float] = NO_VEIL
 
 
 def zero_drift(state: WeatherState) -> Drift:
@@ -224,11 +235,14 @@ def build_frame(
     )
     eye = camera.position_m
     shaded = shade_for_eye(near, eye, sky, settings.max_range_m, settings.shading)
-    draw, kept = oriented(shaded, eye, locks)
+    cloud = in_cloud(near, eye, state.visibility_m)
+    fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
+    draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)
     return FrameScene(
         camera=camera,
         sky=sky,
         near=draw,
-        in_cloud=in_cloud(near, eye, state.visibility_m),
+        in_cloud=cloud,
         locks=kept,
+        veil_rgba=veil,
     )

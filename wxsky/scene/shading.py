@@ -1,6 +1,8 @@
 """Cloud shading, by model: Wang's artist model (`shading_wang`) or Harris's multiple forward
 scattering (`shading_harris`, `scattering`). Both light every sprite from dawn to night from
-the same SkyParams; `[scene] shading` picks one.
+the same SkyParams; `[scene] shading` picks one. Sprites of stratiform layers (`slab` models)
+are shaded as Bouthors' plane-parallel slab (`shading_slab`) under either: a deck is one sheet
+of cloud, and shading its sprites one by one paints it as a field of lit balls.
 
 Harris's model has an eye-independent part (the light reaching each particle) that the ring
 computes once for all its far sprites (`prepare_lighting`), before they are cut into the eight
@@ -9,7 +11,10 @@ impostor bins, so a cloud straddling two impostors is shaded as one cloud in bot
 
 from __future__ import annotations
 
+import numpy as np
+
 from wxsky.scene.shading_harris import ParticleLight, harris_colours, particle_light, scene_lights
+from wxsky.scene.shading_slab import slab_colours
 from wxsky.scene.shading_wang import wang_colours
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, SpriteBatch
@@ -30,9 +35,13 @@ __all__ = [
 
 
 def prepare_lighting(batch: SpriteBatch, sky: SkyParams, model: str) -> ParticleLight | None:
-    """The model's eye-independent precompute for the batch (None for Wang, who has none)."""
+    """The model's eye-independent precompute for the batch's particles (None for Wang, who
+    has none; slab sprites need none)."""
     _check(model)
-    return particle_light(batch, scene_lights(sky)) if model == "harris" else None
+    if model != "harris":
+        return None
+    slab = batch.slab
+    return particle_light(batch.take(~slab) if slab.any() else batch, scene_lights(sky))
 
 
 def sprite_colours(
@@ -45,9 +54,20 @@ def sprite_colours(
     """(N, 4) straight-alpha RGBA for each sprite seen from eye_m. `light` is a precompute
     from `prepare_lighting` over these sprites or a batch holding them."""
     _check(model)
+    slab = batch.slab
+    if slab.all() and len(batch):
+        return slab_colours(batch, sky, eye_m)
+    particles = batch.take(~slab) if slab.any() else batch
     if model == "harris":
-        return harris_colours(batch, sky, eye_m, light)
-    return wang_colours(batch, sky)
+        rgba = harris_colours(particles, sky, eye_m, light)
+    else:
+        rgba = wang_colours(particles, sky)
+    if not slab.any():
+        return rgba
+    out = np.empty((len(batch), 4), np.float32)
+    out[~slab] = rgba
+    out[slab] = slab_colours(batch.take(slab), sky, eye_m)
+    return out
 
 
 def _check(model: str) -> None:

@@ -80,8 +80,10 @@ class ParticleLight:
         return out
 
 
-def scene_lights(sky: SkyParams) -> Lights:
-    """The key light, four skylights and the ambient term for this sky."""
+def scene_lights(sky: SkyParams, above_cloud: bool = False) -> Lights:
+    """The key light, four skylights and the ambient term for this sky; `above_cloud`: the
+    skylights of the open sky over every layer (what lights the top of a deck), not the sky
+    the eye sees."""
     sun_el = sky.sun.elevation_deg
     if sun_el > MOON_TAKES_OVER_DEG:
         key_dir, key_rgb = np.asarray(sky.sun.direction_enu), np.asarray(sky.sun_rgb)
@@ -92,7 +94,11 @@ def scene_lights(sky: SkyParams) -> Lights:
         key_dir = np.asarray(sky.moon.direction_enu)
         gain = MOONLIGHT_GAIN * sky.moon.illuminated_fraction * night
         key_rgb = np.asarray(sky.moon_rgb) * gain
-    zenith, horizon = _greyer(np.asarray(sky.zenith_rgb)), _greyer(np.asarray(sky.horizon_rgb))
+    zenith_rgb, horizon_rgb = sky.zenith_rgb, sky.horizon_rgb
+    if above_cloud:
+        zenith_rgb = sky.open_zenith_rgb or zenith_rgb
+        horizon_rgb = sky.open_horizon_rgb or horizon_rgb
+    zenith, horizon = _greyer(np.asarray(zenith_rgb)), _greyer(np.asarray(horizon_rgb))
     low = zenith + (horizon - zenith) * SKY_HORIZON_MIX
     dirs = [key_dir, np.array([0.0, 0.0, 1.0])]
     rgbs = [key_rgb, zenith * SKY_GAIN[0]]
@@ -163,11 +169,16 @@ def harris_colours(
     cos = view @ lights.directions.T  # (N, L)
     phase = (1.0 - DIFFUSE_SHARE) * 4.0 * math.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
     radiance = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb  # (N, 3)
-    # Exposure on the brightest channel, the others in proportion: a sunset-lit rim stays
-    # orange instead of washing out to white as every channel saturates.
+    return np.concatenate([exposed(radiance), batch.opacity[:, None]], axis=1).astype(np.float32)
+
+
+def exposed(radiance: F64) -> F64:
+    """(N, 3) display colour in 0..1 for (N, 3) radiance. Exposure on the brightest channel,
+    the others in proportion: a sunset-lit rim stays orange instead of washing out to white as
+    every channel saturates."""
     peak = np.maximum(radiance.max(axis=1, keepdims=True), 1e-6)
-    rgb = radiance * ((1.0 - np.exp(-EXPOSURE * peak)) / peak)
-    return np.concatenate([rgb, batch.opacity[:, None]], axis=1).astype(np.float32)
+    out: F64 = radiance * ((1.0 - np.exp(-EXPOSURE * peak)) / peak)
+    return out
 
 
 def multiple_scattering(incident: F32) -> F32:

@@ -113,6 +113,9 @@ class SkyParams:
     haze_m: float  # distance over which clouds fade into the horizon colour
     moon: MoonPosition = _MOON_DOWN
     moon_rgb: RGB = (0.0, 0.0, 0.0)  # light of the moon's sunlit face over the sky
+    # The sky above all cloud (what lights the top of a deck); None: as zenith/horizon_rgb.
+    open_zenith_rgb: RGB | None = None
+    open_horizon_rgb: RGB | None = None
     stars: float = 0.0  # 0 (day, overcast) .. 1 (clear astronomical night): star brightness
     dome: DomeControls = field(default_factory=DomeControls)
     # Clock of the star flicker and the dome drift: UTC seconds since SKY_EPOCH_UTC.
@@ -151,7 +154,13 @@ def sun_position(time_utc: datetime, lat_deg: float, lon_deg: float) -> SunPosit
     return _ephemeris_sun_position(time_utc, lat_deg, lon_deg)
 
 
-def sky_params(state: WeatherState) -> SkyParams:
+BOUNDARY_LAYER_M = 2_000.0  # depth of the hazy mixed layer over the ground, at most
+CLEAR_AIR_HAZE_M = 60_000.0  # haze distance in the clear air above it
+
+
+def sky_params(state: WeatherState, eye_alt_m: float | None = None) -> SkyParams:
+    """The sky seen from eye_alt_m MSL (default: the observer's): only cloud above the eye
+    greys and dims it, so a pilot who climbs out of an overcast deck sees the blue above it."""
     obs = state.observer
     sun, moon = sun_and_moon(state.time_utc, obs.lat_deg, obs.lon_deg, obs.alt_m)
     el = sun.elevation_deg
@@ -159,7 +168,10 @@ def sky_params(state: WeatherState) -> SkyParams:
     sunset = _smoothstep(-8.0, 0.0, el) * (1.0 - _smoothstep(2.0, 18.0, el))
     # Layers overlap at random (the usual assumption for total cloud amount): two 4/8 layers
     # hide 3/4 of the sky, not all of it, so a forming layer darkens the sky gradually.
-    clear = math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in state.layers)
+    eye_m = obs.alt_m if eye_alt_m is None else eye_alt_m
+    clear = math.prod(
+        1.0 - min(1.0, lay.cover_oktas / 8.0) * _share_above(lay, eye_m) for lay in state.layers
+    )
     cover = 1.0 - clear
     overcast_dim = 1.0 - 0.45 * _smoothstep(0.6, 1.0, cover)
 
@@ -169,6 +181,7 @@ def sky_params(state: WeatherState) -> SkyParams:
     horizon = _mix(night_horizon, day_horizon, day)
     horizon = _mix(horizon, (0.98, 0.58, 0.32), sunset * 0.85)
     zenith = _mix(zenith, (0.28, 0.30, 0.52), sunset * 0.4)
+    open_zenith, open_horizon = zenith, horizon
     grey = (0.55, 0.57, 0.60)
     zenith = _mix(zenith, _scale(grey, day + 0.05), _smoothstep(0.6, 1.0, cover) * 0.8)
     horizon = _mix(horizon, _scale(grey, day + 0.05), _smoothstep(0.6, 1.0, cover) * 0.6)
@@ -199,9 +212,11 @@ def sky_params(state: WeatherState) -> SkyParams:
         ambient=0.06 + 0.94 * day,
         sunset=sunset,
         cover=cover,
-        haze_m=max(2_000.0, 3.0 * state.visibility_m),
+        haze_m=_haze_m(state, eye_m),
         moon=moon,
         moon_rgb=moon_rgb,
+        open_zenith_rgb=open_zenith,
+        open_horizon_rgb=open_horizon,
         stars=stars,
         dome=dome_controls(state, cover, sunset),
         sky_time_s=(state.time_utc - SKY_EPOCH_UTC).total_seconds(),
@@ -243,6 +258,25 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
         horizon_deg=math.degrees(math.atan2(max(edge_m, 0.0), DISTANT_CLOUD_M)),
         drift_toward_deg=math.degrees(math.atan2(wind_e, wind_n)) % 360.0,
     )
+
+
+def _haze_m(state: WeatherState, eye_m: float) -> float:
+    """Distance over which clouds fade into the horizon colour. The reported visibility is the
+    surface's: haze and mist stay in the boundary layer, no higher than the top of the lowest
+    cloud layer (an inversion caps both), so an eye above it looks through clear air."""
+    surface_m = max(2_000.0, 3.0 * state.visibility_m)
+    mixed_top_m = state.observer.alt_m + BOUNDARY_LAYER_M
+    if state.layers:
+        mixed_top_m = min(mixed_top_m, min(lay.top_m for lay in state.layers))
+    aloft = _smoothstep(mixed_top_m, mixed_top_m + 500.0, eye_m)
+    return surface_m + (max(surface_m, CLEAR_AIR_HAZE_M) - surface_m) * aloft
+
+
+def _share_above(layer: CloudLayer, eye_m: float) -> float:
+    """How much of the layer is above the eye: 1 under its base, 0 over its top, linear
+    between, so the sky clears gradually while the eye climbs through the layer."""
+    depth_m = max(layer.top_m - layer.base_m, 1.0)
+    return min(1.0, max(0.0, (layer.top_m - eye_m) / depth_m))
 
 
 def _is_high(layer: CloudLayer) -> bool:

@@ -23,6 +23,10 @@ def _no_flags() -> B:
     return np.zeros(0, np.bool_)
 
 
+def _no_slabs() -> F32:
+    return np.zeros((0, 2), np.float32)
+
+
 @dataclass(frozen=True)
 class SpriteBatch:
     """N cloud sprites as parallel arrays."""
@@ -43,6 +47,9 @@ class SpriteBatch:
     # u axis turned rotation_rad from east toward north; False: a camera-facing sprite.
     # Batches built without it (older callers) are all camera-facing.
     flat: B = field(default_factory=_no_flags)
+    # (N, 2) base and top MSL of the stratiform layer whose slab shades the sprite (Bouthors),
+    # NaN for sprites shaded as particles. Batches built without it have no slab sprites.
+    slab_m: F32 = field(default_factory=_no_slabs)
 
     def __post_init__(self) -> None:
         n = int(self.size_m.shape[0])
@@ -50,6 +57,16 @@ class SpriteBatch:
             if self.flat.shape[0] != 0:
                 raise ValueError(f"flat has {self.flat.shape[0]} entries for {n} sprites")
             object.__setattr__(self, "flat", np.zeros(n, np.bool_))
+        if self.slab_m.shape[0] != n:
+            if self.slab_m.shape[0] != 0:
+                raise ValueError(f"slab_m has {self.slab_m.shape[0]} entries for {n} sprites")
+            object.__setattr__(self, "slab_m", np.full((n, 2), np.nan, np.float32))
+
+    @property
+    def slab(self) -> B:
+        """(N,) True for sprites shaded as part of a stratiform slab."""
+        out: B = ~np.isnan(self.slab_m[:, 0])
+        return out
 
     def __len__(self) -> int:
         return int(self.size_m.shape[0])
@@ -59,7 +76,9 @@ class SpriteBatch:
 
     def shifted(self, offset_m: tuple[float, float, float]) -> SpriteBatch:
         return dataclasses.replace(
-            self, centre_m=self.centre_m + np.asarray(offset_m, dtype=np.float64)
+            self,
+            centre_m=self.centre_m + np.asarray(offset_m, dtype=np.float64),
+            slab_m=(self.slab_m + np.float32(offset_m[2])).astype(np.float32),
         )
 
     @staticmethod
@@ -76,6 +95,7 @@ class SpriteBatch:
             cloud_id=np.zeros(0, np.int64),
             core_frac=np.zeros(0, np.float32),
             flat=np.zeros(0, np.bool_),
+            slab_m=np.zeros((0, 2), np.float32),
         )
 
     @staticmethod

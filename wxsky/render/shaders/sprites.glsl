@@ -14,8 +14,17 @@ in vec3 in_normal;        // ENU unit normal, or zero: face the camera
 uniform mat3 u_view_rot;
 uniform mat4 u_proj;
 out vec2 v_uv;
+out vec2 v_round_uv;
+out float v_round_mix;
 out vec4 v_rgba;
+
+vec2 cell_uv(float cell) {
+    vec2 origin = vec2(mod(cell, float(SHEET_CELLS)), floor(cell / float(SHEET_CELLS)));
+    return (origin + in_corner * vec2(0.5, -0.5) + 0.5) / float(SHEET_CELLS);
+}
+
 void main() {
+    float round_mix = 0.0;
     float s = sin(in_rotation), k = cos(in_rotation);
     vec2 corner = mat2(k, s, -s, k) * in_corner;
     vec3 c;
@@ -36,22 +45,33 @@ void main() {
         // Sprites the eye is about to pass through fade out instead of filling the screen.
         float dist = length(u_view_rot * in_centre);
         alpha *= smoothstep(0.1 * in_size, 0.6 * in_size, dist);
+        // A flat-bottomed sprite paints a cloud's base seen from the side. Seen steeply from
+        // below its straight edge is no base at all but a grey bar across the cloud, so it
+        // turns into a round soft one (ROUND_SLOT) that still closes the base.
+        if (abs(in_texture - float(FLAT_BOTTOM_SLOT)) < 0.5) {
+            round_mix = smoothstep(0.45, 0.75, abs(in_centre.z) / max(length(in_centre), 1e-3));
+        }
     }
     gl_Position = u_proj * vec4(c, 1.0);
-    float cell = in_texture;
-    vec2 origin = vec2(mod(cell, float(SHEET_CELLS)), floor(cell / float(SHEET_CELLS)));
-    v_uv = (origin + in_corner * vec2(0.5, -0.5) + 0.5) / float(SHEET_CELLS);
+    v_uv = cell_uv(in_texture);
+    v_round_uv = cell_uv(float(ROUND_SLOT));
+    v_round_mix = round_mix;
     v_rgba = vec4(in_rgba.rgb, alpha);
 }
 #endif
 
 #if defined FRAGMENT_SHADER
 in vec2 v_uv;
+in vec2 v_round_uv;
+in float v_round_mix;
 in vec4 v_rgba;
 uniform sampler2D u_sheet;
 out vec4 f_colour;
 void main() {
     vec4 t = texture(u_sheet, v_uv);
+    if (v_round_mix > 0.0) {
+        t = mix(t, texture(u_sheet, v_round_uv), v_round_mix);
+    }
     float a = t.a * v_rgba.a;
     f_colour = vec4(v_rgba.rgb * t.rgb * a, a);
 }

@@ -1,0 +1,197 @@
+"""Bouthors' slab shading for stratiform layers ("Real-time realistic illumination and shading
+of stratiform clouds", 2006): a stratus or altostratus deck is locally a plane-parallel slab
+of thickness H, so the light it sends toward the eye depends on H, the key light's angle to
+the slab's normal (mu_l) and the view's (mu_v), and on which side of the slab the eye is. Every
+sprite of such a layer gets the slab's colour for the ray from the eye through it, so a deck
+of overlapping sprites reads as one continuous sheet instead of a pile of lit balls.
+
+Terms, per unit key-light irradiance, in the radiance units the particle models use (a white
+Lambertian surface facing the light is 1):
+- single and double scattering, analytic along the ray (Bouthors 4.3, 4.4) with the
+  modified-Mie phase function: the droplets' forward peak (P_f = 51 % within 5 degrees) folded
+  into the extinction, which leaves a Henyey-Greenstein lobe of the delta-scaled asymmetry
+  g_S = (g - P_f) / (1 - P_f); double scattering takes the phase convolved with itself, which
+  for Henyey-Greenstein is exactly the lobe of g_S squared, weighted by the 1D model's ratio
+  of double to single scattered energy;
+- three and more scattering events, diffuse, with the energy the paper's 1D model leaves for
+  them (Appendix A, fitted parameters of Appendix B): T_3+ = T_ms - T_0 - T_1 - T_2 and
+  R_3+ = R_ms - R_1 - R_2. The paper spreads it as mu_l / (4 pi mu_v), which grows without
+  bound toward the horizon; a sprite deck is seen edge-on there, so we spread it with
+  Eddington's limb law (1 + 1.5 mu_v) / 2 instead: an overcast sky three times brighter at
+  the zenith than at the horizon, as measured overcast skies are (the CIE overcast sky);
+- the sky's light (Harris's four skylights, summed) reflected with R_ms and transmitted with
+  T_ms, diffuse (Bouthors 4.6);
+- the ground under the deck (albedo GROUND_ALBEDO) and the cloud base reflecting each other's
+  light: between two uniform infinite planes the paper's radiosity passes sum to a geometric
+  series, 1 / (1 - albedo R_ms).
+
+The direct sun seen through a thin deck (T_0 and its 5-degree forward peak) is left to the sky
+pass behind the sprites. Pure numpy, vectorised over sprites.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from wxsky.scene.scattering import ALBEDO, hg_phase
+from wxsky.scene.shading_harris import NIGHT_FLOOR_RGB, exposed, scene_lights
+from wxsky.scene.sky import SkyParams
+from wxsky.scene.sprites import F32, F64, B, SpriteBatch
+
+# Bouthors' droplet size distribution (Appendix B): N0 = 300 cm^-3, r_e = 7 um.
+DROPLETS_PER_M3 = 300e6
+EFFECTIVE_RADIUS_M = 7e-6
+FORWARD_PEAK_SHARE = 0.51  # P_f: share of Mie scattering within 5 degrees of straight on
+MIE_ASYMMETRY = 0.86  # g of cloud droplets
+# Modified-Mie extinction: the forward peak no longer counts as an extinction event.
+KAPPA_S_PER_M = (1.0 - FORWARD_PEAK_SHARE) * math.pi * EFFECTIVE_RADIUS_M**2 * DROPLETS_PER_M3
+G_S = (MIE_ASYMMETRY - FORWARD_PEAK_SHARE) / (1.0 - FORWARD_PEAK_SHARE)
+BETA = 0.9961  # T_ms of a 1 m slab (Appendix B)
+# Appendix B, per angle of the light to the normal: b, c (the thin-slab correction of T_ms),
+# kappa_c, t and r (the 1D single- and double-scattering column).
+_TABLE_DEG = np.arange(0.0, 91.0, 10.0)
+_TABLE = np.array(
+    [
+        (1.1796, 0.0138, 0.0265, 0.8389, 0.0547),
+        (1.1293, 0.0154, 0.0262, 0.8412, 0.0547),
+        (1.1382, 0.0131, 0.0272, 0.8334, 0.0552),
+        (1.0953, 0.0049, 0.0294, 0.8208, 0.0564),
+        (0.9808, 0.0012, 0.0326, 0.8010, 0.0603),
+        (0.9077, 0.0047, 0.0379, 0.7774, 0.0705),
+        (0.7987, 0.0207, 0.0471, 0.7506, 0.0984),
+        (0.6629, 0.0133, 0.0616, 0.7165, 0.1700),
+        (0.5043, 0.0280, 0.0700, 0.7149, 0.3554),
+        (0.3021, 0.0783, 0.0700, 0.1000, 0.9500),
+    ]
+)
+GROUND_ALBEDO = 0.15  # fields and towns; we know nothing of the ground under the deck
+MIN_MU = 0.02  # views and lights closer than ~1 degree to the slab's plane count as 1 degree
+
+
+def slab_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
+    """The 1D model's transmitted and reflected energy per order (Bouthors, Appendix A), for
+    slabs of these thicknesses lit at this angle from the normal: T_ms, R_ms, T_0, T_1, T_2,
+    R_1, R_2, T_3+ and R_3+, each shaped like thickness_m."""
+    h = np.maximum(np.asarray(thickness_m, np.float64), 0.0)
+    angle = min(max(light_angle_deg, 0.0), 90.0)
+    b, c, kc, t, r = (np.interp(angle, _TABLE_DEG, _TABLE[:, i]) for i in range(5))
+    mu_l = max(math.cos(math.radians(angle)), MIN_MU)
+    t_ms = np.clip((b + (1.0 - b) * np.exp(-c * h)) * BETA / (h - (h - 1.0) * BETA), 0.0, 1.0)
+    tau_1, tau_2, tau_3 = np.exp(-kc * h), np.exp(-2.0 * kc * h), np.exp(-3.0 * kc * h)
+    t_0 = np.exp(-KAPPA_S_PER_M * h / mu_l)
+    t_1 = t * h * kc * tau_1
+    t_2 = (
+        0.5 * (kc * t * h) ** 2 * tau_1
+        + 0.25 * r * r * (1.0 + (2.0 * h * kc - 1.0) * tau_2) * tau_3
+    )
+    r_1 = 0.5 * r * (1.0 - tau_2)
+    r_2 = 0.5 * r * t * (1.0 - (2.0 * h * kc + 1.0) * tau_2)
+    r_ms = 1.0 - t_ms
+    return {
+        "t_ms": t_ms,
+        "r_ms": r_ms,
+        "t_0": t_0,
+        "t_1": t_1,
+        "t_2": t_2,
+        "r_1": r_1,
+        "r_2": r_2,
+        "t_3": np.maximum(t_ms - t_0 - t_1 - t_2, 0.0),
+        "r_3": np.maximum(r_ms - r_1 - r_2, 0.0),
+    }
+
+
+def limb(mu_v: F64) -> F64:
+    """Eddington's angular spread of light leaving a thick scattering layer, per Lambertian
+    radiance: 1.25 along the normal, 0.5 edge-on, and the same flux as a Lambertian surface."""
+    out: F64 = (1.0 + 1.5 * mu_v) / 2.0
+    return out
+
+
+def slab_radiance(
+    thickness_m: F64,
+    mu_l: float,
+    mu_v: F64,
+    cos_phase: F64,
+    reflected: B,
+) -> tuple[F64, F64]:
+    """(key, sky): radiance toward the eye per unit key-light and per unit skylight irradiance,
+    each (N,). mu_l is the key light's cosine to the slab's normal on its lit side (0 when the
+    light is below the slab's plane), mu_v the view's, cos_phase the cosine between the view ray
+    (eye to slab) and the direction to the light; `reflected` is True where the eye is on the
+    lit side."""
+    h = np.asarray(thickness_m, np.float64)
+    mu_v = np.maximum(np.asarray(mu_v, np.float64), MIN_MU)
+    lit = mu_l > 0.0
+    mu_light = max(mu_l, MIN_MU)
+    e = slab_energy(h, math.degrees(math.acos(min(mu_light, 1.0))))
+    p_1 = 4.0 * math.pi * hg_phase(cos_phase, G_S)
+    p_2 = 4.0 * math.pi * hg_phase(cos_phase, G_S * G_S)
+    k = KAPPA_S_PER_M
+    h_l, h_v = h / mu_light, h / mu_v
+    # Single scattering reflected / transmitted along the ray (Bouthors 4.3), in units where
+    # the Lambertian white is 1: I = a P mu_l / (4 (mu_v +- mu_l)) (1 - tau ...).
+    refl_geo = mu_light / (4.0 * (mu_v + mu_light)) * (1.0 - np.exp(-k * (h_l + h_v)))
+    trans_geo = mu_light / 4.0 * _exp_difference(k * h, mu_v, mu_light)
+    ratio_r = np.divide(e["r_2"], e["r_1"], out=np.zeros_like(h), where=e["r_1"] > 1e-12)
+    ratio_t = np.divide(e["t_2"], e["t_1"], out=np.zeros_like(h), where=e["t_1"] > 1e-12)
+    directional = np.where(
+        reflected,
+        ALBEDO * (p_1 + ratio_r * p_2) * refl_geo,
+        ALBEDO * (p_1 + ratio_t * p_2) * trans_geo,
+    )
+    diffuse = np.where(reflected, e["r_3"], e["t_3"]) * mu_light * limb(mu_v)
+    key = np.where(lit, directional + diffuse, 0.0)
+    # Ground and base light each other: irradiance on the ground from the key light and the
+    # sky through the deck, multiplied by the series of bounces between the two planes.
+    bounce = GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * e["r_ms"])
+    t_key = np.where(lit, e["t_ms"] * mu_light, 0.0)
+    # Light the ground sends up leaves the deck on the ground's side by reflection and on the
+    # far side by transmission: the opposite of the light from above.
+    up_share = np.where(reflected, e["t_ms"], e["r_ms"]) * limb(mu_v)
+    from_above = np.where(reflected, e["r_ms"], e["t_ms"]) * limb(mu_v)
+    key_total: F64 = key + t_key * bounce * up_share
+    sky_total: F64 = from_above + e["t_ms"] * bounce * up_share
+    return key_total, sky_total
+
+
+def slab_colours(batch: SpriteBatch, sky: SkyParams, eye_m: tuple[float, float, float]) -> F32:
+    """(N, 4) straight-alpha RGBA for sprites of stratiform layers (`batch.slab_m` set), seen
+    from eye_m. The eye is above a sprite's slab above its top, below it under its base, and
+    inside it on the side of the sprite it looks at."""
+    # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
+    lights = scene_lights(sky, above_cloud=True)
+    key_dir, key_rgb = lights.directions[0], lights.rgb[0]
+    sky_rgb = lights.rgb[1:].sum(axis=0)
+    base_m = batch.slab_m[:, 0].astype(np.float64)
+    top_m = batch.slab_m[:, 1].astype(np.float64)
+    eye = np.asarray(eye_m, np.float64)
+    ray = batch.centre_m - eye  # (N, 3) eye to sprite
+    dist = np.linalg.norm(ray, axis=1, keepdims=True)
+    ray = np.divide(ray, dist, out=np.zeros_like(ray), where=dist > 1e-6)
+    eye_above = np.where(
+        eye[2] >= top_m, True, np.where(eye[2] <= base_m, False, batch.centre_m[:, 2] <= eye[2])
+    )
+    # The light is on the top side whenever it is up; the deck is lit from below never.
+    mu_l = float(key_dir[2])
+    reflected = eye_above  # the key light is above every deck
+    key, sky_share = slab_radiance(
+        top_m - base_m, mu_l, np.abs(ray[:, 2]), ray @ key_dir, reflected
+    )
+    # The sky term is the slab's own ambient: only the night floor (starlight, towns) is added.
+    radiance = key[:, None] * key_rgb + sky_share[:, None] * sky_rgb + NIGHT_FLOOR_RGB
+    return np.concatenate([exposed(radiance), batch.opacity[:, None]], axis=1).astype(np.float32)
+
+
+def _exp_difference(kh: F64, mu_v: F64, mu_l: float) -> F64:
+    """(exp(-kh / mu_v) - exp(-kh / mu_l)) / (mu_v - mu_l), and its limit kh / mu^2 exp(-kh/mu)
+    where the two cosines meet (Bouthors' I_1^t with the view along the light's path)."""
+    diff = mu_v - mu_l
+    near = np.abs(diff) < 1e-4
+    safe = np.where(near, 1.0, diff)
+    far: F64 = (np.exp(-kh / mu_v) - np.exp(-kh / mu_l)) / safe
+    mid = 0.5 * (mu_v + mu_l)
+    limit = kh / (mid * mid) * np.exp(-kh / mid)
+    out: F64 = np.where(near, limit, far)
+    return out
