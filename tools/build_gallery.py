@@ -6,7 +6,8 @@ Times come from the sun at the preset's own place and date: dawn and dusk with t
 (morning and evening), noon at the day's highest sun, night with the sun 20° down. The camera
 stands 2 m above the observer looking 12° up toward the sun's side of the sky (east at dawn,
 south at noon, west at dusk); overcast-stratus also from above its top, at dawn, noon and dusk
-(overcast-stratus-above.png). Every picture goes through `wxsky.snapshot.take_snapshot`, the
+(overcast-stratus-above.png). Also the night sky, a crescent moon at dusk and the two shading
+models side by side (`sky_pictures`). Every picture goes through `wxsky.snapshot.take_snapshot`, the
 daemon's own stages, so the gallery shows what a host would get.
 """
 
@@ -29,7 +30,8 @@ from wxsky.png import write_png  # noqa: E402
 from wxsky.presets import list_presets, load_preset  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
-from wxsky.scene.sky import sun_position  # noqa: E402
+from wxsky.scene.shading import SHADING_MODELS  # noqa: E402
+from wxsky.scene.sky import sun_and_moon, sun_position  # noqa: E402
 from wxsky.snapshot import take_snapshot  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
@@ -73,6 +75,10 @@ def main() -> int:
             above = above_the_deck(renderer, config, width, height)
             write_png(OUT / "overcast-stratus-above.png", above)
             print(f"wrote {OUT / 'overcast-stratus-above.png'}")
+        if not args.preset:
+            for file_name, image in sky_pictures(renderer, config).items():
+                write_png(OUT / file_name, image)
+                print(f"wrote {OUT / file_name}")
     finally:
         renderer.close()
     sheet = np.concatenate(_spaced(rows, axis=0), axis=0)
@@ -99,6 +105,67 @@ def above_the_deck(renderer: Renderer, config: DaemonConfig, width: int, height:
         state = dataclasses.replace(base, time_utc=when)
         row.append(take_snapshot(state, camera, config.scene.settings(), renderer).image)
     return np.concatenate(_spaced(row, axis=1), axis=1)
+
+
+def sky_pictures(renderer: Renderer, config: DaemonConfig) -> dict[str, np.ndarray]:
+    """The night sky (clear, sun 20° down, looking 60° up to the south), a crescent moon at
+    dusk, and fair-cumulus under each shading model at noon and dusk (Wang's left, Harris's
+    right)."""
+    clear = WeatherState().apply(load_preset("clear", ()))
+    settings = config.scene.settings()
+
+    def shot(
+        state: WeatherState, heading: float, pitch: float, size: str, **kw: object
+    ) -> np.ndarray:
+        w, h = parse_size(size)
+        camera = Camera(
+            position_m=(0.0, 0.0, state.observer.alt_m + 2.0),
+            heading_deg=heading,
+            pitch_deg=pitch,
+            width_px=w,
+            height_px=h,
+        )
+        return take_snapshot(state, camera, dataclasses.replace(settings, **kw), renderer).image
+
+    night, _ = moment_time(clear, "night")
+    out = {
+        "night-sky.png": shot(dataclasses.replace(clear, time_utc=night), 180.0, 60.0, "640x360")
+    }
+    when, azimuth = crescent_at_dusk(clear)
+    out["dusk-moon.png"] = shot(dataclasses.replace(clear, time_utc=when), azimuth, 8.0, "640x360")
+    cumulus = WeatherState().apply(load_preset("fair-cumulus", ()))
+    rows = []
+    for moment in ("noon", "dusk"):
+        when, heading = moment_time(cumulus, moment)
+        state = dataclasses.replace(cumulus, time_utc=when)
+        rows.append(
+            np.concatenate(
+                _spaced(
+                    [shot(state, heading, 12.0, "320x180", shading=m) for m in SHADING_MODELS], 1
+                ),
+                axis=1,
+            )
+        )
+    out["shading-wang-vs-harris.png"] = np.concatenate(_spaced(rows, axis=0), axis=0)
+    return out
+
+
+def crescent_at_dusk(state: WeatherState) -> tuple[datetime, float]:
+    """The first evening from the preset's date with the sun 5° down and a waxing crescent
+    (5-30 % lit) 5-20° up: the time, and the moon's azimuth."""
+    obs = state.observer
+    for day in range(60):
+        midnight = state.time_utc.replace(hour=0, minute=0, second=0, microsecond=0)
+        start = midnight + timedelta(days=day, hours=12)
+        for minute in range(0, 12 * 60, 4):
+            when = start + timedelta(minutes=minute)
+            sun, moon = sun_and_moon(when, obs.lat_deg, obs.lon_deg, obs.alt_m)
+            if sun.elevation_deg > -5.0:
+                continue
+            if 0.05 <= moon.illuminated_fraction <= 0.3 and 5.0 <= moon.elevation_deg <= 20.0:
+                return when, moon.azimuth_deg
+            break  # past dusk this evening: try the next
+    raise SystemExit("no crescent moon at dusk within 60 days")
 
 
 def moment_time(state: WeatherState, moment: str) -> tuple[datetime, float]:
