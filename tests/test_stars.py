@@ -15,7 +15,7 @@ import numpy.typing as npt
 import pytest
 
 from wxsky.presets import load_preset
-from wxsky.render import sky_textures
+from wxsky.render import sky_texture_gen, sky_textures
 from wxsky.render.renderer import Renderer
 from wxsky.scene import ephemeris
 from wxsky.scene.camera import Camera
@@ -337,7 +337,7 @@ def test_cloud_dome_drifts_with_the_wind_aloft(renderer: Renderer) -> None:
 
 def test_star_texture_channels_follow_roden_and_parberry() -> None:
     tex = sky_textures.star_texture()
-    n = sky_textures.STAR_FACE_PX
+    n = sky_texture_gen.STAR_FACE_PX
     assert tex.shape == (6 * n, n, 4) and tex.dtype == np.uint8
     stars = tex[tex[..., 0] > 0]
     # Mostly empty: a few percent of the cells hold a star.
@@ -362,7 +362,7 @@ def test_flicker_clock_wraps_without_changing_any_star() -> None:
 
 
 def test_cube_cells_cover_the_sphere_evenly() -> None:
-    dirs = sky_textures.cube_cell_directions(64)
+    dirs = sky_texture_gen.cube_cell_directions(64)
     np.testing.assert_allclose(np.linalg.norm(dirs, axis=-1), 1.0, atol=1e-12)
     # Neighbouring cell centres are 90°/64 apart within 30 % everywhere (equi-angular; a
     # plain cube map is 1.7 times denser at the face corners than at their centres).

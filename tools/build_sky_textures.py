@@ -5,9 +5,10 @@
     .venv/bin/python tools/build_sky_textures.py --check    # exit 1 if the shipped PNGs drift
 
 Writes wxsky/render/data/sky_stars.png (the star cube map, six faces in one vertical strip),
-sky_galaxy.png (the Milky Way's glow, grey in RGB, A = 255) and sky_dome_noise.png (the cloud
-dome's four noise fields), all RGBA8, from the one generator,
-`wxsky.render.sky_textures.build_sky_textures`, with its fixed seeds. `--check` regenerates in
+sky_galaxy.png (the Milky Way's glow, grey in RGB, A = 255), sky_dome_noise.png (the cloud
+dome's four noise fields) and sky_sunset.png (the dome's sunset tint over the sunset control
+and the height in the sky, A = 255), all RGBA8, from the one generator,
+`wxsky.render.sky_texture_gen.build_sky_textures`, with its fixed seeds. `--check` regenerates in
 memory and byte-compares the shipped PNGs, so CI catches a generator change whose files were
 not rebuilt; `--out DIR` writes to (or checks) another folder. After rebuilding, regenerate the
 goldens (tools/regen_goldens.py): the sky is drawn with these textures.
@@ -27,7 +28,8 @@ for _path in (ROOT, ROOT / "tools"):  # run from a checkout without installing
 from shipped_files import write_or_check  # noqa: E402
 
 from wxsky.png import encode_png  # noqa: E402
-from wxsky.render.sky_textures import DATA_DIR, SKY_FILES, build_sky_textures  # noqa: E402
+from wxsky.render.sky_texture_gen import SKY_FILES, build_sky_textures  # noqa: E402
+from wxsky.render.sky_textures import DATA_DIR  # noqa: E402
 
 DATA = ROOT / "wxsky" / "render" / DATA_DIR
 

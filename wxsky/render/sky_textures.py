@@ -1,10 +1,11 @@
 """The sky pass's textures and the per-frame values that index them (Roden & Parberry).
 
-The textures are made procedurally from fixed seeds by one generator, `build_sky_textures`, and
-shipped as package data: `tools/build_sky_textures.py` writes its output to `data/sky_*.png`
-(`--check` there, and tests/test_sky_texture_files.py, keep the files equal to it), and the
-renderer only loads them, once per process (`star_texture`, `galaxy_texture`,
-`dome_noise_texture`). Every file is 8-bit RGBA, so all are stored losslessly:
+The textures are made procedurally from fixed seeds by one generator,
+`wxsky.render.sky_texture_gen.build_sky_textures`, and shipped as package data:
+`tools/build_sky_textures.py` writes its output to `data/sky_*.png` (`--check` there, and
+tests/test_sky_texture_files.py, keep the files equal to it), and the renderer only loads them,
+once per process (`star_texture`, `galaxy_texture`, `dome_noise_texture`, `sunset_texture`).
+Every file is 8-bit RGBA, so all are stored losslessly:
 
 - stars: one RGBA8 cell per direction on an equi-angular cube map of the celestial sphere,
   six faces of STAR_FACE_PX² stacked vertically. Most cells are black (no star); a star's
@@ -19,6 +20,11 @@ renderer only loads them, once per process (`star_texture`, `galaxy_texture`,
   in R, G and B alike with A = 255, and loading keeps R.
 - dome noise: four tileable noise fields (RGBA8, mipmapped): two cloud-shape layers, a
   detail layer and the moon's maria. `sky_dome_noise.png` (256 x 256): the texture's bytes.
+- sunset: the paper's sunset gradient, the dome cloud's tint at dusk (RGB; A = 255), linearly
+  filtered and clamped. Columns run along the `sunset` control (0 golden late afternoon, 1 the
+  sun on the horizon), rows up the sky as sqrt(sin elevation) (row 0 the horizon): golden-yellow
+  at low sunset; at full sunset deep red-orange low down, orange above, pink-magenta high up.
+  `sky_sunset.png` (64 x 32): the texture's bytes.
 
 `SkyPass` uploads them, picks the compiled variant of sky.glsl a frame needs (`features`)
 and gives its uniforms (`frame_uniforms`).
@@ -38,13 +44,23 @@ import numpy.typing as npt
 
 from wxsky.png import read_png
 from wxsky.render.shaders import ShaderLibrary
+from wxsky.render.sky_texture_gen import (
+    DOME_FILE,
+    DOME_NOISE_PX,
+    GALACTIC_FROM_EQUATORIAL,
+    GALAXY_FILE,
+    GALAXY_SIZE_PX,
+    STAR_FACE_PX,
+    STAR_FILE,
+    SUNSET_FILE,
+    SUNSET_SIZE_PX,
+)
 from wxsky.scene.camera import Camera
 from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
 
-STAR_FACE_PX = 256  # cells along a cube face: 0.35° each
 STAR_JITTER = 0.3  # greatest offset of a star from its cell centre, in cells
 # A flicker rate of G = k/255 makes k/255 * 2.55 = k/100 cycles per second, so every star's
 # sine repeats after exactly 100 s: the shader's clock can wrap there without a jump while
@@ -58,8 +74,6 @@ STAR_SIGMA_MAX_CELLS = (1.0 - STAR_JITTER) / 3.0
 # Starlight (R + B·sin) lost against a sky that is not yet dark: at SkyParams.stars = s the
 # stars fainter than this * (1 - s) are gone, so twilight and haze take the faint ones first.
 STAR_FLOOR_AT_DAY = 0.4
-GALAXY_SIZE_PX = (512, 256)  # longitude, latitude
-DOME_NOISE_PX = 256
 # Size on the cloud-dome plane of one repeat of the cloud-shape and the detail noise.
 DOME_TILE_M = 14_000.0
 DOME_DETAIL_TILE_M = 3_500.0
@@ -68,36 +82,9 @@ DOME_MIN_CLEARANCE_M = 300.0
 EARTH_RADIUS_M = 6_371_000.0
 EARTHSHINE = 0.05  # of the sunlit face's brightness, on the dark part of a crescent at night
 
-SEED_STARS = 0x5EED_57A2
-SEED_GALAXY = 0x5EED_6A1A
-SEED_DOME = 0x5EED_D0E0
-
 # The shipped files: wxsky/render/data/, written by tools/build_sky_textures.py.
 DATA_PACKAGE = "wxsky.render"
 DATA_DIR = "data"
-STAR_FILE = "sky_stars.png"
-GALAXY_FILE = "sky_galaxy.png"
-DOME_FILE = "sky_dome_noise.png"
-SKY_FILES = (STAR_FILE, GALAXY_FILE, DOME_FILE)
-
-# J2000 equatorial to galactic (rows: galactic x towards the centre, y, z to the north pole).
-GALACTIC_FROM_EQUATORIAL = np.array(
-    [
-        [-0.0548755604, -0.8734370902, -0.4838350155],
-        [0.4941094279, -0.4448296300, 0.7469822445],
-        [-0.8676661490, -0.1980763734, 0.4559837762],
-    ]
-)
-
-# Each cube face: the major axis and the two axes its (u, v) run along, as the shader has them.
-_FACES = (
-    ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
-    ((-1, 0, 0), (0, 1, 0), (0, 0, 1)),
-    ((0, 1, 0), (1, 0, 0), (0, 0, 1)),
-    ((0, -1, 0), (1, 0, 0), (0, 0, 1)),
-    ((0, 0, 1), (1, 0, 0), (0, 1, 0)),
-    ((0, 0, -1), (1, 0, 0), (0, 1, 0)),
-)
 
 
 def shader_defines(feats: SkyFeatures) -> dict[str, str]:
@@ -113,20 +100,6 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
 
 
 # -- textures --------------------------------------------------------------------------------
-
-
-def build_sky_textures() -> dict[str, U8]:
-    """The one generator: every sky file's image, (H, W, 4) uint8 as shipped, by file name.
-    Deterministic (seeded PCG64, numpy only), about 0.1 s."""
-    galaxy = _make_galaxy()
-    return {
-        STAR_FILE: _make_stars(galaxy),
-        GALAXY_FILE: np.concatenate(
-            [np.repeat(galaxy[..., None], 3, axis=-1), np.full((*galaxy.shape, 1), 255, np.uint8)],
-            axis=-1,
-        ),
-        DOME_FILE: _make_dome_noise(),
-    }
 
 
 @functools.cache
@@ -155,6 +128,14 @@ def dome_noise_texture() -> U8:
     return _load(DOME_FILE, (DOME_NOISE_PX, DOME_NOISE_PX, 4))
 
 
+@functools.cache
+def sunset_texture() -> U8:
+    """(H, W, 4) the dome cloud's sunset tint: columns are the sunset control 0..1, rows
+    sqrt(sin elevation) 0..1 (row 0 at the horizon); RGB tint, A = 255; shipped, read-only."""
+    w, h = SUNSET_SIZE_PX
+    return _load(SUNSET_FILE, (h, w, 4))
+
+
 def _load(name: str, shape: tuple[int, int, int]) -> U8:
     root = resources.files(DATA_PACKAGE).joinpath(DATA_DIR)
     with resources.as_file(root.joinpath(name)) as path:
@@ -163,117 +144,6 @@ def _load(name: str, shape: tuple[int, int, int]) -> U8:
         raise ValueError(f"{name}: expected {shape[1]}x{shape[0]} RGBA, got {img.shape}")
     img.flags.writeable = False  # shared by every caller through the cache
     return img
-
-
-def _make_galaxy() -> U8:
-    """(H, W) glow of the Milky Way: columns are galactic longitude -180°..180°, rows
-    latitude -90°..90° (row 0 at -90°)."""
-    w, h = GALAXY_SIZE_PX
-    rng = np.random.default_rng(SEED_GALAXY)
-    lon = ((np.arange(w) + 0.5) / w * 360.0 - 180.0)[None, :]
-    lat = ((np.arange(h) + 0.5) / h * 180.0 - 90.0)[:, None]
-    clumps = _spectral_noise(rng, (h, w), beta=2.4)
-    lanes = _spectral_noise(rng, (h, w), beta=2.0)
-    # Wider and brighter towards the centre (the bulge), a second bright stretch in Cygnus,
-    # fainter towards the anticentre.
-    width_deg = 5.0 + 9.0 * np.exp(-((lon / 30.0) ** 2))
-    strength = (
-        0.35 + 0.65 * np.exp(-((lon / 60.0) ** 2)) + 0.25 * np.exp(-(((lon - 80.0) / 25.0) ** 2))
-    )
-    band = np.exp(-((lat / width_deg) ** 2)) * strength * (0.35 + 1.1 * clumps)
-    # The Great Rift: dust along the plane from Cygnus to Sagittarius.
-    rift = np.exp(-(((lat - 1.0) / 2.5) ** 2)) * np.exp(-(((lon - 30.0) / 45.0) ** 2))
-    band *= 1.0 - 0.75 * rift * (0.4 + 0.6 * lanes)
-    band += 0.12 * np.exp(-((lat / 25.0) ** 2))
-    band /= band.max()
-    return np.round(np.clip(band, 0.0, 1.0) * 255.0).astype(np.uint8)
-
-
-def _make_stars(galaxy: U8) -> U8:
-    """(6·N, N, 4) star cells, faces stacked (face f's row j at f·N + j, column i), denser
-    where `galaxy` (the generated glow) is bright."""
-    n = STAR_FACE_PX
-    rng = np.random.default_rng(SEED_STARS)
-    dirs = cube_cell_directions(n)  # (6, n, n, 3)
-    glow = _galaxy_at(dirs.reshape(-1, 3), galaxy).reshape(6, n, n)
-    # About 31 000 stars over the sphere, three times as dense along the Milky Way.
-    chance = 0.065 + 0.13 * glow
-    has_star = rng.random((6, n, n)) < chance
-    count = int(has_star.sum())
-    # Brightness follows the usual star counts, three times as many stars per magnitude, so
-    # N(> I) ~ I^-1.2 between a faint floor and 1 (the power law truncated there, so that
-    # only a handful of stars come out at full white).
-    floor, slope = 0.028, 1.2
-    top = floor**slope
-    mean = floor * (1.0 - rng.random(count) * (1.0 - top)) ** (-1.0 / slope)
-    rate = rng.uniform(0.15, 1.0, count)
-    variance = mean * rng.uniform(0.15, 0.45, count)
-    phase = rng.random(count)
-    cells = np.zeros((6, n, n, 4), np.uint8)
-    values = np.stack([mean, rate, variance, phase], -1)
-    packed = np.round(np.clip(values, 0.0, 1.0) * 255.0).astype(np.uint8)
-    packed[:, 0] = np.maximum(packed[:, 0], 1)  # a star's R is never 0, which means "none"
-    cells[has_star] = packed
-    return cells.reshape(6 * n, n, 4)
-
-
-def _make_dome_noise() -> U8:
-    """(N, N, 4) tileable noise: R, G cloud shapes; B detail; A the moon's maria."""
-    n = DOME_NOISE_PX
-    rng = np.random.default_rng(SEED_DOME)
-    shape1 = _spectral_noise(rng, (n, n), beta=3.0, min_cycles=2)
-    shape2 = _spectral_noise(rng, (n, n), beta=2.7, min_cycles=2)
-    detail = _spectral_noise(rng, (n, n), beta=2.0, min_cycles=8)
-    maria = _spectral_noise(rng, (n, n), beta=3.4)
-    out = np.stack([shape1, shape2, detail, maria], -1)
-    return np.round(out * 255.0).astype(np.uint8)
-
-
-def cube_cell_directions(n: int) -> F64:
-    """(6, n, n, 3) unit vectors through the cell centres of the equi-angular cube map, indexed
-    [face, v, u]; the inverse of sky.glsl's cube_cell."""
-    w = ((np.arange(n) + 0.5) / n) * 2.0 - 1.0
-    t = np.tan(w * math.pi / 4.0)
-    tv, tu = np.meshgrid(t, t, indexing="ij")
-    out = np.empty((6, n, n, 3))
-    for f, (major, ax_u, ax_v) in enumerate(_FACES):
-        v = (
-            np.asarray(major, float)[None, None, :]
-            + tu[..., None] * np.asarray(ax_u, float)
-            + tv[..., None] * np.asarray(ax_v, float)
-        )
-        out[f] = v / np.linalg.norm(v, axis=-1, keepdims=True)
-    return out
-
-
-def _galaxy_at(celestial: F64, galaxy: U8) -> F64:
-    """The galaxy texture's value (0..1) in celestial directions (..., 3), nearest texel."""
-    g = celestial @ GALACTIC_FROM_EQUATORIAL.T
-    lon = np.degrees(np.arctan2(g[..., 1], g[..., 0]))
-    lat = np.degrees(np.arcsin(np.clip(g[..., 2], -1.0, 1.0)))
-    w, h = GALAXY_SIZE_PX
-    col = np.clip(((lon + 180.0) / 360.0 * w).astype(int), 0, w - 1)
-    row = np.clip(((lat + 90.0) / 180.0 * h).astype(int), 0, h - 1)
-    result: F64 = galaxy[row, col] / 255.0
-    return result
-
-
-def _spectral_noise(
-    rng: np.random.Generator, shape: tuple[int, int], beta: float, min_cycles: int = 1
-) -> F64:
-    """Tileable noise with a power spectrum falling as f^-beta, flattened to a uniform
-    distribution on 0..1 (so a threshold at 1 - x keeps a share x of the texels)."""
-    h, w = shape
-    fy = np.fft.fftfreq(h)[:, None] * h
-    fx = np.fft.rfftfreq(w)[None, :] * w
-    f = np.hypot(fx, fy)
-    amp = np.where(f >= min_cycles, np.maximum(f, 1e-9) ** (-beta / 2.0), 0.0)
-    spectrum = amp * (rng.standard_normal(amp.shape) + 1j * rng.standard_normal(amp.shape))
-    field = np.fft.irfft2(spectrum, s=shape)
-    ranks = np.empty(field.size)
-    ranks[np.argsort(field, axis=None)] = np.arange(field.size)
-    result: F64 = (ranks / (field.size - 1)).reshape(shape)
-    return result
 
 
 @dataclass(frozen=True)
@@ -287,10 +157,15 @@ class SkyFeatures:
 
 
 class SkyPass:
-    """The sky pass's GL objects: the three textures (units 1-3; the sprite sheet keeps unit
+    """The sky pass's GL objects: the four textures (units 1-4; the sprite sheet keeps unit
     0) and one program and vertex array per feature set, compiled on first use."""
 
-    UNITS: ClassVar[dict[str, int]] = {"u_star_tex": 1, "u_galaxy_tex": 2, "u_dome_tex": 3}
+    UNITS: ClassVar[dict[str, int]] = {
+        "u_star_tex": 1,
+        "u_galaxy_tex": 2,
+        "u_dome_tex": 3,
+        "u_sunset_tex": 4,
+    }
 
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self._ctx = ctx
@@ -309,6 +184,11 @@ class SkyPass:
         self.dome.build_mipmaps()
         self.dome.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
         self.dome.repeat_x = self.dome.repeat_y = True
+        sunset = sunset_texture()
+        self.sunset = ctx.texture((sunset.shape[1], sunset.shape[0]), 4, sunset.tobytes())
+        # A gradient read between texel centres: its ends must not wrap into each other.
+        self.sunset.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.sunset.repeat_x = self.sunset.repeat_y = False
 
     def prepare(
         self, cam: Camera, sky: SkyParams
@@ -324,13 +204,14 @@ class SkyPass:
         self.stars.use(self.UNITS["u_star_tex"])
         self.galaxy.use(self.UNITS["u_galaxy_tex"])
         self.dome.use(self.UNITS["u_dome_tex"])
+        self.sunset.use(self.UNITS["u_sunset_tex"])
         return variant[0], variant[1], frame_uniforms(cam, sky, feats)
 
     def release(self) -> None:
         for _prog, vao in self._variants.values():
             vao.release()  # the programs belong to the shader library
         self._variants.clear()
-        for tex in (self.stars, self.galaxy, self.dome):
+        for tex in (self.stars, self.galaxy, self.dome, self.sunset):
             tex.release()
 
 
@@ -392,6 +273,7 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
         out.update(
             {
                 "u_dome_tex": SkyPass.UNITS["u_dome_tex"],
+                "u_sunset_tex": SkyPass.UNITS["u_sunset_tex"],
                 "u_dome_height_m": frame.height_m,
                 "u_dome_controls": (dome.high_cover, dome.cover, dome.density, dome.sunset),
                 "u_dome_band": (band_lo, band_hi),

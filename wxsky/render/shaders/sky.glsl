@@ -45,6 +45,7 @@ uniform vec3 u_moon_rgb;
 uniform vec3 u_earthshine_rgb;
 // Cloud dome
 uniform sampler2D u_dome_tex;     // R, G cloud shapes; B detail; A maria
+uniform sampler2D u_sunset_tex;   // tint at (sunset, sqrt(sin elevation)); clamped
 uniform float u_dome_height_m;    // of the dome plane above the eye; 0 = none
 uniform vec4 u_dome_controls;     // high cover, total cover, density, sunset
 uniform vec2 u_dome_band;         // sin(elevation): distant cover full below x, none above y
@@ -61,7 +62,7 @@ const float PI = 3.14159265358979;
 
 #if SKY_STARS
 // Celestial direction -> (face, continuous cell coordinates, face-plane coordinates) on
-// the equi-angular cube map (sky_textures.cube_cell_directions uses the same faces).
+// the equi-angular cube map (sky_texture_gen.cube_cell_directions uses the same faces).
 void cube_cell(vec3 c, out int face, out vec2 grid, out vec2 uv) {
     vec3 a = abs(c);
     if (a.x >= a.y && a.x >= a.z) {
@@ -186,7 +187,13 @@ vec4 cloud_dome(vec3 ray) {
     vec2 flat_ray = normalize(ray.xy + vec2(1e-6, 0.0));
     vec2 flat_sun = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
     float sunward = 0.35 + 0.65 * max(dot(flat_ray, flat_sun), 0.0);
-    vec3 sunset_rgb = vec3(1.0, 0.52, 0.32) * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
+    // Roden & Parberry's sunset gradient: redder low down, pinker high up, golden while the sun
+    // is still well up. Scaled to the dome's light so the tint never brightens a dark sky.
+    // Coordinates land on the first and last texel centres at 0 and 1.
+    vec2 sunset_px = vec2(textureSize(u_sunset_tex, 0));
+    vec2 sunset_uv = (vec2(sunset, sqrt(z)) * (sunset_px - 1.0) + 0.5) / sunset_px;
+    vec3 sunset_rgb = textureLod(u_sunset_tex, sunset_uv, 0.0).rgb
+                      * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
     rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
     float haze = 1.0 - exp(-u_dome_height_m / z / u_haze_m);
     rgb = mix(rgb, u_horizon, haze * 0.85);
