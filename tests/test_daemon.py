@@ -150,8 +150,8 @@ def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) 
             },
         )
         start = host.reader.frame_number
-        frame = host.wait_frame(after=start + 2, timeout_s=20)
-        assert frame.meta.camera.width_px == 320
+        frame = host.wait_settled_frame(after=start + 2, timeout_s=30)
+        assert frame.meta.camera.width_px == 320 and not frame.meta.fading
         hosted = frame.composite()
         assert host.weather is not None
 

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 import struct
 
 import numpy as np
@@ -27,7 +28,7 @@ def _meta() -> FrameMeta:
 def test_round_trip_is_exact() -> None:
     meta = _meta()
     data = meta.pack()
-    assert len(data) == RECORD_SIZE == 920
+    assert len(data) == RECORD_SIZE == 1736
     back = FrameMeta.unpack(data)
     assert back.camera == meta.camera
     assert back.frame_number == meta.frame_number
@@ -37,7 +38,7 @@ def test_round_trip_is_exact() -> None:
 
 def test_field_offsets_match_the_protocol_doc() -> None:
     data = _meta().pack()
-    assert struct.unpack_from("<I", data, 0)[0] == 1
+    assert struct.unpack_from("<I", data, 0)[0] == 2
     assert struct.unpack_from("<Q", data, 8)[0] == 123456789012
     assert struct.unpack_from("<Q", data, 16)[0] == 7
     assert struct.unpack_from("<d", data, 56)[0] == 271.0  # heading_deg
@@ -65,3 +66,31 @@ def test_garbage_record_is_a_protocol_error() -> None:
     data[0:4] = struct.pack("<I", 1)
     with pytest.raises(ProtocolError, match="frame record"):
         FrameMeta.unpack(bytes(data))
+
+
+def test_a_fade_round_trips_and_sits_where_the_doc_says() -> None:
+    quads = np.arange(96, dtype=np.float64).reshape(8, 4, 3) * -2.0
+    meta = dataclasses.replace(
+        _meta(),
+        ring_set=1,
+        ring_fade=0.375,
+        incoming_centre_m=(900.0, -50.0, 1500.0),
+        incoming_radius_m=8000.0,
+        incoming_quads_m=quads,
+    )
+    data = meta.pack()
+    back = FrameMeta.unpack(data)
+    assert back.fading and back.ring_set == 1 and back.ring_fade == 0.375
+    assert back.incoming_centre_m == (900.0, -50.0, 1500.0)
+    np.testing.assert_array_equal(back.incoming_quads_m, quads)
+    assert struct.unpack_from("<IId", data, 920) == (1, 1, 0.375)
+    assert struct.unpack_from("<3dd", data, 936) == (900.0, -50.0, 1500.0, 8000.0)
+    assert struct.unpack_from("<d", data, 968 + 8 * 5)[0] == 5 * -2.0
+
+
+def test_without_a_fade_the_incoming_ring_reads_back_as_absent() -> None:
+    back = FrameMeta.unpack(_meta().pack())
+    assert not back.fading and back.ring_fade == 0.0 and back.incoming_quads_m is None
+    # ... even if a writer left a stale weight behind.
+    stale = dataclasses.replace(_meta(), ring_fade=0.5).pack()
+    assert FrameMeta.unpack(stale).ring_fade == 0.0

@@ -17,7 +17,7 @@ from wxsky.scene.in_cloud import (
     in_cloud_fog,
     lock_facing,
 )
-from wxsky.scene.layout import FrameScene, SceneSettings, build_frame, zero_drift
+from wxsky.scene.layout import FrameScene, NearRing, SceneSettings, build_frame, zero_drift
 from wxsky.scene.sky import sky_params
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
@@ -102,7 +102,7 @@ def _frame(eye: tuple[float, float, float], locks: Locks = NO_LOCKS) -> FrameSce
         state,
         zero_drift(state),
         camera,
-        (0.0, 0.0, 1300.0),
+        (NearRing((0.0, 0.0, 1300.0), zero_drift(state), 1.0),),
         sky_params(state),
         SceneSettings(),
         locks=locks,
@@ -132,8 +132,9 @@ def test_a_camera_inside_a_deck_is_in_cloud_and_locks_sprites() -> None:
 def test_flat_cirrus_lies_in_its_layer() -> None:
     state = WeatherState(layers=(CloudLayer(6.0, 9000.0, 9800.0, CloudType.CIRRUS),), wind=())
     eye = (0.0, 0.0, 500.0)
+    rings = (NearRing(eye, zero_drift(state), 1.0),)
     frame = build_frame(
-        state, zero_drift(state), Camera(position_m=eye), eye, sky_params(state), SceneSettings()
+        state, zero_drift(state), Camera(position_m=eye), rings, sky_params(state), SceneSettings()
     )
     assert len(frame.near) > 0 and frame.near.sprites.flat.all()
     assert frame.near.normals is not None

@@ -382,7 +382,8 @@ def test_compositor_through_the_ring_matches_a_direct_render(renderer: Renderer)
     images = {name: renderer.read(name) for name in LAYER_NAMES}
     assert not images["near"].any()
     via_ring = composite(layers_from_images(images, geo.corners_m()), cam).astype(int)
-    ring_only = sample_ring(layers_from_images(images, geo.corners_m()), cam)
+    layers = layers_from_images(images, geo.corners_m())
+    ring_only = sample_ring(layers.ring, layers.ring_quads_m, cam)
 
     with _near_scale(renderer, 1.0):  # the reference: the sprite drawn at full resolution
         renderer.render_frame(FrameScene(cam, sky, _draw(batch)))

@@ -11,6 +11,7 @@ import pytest
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch
 from wxsky.scene.layout import (
+    NearRing,
     SceneSettings,
     advance_drift,
     build_frame,
@@ -349,7 +350,7 @@ def test_build_ring_and_frame_use_the_ring_centre() -> None:
     binned = set().union(*(_keys(d.sprites) for d in ring.impostors))
     assert binned == _keys(far)
     cam = Camera((1500.0, 400.0, 1100.0), heading_deg=30.0, width_px=32, height_px=18)
-    frame = build_frame(state, drift, cam, centre, sky, settings)
+    frame = build_frame(state, drift, cam, (NearRing(centre, drift, 1.0),), sky, settings)
     assert _keys(frame.near.sprites) == _keys(gather_blocks(state, drift, centre, 0.0, R))
     d = np.linalg.norm(frame.near.sprites.centre_m - np.asarray(cam.position_m), axis=1)
     assert np.all(np.diff(d) <= 0.0)  # sorted for the camera, not the ring centre

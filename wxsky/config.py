@@ -106,6 +106,8 @@ class SceneSection(_Section):
     ring_radius_m: float = _opt(8000.0, _Rule(100.0, 200_000.0))
     max_range_m: float = _opt(40_000.0, _Rule(1000.0, 500_000.0))
     ring_texture_px: int = _opt(256, _Rule(16, 4096))
+    # A new ring cross-fades over the old one for this long (Wang); 0 swaps at once.
+    ring_fade_s: float = _opt(1.0, _Rule(0.0, 30.0))
     block_size_m: float = _opt(
         BLOCK_SIZE_M,
         _Rule(fixed_reason="the cloud field is generated in 4 km blocks by design"),

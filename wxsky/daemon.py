@@ -45,7 +45,8 @@ from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
-from wxsky.scene.ring import RING_SIZE
+from wxsky.scene.ring import RING_SIZE, ring_target_name
+from wxsky.trace import TraceWriter
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
 
@@ -83,6 +84,8 @@ def layer_specs(config: DaemonConfig) -> list[LayerSpec]:
         LayerSpec("sky", w, h),
         LayerSpec("near", w, h),
         *(LayerSpec(f"ring_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
+        # The new ring while it fades in over the old one (absent otherwise).
+        *(LayerSpec(f"ring_in_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
     ]
 
 
@@ -96,8 +99,11 @@ class Daemon:
         feeds: Sequence[str] = (),
         serial: Sequence[SerialInputSection] = (),
         can: Sequence[CanInputSection] = (),
+        trace_path: Path | None = None,
     ) -> None:
         self.config = config
+        self._trace_path = trace_path
+        self._trace: TraceWriter | None = None
         self.address = address or (
             _parse(config.output.control) if config.output.control else default_address()
         )
@@ -130,6 +136,8 @@ class Daemon:
             rates=config.transition.rates(),
             transition_step_s=config.transition.step_s,
             cockpit_hold_s=config.transition.cockpit_hold_s,
+            ring_build="async",
+            ring_fade_s=config.scene.ring_fade_s,
         )
         for patch in patches:
             if patch.source not in (Source.DEFAULT, Source.PRESET):
@@ -194,6 +202,9 @@ class Daemon:
             max_workers=1, thread_name_prefix="wxsky-render"
         )
         await loop.run_in_executor(self._render_exec, self._create_renderer)
+        if self._trace_path is not None:
+            self._trace = TraceWriter(self._trace_path)
+            log.info("trace: %s", self._trace_path)
         self._writer = FrameWriter.create(self.config.output.shm_name, layer_specs(self.config))
         self._server = ControlServer(self.address, self._handle)
         await self._server.start()
@@ -222,6 +233,7 @@ class Daemon:
         next_status = last + self.config.daemon.status_interval_s
         next_preview = last + 0.5
         weather_version = self.engine.weather_version
+        shown_ring = None
         while not self._stop.is_set():
             now = loop.time()
             # The scene is built on the render thread too: a ring build takes long enough on a
@@ -233,7 +245,8 @@ class Daemon:
             self._publish_target()
             self._count_frame()
             self._broadcast_frame(plan, meta)
-            if plan.ring_changed:
+            if plan.ring is not shown_ring:
+                shown_ring = plan.ring
                 self._server_broadcast("scene", self.scene_info())
             if self.engine.weather_version != weather_version:
                 weather_version = self.engine.weather_version
@@ -291,6 +304,9 @@ class Daemon:
         if self._writer is not None:
             self._writer.close()
             self._writer = None
+        self.engine.close()
+        if self._trace is not None:
+            self._trace.close()
         log.info("stopped after %d frames", self.frames_published)
 
     # -- render thread ----------------------------------------------------------------
@@ -312,15 +328,28 @@ class Daemon:
     def _render_and_publish(self, plan: FramePlan) -> FrameMeta:
         r, writer = self._renderer, self._writer
         assert r is not None and writer is not None
-        if plan.ring_changed:
-            r.render_ring(plan.ring)
+        rings = plan.rings
+        if rings.current is None:
+            # Nothing built yet: the set on show is the empty ring (transparent images).
+            r.render_ring(plan.ring, ring_set=rings.current_set)
+        if rings.render and rings.render_ring is not None:
+            r.render_ring(rings.render_ring, rings.render, rings.render_set)
         r.render_frame(plan.frame)
         cam = plan.frame.camera
         for name in ("sky", "near"):
             r.read_into(name, writer.layer_buffer(name, cam.width_px, cam.height_px))
         px = self.config.scene.ring_texture_px
         for i in range(RING_SIZE):
-            r.read_into(f"ring_{i}", writer.layer_buffer(f"ring_{i}", px, px))
+            r.read_into(
+                ring_target_name(i, rings.current_set), writer.layer_buffer(f"ring_{i}", px, px)
+            )
+        incoming = rings.incoming if rings.fade > 0.0 else None
+        if incoming is not None:
+            for i in range(RING_SIZE):
+                r.read_into(
+                    ring_target_name(i, rings.incoming_set),
+                    writer.layer_buffer(f"ring_in_{i}", px, px),
+                )
         geo = plan.ring.geometry
         meta = FrameMeta(
             frame_number=self.frames_published + 1,
@@ -331,8 +360,15 @@ class Daemon:
             ring_centre_m=geo.centre_m,
             ring_radius_m=geo.radius_m,
             ring_quads_m=geo.corners_m(),
+            ring_set=rings.current_set,
+            ring_fade=rings.fade if incoming is not None else 0.0,
+            incoming_centre_m=incoming.geometry.centre_m if incoming else None,
+            incoming_radius_m=incoming.geometry.radius_m if incoming else 0.0,
+            incoming_quads_m=incoming.geometry.corners_m() if incoming else None,
         )
         writer.publish(meta.frame_number, meta.pack())
+        if self._trace is not None:
+            self._trace.write_events(meta.frame_number, cam.position_m, rings.events)
         return meta
 
     # -- control channel --------------------------------------------------------------
@@ -426,12 +462,13 @@ class Daemon:
         return {
             "shm_name": self.config.output.shm_name,
             "ring_version": self.engine.ring_version,
+            "ring_busy": self.engine.ring_busy,
             "ring": ring.geometry.to_dict() if ring is not None else None,
             "ring_texture_px": self.config.scene.ring_texture_px,
             "camera": camera_to_dict(self.engine.camera),
             "sky": sky_params(self.engine.state).to_dict(),
             "block_size_m": 4000.0,
-            "layers": ["sky", "near", *(f"ring_{i}" for i in range(RING_SIZE))],
+            "layers": [s.name for s in layer_specs(self.config)],
         }
 
     def _broadcast_frame(self, plan: FramePlan, meta: FrameMeta) -> None:
@@ -441,6 +478,8 @@ class Daemon:
                 "frame_number": meta.frame_number,
                 "time_utc": plan.state.time_utc.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
                 "ring_version": meta.ring_version,
+                "ring_set": meta.ring_set,
+                "ring_fade": meta.ring_fade,
                 "camera": camera_to_dict(meta.camera),
                 "sun_direction_enu": list(meta.sun_direction_enu),
                 **plan.frame.in_cloud.to_dict(),

@@ -25,29 +25,29 @@ import threading
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 
+from wxsky.ring_schedule import DEFAULT_FADE_S, RingFrame, RingSchedule
 from wxsky.scene.camera import Camera
 from wxsky.scene.in_cloud import NO_LOCKS, Locks
 from wxsky.scene.layout import (
     Drift,
     FrameScene,
+    NearRing,
     RingScene,
     SceneSettings,
     advance_drift,
     build_frame,
     build_ring,
     carry_drift,
+    empty_ring,
     zero_drift,
 )
-from wxsky.scene.sky import SkyParams, sky_params
+from wxsky.scene.sky import sky_params
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
 from wxsky.weather.precedence import DEFAULT_COCKPIT_HOLD_S, SourceStack
 from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
 from wxsky.weather.transition import INSTANT, TransitionRates, settled, step_toward
 
-# Rebuild the ring once the clouds in it have drifted this share of its radius, or the sun
-# has moved this far: past these, the seam between near sprites and impostors shows.
-RING_DRIFT_FRAC = 0.03
-RING_SUN_DEG = 1.0
+RENDER_MODES = ("ring", "direct")  # far clouds as impostors, or every cloud as sprites
 METRES_PER_DEG_LAT = 110_540.0
 METRES_PER_DEG_LON_EQUATOR = 111_320.0
 DEFAULT_TRANSITION_STEP_S = 1.0
@@ -64,9 +64,17 @@ class FramePlan:
 
     state: WeatherState  # with time_utc set to the frame's simulated time
     frame: FrameScene
-    ring: RingScene
-    ring_version: int
-    ring_changed: bool  # the ring must be redrawn for this frame
+    ring: RingScene  # the complete ring on show (an empty one before the first, or direct)
+    rings: RingFrame  # what to render into which texture set, the fade, the trace events
+
+    @property
+    def ring_version(self) -> int:
+        return self.rings.version
+
+    @property
+    def ring_changed(self) -> bool:
+        """Some impostor must be drawn this frame (see `rings.render`)."""
+        return self.rings.changed
 
 
 class SkyEngine:
@@ -79,9 +87,17 @@ class SkyEngine:
         rates: TransitionRates = INSTANT,
         transition_step_s: float = DEFAULT_TRANSITION_STEP_S,
         cockpit_hold_s: float = DEFAULT_COCKPIT_HOLD_S,
+        render_mode: str = "ring",
+        ring_build: str = "immediate",
+        ring_fade_s: float = DEFAULT_FADE_S,
     ) -> None:
         """`state` is the base weather (defaults and the startup preset), also the first
-        applied weather. Rates default to instant, which suits one-off snapshots."""
+        applied weather. Rates default to instant and the ring to being built whole in the
+        frame that needs it, which suits one-off snapshots; the daemon builds it off the
+        render thread and spreads it over frames (`ring_build="async"`, see ring_schedule).
+        `render_mode="direct"` draws every cloud as sprites and no ring (for comparison)."""
+        if render_mode not in RENDER_MODES:
+            raise ValueError(f"render mode must be one of {', '.join(RENDER_MODES)}")
         self._lock = threading.RLock()
         self._stack = SourceStack(base=state, cockpit_hold_s=cockpit_hold_s)
         self._state = state  # applied
@@ -96,10 +112,14 @@ class SkyEngine:
         self._cockpit_date: tuple[date, float] | None = None  # (date, wall_s it arrived)
         self._since_step_s = 0.0
         self._drift: Drift = zero_drift(state)
-        self._ring: RingScene | None = None
-        self._ring_state: WeatherState | None = None
-        self._ring_sun_dir: tuple[float, float, float] = (0.0, 0.0, 1.0)
-        self._ring_version = 0
+        self.render_mode = render_mode
+        self._schedule = RingSchedule(
+            lambda s, d, c, k: build_ring(s, d, c, k, self.settings),
+            settings.ring_radius_m,
+            mode=ring_build,
+            fade_s=ring_fade_s,
+        )
+        self._rings: RingFrame | None = None
         self._locks: Locks = NO_LOCKS  # in-cloud facing locks, carried frame to frame
         self.weather_version = 0  # bumped when the applied weather or the target changes
         self.target_version = 0  # bumped when the target (or the clock, set from outside) changes
@@ -135,12 +155,27 @@ class SkyEngine:
 
     @property
     def ring(self) -> RingScene | None:
-        """The ring the latest frame was drawn with (None before the first frame)."""
-        return self._ring
+        """The complete ring on show (None before the first is done, and in direct mode)."""
+        return self._schedule.current
 
     @property
     def ring_version(self) -> int:
-        return self._ring_version
+        return 0 if self._rings is None else self._rings.version
+
+    @property
+    def ring_busy(self) -> bool:
+        """A ring rebuild is under way (building, rendering or fading in)."""
+        return self._schedule.busy
+
+    def close(self) -> None:
+        """Stop the ring builder; idempotent."""
+        self._schedule.close()
+
+    def __enter__(self) -> SkyEngine:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def apply(self, patch: WeatherPatch) -> WeatherState:
         """Put an input's patch into its source's slot; returns the new target. A time in the
@@ -271,19 +306,28 @@ class SkyEngine:
             state, drift, camera = self._state, self._drift, self._camera
         # The scene stages read only the immutable values taken above: no lock from here on.
         sky = sky_params(state, camera.position_m[2])
-        ring, changed = self._ring_for(state, drift, camera, sky)
+        near_radius_m: float | None = None
+        if self.render_mode == "direct":
+            rings = RingFrame(None, 0, None, (), None, 1, 0.0, 0, ())
+            near: tuple[NearRing, ...] = (NearRing(camera.position_m, drift, 1.0),)
+            near_radius_m = self.settings.max_range_m
+        else:
+            rings = self._schedule.step(state, drift, camera, sky, dt_wall_s)
+            near = rings.near_rings(camera, drift)
+        self._rings = rings
         frame = build_frame(
             state,
             drift,
             camera,
-            ring.geometry.centre_m,
+            near,
             sky,
             self.settings,
-            ring_drift=ring.drift,
             locks=self._locks,
+            near_radius_m=near_radius_m,
         )
         self._locks = frame.locks
-        return FramePlan(state, frame, ring, self._ring_version, changed)
+        shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)
+        return FramePlan(state, frame, shown, rings)
 
     def drift_for(self, seconds: float) -> None:
         """Move every layer as the wind would have in `seconds` (negative: back), at once: a
@@ -312,41 +356,6 @@ class SkyEngine:
                 self._state, time_utc=self._state.time_utc + timedelta(seconds=dt_sim)
             )
             self._drift = advance_drift(self._state, self._drift, dt_sim)
-
-    def _ring_for(
-        self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
-    ) -> tuple[RingScene, bool]:
-        ring = self._ring
-        if ring is not None and not self._ring_stale(ring, state, drift, camera, sky):
-            return ring, False
-        ring = build_ring(state, drift, camera.position_m, sky, self.settings)
-        self._ring = ring
-        self._ring_state = state
-        self._ring_sun_dir = sky.sun.direction_enu
-        self._ring_version += 1
-        return ring, True
-
-    def _ring_stale(
-        self, ring: RingScene, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
-    ) -> bool:
-        built = self._ring_state
-        if built is None or _weather_differs(built, state):
-            return True
-        if ring.geometry.needs_regeneration(camera.position_m):
-            return True
-        cos_sun = sum(a * b for a, b in zip(sky.sun.direction_enu, self._ring_sun_dir, strict=True))
-        if math.degrees(math.acos(max(-1.0, min(1.0, cos_sun)))) > RING_SUN_DEG:
-            return True
-        limit = RING_DRIFT_FRAC * self.settings.ring_radius_m
-        return len(ring.drift) != len(drift) or any(
-            math.hypot(a[0] - b[0], a[1] - b[1]) > limit
-            for a, b in zip(ring.drift, drift, strict=True)
-        )
-
-
-def _weather_differs(a: WeatherState, b: WeatherState) -> bool:
-    """True when anything but the clock differs (time alone is covered by the sun test)."""
-    return dataclasses.replace(a, time_utc=b.time_utc, sources=b.sources) != b
 
 
 def enu_from_geodetic(

@@ -54,10 +54,13 @@ def take_snapshot(
     renderer: Renderer | None = None,
     transition: Transition | None = None,
     drift_s: float = 0.0,
+    mode: str = "ring",
 ) -> Snapshot:
     """`drift_s`: how long the wind has blown the clouds since the weather was set (a picture
-    later than its preset's time shows them moved on, the same in every process)."""
-    engine = SkyEngine(state, camera, settings, clock_rate=0.0)
+    later than its preset's time shows them moved on, the same in every process). `mode`:
+    "ring" (far clouds in impostors, as the daemon draws them) or "direct" (every cloud as a
+    sprite, to compare)."""
+    engine = SkyEngine(state, camera, settings, clock_rate=0.0, render_mode=mode)
     if drift_s:
         engine.drift_for(drift_s)
     if transition is not None:

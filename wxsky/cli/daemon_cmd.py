@@ -47,6 +47,12 @@ def add_commands(sub: Subparsers) -> None:
         metavar="DIR",
         help="write a composited preview.png there every few seconds",
     )
+    run.add_argument(
+        "--trace",
+        type=Path,
+        metavar="FILE",
+        help="write the ring's rebuild events there, one JSON object per line",
+    )
     run.set_defaults(func=_cmd_run)
 
     status = sub.add_parser("status", help="ask a running daemon")
@@ -79,6 +85,13 @@ def add_commands(sub: Subparsers) -> None:
         default=0.0,
         help="seconds since the change (with --transition-to); rates from [transition]",
     )
+    snap.add_argument(
+        "--mode",
+        choices=("ring", "direct"),
+        default="ring",
+        help="far clouds as ring impostors (what the daemon does), or every cloud drawn as "
+        "sprites, to compare the two",
+    )
     snap.add_argument("--out", type=Path, required=True, help="output PNG")
     snap.add_argument("--layers-out", type=Path, metavar="DIR", help="also write the raw layers")
     snap.set_defaults(func=_cmd_snapshot)
@@ -103,6 +116,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         feeds=args.metar_feed,
         serial=[SerialInputSection.from_spec(spec) for spec in args.serial],
         can=[CanInputSection.from_spec(spec) for spec in args.can],
+        trace_path=args.trace,
     )
     return asyncio.run(daemon.run())
 
@@ -217,7 +231,9 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     # The weather was set at its own time (a preset's time_utc): a later --time sees the
     # clouds blown on by the wind since then.
     drift_s = (state.time_utc - weather_time).total_seconds()
-    shot = take_snapshot(state, camera, settings, transition=transition, drift_s=drift_s)
+    shot = take_snapshot(
+        state, camera, settings, transition=transition, drift_s=drift_s, mode=args.mode
+    )
     write_png(args.out, shot.image)
     if args.layers_out:
         for name, image in shot.layers.items():

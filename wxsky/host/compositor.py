@@ -2,8 +2,10 @@
 
 Given the sky and near layers (drawn for one camera) and the 8 ring images with their world
 quads, it draws, per pixel of that camera: sky, then the ring quad the view ray meets, then
-the near layer, each premultiplied-alpha "over" the last. Pure numpy, so it is an independent
-check of the protocol rather than a second copy of the renderer.
+the near layer, each premultiplied-alpha "over" the last. While a rebuilt ring fades in, the
+ring is the old one's and the new one's pictures mixed by the fade weight, each seen through
+its own quads. Pure numpy, so it is an independent check of the protocol rather than a second
+copy of the renderer.
 """
 
 from __future__ import annotations
@@ -25,15 +27,30 @@ class Layers:
     near: U8  # (H, W, 4)
     ring: tuple[U8, ...]  # (8,) of (P, P, 4)
     ring_quads_m: F64  # (8, 4, 3): top-left, top-right, bottom-right, bottom-left
+    # The ring fading in, its quads, and its weight; empty when no fade is under way.
+    incoming_ring: tuple[U8, ...] = ()
+    incoming_quads_m: F64 | None = None
+    fade: float = 0.0
 
 
-def layers_from_images(images: dict[str, U8], ring_quads_m: F64) -> Layers:
-    """Layers from images named as the daemon names them: sky, near, ring_0 .. ring_7."""
+def layers_from_images(
+    images: dict[str, U8],
+    ring_quads_m: F64,
+    incoming_quads_m: F64 | None = None,
+    fade: float = 0.0,
+) -> Layers:
+    """Layers from images named as the daemon names them: sky, near, ring_0 .. ring_7, and
+    while a new ring fades in (`incoming_quads_m` given), ring_in_0 .. ring_in_7."""
+    n = len(ring_quads_m)
+    fading = incoming_quads_m is not None
     return Layers(
         sky=images["sky"],
         near=images["near"],
-        ring=tuple(images[f"ring_{i}"] for i in range(len(ring_quads_m))),
+        ring=tuple(images[f"ring_{i}"] for i in range(n)),
         ring_quads_m=ring_quads_m,
+        incoming_ring=tuple(images[f"ring_in_{i}"] for i in range(n)) if fading else (),
+        incoming_quads_m=incoming_quads_m,
+        fade=fade if fading else 0.0,
     )
 
 
@@ -46,7 +63,10 @@ def composite(layers: Layers, camera: Camera) -> U8:
             f"the camera viewport {(h, w)}"
         )
     out = layers.sky.astype(np.float64) / 255.0
-    ring = sample_ring(layers, camera)
+    ring = sample_ring(layers.ring, layers.ring_quads_m, camera)
+    if layers.incoming_quads_m is not None and layers.fade > 0.0:
+        incoming = sample_ring(layers.incoming_ring, layers.incoming_quads_m, camera)
+        ring = (1.0 - layers.fade) * ring + layers.fade * incoming
     out = ring + (1.0 - ring[..., 3:4]) * out
     near = layers.near.astype(np.float64) / 255.0
     out = near + (1.0 - near[..., 3:4]) * out
@@ -55,14 +75,14 @@ def composite(layers: Layers, camera: Camera) -> U8:
     return result
 
 
-def sample_ring(layers: Layers, camera: Camera) -> F64:
-    """(H, W, 4) premultiplied colour of the ring as seen through each pixel."""
+def sample_ring(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> F64:
+    """(H, W, 4) premultiplied colour of a ring (images on their quads) through each pixel."""
     rays = camera.pixel_rays()
     eye = np.asarray(camera.position_m, dtype=np.float64)
     h, w = rays.shape[:2]
     out = np.zeros((h, w, 4))
     best_t = np.full((h, w), np.inf)
-    for quad, image in zip(layers.ring_quads_m, layers.ring, strict=True):
+    for quad, image in zip(quads_m, ring, strict=True):
         tl, tr, _br, bl = quad
         u, v = tr - tl, bl - tl
         normal = np.cross(u, v)

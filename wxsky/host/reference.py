@@ -33,7 +33,10 @@ class HostFrame:
 def host_frame(frame: Frame) -> HostFrame:
     """Pixels and record of one shared-memory frame, ready to composite."""
     meta = FrameMeta.unpack(frame.meta)
-    return HostFrame(meta, layers_from_images(frame.layers, meta.ring_quads_m))
+    layers = layers_from_images(
+        frame.layers, meta.ring_quads_m, meta.incoming_quads_m, meta.ring_fade
+    )
+    return HostFrame(meta, layers)
 
 
 class ReferenceHost:
@@ -81,6 +84,18 @@ class ReferenceHost:
                 self.weather = note.params
             elif note.method == "scene":
                 self.scene = note.params
+
+    def wait_settled_frame(self, after: int = 0, timeout_s: float = 20.0) -> HostFrame:
+        """The first frame after `after` drawn once the ring has settled: no rebuild building,
+        rendering or fading in (after a camera, clock or weather change the daemon takes a
+        few frames and a cross-fade to bring its ring up to date)."""
+        deadline = time.monotonic() + timeout_s
+        frame = self.wait_frame(after, timeout_s)
+        while self.call("scene")["ring_busy"]:
+            if time.monotonic() > deadline:
+                raise WxskyError(f"the ring did not settle within {timeout_s} s")
+            frame = self.wait_frame(frame.meta.frame_number, deadline - time.monotonic())
+        return self.wait_frame(frame.meta.frame_number, max(0.1, deadline - time.monotonic()))
 
     def read_latest(self) -> HostFrame:
         return host_frame(self.reader.read(timeout_s=1.0))

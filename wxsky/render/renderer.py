@@ -21,7 +21,7 @@ from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import load_sheet
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
-from wxsky.scene.ring import RING_SIZE
+from wxsky.scene.ring import RING_SIZE, ring_target_name
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
 
@@ -125,11 +125,17 @@ class Renderer:
             self._upsample(target, self._target("near", cam.width_px, cam.height_px))
         self._check("rendering a frame")
 
-    def render_ring(self, ring: RingScene, indices: range | list[int] | None = None) -> None:
-        """Draw ring impostors (all 8 unless given), each from the ring centre."""
+    def render_ring(
+        self,
+        ring: RingScene,
+        indices: range | list[int] | tuple[int, ...] | None = None,
+        ring_set: int = 0,
+    ) -> None:
+        """Draw ring impostors (all 8 unless given), each from the ring centre, into texture
+        set 0 or 1 (`ring_target_name`): a new ring is drawn into the set not on show."""
         geo = ring.geometry
         for i in indices if indices is not None else range(RING_SIZE):
-            target = self._target(f"ring_{i}", self.ring_px, self.ring_px)
+            target = self._target(ring_target_name(i, ring_set), self.ring_px, self.ring_px)
             self._draw_sprites(
                 target,
                 ring.impostors[i],

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -113,39 +114,88 @@ def gather_blocks(
     placed with `drift`. Blocks are chosen with `select_drift` when given: the near layer
     picks its blocks as they stood when the ring was built, so no block is drawn both as
     sprites and in the ring, nor in neither, until the ring is rebuilt."""
+    ring = NearRing(centre_m, drift if select_drift is None else select_drift, 1.0)
+    return _gather(state, drift, (ring,), min_range_m, max_range_m)[0]
+
+
+class NearRing(NamedTuple):
+    """A ring the near layer complements: blocks within its radius of `centre_m` (as they
+    stood at `select_drift`) are near sprites, the rest are in the ring's impostors."""
+
+    centre_m: tuple[float, float, float]
+    select_drift: Drift
+    weight: float  # the ring's share of the picture: 1, or its side of a cross-fade
+
+
+def gather_near(
+    state: WeatherState, drift: Drift, rings: tuple[NearRing, ...], radius_m: float
+) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
+    """The near sprites that complement the rings drawn, and (N,) the share of each to show:
+    a block inside the radius of rings whose weights add up to w shows at w. While an old and
+    a new ring cross-fade (weights 1 - f and f), every block then totals 1 between the near
+    layer and the two rings, wherever the two centres are, so nothing doubles or vanishes
+    mid-fade. The share is applied after shading, so a fade never changes the lighting."""
+    return _gather(state, drift, rings, 0.0, radius_m)
+
+
+def _gather(
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    min_range_m: float,
+    max_range_m: float,
+) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
     if len(drift) != len(state.layers):
         drift = zero_drift(state)
-    if select_drift is None or len(select_drift) != len(drift):
-        select_drift = drift
+    rings = tuple(
+        r if len(r.select_drift) == len(drift) else r._replace(select_drift=drift) for r in rings
+    )
     batches: list[SpriteBatch] = []
-    for key, layer, (dx, dy), (sx, sy) in zip(
-        layer_keys(state.layers), state.layers, drift, select_drift, strict=True
+    shares: list[npt.NDArray[np.float32]] = []
+    for li, (key, layer, (dx, dy)) in enumerate(
+        zip(layer_keys(state.layers), state.layers, drift, strict=True)
     ):
         if layer.cover_oktas <= 0.0:
             continue
-        qx, qy = centre_m[0] - sx, centre_m[1] - sy
-        bx0 = math.floor((qx - max_range_m) / BLOCK_SIZE_M)
-        bx1 = math.floor((qx + max_range_m) / BLOCK_SIZE_M)
-        by0 = math.floor((qy - max_range_m) / BLOCK_SIZE_M)
-        by1 = math.floor((qy + max_range_m) / BLOCK_SIZE_M)
-        for by in range(by0, by1 + 1):
-            for bx in range(bx0, bx1 + 1):
-                near_x = min(max(qx, bx * BLOCK_SIZE_M), (bx + 1) * BLOCK_SIZE_M)
-                near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
-                d = math.hypot(near_x - qx, near_y - qy)
-                if min_range_m <= d < max_range_m:
-                    # Cover only fades whole clouds in and out, so the cached generation
-                    # of the block is reused while the weather forms or dissipates it.
-                    block = layer_block(bx, by, key, layer, state.seed, (dx, dy))
-                    if len(block):
-                        batches.append(block)
-    return SpriteBatch.concat(batches)
+        weights: dict[tuple[int, int], float] = {}
+        for ring in rings:
+            sx, sy = ring.select_drift[li]
+            qx, qy = ring.centre_m[0] - sx, ring.centre_m[1] - sy
+            bx0 = math.floor((qx - max_range_m) / BLOCK_SIZE_M)
+            bx1 = math.floor((qx + max_range_m) / BLOCK_SIZE_M)
+            by0 = math.floor((qy - max_range_m) / BLOCK_SIZE_M)
+            by1 = math.floor((qy + max_range_m) / BLOCK_SIZE_M)
+            for by in range(by0, by1 + 1):
+                for bx in range(bx0, bx1 + 1):
+                    near_x = min(max(qx, bx * BLOCK_SIZE_M), (bx + 1) * BLOCK_SIZE_M)
+                    near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
+                    d = math.hypot(near_x - qx, near_y - qy)
+                    if min_range_m <= d < max_range_m:
+                        weights[(bx, by)] = weights.get((bx, by), 0.0) + ring.weight
+        for (bx, by), weight in sorted(weights.items(), key=lambda kv: (kv[0][1], kv[0][0])):
+            if weight <= 0.0:
+                continue
+            # Cover only fades whole clouds in and out, so the cached generation of the
+            # block is reused while the weather forms or dissipates it.
+            block = layer_block(bx, by, key, layer, state.seed, (dx, dy))
+            if not len(block):
+                continue
+            batches.append(block)
+            shares.append(np.full(len(block), min(weight, 1.0), np.float32))
+    share = np.concatenate(shares) if shares else np.zeros(0, np.float32)
+    return SpriteBatch.concat(batches), share
 
 
 def sort_back_to_front(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> SpriteBatch:
+    return batch.take(sort_order(batch, eye_m))
+
+
+def sort_order(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDArray[np.intp]:
+    """(N,) indices that put the sprites back to front from the eye."""
     d2 = np.sum((batch.centre_m - np.asarray(eye_m)) ** 2, axis=1)
     # Stable sort on distance so equal distances keep their generation order on every machine.
-    return batch.take(np.argsort(-d2, kind="stable"))
+    out: npt.NDArray[np.intp] = np.argsort(-d2, kind="stable")
+    return out
 
 
 def fade_by_range(
@@ -173,11 +223,18 @@ def shade_for_eye(
     max_range_m: float,
     shading: str = DEFAULT_SHADING,
     light: ParticleLight | None = None,
+    share: npt.NDArray[np.float32] | None = None,
 ) -> SpriteDraw:
-    """`light`: a precompute (`prepare_lighting`) of a batch holding these sprites."""
-    ordered = sort_back_to_front(batch, eye_m)
-    rgba = sprite_colours(ordered, sky, eye_m, shading, light)
-    return SpriteDraw(ordered, fade_by_range(rgba, ordered, eye_m, sky, max_range_m))
+    """`light`: a precompute (`prepare_lighting`) of a batch holding these sprites; `share`:
+    (N,) a factor on each sprite's alpha after shading (see `gather_near`)."""
+    order = sort_order(batch, eye_m)
+    ordered = batch.take(order)
+    rgba = fade_by_range(
+        sprite_colours(ordered, sky, eye_m, shading, light), ordered, eye_m, sky, max_range_m
+    )
+    if share is not None and len(share) and share.min() < 1.0:
+        rgba[:, 3] *= share[order]
+    return SpriteDraw(ordered, rgba)
 
 
 def oriented(
@@ -219,22 +276,31 @@ def build_ring(
     return RingScene(geometry=geometry, impostors=impostors, drift=drift)
 
 
+def empty_ring(centre_m: tuple[float, float, float], radius_m: float, drift: Drift) -> RingScene:
+    """A ring with no clouds in it: what shows before the first ring is built, or in direct
+    mode, where every cloud is a near sprite."""
+    geometry, bins = bin_far_sprites(SpriteBatch.empty(), centre_m, radius_m)
+    nothing = SpriteDraw(SpriteBatch.empty(), np.zeros((0, 4), np.float32))
+    return RingScene(geometry=geometry, impostors=tuple(nothing for _ in bins), drift=drift)
+
+
 def build_frame(
     state: WeatherState,
     drift: Drift,
     camera: Camera,
-    ring_centre_m: tuple[float, float, float],
+    rings: tuple[NearRing, ...],
     sky: SkyParams,
     settings: SceneSettings,
-    ring_drift: Drift | None = None,
     locks: Locks = NO_LOCKS,
+    near_radius_m: float | None = None,
 ) -> FrameScene:
-    """The near sprites for the camera; `locks` are the previous frame's in-cloud locks."""
-    near = gather_blocks(
-        state, drift, ring_centre_m, 0.0, settings.ring_radius_m, select_drift=ring_drift
-    )
+    """The near sprites for the camera, complementing `rings` (see `gather_near`) within
+    `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
+    `locks` are the previous frame's in-cloud locks."""
+    radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
+    near, share = gather_near(state, drift, rings, radius_m)
     eye = camera.position_m
-    shaded = shade_for_eye(near, eye, sky, settings.max_range_m, settings.shading)
+    shaded = shade_for_eye(near, eye, sky, settings.max_range_m, settings.shading, share=share)
     cloud = in_cloud(near, eye, state.visibility_m)
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)

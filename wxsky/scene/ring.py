@@ -24,6 +24,14 @@ MOVE_HORIZONTAL_FRAC = 0.15
 MOVE_VERTICAL_FRAC = 0.02
 
 
+def ring_target_name(index: int, ring_set: int = 0) -> str:
+    """The layer holding impostor `index` of texture set 0 (`ring_i`, what snapshots and a
+    settled daemon read) or 1 (`ring_b_i`)."""
+    if ring_set not in (0, 1):
+        raise ValueError(f"ring set must be 0 or 1, got {ring_set}")
+    return f"ring_{index}" if ring_set == 0 else f"ring_b_{index}"
+
+
 @dataclass(frozen=True)
 class RingGeometry:
     centre_m: tuple[float, float, float]

@@ -1,0 +1,217 @@
+"""The ring's rebuild schedule (`wxsky.ring_schedule`): when a rebuild starts and why, one
+impostor per frame over 8 frames into the other texture set, the cross-fade, and the near
+layer's share of each ring while the two fade."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from datetime import timedelta
+
+import numpy as np
+import pytest
+
+from wxsky.ring_schedule import RingSchedule
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import Drift, NearRing, RingScene, empty_ring, gather_near, zero_drift
+from wxsky.scene.ring import RING_SIZE
+from wxsky.scene.sky import SkyParams, sky_params
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+
+R = 8000.0
+DT = 1.0 / 30.0
+STATE = WeatherState(layers=(CloudLayer(4.0, 1500.0, 2200.0, CloudType.CUMULUS),), wind=())
+SKY = sky_params(STATE)
+DRIFT = zero_drift(STATE)
+
+
+def quick_build(state: WeatherState, drift: Drift, centre: tuple, sky: SkyParams) -> RingScene:
+    return empty_ring(centre, R, drift)
+
+
+def cam(x: float = 0.0, z: float = 1500.0) -> Camera:
+    return Camera(position_m=(x, 0.0, z))
+
+
+def events(frame: object) -> list[str]:
+    return [e.event for e in frame.events]  # type: ignore[attr-defined]
+
+
+def test_a_rebuild_renders_one_impostor_per_frame_then_fades() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.2)
+    frames = [s.step(STATE, DRIFT, cam(), SKY, DT) for _ in range(20)]
+    assert events(frames[0]) == ["ring_rebuild_start", "impostor_rendered"]
+    assert frames[0].events[0].fields["reason"] == "initial"
+    for k in range(RING_SIZE):
+        assert frames[k].render == (k,) and frames[k].render_set == 1
+        assert frames[k].current is None and frames[k].fade == 0.0
+    assert events(frames[7])[-1] == "ring_rebuild_done"
+    assert events(frames[8]) == ["crossfade_start"]
+    assert all(len(f.render) <= 1 for f in frames)
+    fades = [f.fade for f in frames[8:]]
+    # 0.2 s at 30 fps: six steps of 1/6, the sixth completing the fade and swapping sets.
+    np.testing.assert_allclose(fades[:5], np.arange(1, 6) / 6.0)
+    assert events(frames[13]) == ["crossfade_done"]
+    assert frames[13].current is not None and frames[13].current_set == 1
+    assert frames[13].fade == 0.0 and frames[13].incoming is None
+    assert all(not f.events for f in frames[14:])
+    versions = [f.version for f in frames]
+    assert versions == sorted(versions) and versions[13] > versions[7]
+
+
+def _run(s: RingSchedule, xs: list[float], z: float = 1500.0) -> list[tuple[int, str, dict]]:
+    out = []
+    for i, x in enumerate(xs):
+        f = s.step(STATE, DRIFT, cam(x, z), SKY, DT)
+        out += [(i, e.event, e.fields) for e in f.events]
+    return out
+
+
+def test_rebuilds_start_exactly_when_the_camera_passes_fifteen_percent() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.5)
+    xs = [4.0 * i for i in range(1000)]  # 120 m/s at 30 fps
+    starts = [(i, f) for i, e, f in _run(s, xs) if e == "ring_rebuild_start"]
+    reasons = [f["reason"] for _, f in starts]
+    assert reasons == ["initial"] + ["moved_horizontal"] * 3  # 4 km flown, every 1.2 km
+    centre = 0.0
+    for i, fields in starts[1:]:
+        # The first frame beyond 0.15 R (1200 m) from where the previous ring was built.
+        assert xs[i] - centre > 0.15 * R >= xs[i - 1] - centre
+        assert fields["centre_m"][0] == xs[i]
+        centre = xs[i]
+
+
+def test_a_climb_of_two_percent_rebuilds() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.0)
+    out = []
+    for i in range(200):
+        f = s.step(STATE, DRIFT, cam(0.0, 1500.0 + 2.0 * i), SKY, DT)
+        out += [(i, e.fields.get("reason")) for e in f.events if e.event == "ring_rebuild_start"]
+    assert out[1][1] == "moved_vertical"
+    assert 2.0 * out[1][0] > 0.02 * R >= 2.0 * (out[1][0] - 1)
+
+
+def test_a_need_that_arises_mid_cycle_waits_for_the_cycle_to_end() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.1)
+    s.step(STATE, DRIFT, cam(), SKY, DT)  # starts the first rebuild
+    log = _run(s, [5000.0] * 20)  # far beyond the threshold from the very next frame
+    starts = [i for i, e, _ in log if e == "ring_rebuild_start"]
+    done = [i for i, e, _ in log if e == "crossfade_done"]
+    assert starts == [done[0]]  # in the frame the first cycle ends, not before
+
+
+def test_weather_and_sun_changes_rebuild_with_their_reason() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.0)
+    for _ in range(12):
+        s.step(STATE, DRIFT, cam(), SKY, DT)
+    assert not s.busy
+    thicker = dataclasses.replace(
+        STATE, layers=(dataclasses.replace(STATE.layers[0], cover_oktas=5.0),)
+    )
+    f = s.step(thicker, DRIFT, cam(), SKY, DT)
+    assert f.events[0].event == "ring_rebuild_start" and f.events[0].fields["reason"] == "weather"
+    for _ in range(12):
+        s.step(thicker, DRIFT, cam(), SKY, DT)
+    later = dataclasses.replace(thicker, time_utc=thicker.time_utc + timedelta(minutes=10))
+    f = s.step(later, DRIFT, cam(), sky_params(later), DT)
+    assert f.events[0].fields["reason"] == "sun"
+    # The clock alone (seconds, the sun barely moving) rebuilds nothing.
+    for _ in range(12):
+        s.step(later, DRIFT, cam(), sky_params(later), DT)
+    soon = dataclasses.replace(later, time_utc=later.time_utc + timedelta(seconds=20))
+    assert not s.step(soon, DRIFT, cam(), sky_params(soon), DT).events
+
+
+def test_async_builds_off_the_frame_and_renders_when_ready() -> None:
+    gate = threading.Event()
+    built: list[str] = []
+
+    def slow_build(*args: object) -> RingScene:
+        gate.wait(5.0)
+        built.append(threading.current_thread().name)
+        return quick_build(*args)  # type: ignore[arg-type]
+
+    s = RingSchedule(slow_build, R, mode="async", fade_s=0.0)
+    try:
+        first = s.step(STATE, DRIFT, cam(), SKY, DT)
+        assert events(first) == ["ring_rebuild_start"] and first.render == ()
+        waiting = [s.step(STATE, DRIFT, cam(), SKY, DT) for _ in range(5)]
+        assert all(not f.events and not f.render for f in waiting)  # frames go on meanwhile
+        gate.set()
+        for _ in range(100):
+            f = s.step(STATE, DRIFT, cam(), SKY, DT)
+            if f.render:
+                break
+            threading.Event().wait(0.01)
+        assert f.render == (0,) and built and built[0].startswith("wxsky-ring")
+    finally:
+        s.close()
+        s.close()  # idempotent
+
+
+def test_a_failed_build_keeps_the_old_ring_and_tries_again(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    calls = []
+
+    def flaky(*args: object) -> RingScene:
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("out of memory")
+        return quick_build(*args)  # type: ignore[arg-type]
+
+    s = RingSchedule(flaky, R, mode="sync", fade_s=0.0)
+    for _ in range(10):
+        s.step(STATE, DRIFT, cam(), SKY, DT)
+    old = s.current
+    failed = s.step(STATE, DRIFT, cam(3000.0), SKY, DT)
+    assert "ring_rebuild_failed" in events(failed) and s.current is old
+    assert "ring build failed: out of memory" in caplog.text
+    retry = s.step(STATE, DRIFT, cam(3000.0), SKY, DT)
+    assert events(retry)[:2] == ["ring_rebuild_start", "impostor_rendered"]
+
+
+def test_immediate_mode_builds_and_renders_the_whole_ring_at_once() -> None:
+    s = RingSchedule(quick_build, R, mode="immediate")
+    f = s.step(STATE, DRIFT, cam(), SKY, DT)
+    assert f.render == tuple(range(RING_SIZE)) and f.render_set == 0
+    assert f.current is not None and f.current is f.render_ring and f.fade == 0.0
+    assert not s.step(STATE, DRIFT, cam(), SKY, DT).render
+
+
+def test_unknown_mode_is_refused() -> None:
+    with pytest.raises(ValueError, match="async, sync, immediate"):
+        RingSchedule(quick_build, R, mode="lazy")
+
+
+def test_near_shares_of_the_two_rings_add_up_to_one_mid_fade() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.3)
+    for _ in range(30):
+        s.step(STATE, DRIFT, cam(), SKY, DT)
+    assert not s.busy
+    for _ in range(8):  # a new ring built 3 km east, now fading in
+        f = s.step(STATE, DRIFT, cam(3000.0), SKY, DT)
+    f = s.step(STATE, DRIFT, cam(3000.0), SKY, DT)
+    assert 0.0 < f.fade < 1.0
+    old, new = f.near_rings(cam(3000.0), DRIFT)
+    assert old.centre_m[0] == 0.0 and new.centre_m[0] == 3000.0
+    assert old.weight + new.weight == pytest.approx(1.0) and new.weight == f.fade
+
+
+def test_gather_near_weighs_each_block_by_the_rings_it_is_near_to() -> None:
+    state = WeatherState(layers=(CloudLayer(8.0, 1000.0, 1500.0, CloudType.STRATUS),), wind=())
+    drift = zero_drift(state)
+    a = NearRing((0.0, 0.0, 1200.0), drift, 0.25)
+    b = NearRing((9000.0, 0.0, 1200.0), drift, 0.75)
+    batch, share = gather_near(state, drift, (a, b), 6000.0)
+    x = batch.centre_m[:, 0]
+    assert set(np.unique(share).round(6)) == {0.25, 0.75, 1.0}
+    # Blocks only near the first centre show at its weight, only near the second at its.
+    assert np.all(share[x < -2000.0] == np.float32(0.25))
+    assert np.all(share[x > 12000.0] == np.float32(0.75))
+    y = batch.centre_m[:, 1]
+    both = (x > 4500.0) & (x < 7500.0) & (np.abs(y) < 3000.0)
+    assert both.any() and np.all(share[both] == 1.0)
+    # One ring at weight 1 is what gather_blocks gives, share 1 everywhere.
+    single, ones = gather_near(state, drift, (a._replace(weight=1.0),), 6000.0)
+    assert len(single) and np.all(ones == 1.0)

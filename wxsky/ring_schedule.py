@@ -1,0 +1,296 @@
+"""When the impostor ring is rebuilt, and how a new one replaces the old without a hitch.
+
+Wang's schedule: the ring is rebuilt once the camera has moved 15 % of the ring radius
+horizontally or 2 % vertically from where it was built (`RingPolicy`), and also here when the
+sun has moved, the weather has changed the clouds, or the clouds have drifted. A rebuild
+never stalls a frame:
+
+    idle -> building (the sprite work, on a worker thread) -> rendering (one impostor per
+    frame, 8 frames, into the second set) -> fading (the host cross-fades from the old set
+    to the new over `fade_s`) -> idle, the new set now the current one
+
+Two physical sets of 8 textures exist (0 and 1), so the old ring stays on screen, whole,
+until the new one is complete. A need to rebuild that arises mid-cycle waits for the cycle to
+end, and is judged then against the newest ring (a weather change under way rebuilds once per
+cycle, not once per frame).
+
+Modes: "async" (the daemon and `wxsky bench`: building off the render thread), "sync" (the
+same schedule with the build done inline: deterministic frame numbers, for tests), and
+"immediate" (snapshots: build and render all 8 at once, no fade).
+
+`RingSchedule.step` runs once per frame on the render thread and says, in a `RingFrame`, what
+to render and publish, with the trace events of that frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import Drift, NearRing, RingScene
+from wxsky.scene.ring import MOVE_HORIZONTAL_FRAC, MOVE_VERTICAL_FRAC, RING_SIZE
+from wxsky.scene.sky import SkyParams
+from wxsky.weather.state import WeatherState
+
+log = logging.getLogger(__name__)
+
+BUILD_MODES = ("async", "sync", "immediate")
+DEFAULT_FADE_S = 1.0
+# Rebuild the ring once the clouds in it have drifted this share of its radius, or the sun
+# has moved this far: past these, the seam between near sprites and impostors shows.
+RING_DRIFT_FRAC = 0.03
+RING_SUN_DEG = 1.0
+
+Builder = Callable[[WeatherState, Drift, tuple[float, float, float], SkyParams], RingScene]
+
+
+@dataclass(frozen=True)
+class RingPolicy:
+    horizontal_frac: float = MOVE_HORIZONTAL_FRAC
+    vertical_frac: float = MOVE_VERTICAL_FRAC
+    sun_deg: float = RING_SUN_DEG
+    drift_frac: float = RING_DRIFT_FRAC
+
+
+@dataclass(frozen=True)
+class RingEvent:
+    """One line of the trace: `event` and its fields (reason, index, fade ...)."""
+
+    event: str
+    fields: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RingFrame:
+    """What the renderer draws and the publisher sends for the ring in one frame."""
+
+    current: RingScene | None  # complete, shown at weight 1 - fade (None before the first)
+    current_set: int  # the physical texture set (0 or 1) it lives in
+    incoming: RingScene | None  # being rendered into the other set, or fading in
+    render: tuple[int, ...]  # impostors of `render_ring` to draw this frame, into `render_set`
+    render_ring: RingScene | None
+    render_set: int
+    fade: float  # weight of `incoming`: 0 while it is rendered, rising to 1 as it fades in
+    version: int  # bumps whenever a ring image or the fade weight changes
+    events: tuple[RingEvent, ...]
+
+    @property
+    def incoming_set(self) -> int:
+        return 1 - self.current_set
+
+    @property
+    def changed(self) -> bool:
+        return bool(self.render)
+
+    def near_rings(self, camera: Camera, drift: Drift) -> tuple[NearRing, ...]:
+        """The rings the near layer must complement, with their shares of the picture."""
+        if self.current is None:
+            if self.incoming is not None and self.fade > 0.0:
+                ring = self.incoming
+                return (NearRing(ring.geometry.centre_m, ring.drift, 1.0),)
+            return (NearRing(camera.position_m, drift, 1.0),)
+        cur = NearRing(self.current.geometry.centre_m, self.current.drift, 1.0 - self.fade)
+        if self.incoming is None or self.fade <= 0.0:
+            return (cur._replace(weight=1.0),)
+        new = NearRing(self.incoming.geometry.centre_m, self.incoming.drift, self.fade)
+        return (cur, new)
+
+
+@dataclass(frozen=True)
+class _Built:
+    """What a ring was built from, to judge later whether it is stale."""
+
+    state: WeatherState
+    drift: Drift
+    centre_m: tuple[float, float, float]
+    sun_dir: tuple[float, float, float]
+
+
+class RingSchedule:
+    def __init__(
+        self,
+        build: Builder,
+        radius_m: float,
+        mode: str = "async",
+        fade_s: float = DEFAULT_FADE_S,
+        policy: RingPolicy | None = None,
+    ) -> None:
+        if mode not in BUILD_MODES:
+            raise ValueError(f"ring build mode must be one of {', '.join(BUILD_MODES)}: {mode!r}")
+        self._build = build
+        self.radius_m = radius_m
+        self.mode = mode
+        self.fade_s = max(0.0, fade_s)
+        self.policy = policy or RingPolicy()
+        self._executor: ThreadPoolExecutor | None = None
+        self._current: RingScene | None = None
+        self._current_set = 0
+        self._newest: _Built | None = None  # the latest ring asked for
+        self._pending: Future[RingScene] | None = None
+        self._incoming: RingScene | None = None
+        self._next_index = 0
+        self._fade = 0.0
+        self._version = 0
+        self._closed = False
+
+    @property
+    def current(self) -> RingScene | None:
+        return self._current
+
+    @property
+    def busy(self) -> bool:
+        """A rebuild is under way (building, rendering or fading)."""
+        return self._pending is not None or self._incoming is not None
+
+    def step(
+        self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams, dt_wall_s: float
+    ) -> RingFrame:
+        """Advance the schedule by one frame dt_wall_s after the previous one."""
+        events: list[RingEvent] = []
+        render: tuple[int, ...] = ()
+        render_ring: RingScene | None = None
+        render_set = 1 - self._current_set
+        if self.mode == "immediate":
+            reason = self._reason(state, drift, camera, sky)
+            if reason is not None:
+                events.append(RingEvent("ring_rebuild_start", {"reason": reason}))
+                self._current = self._start(state, drift, camera, sky)
+                render, render_ring, render_set = tuple(range(RING_SIZE)), self._current, 0
+                self._current_set = 0
+                self._version += 1
+                events.append(RingEvent("ring_rebuild_done", {}))
+            return self._frame(render, render_ring, render_set, events)
+
+        if self._incoming is not None and self._next_index >= RING_SIZE:
+            # Complete since the previous frame: fade it in.
+            if self._fade == 0.0:
+                events.append(RingEvent("crossfade_start", {"fade_s": self.fade_s}))
+            step = 1.0 if self.fade_s <= 0.0 else dt_wall_s / self.fade_s
+            # (A fade of n whole frames must end on the nth, whatever the rounding.)
+            self._fade = min(1.0, self._fade + step + 1e-9)
+            self._version += 1
+            if self._fade >= 1.0:
+                self._current, self._incoming = self._incoming, None
+                self._current_set = 1 - self._current_set
+                self._fade = 0.0
+                events.append(RingEvent("crossfade_done", {}))
+        if not self.busy:
+            reason = self._reason(state, drift, camera, sky)
+            if reason is not None:
+                fields = {"reason": reason, "centre_m": list(camera.position_m)}
+                events.append(RingEvent("ring_rebuild_start", fields))
+                if self.mode == "sync":
+                    # Built inline: the first impostor renders in this very frame.
+                    self._pending = Future()
+                    try:
+                        self._pending.set_result(self._start(state, drift, camera, sky))
+                    except Exception as exc:
+                        self._pending.set_exception(exc)
+                else:
+                    self._pending = self._submit(state, drift, camera, sky)
+        if self._pending is not None and self._pending.done():
+            future, self._pending = self._pending, None
+            try:
+                self._incoming = future.result()
+                self._next_index = 0
+            except Exception as exc:  # a failed build keeps the old ring and tries again later
+                log.error("ring build failed: %s", exc)
+                self._newest = None
+                events.append(RingEvent("ring_rebuild_failed", {"error": str(exc)}))
+        if self._incoming is not None and self._next_index < RING_SIZE:
+            render, render_ring = (self._next_index,), self._incoming
+            render_set = 1 - self._current_set
+            events.append(RingEvent("impostor_rendered", {"index": self._next_index}))
+            self._next_index += 1
+            self._version += 1
+            if self._next_index == RING_SIZE:
+                events.append(RingEvent("ring_rebuild_done", {}))
+        return self._frame(render, render_ring, render_set, events)
+
+    def close(self) -> None:
+        """Stop the worker (a build in flight is abandoned); idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+            self._executor = None
+
+    # -- helpers ----------------------------------------------------------------------
+
+    def _frame(
+        self,
+        render: tuple[int, ...],
+        render_ring: RingScene | None,
+        render_set: int,
+        events: list[RingEvent],
+    ) -> RingFrame:
+        return RingFrame(
+            current=self._current,
+            current_set=self._current_set,
+            incoming=self._incoming,
+            render=render,
+            render_ring=render_ring,
+            render_set=render_set,
+            fade=self._fade,
+            version=self._version,
+            events=tuple(events),
+        )
+
+    def _start(
+        self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
+    ) -> RingScene:
+        self._note_newest(state, drift, camera, sky)
+        return self._build(state, drift, camera.position_m, sky)
+
+    def _submit(
+        self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
+    ) -> Future[RingScene]:
+        self._note_newest(state, drift, camera, sky)
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wxsky-ring")
+        return self._executor.submit(self._build, state, drift, camera.position_m, sky)
+
+    def _note_newest(
+        self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
+    ) -> None:
+        self._newest = _Built(state, drift, camera.position_m, sky.sun.direction_enu)
+
+    def _reason(
+        self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
+    ) -> str | None:
+        """Why the newest ring no longer serves this frame, or None."""
+        built = self._newest
+        if built is None:
+            return "initial"
+        if _weather_differs(built.state, state):
+            return "weather"
+        p = self.policy
+        dx = camera.position_m[0] - built.centre_m[0]
+        dy = camera.position_m[1] - built.centre_m[1]
+        dz = camera.position_m[2] - built.centre_m[2]
+        if math.hypot(dx, dy) > p.horizontal_frac * self.radius_m:
+            return "moved_horizontal"
+        if abs(dz) > p.vertical_frac * self.radius_m:
+            return "moved_vertical"
+        cos_sun = sum(a * b for a, b in zip(sky.sun.direction_enu, built.sun_dir, strict=True))
+        if math.degrees(math.acos(max(-1.0, min(1.0, cos_sun)))) > p.sun_deg:
+            return "sun"
+        limit = p.drift_frac * self.radius_m
+        if len(built.drift) != len(drift) or any(
+            math.hypot(a[0] - b[0], a[1] - b[1]) > limit
+            for a, b in zip(built.drift, drift, strict=True)
+        ):
+            return "drift"
+        return None
+
+
+def _weather_differs(a: WeatherState, b: WeatherState) -> bool:
+    """True when anything but the clock differs (time alone is covered by the sun test)."""
+    return dataclasses.replace(a, time_utc=b.time_utc, sources=b.sources) != b
