@@ -11,7 +11,7 @@ from datetime import timedelta
 import numpy as np
 import pytest
 
-from wxsky.ring_schedule import RingSchedule
+from wxsky.ring_schedule import RETRY_AFTER_S, RingSchedule
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import Drift, NearRing, RingScene, empty_ring, gather_near, zero_drift
 from wxsky.scene.ring import RING_SIZE
@@ -167,7 +167,11 @@ def test_a_failed_build_keeps_the_old_ring_and_tries_again(
     failed = s.step(STATE, DRIFT, cam(3000.0), SKY, DT)
     assert "ring_rebuild_failed" in events(failed) and s.current is old
     assert "ring build failed: out of memory" in caplog.text
-    retry = s.step(STATE, DRIFT, cam(3000.0), SKY, DT)
+    # Not every frame: the next try comes RETRY_AFTER_S later.
+    waits = 0
+    while not (retry := s.step(STATE, DRIFT, cam(3000.0), SKY, DT)).events:
+        waits += 1
+    assert waits == round(RETRY_AFTER_S / DT) - 1
     assert events(retry)[:2] == ["ring_rebuild_start", "impostor_rendered"]
 
 

@@ -17,7 +17,6 @@ import signal
 import threading
 import time
 from collections.abc import Iterator, Sequence
-from datetime import UTC
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -35,6 +34,7 @@ from wxsky.control import (
 )
 from wxsky.engine import FramePlan, SkyEngine, geodetic_from_enu
 from wxsky.errors import ConfigError, WxskyError
+from wxsky.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.inputs.cockpit_link import CockpitLink, Mailbox
 from wxsky.inputs.drivers import open_link
 from wxsky.inputs.feed_sources import open_source
@@ -45,7 +45,6 @@ from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
-from wxsky.scene.ring import RING_SIZE, ring_target_name
 from wxsky.trace import TraceWriter
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
@@ -78,15 +77,8 @@ def initial_patches(
 
 
 def layer_specs(config: DaemonConfig) -> list[LayerSpec]:
-    w, h = config.output.max_width, config.output.max_height
-    ring_px = config.scene.ring_texture_px
-    return [
-        LayerSpec("sky", w, h),
-        LayerSpec("near", w, h),
-        *(LayerSpec(f"ring_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
-        # The new ring while it fades in over the old one (absent otherwise).
-        *(LayerSpec(f"ring_in_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
-    ]
+    out = config.output
+    return frame_layer_specs(out.max_width, out.max_height, config.scene.ring_texture_px)
 
 
 class Daemon:
@@ -245,8 +237,8 @@ class Daemon:
             self._publish_target()
             self._count_frame()
             self._broadcast_frame(plan, meta)
-            if plan.ring is not shown_ring:
-                shown_ring = plan.ring
+            if self.engine.ring is not shown_ring:
+                shown_ring = self.engine.ring
                 self._server_broadcast("scene", self.scene_info())
             if self.engine.weather_version != weather_version:
                 weather_version = self.engine.weather_version
@@ -328,47 +320,12 @@ class Daemon:
     def _render_and_publish(self, plan: FramePlan) -> FrameMeta:
         r, writer = self._renderer, self._writer
         assert r is not None and writer is not None
-        rings = plan.rings
-        if rings.current is None:
-            # Nothing built yet: the set on show is the empty ring (transparent images).
-            r.render_ring(plan.ring, ring_set=rings.current_set)
-        if rings.render and rings.render_ring is not None:
-            r.render_ring(rings.render_ring, rings.render, rings.render_set)
+        draw_ring(r, plan)
         r.render_frame(plan.frame)
-        cam = plan.frame.camera
-        for name in ("sky", "near"):
-            r.read_into(name, writer.layer_buffer(name, cam.width_px, cam.height_px))
-        px = self.config.scene.ring_texture_px
-        for i in range(RING_SIZE):
-            r.read_into(
-                ring_target_name(i, rings.current_set), writer.layer_buffer(f"ring_{i}", px, px)
-            )
-        incoming = rings.incoming if rings.fade > 0.0 else None
-        if incoming is not None:
-            for i in range(RING_SIZE):
-                r.read_into(
-                    ring_target_name(i, rings.incoming_set),
-                    writer.layer_buffer(f"ring_in_{i}", px, px),
-                )
-        geo = plan.ring.geometry
-        meta = FrameMeta(
-            frame_number=self.frames_published + 1,
-            ring_version=plan.ring_version,
-            time_utc_unix_s=plan.state.time_utc.astimezone(UTC).timestamp(),
-            camera=cam,
-            sun_direction_enu=plan.frame.sky.sun.direction_enu,
-            ring_centre_m=geo.centre_m,
-            ring_radius_m=geo.radius_m,
-            ring_quads_m=geo.corners_m(),
-            ring_set=rings.current_set,
-            ring_fade=rings.fade if incoming is not None else 0.0,
-            incoming_centre_m=incoming.geometry.centre_m if incoming else None,
-            incoming_radius_m=incoming.geometry.radius_m if incoming else 0.0,
-            incoming_quads_m=incoming.geometry.corners_m() if incoming else None,
-        )
-        writer.publish(meta.frame_number, meta.pack())
+        frame_number = self.frames_published + 1
+        meta = publish_plan(r, writer, plan, frame_number, self.config.scene.ring_texture_px)
         if self._trace is not None:
-            self._trace.write_events(meta.frame_number, cam.position_m, rings.events)
+            self._trace.write_events(frame_number, plan.frame.camera.position_m, plan.rings.events)
         return meta
 
     # -- control channel --------------------------------------------------------------

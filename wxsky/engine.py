@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
+import time
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 
@@ -34,6 +35,7 @@ from wxsky.scene.layout import (
     NearRing,
     RingScene,
     SceneSettings,
+    StageClock,
     advance_drift,
     build_frame,
     build_ring,
@@ -41,7 +43,7 @@ from wxsky.scene.layout import (
     empty_ring,
     zero_drift,
 )
-from wxsky.scene.sky import sky_params
+from wxsky.scene.sky import SkyParams, sky_params
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
 from wxsky.weather.precedence import DEFAULT_COCKPIT_HOLD_S, SourceStack
 from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
@@ -113,8 +115,9 @@ class SkyEngine:
         self._since_step_s = 0.0
         self._drift: Drift = zero_drift(state)
         self.render_mode = render_mode
+        self._build_times: list[float] | None = None
         self._schedule = RingSchedule(
-            lambda s, d, c, k: build_ring(s, d, c, k, self.settings),
+            self._build_ring,
             settings.ring_radius_m,
             mode=ring_build,
             fade_s=ring_fade_s,
@@ -161,6 +164,23 @@ class SkyEngine:
     @property
     def ring_version(self) -> int:
         return 0 if self._rings is None else self._rings.version
+
+    def time_ring_builds(self, out: list[float]) -> None:
+        """Append the seconds each later ring build takes (on whichever thread) to `out`."""
+        self._build_times = out
+
+    def _build_ring(
+        self,
+        state: WeatherState,
+        drift: Drift,
+        centre_m: tuple[float, float, float],
+        sky: SkyParams,
+    ) -> RingScene:
+        t0 = time.perf_counter()
+        ring = build_ring(state, drift, centre_m, sky, self.settings)
+        if self._build_times is not None:
+            self._build_times.append(time.perf_counter() - t0)
+        return ring
 
     @property
     def ring_busy(self) -> bool:
@@ -299,8 +319,9 @@ class SkyEngine:
         self._since_step_s = 0.0
         self._set_applied(step)
 
-    def advance(self, dt_wall_s: float) -> FramePlan:
-        """Run the stages for a frame dt_wall_s after the previous one."""
+    def advance(self, dt_wall_s: float, clock: StageClock | None = None) -> FramePlan:
+        """Run the stages for a frame dt_wall_s after the previous one (`clock`: times the
+        sort for `wxsky bench`)."""
         with self._lock:
             self._step_weather(dt_wall_s)
             state, drift, camera = self._state, self._drift, self._camera
@@ -324,6 +345,7 @@ class SkyEngine:
             self.settings,
             locks=self._locks,
             near_radius_m=near_radius_m,
+            clock=clock,
         )
         self._locks = frame.locks
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)

@@ -42,6 +42,7 @@ log = logging.getLogger(__name__)
 
 BUILD_MODES = ("async", "sync", "immediate")
 DEFAULT_FADE_S = 1.0
+RETRY_AFTER_S = 2.0  # a failed build is tried again after this long, not every frame
 # Rebuild the ring once the clouds in it have drifted this share of its radius, or the sun
 # has moved this far: past these, the seam between near sprites and impostors shows.
 RING_DRIFT_FRAC = 0.03
@@ -137,6 +138,7 @@ class RingSchedule:
         self._next_index = 0
         self._fade = 0.0
         self._version = 0
+        self._retry_in_s = 0.0  # after a failed build, wait this long before the next
         self._closed = False
 
     @property
@@ -159,7 +161,8 @@ class RingSchedule:
         if self.mode == "immediate":
             reason = self._reason(state, drift, camera, sky)
             if reason is not None:
-                events.append(RingEvent("ring_rebuild_start", {"reason": reason}))
+                fields = {"reason": reason, "centre_m": list(camera.position_m)}
+                events.append(RingEvent("ring_rebuild_start", fields))
                 self._current = self._start(state, drift, camera, sky)
                 render, render_ring, render_set = tuple(range(RING_SIZE)), self._current, 0
                 self._current_set = 0
@@ -180,7 +183,8 @@ class RingSchedule:
                 self._current_set = 1 - self._current_set
                 self._fade = 0.0
                 events.append(RingEvent("crossfade_done", {}))
-        if not self.busy:
+        self._retry_in_s = max(0.0, self._retry_in_s - dt_wall_s)
+        if not self.busy and self._retry_in_s <= 0.0:
             reason = self._reason(state, drift, camera, sky)
             if reason is not None:
                 fields = {"reason": reason, "centre_m": list(camera.position_m)}
@@ -200,8 +204,9 @@ class RingSchedule:
                 self._incoming = future.result()
                 self._next_index = 0
             except Exception as exc:  # a failed build keeps the old ring and tries again later
-                log.error("ring build failed: %s", exc)
+                log.error("ring build failed: %s; retrying in %g s", exc, RETRY_AFTER_S)
                 self._newest = None
+                self._retry_in_s = RETRY_AFTER_S
                 events.append(RingEvent("ring_rebuild_failed", {"error": str(exc)}))
         if self._incoming is not None and self._next_index < RING_SIZE:
             render, render_ring = (self._next_index,), self._incoming

@@ -3,8 +3,9 @@ ring's rebuild policy can be checked from outside the daemon.
 
 Every line has `frame` (the published frame number), `event` and `camera_m` ([x, y, z] in the
 ring's world frame: east, north, up metres around the observer); the ring schedule's events
-(`ring_rebuild_start` with `reason`, `impostor_rendered` with `index`, `ring_rebuild_done`,
-`crossfade_start`, `crossfade_done`) add their own fields. Lines are flushed per frame, so a
+(`ring_rebuild_start` with `reason` and `centre_m`, `impostor_rendered` with `index`,
+`ring_rebuild_done`, `crossfade_start` with `fade_s`, `crossfade_done`, `ring_rebuild_failed`
+with `error`) add their own fields. Lines are flushed per frame, so a
 reader sees them while the daemon runs.
 """
 

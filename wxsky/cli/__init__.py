@@ -1,7 +1,8 @@
 """The `wxsky` command line. Errors a user can fix print one line and exit with status 2.
 
 Each command group lives in its own module and adds its subparsers through `add_commands`:
-`daemon_cmd` (run, status, snapshot), `metar_cmd` (metar ...), `preset_cmd` (preset ...).
+`daemon_cmd` (run, status, snapshot), `metar_cmd` (metar ...), `preset_cmd` (preset ...),
+`sun_cmd` (sun), `bench_cmd` (bench).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from wxsky import __version__
-from wxsky.cli import daemon_cmd, metar_cmd, preset_cmd, sun_cmd
+from wxsky.cli import bench_cmd, daemon_cmd, metar_cmd, preset_cmd, sun_cmd
 from wxsky.cli.common import EXIT_USAGE, parse_size
 from wxsky.errors import WxskyError
 
@@ -41,4 +42,5 @@ def build_parser() -> argparse.ArgumentParser:
     preset_cmd.add_commands(sub)
     metar_cmd.add_commands(sub)
     sun_cmd.add_commands(sub)
+    bench_cmd.add_commands(sub)
     return p

@@ -92,6 +92,7 @@ class Renderer:
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._targets: dict[str, _Target] = {}
         self._finish = gil_free_finish(self.ctx)
+        self._clear_ring_sets: set[int] = set()  # ring sets whose 8 images are all clear
         # A CPU renderer (llvmpipe) rasterises when the next GL call switches targets or
         # rewrites a buffer, with the calling thread waiting, and so with the GIL held: finish
         # after each draw instead. A GPU works asynchronously; there only the read-back waits.
@@ -134,7 +135,15 @@ class Renderer:
         """Draw ring impostors (all 8 unless given), each from the ring centre, into texture
         set 0 or 1 (`ring_target_name`): a new ring is drawn into the set not on show."""
         geo = ring.geometry
-        for i in indices if indices is not None else range(RING_SIZE):
+        chosen = list(indices if indices is not None else range(RING_SIZE))
+        empty = all(len(ring.impostors[i]) == 0 for i in chosen)
+        if empty and len(chosen) == RING_SIZE and ring_set in self._clear_ring_sets:
+            return  # already all clear: an empty ring (before the first, or direct mode)
+        if empty and len(chosen) == RING_SIZE:
+            self._clear_ring_sets.add(ring_set)
+        else:
+            self._clear_ring_sets.discard(ring_set)
+        for i in chosen:
             target = self._target(ring_target_name(i, ring_set), self.ring_px, self.ring_px)
             self._draw_sprites(
                 target,
@@ -144,6 +153,10 @@ class Renderer:
                 geo.projection_matrix(i),
             )
         self._check("rendering the impostor ring")
+
+    def finish(self) -> None:
+        """Wait for every GL command issued so far (GIL-free): a benchmark's stage ends here."""
+        self._finish()
 
     def layer_size(self, name: str) -> tuple[int, int]:
         return self._targets[name].size

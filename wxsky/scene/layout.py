@@ -8,9 +8,11 @@ live in a frame moved by the integrated wind, so the clouds travel but never cha
 
 from __future__ import annotations
 
+import contextlib
 import math
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -116,6 +118,20 @@ def gather_blocks(
     sprites and in the ring, nor in neither, until the ring is rebuilt."""
     ring = NearRing(centre_m, drift if select_drift is None else select_drift, 1.0)
     return _gather(state, drift, (ring,), min_range_m, max_range_m)[0]
+
+
+class StageClock(Protocol):
+    """Times named stages of a frame (`wxsky bench`); the scene only marks where they are."""
+
+    def stage(self, name: str) -> AbstractContextManager[object]: ...
+
+
+class _NoClock:
+    def stage(self, name: str) -> AbstractContextManager[object]:
+        return contextlib.nullcontext()
+
+
+NO_CLOCK: StageClock = _NoClock()
 
 
 class NearRing(NamedTuple):
@@ -224,10 +240,13 @@ def shade_for_eye(
     shading: str = DEFAULT_SHADING,
     light: ParticleLight | None = None,
     share: npt.NDArray[np.float32] | None = None,
+    order: npt.NDArray[np.intp] | None = None,
 ) -> SpriteDraw:
     """`light`: a precompute (`prepare_lighting`) of a batch holding these sprites; `share`:
-    (N,) a factor on each sprite's alpha after shading (see `gather_near`)."""
-    order = sort_order(batch, eye_m)
+    (N,) a factor on each sprite's alpha after shading (see `gather_near`); `order`: the
+    back-to-front order if already known (`sort_order`)."""
+    if order is None:
+        order = sort_order(batch, eye_m)
     ordered = batch.take(order)
     rgba = fade_by_range(
         sprite_colours(ordered, sky, eye_m, shading, light), ordered, eye_m, sky, max_range_m
@@ -293,14 +312,19 @@ def build_frame(
     settings: SceneSettings,
     locks: Locks = NO_LOCKS,
     near_radius_m: float | None = None,
+    clock: StageClock | None = None,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
-    `locks` are the previous frame's in-cloud locks."""
+    `locks` are the previous frame's in-cloud locks; `clock` times the sort for benchmarks."""
     radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
     near, share = gather_near(state, drift, rings, radius_m)
     eye = camera.position_m
-    shaded = shade_for_eye(near, eye, sky, settings.max_range_m, settings.shading, share=share)
+    with (clock or NO_CLOCK).stage("sort"):
+        order = sort_order(near, eye)
+    shaded = shade_for_eye(
+        near, eye, sky, settings.max_range_m, settings.shading, share=share, order=order
+    )
     cloud = in_cloud(near, eye, state.visibility_m)
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)

@@ -1,0 +1,84 @@
+"""`wxsky bench` end to end on the real renderer and a real shared-memory segment: stage
+timings per frame, the ring's events and trace, direct mode drawing every cloud."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from wxsky.bench import STAGES, run_bench
+from wxsky.camera_path import straight_and_level
+from wxsky.cli import main
+from wxsky.presets import load_preset
+from wxsky.scene.layout import SceneSettings
+from wxsky.trace import TraceWriter
+from wxsky.weather.state import WeatherState
+
+pytestmark = pytest.mark.gl
+
+STATE = WeatherState().apply(load_preset("scattered-cumulus", ()))
+SETTINGS = SceneSettings(ring_texture_px=64, max_range_m=20_000.0)
+
+
+def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None:
+    trace_path = tmp_path / "trace.jsonl"
+    with TraceWriter(trace_path) as trace:
+        result = run_bench(
+            STATE,
+            SETTINGS,
+            straight_and_level(),
+            40,
+            "ring",
+            (96, 54),
+            preset="scattered-cumulus",
+            ring_fade_s=0.1,
+            trace=trace,
+        )
+    assert result.frames == 40
+    for name in STAGES:
+        assert len(result.stage_s[name]) == 40 and min(result.stage_s[name]) >= 0.0
+    assert all(f > 0.0 for f in result.frame_s)
+    # The first ring: started at frame 1, its 8 impostors on 8 consecutive frames.
+    lines = [json.loads(line) for line in trace_path.read_text().splitlines()]
+    assert lines[0]["event"] == "ring_rebuild_start" and lines[0]["reason"] == "initial"
+    assert all({"frame", "event", "camera_m"} <= set(line) for line in lines)
+    rendered = [line for line in lines if line["event"] == "impostor_rendered"]
+    assert [line["index"] for line in rendered] == list(range(8))
+    frames = [line["frame"] for line in rendered]
+    assert frames == list(range(frames[0], frames[0] + 8))
+    assert result.events["ring_rebuild_start"] == 1 and result.build_s
+    d = result.to_dict()
+    assert set(d["stages_ms"]) == set(STAGES) and d["frames"] == 40
+    assert "impostor_slice" in result.table()
+
+
+def test_direct_mode_draws_every_cloud_as_a_sprite() -> None:
+    args = (STATE, SETTINGS, straight_and_level(), 3)
+    direct = run_bench(*args, "direct", (96, 54))
+    ring = run_bench(*args, "ring", (96, 54))
+    assert min(direct.sprites) > 3 * max(ring.sprites)
+    assert not direct.events  # no ring at all
+
+
+def test_the_command_prints_json(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    path = tmp_path / "path.csv"
+    path.write_text("0, 0, 0, 1500, 45, 5\n1, 100, 100, 1500, 45, 5\n")
+    code = main(
+        ["bench", "--preset", "clear", "--frames", "3", "--size", "64x36", "--json",
+         "--camera-path", str(path)]
+    )  # fmt: skip
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["frames"] == 3 and out["size"] == [64, 36] and out["path"] == str(path)
+
+
+def test_a_bad_camera_path_is_a_one_line_error(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text("0, 0, 0, 1500, 45\n")
+    assert main(["bench", "--frames", "2", "--camera-path", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("wxsky: error:") and "bad.csv line 1" in err and "\n" not in err

@@ -1,0 +1,226 @@
+"""`wxsky bench`: render N frames along a camera path exactly as the daemon would, and time
+each stage of every frame.
+
+Stages, in frame order (each ends with the GPU idle, so its time is its own):
+
+    scene           weather step, ring schedule, gathering, shading (engine.advance less sort)
+    sort            the near sprites back to front
+    impostor_slice  the ring impostor this frame renders (none in most frames, or direct mode)
+    near_pass       the sky and the near sprites (renderer.render_frame)
+    publish         reading the layers into a real shared-memory slot and publishing it
+
+Frames are paced by simulated time (one every 1/fps s of it), not by the wall clock: the
+benchmark runs as fast as it can. In ring mode the ring is built on its worker thread as in
+the daemon, so a rebuild costs the frames the CPU time it takes from them. `--mode direct`
+draws every cloud within range as sprites every frame, and no ring.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import statistics
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from wxsky.camera_path import CameraPath
+from wxsky.engine import SkyEngine
+from wxsky.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.output.shm import FrameWriter
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import SceneSettings
+from wxsky.trace import TraceWriter
+from wxsky.weather.state import WeatherState
+
+STAGES = ("scene", "sort", "impostor_slice", "near_pass", "publish")
+
+
+class _StageTimes:
+    """Seconds per stage for the frame being timed (a `StageClock`)."""
+
+    def __init__(self) -> None:
+        self.frame: dict[str, float] = {}
+
+    @contextlib.contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.frame[name] = self.frame.get(name, 0.0) + time.perf_counter() - t0
+
+
+@dataclass
+class BenchResult:
+    preset: str
+    mode: str
+    width: int
+    height: int
+    path: str
+    renderer: str
+    startup_s: float
+    frames_s: float
+    stage_s: dict[str, list[float]] = field(default_factory=dict)  # per frame, by stage
+    frame_s: list[float] = field(default_factory=list)
+    events: dict[str, int] = field(default_factory=dict)
+    build_s: list[float] = field(default_factory=list)  # ring builds on the worker thread
+    sprites: list[int] = field(default_factory=list)  # near sprites drawn per frame
+
+    @property
+    def frames(self) -> int:
+        return len(self.frame_s)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "preset": self.preset,
+            "mode": self.mode,
+            "size": [self.width, self.height],
+            "path": self.path,
+            "renderer": self.renderer,
+            "frames": self.frames,
+            "startup_s": self.startup_s,
+            "frames_s": self.frames_s,
+            "stages_ms": {name: _summary(v) for name, v in self.stage_s.items()},
+            "frame_ms": _summary(self.frame_s),
+            "near_sprites": {
+                "median": statistics.median(self.sprites) if self.sprites else 0,
+                "max": max(self.sprites, default=0),
+            },
+            "ring_events": dict(self.events),
+            "ring_build_ms": _summary(self.build_s),
+        }
+
+    def table(self) -> str:
+        d = self.to_dict()
+        lines = [
+            f"wxsky bench: {self.preset}, {self.mode} mode, {self.width}x{self.height}, "
+            f"{self.frames} frames, {self.path} ({self.renderer})",
+            f"{'stage':<16}{'median ms':>11}{'p95 ms':>10}",
+        ]
+        for name in STAGES:
+            s = d["stages_ms"][name]
+            lines.append(f"{name:<16}{s['median']:>11.2f}{s['p95']:>10.2f}")
+        f = d["frame_ms"]
+        lines.append(f"{'frame':<16}{f['median']:>11.2f}{f['p95']:>10.2f}")
+        lines.append(
+            f"near sprites per frame: median {d['near_sprites']['median']:.0f}, "
+            f"max {d['near_sprites']['max']}"
+        )
+        if self.mode == "ring":
+            b = d["ring_build_ms"]
+            lines.append(
+                f"ring: {self.events.get('ring_rebuild_start', 0)} rebuilds started, "
+                f"{self.events.get('impostor_rendered', 0)} impostors rendered, "
+                f"{self.events.get('crossfade_done', 0)} fades done; builds on the worker "
+                f"thread median {b['median']:.0f} ms"
+            )
+        lines.append(f"startup {self.startup_s:.2f} s, {self.frames} frames {self.frames_s:.2f} s")
+        return "\n".join(lines)
+
+
+def run_bench(
+    state: WeatherState,
+    settings: SceneSettings,
+    path: CameraPath,
+    frames: int,
+    mode: str,
+    size: tuple[int, int],
+    *,
+    preset: str = "",
+    fov_deg: float = 60.0,
+    fps: float = 30.0,
+    ring_fade_s: float = 1.0,
+    trace: TraceWriter | None = None,
+    started_s: float | None = None,
+) -> BenchResult:
+    """Render `frames` frames along `path`; `started_s`: the perf_counter reading the process's
+    startup is counted from (default: now)."""
+    from wxsky.render.context import describe
+    from wxsky.render.renderer import Renderer
+
+    t_start = time.perf_counter() if started_s is None else started_s
+    width, height = size
+    dt_s = 1.0 / fps
+
+    def camera_at(t_s: float) -> Camera:
+        pose = path.at(t_s)
+        return Camera(
+            position_m=pose.position_m,
+            heading_deg=pose.heading_deg,
+            pitch_deg=pose.pitch_deg,
+            roll_deg=pose.roll_deg,
+            fov_deg=fov_deg,
+            width_px=width,
+            height_px=height,
+        )
+
+    build_s: list[float] = []
+    times = _StageTimes()
+    shm_name = f"wxsky-bench-{os.getpid()}"
+    specs = frame_layer_specs(width, height, settings.ring_texture_px)
+    with (
+        Renderer(settings.ring_texture_px) as renderer,
+        FrameWriter.create(shm_name, specs) as writer,
+        SkyEngine(
+            state,
+            camera_at(0.0),
+            settings,
+            clock_rate=1.0,
+            render_mode=mode,
+            ring_build="async",
+            ring_fade_s=ring_fade_s,
+        ) as engine,
+    ):
+        engine.time_ring_builds(build_s)
+        result = BenchResult(
+            preset=preset,
+            mode=mode,
+            width=width,
+            height=height,
+            path=path.name,
+            renderer=describe(renderer.ctx),
+            startup_s=time.perf_counter() - t_start,
+            frames_s=0.0,
+            stage_s={name: [] for name in STAGES},
+        )
+        loop_start = time.perf_counter()
+        for k in range(frames):
+            engine.set_camera(camera_at(k * dt_s))
+            times.frame = {}
+            t0 = time.perf_counter()
+            plan = engine.advance(dt_s if k else 0.0, times)
+            times.frame["scene"] = time.perf_counter() - t0 - times.frame.get("sort", 0.0)
+            with times.stage("impostor_slice"):
+                if plan.rings.render or plan.rings.current is None:
+                    draw_ring(renderer, plan)
+                    renderer.finish()
+            with times.stage("near_pass"):
+                renderer.render_frame(plan.frame)
+                renderer.finish()
+            with times.stage("publish"):
+                publish_plan(renderer, writer, plan, k + 1, settings.ring_texture_px)
+            result.frame_s.append(time.perf_counter() - t0)
+            for name in STAGES:
+                result.stage_s[name].append(times.frame.get(name, 0.0))
+            result.sprites.append(len(plan.frame.near))
+            for e in plan.rings.events:
+                result.events[e.event] = result.events.get(e.event, 0) + 1
+            if trace is not None:
+                trace.write_events(k + 1, plan.frame.camera.position_m, plan.rings.events)
+        result.frames_s = time.perf_counter() - loop_start
+        result.build_s = list(build_s)
+    return result
+
+
+def _summary(values: list[float]) -> dict[str, float]:
+    if not values:
+        return {"median": 0.0, "p95": 0.0, "max": 0.0}
+    ordered = sorted(values)
+    p95 = ordered[min(len(ordered) - 1, round(0.95 * (len(ordered) - 1)))]
+    return {
+        "median": 1000.0 * statistics.median(ordered),
+        "p95": 1000.0 * p95,
+        "max": 1000.0 * ordered[-1],
+    }

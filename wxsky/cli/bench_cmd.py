@@ -1,0 +1,92 @@
+"""`wxsky bench`: frames along a camera path, timed per stage (see `wxsky.bench`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from wxsky.cli.common import Subparsers, parse_size
+
+STARTED_S = time.perf_counter()  # the command's start, for the startup figure
+
+
+def add_commands(sub: Subparsers) -> None:
+    bench = sub.add_parser(
+        "bench",
+        help="render frames along a camera path as the daemon would and time each stage",
+    )
+    bench.add_argument("--preset", default="broken-stratocumulus", help="weather preset")
+    bench.add_argument("--config", type=Path, help="daemon config (TOML); default: built-in")
+    bench.add_argument("--frames", type=int, default=120, help="frames to render (1..100000)")
+    bench.add_argument(
+        "--mode",
+        choices=("ring", "direct"),
+        default="ring",
+        help="ring: the daemon's pipeline; direct: every cloud as sprites every frame",
+    )
+    bench.add_argument("--size", default="1280x720", help="WIDTHxHEIGHT")
+    bench.add_argument("--fov-deg", type=float, default=60.0, help="horizontal field of view")
+    bench.add_argument(
+        "--camera-path",
+        type=Path,
+        metavar="FILE",
+        help="timestamped poses (t_s, x_m, y_m, z_m, heading_deg, pitch_deg[, roll_deg] per "
+        "line); default: straight and level at 120 m/s and 1500 m, heading 090",
+    )
+    bench.add_argument("--fps", type=float, default=30.0, help="simulated frames per second")
+    bench.add_argument("--json", action="store_true", help="print one JSON object")
+    bench.add_argument("--trace", type=Path, metavar="FILE", help="write ring events there")
+    bench.set_defaults(func=_cmd_bench)
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from wxsky.bench import run_bench
+    from wxsky.camera_path import parse_camera_path, straight_and_level
+    from wxsky.config import load_config
+    from wxsky.errors import ConfigError
+    from wxsky.presets import load_preset
+    from wxsky.trace import TraceWriter
+    from wxsky.weather.state import WeatherState
+
+    if not 1 <= args.frames <= 100_000:
+        raise ValueError(f"--frames must be in 1..100000, got {args.frames}")
+    if not 1.0 <= args.fps <= 1000.0:
+        raise ValueError(f"--fps must be in 1..1000, got {args.fps:g}")
+    if not 1.0 <= args.fov_deg <= 170.0:
+        raise ValueError(f"--fov-deg must be in 1..170, got {args.fov_deg:g}")
+    config = load_config(args.config)
+    size = parse_size(args.size)
+    state = WeatherState().apply(load_preset(args.preset, config.presets.dirs))
+    if args.camera_path is not None:
+        try:
+            text = args.camera_path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ConfigError(f"--camera-path {args.camera_path}: {exc.strerror}") from None
+        except UnicodeDecodeError:
+            raise ConfigError(f"--camera-path {args.camera_path}: not UTF-8 text") from None
+        path = parse_camera_path(text, str(args.camera_path))
+    else:
+        path = straight_and_level(alt_m=1500.0)
+    trace = TraceWriter(args.trace) if args.trace is not None else None
+    try:
+        result = run_bench(
+            state,
+            config.scene.settings(),
+            path,
+            args.frames,
+            args.mode,
+            size,
+            preset=args.preset,
+            fov_deg=args.fov_deg,
+            fps=args.fps,
+            ring_fade_s=config.scene.ring_fade_s,
+            trace=trace,
+            started_s=STARTED_S,
+        )
+    finally:
+        if trace is not None:
+            trace.close()
+    print(json.dumps(result.to_dict(), indent=2) if args.json else result.table())
+    return 0

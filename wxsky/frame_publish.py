@@ -1,0 +1,95 @@
+"""Drawing a frame plan and handing it to hosts: the steps the daemon runs per frame, shared
+with `wxsky bench` so the benchmark times exactly what the daemon does.
+
+    draw_ring (one impostor of a rebuild, or none) -> renderer.render_frame (sky + near)
+    -> publish_plan (read the layers into the shared-memory slot, the frame record, publish)
+"""
+
+from __future__ import annotations
+
+from datetime import UTC
+from typing import Protocol
+
+from wxsky.engine import FramePlan
+from wxsky.output.frame_meta import FrameMeta
+from wxsky.output.shm import LayerSpec
+from wxsky.scene.layout import RingScene
+from wxsky.scene.ring import RING_SIZE, ring_target_name
+
+
+class RingRenderer(Protocol):
+    def render_ring(
+        self,
+        ring: RingScene,
+        indices: range | list[int] | tuple[int, ...] | None = None,
+        ring_set: int = 0,
+    ) -> None: ...
+
+    def read_into(self, name: str, buffer: memoryview) -> None: ...
+
+
+class LayerSink(Protocol):
+    def layer_buffer(self, layer: str, width: int, height: int) -> memoryview: ...
+
+    def publish(self, frame_number: int, meta: bytes = b"") -> None: ...
+
+
+def frame_layer_specs(width: int, height: int, ring_px: int) -> list[LayerSpec]:
+    """The segment's layers: sky and near at most width x height, the current ring's 8
+    images, and the incoming ring's 8 while it fades in (absent otherwise)."""
+    return [
+        LayerSpec("sky", width, height),
+        LayerSpec("near", width, height),
+        *(LayerSpec(f"ring_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
+        *(LayerSpec(f"ring_in_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
+    ]
+
+
+def draw_ring(renderer: RingRenderer, plan: FramePlan) -> None:
+    """The ring work of this frame: the impostor(s) the schedule asks for, into their set."""
+    rings = plan.rings
+    if rings.current is None:
+        # Nothing built yet: the set on show is the empty ring (transparent images).
+        renderer.render_ring(plan.ring, ring_set=rings.current_set)
+    if rings.render and rings.render_ring is not None:
+        renderer.render_ring(rings.render_ring, rings.render, rings.render_set)
+
+
+def publish_plan(
+    renderer: RingRenderer, sink: LayerSink, plan: FramePlan, frame_number: int, ring_px: int
+) -> FrameMeta:
+    """Copy the drawn layers into the slot being filled (the current ring as ring_i, the
+    incoming one as ring_in_i while it fades in), write the frame record and publish."""
+    rings = plan.rings
+    cam = plan.frame.camera
+    for name in ("sky", "near"):
+        renderer.read_into(name, sink.layer_buffer(name, cam.width_px, cam.height_px))
+    for i in range(RING_SIZE):
+        renderer.read_into(
+            ring_target_name(i, rings.current_set), sink.layer_buffer(f"ring_{i}", ring_px, ring_px)
+        )
+    incoming = rings.incoming if rings.fade > 0.0 else None
+    if incoming is not None:
+        for i in range(RING_SIZE):
+            renderer.read_into(
+                ring_target_name(i, rings.incoming_set),
+                sink.layer_buffer(f"ring_in_{i}", ring_px, ring_px),
+            )
+    geo = plan.ring.geometry
+    meta = FrameMeta(
+        frame_number=frame_number,
+        ring_version=plan.ring_version,
+        time_utc_unix_s=plan.state.time_utc.astimezone(UTC).timestamp(),
+        camera=cam,
+        sun_direction_enu=plan.frame.sky.sun.direction_enu,
+        ring_centre_m=geo.centre_m,
+        ring_radius_m=geo.radius_m,
+        ring_quads_m=geo.corners_m(),
+        ring_set=rings.current_set,
+        ring_fade=rings.fade if incoming is not None else 0.0,
+        incoming_centre_m=incoming.geometry.centre_m if incoming else None,
+        incoming_radius_m=incoming.geometry.radius_m if incoming else 0.0,
+        incoming_quads_m=incoming.geometry.corners_m() if incoming else None,
+    )
+    sink.publish(frame_number, meta.pack())
+    return meta
