@@ -20,6 +20,7 @@ processes, plus the image difference between the two modes and a check of the re
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import statistics
@@ -33,8 +34,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-import itertools
 
 from wxsky.cli.common import parse_size  # noqa: E402
 from wxsky.config import DaemonConfig  # noqa: E402
