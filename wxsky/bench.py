@@ -18,21 +18,29 @@ draws every cloud within range as sprites every frame, and no ring.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import statistics
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
 
 from wxsky.camera_path import CameraPath
 from wxsky.engine import SkyEngine
 from wxsky.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.output.shm import FrameWriter
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import SceneSettings
+from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw
+from wxsky.scene.shading_harris import particle_keys
 from wxsky.trace import TraceWriter
 from wxsky.weather.state import WeatherState
+
+if TYPE_CHECKING:
+    from wxsky.render.renderer import Renderer
 
 STAGES = ("scene", "sort", "impostor_slice", "near_pass", "publish")
 
@@ -67,6 +75,11 @@ class BenchResult:
     events: dict[str, int] = field(default_factory=dict)
     build_s: list[float] = field(default_factory=list)  # ring builds on the worker thread
     sprites: list[int] = field(default_factory=list)  # near sprites drawn per frame
+    # With check_order: per frame after the first, whether the near sprites' order differs
+    # from the previous frame's (for the sprites in both), and the largest change (0..255) in
+    # any channel of the near layer that the new order makes against the old one.
+    order_changed: list[bool] = field(default_factory=list)
+    order_diff: list[int] = field(default_factory=list)
 
     @property
     def frames(self) -> int:
@@ -90,6 +103,18 @@ class BenchResult:
             },
             "ring_events": dict(self.events),
             "ring_build_ms": _summary(self.build_s),
+            **(
+                {
+                    "order_check": {
+                        "frames": len(self.order_diff),
+                        "frames_with_order_change": sum(self.order_changed),
+                        "max_pixel_change": max(self.order_diff, default=0),
+                        "frames_over_8": sum(d > 8 for d in self.order_diff),
+                    }
+                }
+                if self.order_diff
+                else {}
+            ),
         }
 
     def table(self) -> str:
@@ -116,6 +141,13 @@ class BenchResult:
                 f"{self.events.get('crossfade_done', 0)} fades done; builds on the worker "
                 f"thread median {b['median']:.0f} ms"
             )
+        if self.order_diff:
+            o = d["order_check"]
+            lines.append(
+                f"order check: {o['frames_with_order_change']} of {o['frames']} frames changed "
+                f"the near sprites' order; largest pixel change from it {o['max_pixel_change']}"
+                f"/255; frames over 8/255: {o['frames_over_8']}"
+            )
         lines.append(f"startup {self.startup_s:.2f} s, {self.frames} frames {self.frames_s:.2f} s")
         return "\n".join(lines)
 
@@ -134,9 +166,12 @@ def run_bench(
     ring_fade_s: float = 1.0,
     trace: TraceWriter | None = None,
     started_s: float | None = None,
+    check_order: bool = False,
 ) -> BenchResult:
     """Render `frames` frames along `path`; `started_s`: the perf_counter reading the process's
-    startup is counted from (default: now)."""
+    startup is counted from (default: now). `check_order`: also measure what each change in the
+    near sprites' back-to-front order does to the picture (see `order_change`), outside the
+    timed stages."""
     from wxsky.render.context import describe
     from wxsky.render.renderer import Renderer
 
@@ -185,6 +220,7 @@ def run_bench(
             frames_s=0.0,
             stage_s={name: [] for name in STAGES},
         )
+        previous_keys: npt.NDArray[np.uint64] | None = None
         loop_start = time.perf_counter()
         for k in range(frames):
             engine.set_camera(camera_at(k * dt_s))
@@ -209,9 +245,46 @@ def run_bench(
                 result.events[e.event] = result.events.get(e.event, 0) + 1
             if trace is not None:
                 trace.write_events(k + 1, plan.frame.camera.position_m, plan.rings.events)
+            if check_order:
+                keys = particle_keys(plan.frame.near.sprites)
+                if previous_keys is not None:
+                    changed, diff = order_change(renderer, plan.frame, previous_keys, keys)
+                    result.order_changed.append(changed)
+                    result.order_diff.append(diff)
+                previous_keys = keys
         result.frames_s = time.perf_counter() - loop_start
         result.build_s = list(build_s)
     return result
+
+
+def order_change(
+    renderer: Renderer,
+    frame: FrameScene,
+    previous_keys: npt.NDArray[np.uint64],
+    keys: npt.NDArray[np.uint64],
+) -> tuple[bool, int]:
+    """Whether the frame's near sprites are drawn in a different order than the previous frame
+    drew the same sprites, and if so the largest change in any channel of the near layer
+    between drawing this frame in its own order and in the previous one (sprites new this
+    frame keep their place after the sprite before them). 0 when the order is the same."""
+    rank_of = {int(k): r for r, k in enumerate(previous_keys)}
+    ranks = np.empty(len(keys))
+    last = -1.0
+    for i, k in enumerate(keys):
+        r = rank_of.get(int(k))
+        last = float(r) if r is not None else last + 1e-6
+        ranks[i] = last
+    old_order = np.argsort(ranks, kind="stable")
+    if np.array_equal(old_order, np.arange(len(keys))):
+        return False, 0
+    renderer.render_frame(frame)
+    mine = renderer.read("near").astype(np.int16)
+    near = frame.near
+    normals = None if near.normals is None else near.normals[old_order]
+    reordered = SpriteDraw(near.sprites.take(old_order), near.rgba[old_order], normals)
+    renderer.render_frame(dataclasses.replace(frame, near=reordered))
+    theirs = renderer.read("near").astype(np.int16)
+    return True, int(np.abs(mine - theirs).max())
 
 
 def _summary(values: list[float]) -> dict[str, float]:

@@ -97,6 +97,27 @@ def camera_to_dict(cam: Camera) -> dict[str, Any]:
     }
 
 
+def set_aircraft(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
+    """`position_m`: [east_m, north_m, alt_m] of the host's own aircraft, or null to stop
+    splitting the near layer at it."""
+    _only("set_aircraft", params, {"position_m"})
+    if "position_m" not in params:
+        raise ControlError("set_aircraft: give position_m ([east_m, north_m, alt_m] or null)")
+    pos = params["position_m"]
+    if pos is None:
+        engine.set_aircraft(None)
+        return {"position_m": None}
+    if not isinstance(pos, (list, tuple)) or len(pos) != 3:
+        raise ControlError("set_aircraft: position_m must be [east_m, north_m, alt_m] or null")
+    position = (
+        _number("set_aircraft", "position_m[0]", pos[0], -1e6, 1e6),
+        _number("set_aircraft", "position_m[1]", pos[1], -1e6, 1e6),
+        _number("set_aircraft", "position_m[2]", pos[2], -1000.0, 100_000.0),
+    )
+    engine.set_aircraft(position)
+    return {"position_m": list(position)}
+
+
 def set_time(engine: SkyEngine, params: dict[str, Any]) -> None:
     _only("set_time", params, {"time_utc", "rate"})
     text = params.get("time_utc")

@@ -30,6 +30,7 @@ from wxsky.control import (
     camera_to_dict,
     dispatch_table,
     release,
+    set_aircraft,
     set_time,
 )
 from wxsky.engine import FramePlan, SkyEngine, geodetic_from_enu
@@ -166,6 +167,7 @@ class Daemon:
                 "status": lambda p: self.status(),
                 "scene": lambda p: self.scene_info(),
                 "set_camera": self._set_camera,
+                "set_aircraft": lambda p: set_aircraft(self.engine, p),
                 "set_time": lambda p: set_time(self.engine, p),
                 "apply_preset": lambda p: apply_preset(self.engine, p, config.presets.dirs),
                 "release": lambda p: release(self.engine, p),
@@ -437,6 +439,7 @@ class Daemon:
                 "ring_version": meta.ring_version,
                 "ring_set": meta.ring_set,
                 "ring_fade": meta.ring_fade,
+                "split_distance_m": plan.frame.split_distance_m,
                 "camera": camera_to_dict(meta.camera),
                 "sun_direction_enu": list(meta.sun_direction_enu),
                 **plan.frame.in_cloud.to_dict(),

@@ -106,6 +106,7 @@ class SkyEngine:
         self._target = state
         self._settled = True
         self._camera = camera
+        self._aircraft_m: tuple[float, float, float] | None = None
         self.settings = settings
         self.clock_rate = clock_rate
         self.rates = rates
@@ -257,6 +258,17 @@ class SkyEngine:
         with self._lock:
             self._camera = camera
 
+    def set_aircraft(self, position_m: tuple[float, float, float] | None) -> None:
+        """Where the host's own aircraft is (None: nowhere): the near layer is then split at
+        its distance into sprites behind it and in front of it (Harris's impostor splitting),
+        so the host can draw its aircraft between the two."""
+        with self._lock:
+            self._aircraft_m = position_m
+
+    @property
+    def aircraft_m(self) -> tuple[float, float, float] | None:
+        return self._aircraft_m
+
     def set_time(
         self, time_utc: datetime, rate: float | None = None, source: Source = Source.CONTROL
     ) -> None:
@@ -325,6 +337,7 @@ class SkyEngine:
         with self._lock:
             self._step_weather(dt_wall_s)
             state, drift, camera = self._state, self._drift, self._camera
+            aircraft_m = self._aircraft_m
         # The scene stages read only the immutable values taken above: no lock from here on.
         sky = sky_params(state, camera.position_m[2])
         near_radius_m: float | None = None
@@ -346,6 +359,7 @@ class SkyEngine:
             locks=self._locks,
             near_radius_m=near_radius_m,
             clock=clock,
+            split_at_m=aircraft_m,
         )
         self._locks = frame.locks
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)

@@ -40,6 +40,8 @@ def frame_layer_specs(width: int, height: int, ring_px: int) -> list[LayerSpec]:
     return [
         LayerSpec("sky", width, height),
         LayerSpec("near", width, height),
+        # The near sprites in front of the host's aircraft, while it is set (absent otherwise).
+        LayerSpec("near_front", width, height),
         *(LayerSpec(f"ring_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
         *(LayerSpec(f"ring_in_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
     ]
@@ -62,7 +64,8 @@ def publish_plan(
     incoming one as ring_in_i while it fades in), write the frame record and publish."""
     rings = plan.rings
     cam = plan.frame.camera
-    for name in ("sky", "near"):
+    names = ("sky", "near", "near_front") if plan.frame.near_front is not None else ("sky", "near")
+    for name in names:
         renderer.read_into(name, sink.layer_buffer(name, cam.width_px, cam.height_px))
     for i in range(RING_SIZE):
         renderer.read_into(

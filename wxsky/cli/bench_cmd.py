@@ -36,6 +36,16 @@ def add_commands(sub: Subparsers) -> None:
         "line); default: straight and level at 120 m/s and 1500 m, heading 090",
     )
     bench.add_argument("--fps", type=float, default=30.0, help="simulated frames per second")
+    bench.add_argument(
+        "--turn",
+        action="store_true",
+        help="instead of a path: a full turn on the spot in 2 s at 1500 m (sort stability)",
+    )
+    bench.add_argument(
+        "--check-order",
+        action="store_true",
+        help="also measure how much each change in the near sprites' order changes a pixel",
+    )
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.add_argument("--trace", type=Path, metavar="FILE", help="write ring events there")
     bench.set_defaults(func=_cmd_bench)
@@ -43,7 +53,7 @@ def add_commands(sub: Subparsers) -> None:
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     from wxsky.bench import run_bench
-    from wxsky.camera_path import parse_camera_path, straight_and_level
+    from wxsky.camera_path import parse_camera_path, straight_and_level, turn_in_place
     from wxsky.config import load_config
     from wxsky.errors import ConfigError
     from wxsky.presets import load_preset
@@ -56,6 +66,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         raise ValueError(f"--fps must be in 1..1000, got {args.fps:g}")
     if not 1.0 <= args.fov_deg <= 170.0:
         raise ValueError(f"--fov-deg must be in 1..170, got {args.fov_deg:g}")
+    if args.turn and args.camera_path is not None:
+        raise ValueError("--turn and --camera-path are two paths: give one")
     config = load_config(args.config)
     size = parse_size(args.size)
     state = WeatherState().apply(load_preset(args.preset, config.presets.dirs))
@@ -67,6 +79,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         except UnicodeDecodeError:
             raise ConfigError(f"--camera-path {args.camera_path}: not UTF-8 text") from None
         path = parse_camera_path(text, str(args.camera_path))
+    elif args.turn:
+        path = turn_in_place(seconds=2.0, alt_m=1500.0)
     else:
         path = straight_and_level(alt_m=1500.0)
     trace = TraceWriter(args.trace) if args.trace is not None else None
@@ -84,6 +98,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             ring_fade_s=config.scene.ring_fade_s,
             trace=trace,
             started_s=STARTED_S,
+            check_order=args.check_order,
         )
     finally:
         if trace is not None:

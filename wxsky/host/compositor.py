@@ -31,6 +31,8 @@ class Layers:
     incoming_ring: tuple[U8, ...] = ()
     incoming_quads_m: F64 | None = None
     fade: float = 0.0
+    # The near sprites in front of the host's aircraft (drawn after it); None: not split.
+    near_front: U8 | None = None
 
 
 def layers_from_images(
@@ -43,6 +45,7 @@ def layers_from_images(
     while a new ring fades in (`incoming_quads_m` given), ring_in_0 .. ring_in_7."""
     n = len(ring_quads_m)
     fading = incoming_quads_m is not None
+    front = images.get("near_front")  # absent (0 x 0) unless the near layer is split
     return Layers(
         sky=images["sky"],
         near=images["near"],
@@ -51,6 +54,7 @@ def layers_from_images(
         incoming_ring=tuple(images[f"ring_in_{i}"] for i in range(n)) if fading else (),
         incoming_quads_m=incoming_quads_m,
         fade=fade if fading else 0.0,
+        near_front=front if front is not None and front.size else None,
     )
 
 
@@ -70,6 +74,10 @@ def composite(layers: Layers, camera: Camera) -> U8:
     out = ring + (1.0 - ring[..., 3:4]) * out
     near = layers.near.astype(np.float64) / 255.0
     out = near + (1.0 - near[..., 3:4]) * out
+    # (A host draws its own aircraft here.)
+    if layers.near_front is not None:
+        front = layers.near_front.astype(np.float64) / 255.0
+        out = front + (1.0 - front[..., 3:4]) * out
     out[..., 3] = 1.0
     result: U8 = np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
     return result

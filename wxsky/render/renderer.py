@@ -103,28 +103,42 @@ class Renderer:
     # -- public API -------------------------------------------------------------------
 
     def render_frame(self, frame: FrameScene) -> None:
-        """Draw the sky and the near layer for the frame's camera."""
+        """Draw the sky and the near layer for the frame's camera, and the near_front layer
+        when the frame is split at the host's aircraft."""
         cam = frame.camera
         self._draw_sky("sky", cam, frame.sky)
+        self._draw_near("near", frame.near, cam, frame.veil_rgba)
+        if frame.near_front is not None:
+            self._draw_near("near_front", frame.near_front, cam, (0.0, 0.0, 0.0, 0.0))
+        self._check("rendering a frame")
+
+    def _draw_near(
+        self,
+        name: str,
+        draw: SpriteDraw,
+        cam: Camera,
+        clear_rgba: tuple[float, float, float, float],
+    ) -> None:
+        """Near sprites into layer `name`, at near_scale and upsampled (fill rate is what
+        near sprites cost), or straight at full size."""
         if self.near_scale >= 1.0:
-            target = self._target("near", cam.width_px, cam.height_px)
+            target = self._target(name, cam.width_px, cam.height_px)
         else:
             target = self._target(
-                "near_reduced",
+                f"{name}_reduced",
                 max(1, round(cam.width_px * self.near_scale)),
                 max(1, round(cam.height_px * self.near_scale)),
             )
         self._draw_sprites(
             target,
-            frame.near,
+            draw,
             cam.position_m,
             cam.view_matrix(),
             cam.projection_matrix(),
-            clear_rgba=frame.veil_rgba,
+            clear_rgba=clear_rgba,
         )
         if self.near_scale < 1.0:
-            self._upsample(target, self._target("near", cam.width_px, cam.height_px))
-        self._check("rendering a frame")
+            self._upsample(target, self._target(name, cam.width_px, cam.height_px))
 
     def render_ring(
         self,

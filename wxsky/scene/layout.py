@@ -78,6 +78,10 @@ class FrameScene:
     locks: Locks = field(default_factory=lambda: NO_LOCKS)
     # premultiplied RGBA of the in-cloud fog over everything behind the near sprites
     veil_rgba: tuple[float, float, float, float] = NO_VEIL
+    # With the host's aircraft set: the near sprites nearer than it (`near` keeps those
+    # behind it), for a layer the host draws over its aircraft; None without one.
+    near_front: SpriteDraw | None = None
+    split_distance_m: float | None = None
 
 
 def zero_drift(state: WeatherState) -> Drift:
@@ -313,10 +317,12 @@ def build_frame(
     locks: Locks = NO_LOCKS,
     near_radius_m: float | None = None,
     clock: StageClock | None = None,
+    split_at_m: tuple[float, float, float] | None = None,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
-    `locks` are the previous frame's in-cloud locks; `clock` times the sort for benchmarks."""
+    `locks` are the previous frame's in-cloud locks; `clock` times the sort for benchmarks;
+    `split_at_m`: the host's aircraft, at whose distance the near layer is split."""
     radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
     near, share = gather_near(state, drift, rings, radius_m)
     eye = camera.position_m
@@ -328,6 +334,11 @@ def build_frame(
     cloud = in_cloud(near, eye, state.visibility_m)
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)
+    front: SpriteDraw | None = None
+    split_m: float | None = None
+    if split_at_m is not None:
+        split_m = math.dist(split_at_m, eye)
+        draw, front = split_at_distance(draw, eye, split_m)
     return FrameScene(
         camera=camera,
         sky=sky,
@@ -335,4 +346,22 @@ def build_frame(
         in_cloud=cloud,
         locks=kept,
         veil_rgba=veil,
+        near_front=front,
+        split_distance_m=split_m,
     )
+
+
+def split_at_distance(
+    draw: SpriteDraw, eye_m: tuple[float, float, float], distance_m: float
+) -> tuple[SpriteDraw, SpriteDraw]:
+    """(behind, in front): a back-to-front draw cut where its sprites come nearer the eye than
+    distance_m (Harris's impostor splitting). A camera-facing sprite lies at one depth, so the
+    cut never passes through one; drawn one over the other, the two are the whole draw."""
+    dist = np.linalg.norm(draw.sprites.centre_m - np.asarray(eye_m), axis=1)  # decreasing
+    k = int(np.count_nonzero(dist >= distance_m))
+
+    def part(index: slice) -> SpriteDraw:
+        normals = None if draw.normals is None else draw.normals[index]
+        return SpriteDraw(draw.sprites.take(np.arange(len(draw))[index]), draw.rgba[index], normals)
+
+    return part(slice(0, k)), part(slice(k, None))
