@@ -108,6 +108,10 @@ class SceneSection(_Section):
     ring_texture_px: int = _opt(256, _Rule(16, 4096))
     # A new ring cross-fades over the old one for this long (Wang); 0 swaps at once.
     ring_fade_s: float = _opt(1.0, _Rule(0.0, 30.0))
+    # Near sprites this far away are drawn at the ring impostors' texel density (0: never).
+    far_band_m: float = _opt(3000.0, _Rule(0.0, 200_000.0))
+    # Near clouds this far away are drawn as one sprite each (Wang's LOD; 0: never).
+    lod_start_m: float = _opt(0.0, _Rule(0.0, 200_000.0))
     block_size_m: float = _opt(
         BLOCK_SIZE_M,
         _Rule(fixed_reason="the cloud field is generated in 4 km blocks by design"),
@@ -121,6 +125,8 @@ class SceneSection(_Section):
             max_range_m=self.max_range_m,
             ring_texture_px=self.ring_texture_px,
             shading=self.shading,
+            far_band_m=self.far_band_m,
+            lod_start_m=self.lod_start_m,
         )
 
 

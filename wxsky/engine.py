@@ -360,6 +360,7 @@ class SkyEngine:
             near_radius_m=near_radius_m,
             clock=clock,
             split_at_m=aircraft_m,
+            lod=self.render_mode != "direct",
         )
         self._locks = frame.locks
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)

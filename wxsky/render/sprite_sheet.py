@@ -71,3 +71,25 @@ def _load_levels() -> tuple[U8, ...]:
         img.flags.writeable = False  # shared by every caller through the cache
         levels.append(img)
     return tuple(levels)
+
+
+def support_radii(levels: list[U8] | None = None) -> tuple[float, ...]:
+    """For each slot, the radius (1 = half the cell) outside which it is transparent on the
+    full-size level, with half a texel more for the bilinear filter's reach: a sprite need
+    only cover that disc, so it is drawn as an octagon around it instead of its whole square
+    (fill rate is what sprites cost). Coarser mip levels spread a faint halo a little beyond;
+    far sprites lose it, at most a few levels of alpha."""
+    chain = (levels if levels is not None else load_sheet())[:1]
+    cells = chain[0].shape[0] // CELL_PX
+    out = np.zeros(cells * cells)
+    for level in chain:
+        cell = level.shape[0] // cells
+        centre = (cell - 1) / 2.0
+        yy, xx = np.mgrid[0:cell, 0:cell]
+        radius = (np.hypot(xx - centre, yy - centre) + 0.5 + 0.5) / (cell / 2.0)
+        for slot in range(cells * cells):
+            row, col = divmod(slot, cells)
+            alpha = level[row * cell : (row + 1) * cell, col * cell : (col + 1) * cell, 3]
+            if alpha.any():
+                out[slot] = max(out[slot], float(radius[alpha > 0].max()))
+    return tuple(float(r) for r in out)

@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.camera import Camera
+from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
 from wxsky.scene.in_cloud import (
@@ -44,6 +45,13 @@ class SceneSettings:
     max_range_m: float = 40000.0
     ring_texture_px: int = 256
     shading: str = DEFAULT_SHADING  # "wang" or "harris" (wxsky.scene.shading)
+    # Near clouds this far from the eye are drawn as one sprite (Wang's LOD for machines
+    # short of fill rate; 0: never), cross-fading over the band beyond it (see cloud_lod).
+    lod_start_m: float = 0.0
+    lod_band_m: float = 1000.0
+    # Near sprites this far from the eye are drawn at the ring impostors' resolution rather
+    # than the near layer's (0: never); see Renderer._draw_near.
+    far_band_m: float = 3000.0
 
 
 @dataclass(frozen=True)
@@ -59,6 +67,12 @@ class SpriteDraw:
 
     def __len__(self) -> int:
         return len(self.sprites)
+
+    def slice(self, start: int, stop: int) -> SpriteDraw:
+        """Sprites start..stop of the draw, in its order."""
+        index = np.arange(start, stop)
+        normals = None if self.normals is None else self.normals[start:stop]
+        return SpriteDraw(self.sprites.take(index), self.rgba[start:stop], normals)
 
 
 @dataclass(frozen=True)
@@ -82,6 +96,9 @@ class FrameScene:
     # behind it), for a layer the host draws over its aircraft; None without one.
     near_front: SpriteDraw | None = None
     split_distance_m: float | None = None
+    # The first this many of `near` (the farthest) are the far band, drawn at a lower
+    # resolution, as the ring's impostors are; 0: none.
+    near_far_count: int = 0
 
 
 def zero_drift(state: WeatherState) -> Drift:
@@ -318,11 +335,13 @@ def build_frame(
     near_radius_m: float | None = None,
     clock: StageClock | None = None,
     split_at_m: tuple[float, float, float] | None = None,
+    lod: bool = True,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
     `locks` are the previous frame's in-cloud locks; `clock` times the sort for benchmarks;
-    `split_at_m`: the host's aircraft, at whose distance the near layer is split."""
+    `split_at_m`: the host's aircraft, at whose distance the near layer is split; `lod`: far
+    near clouds as one sprite each (off in direct mode, which draws every sprite)."""
     radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
     near, share = gather_near(state, drift, rings, radius_m)
     eye = camera.position_m
@@ -331,6 +350,14 @@ def build_frame(
     shaded = shade_for_eye(
         near, eye, sky, settings.max_range_m, settings.shading, share=share, order=order
     )
+    if lod and settings.lod_start_m > 0.0:
+        collapsed = collapse_far_clouds(
+            shaded.sprites, shaded.rgba, eye, settings.lod_start_m, settings.lod_band_m
+        )
+        if collapsed.lod_clouds:
+            with (clock or NO_CLOCK).stage("sort"):
+                again = sort_order(collapsed.sprites, eye)
+            shaded = SpriteDraw(collapsed.sprites.take(again), collapsed.rgba[again])
     cloud = in_cloud(near, eye, state.visibility_m)
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)
@@ -339,6 +366,10 @@ def build_frame(
     if split_at_m is not None:
         split_m = math.dist(split_at_m, eye)
         draw, front = split_at_distance(draw, eye, split_m)
+    far_count = 0
+    if lod and settings.far_band_m > 0.0 and len(draw):
+        dist = np.linalg.norm(draw.sprites.centre_m - np.asarray(eye), axis=1)
+        far_count = int(np.count_nonzero(dist >= settings.far_band_m))
     return FrameScene(
         camera=camera,
         sky=sky,
@@ -348,6 +379,7 @@ def build_frame(
         veil_rgba=veil,
         near_front=front,
         split_distance_m=split_m,
+        near_far_count=far_count,
     )
 
 

@@ -4,7 +4,7 @@
 // Sprite centres arrive relative to the eye so float32 keeps centimetre precision.
 
 #if defined VERTEX_SHADER
-in vec2 in_corner;        // per vertex: (-1..1, -1..1)
+in vec2 in_corner;        // per vertex: an octagon around the unit disc
 in vec3 in_centre;        // per instance: centre minus eye, metres (ENU)
 in float in_size;
 in float in_rotation;
@@ -13,20 +13,30 @@ in vec4 in_rgba;
 in vec3 in_normal;        // ENU unit normal, or zero: face the camera
 uniform mat3 u_view_rot;
 uniform mat4 u_proj;
+// Per sheet slot, the radius (1 = half a cell) outside which its texture is transparent: the
+// octagon shrinks to it, so no fragment is spent on empty texels.
+uniform float u_extent[SHEET_CELLS * SHEET_CELLS];
 out vec2 v_uv;
 out vec2 v_round_uv;
 out float v_round_mix;
 out vec4 v_rgba;
 
-vec2 cell_uv(float cell) {
+vec2 cell_uv(float cell, vec2 local) {
     vec2 origin = vec2(mod(cell, float(SHEET_CELLS)), floor(cell / float(SHEET_CELLS)));
-    return (origin + in_corner * vec2(0.5, -0.5) + 0.5) / float(SHEET_CELLS);
+    return (origin + local * vec2(0.5, -0.5) + 0.5) / float(SHEET_CELLS);
 }
 
 void main() {
     float round_mix = 0.0;
+    int slot = int(in_texture + 0.5);
+    float extent = u_extent[slot];
+    if (slot == FLAT_BOTTOM_SLOT) {
+        extent = max(extent, u_extent[ROUND_SLOT]);  // it may turn into the round one
+    }
+    // A texture reaching into its cell's corners (radius > 1) is clipped to its own cell.
+    vec2 local = clamp(in_corner * extent, -1.0, 1.0);
     float s = sin(in_rotation), k = cos(in_rotation);
-    vec2 corner = mat2(k, s, -s, k) * in_corner;
+    vec2 corner = mat2(k, s, -s, k) * local;
     vec3 c;
     float alpha = in_rgba.a;
     if (dot(in_normal, in_normal) > 0.25) {
@@ -53,8 +63,8 @@ void main() {
         }
     }
     gl_Position = u_proj * vec4(c, 1.0);
-    v_uv = cell_uv(in_texture);
-    v_round_uv = cell_uv(float(ROUND_SLOT));
+    v_uv = cell_uv(in_texture, local);
+    v_round_uv = cell_uv(float(ROUND_SLOT), local);
     v_round_mix = round_mix;
     v_rgba = vec4(in_rgba.rgb, alpha);
 }
@@ -73,6 +83,10 @@ void main() {
         t = mix(t, texture(u_sheet, v_round_uv), v_round_mix);
     }
     float a = t.a * v_rgba.a;
+    // Most of a soft sprite is empty: skip the blend there (fill rate is what sprites cost).
+    if (a < 1.0 / 512.0) {
+        discard;
+    }
     f_colour = vec4(v_rgba.rgb * t.rgb * a, a);
 }
 #endif

@@ -1,0 +1,142 @@
+"""What keeps the near layer's fill rate down without changing its look: sprites drawn as
+octagons around their texture's support, the far band at the impostors' texel density, and
+(as an option) Wang's single-sprite LOD for far near clouds."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from wxsky.render.renderer import Renderer
+from wxsky.render.sprite_sheet import CELL_PX, load_sheet, support_radii
+from wxsky.scene.camera import Camera
+from wxsky.scene.cloud_lod import collapse_far_clouds
+from wxsky.scene.layout import FrameScene, SpriteDraw
+from wxsky.scene.sky import sky_params
+from wxsky.scene.sprites import SpriteBatch
+from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FOG, TEX_PUFFY
+from wxsky.weather.state import WeatherState
+
+SKY = sky_params(WeatherState())
+
+
+def _batch(centres: list, sizes: list, cloud: list, texture: int = TEX_PUFFY[0], rot=0.0):
+    n = len(centres)
+    return SpriteBatch(
+        centre_m=np.asarray(centres, np.float64).reshape(n, 3),
+        size_m=np.asarray(sizes, np.float32),
+        rotation_rad=np.full(n, rot, np.float32),
+        texture=np.full(n, texture, np.int32),
+        height_frac=np.full(n, 0.5, np.float32),
+        light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
+        opacity=np.ones(n, np.float32),
+        darkness=np.zeros(n, np.float32),
+        cloud_id=np.asarray(cloud, np.int64),
+        core_frac=np.zeros(n, np.float32),
+    )
+
+
+def test_support_radius_holds_every_visible_texel() -> None:
+    level = load_sheet()[0]
+    radii = support_radii()
+    yy, xx = np.mgrid[0:CELL_PX, 0:CELL_PX]
+    centre = (CELL_PX - 1) / 2.0
+    radius = np.hypot(xx - centre, yy - centre) / (CELL_PX / 2.0)
+    for slot in range(SHEET_CELLS * SHEET_CELLS):
+        row, col = divmod(slot, SHEET_CELLS)
+        alpha = level[row * CELL_PX : (row + 1) * CELL_PX, col * CELL_PX : (col + 1) * CELL_PX, 3]
+        assert radius[alpha > 0].max() < radii[slot] <= math.sqrt(2.0)
+        assert radii[slot] < 1.0  # every shipped texture saves fill: none reaches the corners
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("slot", [TEX_FOG[0], TEX_PUFFY[2], 12])
+@pytest.mark.parametrize("rotation", [0.0, 0.7])
+def test_an_octagon_sprite_loses_none_of_its_texture(
+    renderer: Renderer, slot: int, rotation: float
+) -> None:
+    # A sprite one texel per pixel: its drawn alpha adds up to its texture's.
+    cam = Camera((0.0, 0.0, 0.0), 0.0, 0.0, fov_deg=90.0, width_px=257, height_px=257)
+    size_m = 1000.0 * CELL_PX / 128.5  # 128 px across at 1000 m with a 90° view of 257 px
+    draw = SpriteDraw(
+        _batch([(0, 1000, 0)], [size_m], [1], slot, rotation), np.ones((1, 4), np.float32)
+    )
+    old = renderer.near_scale
+    renderer.near_scale = 1.0
+    try:
+        renderer.render_frame(FrameScene(cam, SKY, draw))
+        drawn = renderer.read("near")[..., 3].astype(np.float64).sum()
+    finally:
+        renderer.near_scale = old
+    row, col = divmod(slot, SHEET_CELLS)
+    cell = load_sheet()[0][row * CELL_PX : (row + 1) * CELL_PX, col * CELL_PX : (col + 1) * CELL_PX]
+    assert drawn == pytest.approx(cell[..., 3].astype(np.float64).sum(), rel=0.02)
+
+
+@pytest.mark.gl
+def test_the_far_band_at_impostor_density_looks_the_same(renderer: Renderer) -> None:
+    rng = np.random.default_rng(5)
+    n = 400
+    centres = np.column_stack(
+        [rng.uniform(-6000, 6000, n), rng.uniform(2000, 9000, n), rng.uniform(1200, 2000, n)]
+    )
+    eye = (0.0, 0.0, 1000.0)
+    order = np.argsort(-np.linalg.norm(centres - eye, axis=1))
+    batch = _batch(centres[order].tolist(), [600.0] * n, list(range(n)))
+    rgba = np.tile(np.float32([0.9, 0.9, 0.95, 0.8]), (n, 1))
+    rgba[:, :3] *= rng.uniform(0.6, 1.0, (n, 1)).astype(np.float32)
+    draw = SpriteDraw(batch, rgba)
+    cam = Camera(eye, 0.0, 8.0, fov_deg=60.0, width_px=1280, height_px=720)
+    far = int(np.count_nonzero(np.linalg.norm(batch.centre_m - eye, axis=1) >= 3000.0))
+    assert 0 < far < n
+
+    def over_grey(frame: FrameScene) -> np.ndarray:
+        renderer.render_frame(frame)
+        near = renderer.read("near").astype(np.float64)
+        return near[..., :3] + (255.0 - near[..., 3:4]) * 0.5  # premultiplied over mid-grey
+
+    whole = over_grey(FrameScene(cam, SKY, draw))
+    banded = over_grey(FrameScene(cam, SKY, draw, near_far_count=far))
+    assert renderer.layer_size("near_far")[0] < renderer.layer_size("near_reduced")[0]
+    diff = np.abs(whole - banded)
+    assert diff.mean() < 1.0 and np.percentile(diff, 99) < 16, (
+        diff.mean(),
+        np.percentile(diff, 99),
+    )
+
+
+def test_lod_collapses_far_clouds_to_one_sprite_of_their_colour() -> None:
+    # Two clouds of 3 sprites: one 2 km away, one 9 km away.
+    centres = [(0, 2000, 0), (100, 2000, 50), (-100, 2000, 0)]
+    centres += [(0, 9000, 0), (150, 9000, 60), (-150, 9000, 0)]
+    batch = _batch(centres, [300.0] * 6, [1, 1, 1, 2, 2, 2])
+    rgba = np.array(
+        [[1, 0, 0, 1], [1, 0, 0, 1], [1, 0, 0, 1], [0.2, 0.4, 0.6, 1], [0.4, 0.4, 0.6, 1],
+         [0.6, 0.4, 0.6, 0.5]], np.float32,
+    )  # fmt: skip
+    out = collapse_far_clouds(batch, rgba, (0.0, 0.0, 0.0), 4000.0, 1000.0)
+    assert out.lod_clouds == 1 and len(out.sprites) == 4
+    near = out.sprites.cloud_id == 1
+    np.testing.assert_array_equal(out.rgba[near], rgba[:3])
+    one = ~near
+    assert out.sprites.centre_m[one][0, 1] == pytest.approx(9000.0)
+    weights = np.array([1.0, 1.0, 0.5])
+    np.testing.assert_allclose(
+        out.rgba[one][0, :3], (weights @ rgba[3:, :3]) / weights.sum(), atol=1e-6
+    )
+    assert out.rgba[one][0, 3] == 1.0 and out.sprites.size_m[one][0] > 300.0
+
+
+def test_lod_cross_fades_in_its_band_and_leaves_flat_clouds_alone() -> None:
+    batch = _batch([(0, 4500, 0), (50, 4500, 0)], [300.0, 300.0], [3, 3])
+    rgba = np.ones((2, 4), np.float32)
+    out = collapse_far_clouds(batch, rgba, (0.0, 0.0, 0.0), 4000.0, 1000.0)
+    assert len(out.sprites) == 3  # both sprites and the one, mid-fade
+    parts, one = out.rgba[:2, 3], out.rgba[2, 3]
+    assert 0.0 < one < 1.0 and np.allclose(parts, 1.0 - one)
+    flat = dataclasses.replace(batch, flat=np.ones(2, np.bool_))
+    kept = collapse_far_clouds(flat, rgba, (0.0, 0.0, 0.0), 1000.0, 100.0)
+    assert kept.lod_clouds == 0 and len(kept.sprites) == 2
