@@ -75,6 +75,7 @@ class BenchResult:
     events: dict[str, int] = field(default_factory=dict)
     build_s: list[float] = field(default_factory=list)  # ring builds on the worker thread
     sprites: list[int] = field(default_factory=list)  # near sprites drawn per frame
+    dropped: list[int] = field(default_factory=list)  # near sprites the cap left out
     # With check_order: per frame after the first, whether the near sprites' order differs
     # from the previous frame's (for the sprites in both), and the largest change (0..255) in
     # any channel of the near layer that the new order makes against the old one.
@@ -100,6 +101,8 @@ class BenchResult:
             "near_sprites": {
                 "median": statistics.median(self.sprites) if self.sprites else 0,
                 "max": max(self.sprites, default=0),
+                "capped_frames": sum(d > 0 for d in self.dropped),
+                "most_dropped": max(self.dropped, default=0),
             },
             "ring_events": dict(self.events),
             "ring_build_ms": _summary(self.build_s),
@@ -131,7 +134,9 @@ class BenchResult:
         lines.append(f"{'frame':<16}{f['median']:>11.2f}{f['p95']:>10.2f}")
         lines.append(
             f"near sprites per frame: median {d['near_sprites']['median']:.0f}, "
-            f"max {d['near_sprites']['max']}"
+            f"max {d['near_sprites']['max']}; frames over the cap "
+            f"{d['near_sprites']['capped_frames']} (at most {d['near_sprites']['most_dropped']}"
+            " left out)"
         )
         if self.mode == "ring":
             b = d["ring_build_ms"]
@@ -241,10 +246,11 @@ def run_bench(
             for name in STAGES:
                 result.stage_s[name].append(times.frame.get(name, 0.0))
             result.sprites.append(len(plan.frame.near))
-            for e in plan.rings.events:
+            for e in plan.events:
                 result.events[e.event] = result.events.get(e.event, 0) + 1
+            result.dropped.append(plan.frame.near_dropped)
             if trace is not None:
-                trace.write_events(k + 1, plan.frame.camera.position_m, plan.rings.events)
+                trace.write_events(k + 1, plan.frame.camera.position_m, plan.events)
             if check_order:
                 keys = particle_keys(plan.frame.near.sprites)
                 if previous_keys is not None:

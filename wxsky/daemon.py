@@ -327,7 +327,7 @@ class Daemon:
         frame_number = self.frames_published + 1
         meta = publish_plan(r, writer, plan, frame_number, self.config.scene.ring_texture_px)
         if self._trace is not None:
-            self._trace.write_events(frame_number, plan.frame.camera.position_m, plan.rings.events)
+            self._trace.write_events(frame_number, plan.frame.camera.position_m, plan.events)
         return meta
 
     # -- control channel --------------------------------------------------------------

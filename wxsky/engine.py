@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 
-from wxsky.ring_schedule import DEFAULT_FADE_S, RingFrame, RingSchedule
+from wxsky.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
 from wxsky.scene.camera import Camera
 from wxsky.scene.in_cloud import NO_LOCKS, Locks
 from wxsky.scene.layout import (
@@ -67,7 +67,8 @@ class FramePlan:
     state: WeatherState  # with time_utc set to the frame's simulated time
     frame: FrameScene
     ring: RingScene  # the complete ring on show (an empty one before the first, or direct)
-    rings: RingFrame  # what to render into which texture set, the fade, the trace events
+    rings: RingFrame  # what to render into which texture set, the fade, the ring's events
+    events: tuple[RingEvent, ...] = ()  # the frame's trace events: the ring's, then the cap's
 
     @property
     def ring_version(self) -> int:
@@ -124,6 +125,7 @@ class SkyEngine:
             fade_s=ring_fade_s,
         )
         self._rings: RingFrame | None = None
+        self._capping = False  # the near-sprite cap left sprites out last frame
         self._locks: Locks = NO_LOCKS  # in-cloud facing locks, carried frame to frame
         self.weather_version = 0  # bumped when the applied weather or the target changes
         self.target_version = 0  # bumped when the target (or the clock, set from outside) changes
@@ -363,8 +365,14 @@ class SkyEngine:
             lod=self.render_mode != "direct",
         )
         self._locks = frame.locks
+        events = rings.events
+        if (frame.near_dropped > 0) != self._capping:
+            self._capping = frame.near_dropped > 0
+            name = "near_cap_start" if self._capping else "near_cap_end"
+            fields = {"dropped": frame.near_dropped, "kept": len(frame.near)}
+            events = (*events, RingEvent(name, fields))
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)
-        return FramePlan(state, frame, shown, rings)
+        return FramePlan(state, frame, shown, rings, events)
 
     def drift_for(self, seconds: float) -> None:
         """Move every layer as the wind would have in `seconds` (negative: back), at once: a

@@ -31,9 +31,10 @@ from wxsky.scene.in_cloud import (
     in_cloud_fog,
     lock_facing,
 )
-from wxsky.scene.ring import RingGeometry, bin_far_sprites
+from wxsky.scene.ring import RingGeometry, bin_far_sprites, in_impostors
 from wxsky.scene.shading import DEFAULT_SHADING, ParticleLight, prepare_lighting, sprite_colours
 from wxsky.scene.sky import SkyParams
+from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.weather.state import WeatherState
 
 Drift = tuple[tuple[float, float], ...]  # per cloud layer: (east, north) offset in metres
@@ -52,6 +53,8 @@ class SceneSettings:
     # Near sprites this far from the eye are drawn at the ring impostors' resolution rather
     # than the near layer's (0: never); see Renderer._draw_near.
     far_band_m: float = 3000.0
+    # At most this many near sprites a frame, farthest clouds left out first (0: no cap).
+    max_near_sprites: int = 20_000
 
 
 @dataclass(frozen=True)
@@ -99,6 +102,7 @@ class FrameScene:
     # The first this many of `near` (the farthest) are the far band, drawn at a lower
     # resolution, as the ring's impostors are; 0: none.
     near_far_count: int = 0
+    near_dropped: int = 0  # near sprites left out by the per-frame cap
 
 
 def zero_drift(state: WeatherState) -> Drift:
@@ -165,14 +169,27 @@ class NearRing(NamedTuple):
 
 
 def gather_near(
-    state: WeatherState, drift: Drift, rings: tuple[NearRing, ...], radius_m: float
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    radius_m: float,
+    max_range_m: float | None = None,
 ) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
     """The near sprites that complement the rings drawn, and (N,) the share of each to show:
     a block inside the radius of rings whose weights add up to w shows at w. While an old and
     a new ring cross-fade (weights 1 - f and f), every block then totals 1 between the near
     layer and the two rings, wherever the two centres are, so nothing doubles or vanishes
-    mid-fade. The share is applied after shading, so a fade never changes the lighting."""
-    return _gather(state, drift, rings, 0.0, radius_m)
+    mid-fade. The share is applied after shading, so a fade never changes the lighting.
+    With `max_range_m`, layers too far above or below the rings to go into impostors
+    (`ring.in_impostors`) are gathered out to it: they are drawn directly."""
+    if max_range_m is None or not rings:
+        return _gather(state, drift, rings, 0.0, radius_m)
+    centre_z = rings[0].centre_m[2]
+    ranges = [
+        (0.0, radius_m if in_impostors(lay.base_m, lay.top_m, centre_z) else max_range_m)
+        for lay in state.layers
+    ]
+    return _gather(state, drift, rings, 0.0, radius_m, ranges)
 
 
 def _gather(
@@ -181,7 +198,10 @@ def _gather(
     rings: tuple[NearRing, ...],
     min_range_m: float,
     max_range_m: float,
+    layer_ranges: list[tuple[float, float]] | None = None,
 ) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
+    """`layer_ranges`: per layer, (min, max) in place of (min_range_m, max_range_m); a layer
+    with max <= min is skipped."""
     if len(drift) != len(state.layers):
         drift = zero_drift(state)
     rings = tuple(
@@ -192,22 +212,23 @@ def _gather(
     for li, (key, layer, (dx, dy)) in enumerate(
         zip(layer_keys(state.layers), state.layers, drift, strict=True)
     ):
-        if layer.cover_oktas <= 0.0:
+        lo_m, hi_m = (min_range_m, max_range_m) if layer_ranges is None else layer_ranges[li]
+        if layer.cover_oktas <= 0.0 or hi_m <= lo_m:
             continue
         weights: dict[tuple[int, int], float] = {}
         for ring in rings:
             sx, sy = ring.select_drift[li]
             qx, qy = ring.centre_m[0] - sx, ring.centre_m[1] - sy
-            bx0 = math.floor((qx - max_range_m) / BLOCK_SIZE_M)
-            bx1 = math.floor((qx + max_range_m) / BLOCK_SIZE_M)
-            by0 = math.floor((qy - max_range_m) / BLOCK_SIZE_M)
-            by1 = math.floor((qy + max_range_m) / BLOCK_SIZE_M)
+            bx0 = math.floor((qx - hi_m) / BLOCK_SIZE_M)
+            bx1 = math.floor((qx + hi_m) / BLOCK_SIZE_M)
+            by0 = math.floor((qy - hi_m) / BLOCK_SIZE_M)
+            by1 = math.floor((qy + hi_m) / BLOCK_SIZE_M)
             for by in range(by0, by1 + 1):
                 for bx in range(bx0, bx1 + 1):
                     near_x = min(max(qx, bx * BLOCK_SIZE_M), (bx + 1) * BLOCK_SIZE_M)
                     near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
                     d = math.hypot(near_x - qx, near_y - qy)
-                    if min_range_m <= d < max_range_m:
+                    if lo_m <= d < hi_m:
                         weights[(bx, by)] = weights.get((bx, by), 0.0) + ring.weight
         for (bx, by), weight in sorted(weights.items(), key=lambda kv: (kv[0][1], kv[0][0])):
             if weight <= 0.0:
@@ -302,7 +323,13 @@ def build_ring(
     sky: SkyParams,
     settings: SceneSettings,
 ) -> RingScene:
-    far = gather_blocks(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m)
+    ring = NearRing(centre_m, drift, 1.0)
+    r_m, max_m = settings.ring_radius_m, settings.max_range_m
+    ranges = [
+        (r_m, max_m) if in_impostors(lay.base_m, lay.top_m, centre_m[2]) else (0.0, 0.0)
+        for lay in state.layers
+    ]
+    far = _gather(state, drift, (ring,), r_m, max_m, ranges)[0]
     geometry, bins = bin_far_sprites(far, centre_m, settings.ring_radius_m)
     # Light the far clouds whole, before the bins cut those that straddle two impostors.
     light = prepare_lighting(far, sky, settings.shading)
@@ -343,7 +370,7 @@ def build_frame(
     `split_at_m`: the host's aircraft, at whose distance the near layer is split; `lod`: far
     near clouds as one sprite each (off in direct mode, which draws every sprite)."""
     radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
-    near, share = gather_near(state, drift, rings, radius_m)
+    near, share = gather_near(state, drift, rings, radius_m, settings.max_range_m)
     eye = camera.position_m
     with (clock or NO_CLOCK).stage("sort"):
         order = sort_order(near, eye)
@@ -358,6 +385,11 @@ def build_frame(
             with (clock or NO_CLOCK).stage("sort"):
                 again = sort_order(collapsed.sprites, eye)
             shaded = SpriteDraw(collapsed.sprites.take(again), collapsed.rgba[again])
+    dropped = 0
+    if lod and settings.max_near_sprites > 0:
+        budget = cap_sprites(shaded.sprites, shaded.rgba, eye, settings.max_near_sprites)
+        if budget.dropped:
+            shaded, dropped = SpriteDraw(budget.sprites, budget.rgba), budget.dropped
     cloud = in_cloud(near, eye, state.visibility_m)
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)
@@ -380,6 +412,7 @@ def build_frame(
         near_front=front,
         split_distance_m=split_m,
         near_far_count=far_count,
+        near_dropped=dropped,
     )
 
 

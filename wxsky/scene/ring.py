@@ -22,6 +22,16 @@ HALF_ANGLE_RAD = math.pi / RING_SIZE  # 22.5°
 # Regenerate after the camera leaves this share of the radius (Wang: 15 % and 2 %).
 MOVE_HORIZONTAL_FRAC = 0.15
 MOVE_VERTICAL_FRAC = 0.02
+# Clouds more than 10,000 ft above or below the ring's centre are not put into impostors (Wang):
+# seen that steeply their impostors' parallax shows as soon as the camera moves.
+IMPOSTOR_VERTICAL_REACH_M = 3048.0
+
+
+def in_impostors(base_m: float, top_m: float, centre_z_m: float) -> bool:
+    """Whether a layer from base_m to top_m is close enough in altitude to the ring's centre
+    to go into impostors; if not, its far clouds are drawn directly as near sprites."""
+    reach = IMPOSTOR_VERTICAL_REACH_M
+    return base_m - reach <= centre_z_m <= top_m + reach
 
 
 def ring_target_name(index: int, ring_set: int = 0) -> str:
