@@ -1,10 +1,12 @@
 """Measure the daemon as the issue's acceptance asks: frames per second at the default
 settings (as `wxsky status --json` reports them) and time to stop after SIGTERM.
 
-    .venv/bin/python tools/measure_daemon.py [--seconds 20] [--preset NAME]
+    .venv/bin/python tools/measure_daemon.py [--seconds 20] [--preset NAME] [--change-to NAME]
 
 Prints the median and range of the fps samples and the stop time; exits 0. It starts its own
 daemon on a private socket and shared-memory name so it never disturbs a running one.
+`--change-to` applies a second preset once the daemon runs, so the samples are taken while the
+weather moves toward it (the ring is rebuilt for it, cycle after cycle).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seconds", type=float, default=20.0)
     p.add_argument("--preset", default=None)
+    p.add_argument("--change-to", default=None, metavar="PRESET")
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         sock = Path(tmp) / "wx.sock"
@@ -51,6 +54,14 @@ def main() -> int:
                     return 1
                 time.sleep(0.1)
             time.sleep(3.0)  # past start-up and the first ring build
+            if args.change_to:
+                subprocess.run(
+                    [sys.executable, "-m", "wxsky", "preset", "apply", args.change_to]
+                    + ["--control", f"unix:{sock}"],
+                    check=True,
+                    capture_output=True,
+                )
+                time.sleep(2.0)  # the fps window holds only frames drawn during the change
             samples = []
             end = time.monotonic() + args.seconds
             while time.monotonic() < end:
@@ -78,8 +89,9 @@ def main() -> int:
         finally:
             if proc.poll() is None:
                 proc.kill()
+        change = f" -> {args.change_to} (changing)" if args.change_to else ""
         print(
-            f"cpu: {os.cpu_count()} cores; preset: {args.preset or 'default'}; "
+            f"cpu: {os.cpu_count()} cores; preset: {args.preset or 'default'}{change}; "
             f"viewport {status['camera']['width']}x{status['camera']['height']}"
         )
         print(
