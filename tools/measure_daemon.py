@@ -55,11 +55,9 @@ def main() -> int:
                 time.sleep(0.1)
             time.sleep(3.0)  # past start-up and the first ring build
             if args.change_to:
+                apply = [sys.executable, "-m", "wxsky", "preset", "apply", args.change_to]
                 subprocess.run(
-                    [sys.executable, "-m", "wxsky", "preset", "apply", args.change_to]
-                    + ["--control", f"unix:{sock}"],
-                    check=True,
-                    capture_output=True,
+                    [*apply, "--control", f"unix:{sock}"], check=True, capture_output=True
                 )
                 time.sleep(2.0)  # the fps window holds only frames drawn during the change
             samples = []
