@@ -4,7 +4,9 @@ layers are the unsplit picture, so a host that draws nothing between loses nothi
 
 from __future__ import annotations
 
+import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -112,3 +114,28 @@ def test_a_host_gets_the_front_layer_after_set_aircraft(tmp_path: Path) -> None:
         host.call("set_aircraft", {"position_m": None})
         frame = host.wait_frame(host.reader.frame_number + 2)
         assert frame.layers.near_front is None
+
+
+@pytest.mark.gl
+def test_run_trace_records_the_daemons_ring_cycle(tmp_path: Path) -> None:
+    trace = tmp_path / "ring.jsonl"
+    extra = "[scene]\nring_fade_s = 0.2\n"
+    with running_daemon(tmp_path, extra_config=extra, args=("--trace", str(trace))) as d:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            text = trace.read_text() if trace.exists() else ""
+            if "crossfade_done" in text:
+                break
+            time.sleep(0.1)
+        with d.client() as c:
+            assert c.call("scene")["ring"] is not None  # the first ring is on show
+    lines = [json.loads(line) for line in trace.read_text().splitlines()]
+    events = [line["event"] for line in lines]
+    assert events[0] == "ring_rebuild_start" and lines[0]["reason"] == "initial"
+    rendered = [line for line in lines if line["event"] == "impostor_rendered"]
+    assert [line["index"] for line in rendered[:8]] == list(range(8))
+    frames = [line["frame"] for line in rendered[:8]]
+    assert frames == list(range(frames[0], frames[0] + 8))
+    assert events.index("ring_rebuild_done") < events.index("crossfade_start")
+    assert events.index("crossfade_start") < events.index("crossfade_done")
+    assert all(len(line["camera_m"]) == 3 for line in lines)
