@@ -68,6 +68,9 @@ _TABLE = np.array(
 )
 GROUND_ALBEDO = 0.15  # fields and towns; we know nothing of the ground under the deck
 MIN_MU = 0.02  # views and lights closer than ~1 degree to the slab's plane count as 1 degree
+# Light from a uniformly bright hemisphere crosses a slab on average as a beam 60 degrees from
+# the normal does (its mean cosine is 1/2).
+DIFFUSE_ANGLE_DEG = 60.0
 
 
 def slab_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
@@ -143,16 +146,20 @@ def slab_radiance(
     )
     diffuse = np.where(reflected, e["r_3"], e["t_3"]) * mu_light * limb(mu_v)
     key = np.where(lit, directional + diffuse, 0.0)
+    # Sky and ground light arrive from a whole hemisphere: the slab passes it as it passes a
+    # beam at DIFFUSE_ANGLE_DEG, not at the sun's angle (at dawn the sun grazes the deck, the
+    # sky does not).
+    d = slab_energy(h, DIFFUSE_ANGLE_DEG)
     # Ground and base light each other: irradiance on the ground from the key light and the
     # sky through the deck, multiplied by the series of bounces between the two planes.
-    bounce = GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * e["r_ms"])
+    bounce = GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * d["r_ms"])
     t_key = np.where(lit, e["t_ms"] * mu_light, 0.0)
     # Light the ground sends up leaves the deck on the ground's side by reflection and on the
     # far side by transmission: the opposite of the light from above.
-    up_share = np.where(reflected, e["t_ms"], e["r_ms"]) * limb(mu_v)
-    from_above = np.where(reflected, e["r_ms"], e["t_ms"]) * limb(mu_v)
+    up_share = np.where(reflected, d["t_ms"], d["r_ms"]) * limb(mu_v)
+    from_above = np.where(reflected, d["r_ms"], d["t_ms"]) * limb(mu_v)
     key_total: F64 = key + t_key * bounce * up_share
-    sky_total: F64 = from_above + e["t_ms"] * bounce * up_share
+    sky_total: F64 = from_above + d["t_ms"] * bounce * up_share
     return key_total, sky_total
 
 
