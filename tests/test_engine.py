@@ -210,7 +210,7 @@ def test_enu_from_geodetic() -> None:
 def test_near_and_ring_partition_the_clouds_while_they_drift() -> None:
     """Between ring rebuilds the near layer keeps the ring's choice of blocks: a drifting
     block is never drawn both as sprites and in an impostor, nor dropped from both."""
-    from wxsky.scene.layout import gather_blocks
+    from wxsky.scene.gather import gather_blocks
 
     eng = _engine(rate=1.0, wind_mps=20.0)
     first = eng.advance(0.0)

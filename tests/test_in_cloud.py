@@ -7,6 +7,7 @@ import pytest
 
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.gather import NearRing, zero_drift
 from wxsky.scene.in_cloud import (
     LOCK_FRAC,
     NO_LOCKS,
@@ -17,7 +18,7 @@ from wxsky.scene.in_cloud import (
     in_cloud_fog,
     lock_facing,
 )
-from wxsky.scene.layout import FrameScene, NearRing, SceneSettings, build_frame, zero_drift
+from wxsky.scene.layout import FrameScene, SceneSettings, build_frame
 from wxsky.scene.sky import sky_params
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 

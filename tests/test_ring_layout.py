@@ -10,17 +10,14 @@ import pytest
 
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch
+from wxsky.scene.gather import NearRing, advance_drift, gather_blocks, zero_drift
 from wxsky.scene.layout import (
-    NearRing,
     SceneSettings,
-    advance_drift,
     build_frame,
     build_ring,
     fade_by_range,
-    gather_blocks,
     shade_for_eye,
     sort_back_to_front,
-    zero_drift,
 )
 from wxsky.scene.ring import RING_SIZE, RingGeometry, bin_far_sprites
 from wxsky.scene.sky import sky_params

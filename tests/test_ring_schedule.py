@@ -13,7 +13,8 @@ import pytest
 
 from wxsky.ring_schedule import RETRY_AFTER_S, RingSchedule
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import Drift, NearRing, RingScene, empty_ring, gather_near, zero_drift
+from wxsky.scene.gather import Drift, NearRing, gather_near, zero_drift
+from wxsky.scene.layout import RingScene, empty_ring
 from wxsky.scene.ring import RING_SIZE
 from wxsky.scene.sky import SkyParams, sky_params
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState

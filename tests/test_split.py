@@ -19,14 +19,8 @@ from wxsky.host.reference import ReferenceHost
 from wxsky.presets import load_preset
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import (
-    NearRing,
-    SceneSettings,
-    build_frame,
-    empty_ring,
-    split_at_distance,
-    zero_drift,
-)
+from wxsky.scene.gather import NearRing, zero_drift
+from wxsky.scene.layout import SceneSettings, build_frame, empty_ring, split_at_distance
 from wxsky.scene.sky import sky_params
 from wxsky.snapshot import LAYER_NAMES
 from wxsky.weather.state import WeatherState

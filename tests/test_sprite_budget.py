@@ -6,13 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from wxsky.scene.layout import (
-    NearRing,
-    SceneSettings,
-    build_ring,
-    gather_near,
-    zero_drift,
-)
+from wxsky.scene.gather import NearRing, gather_near, zero_drift
+from wxsky.scene.layout import SceneSettings, build_ring
 from wxsky.scene.ring import in_impostors
 from wxsky.scene.sky import sky_params
 from wxsky.scene.sprite_budget import FADE_SHARE, cap_sprites

@@ -28,20 +28,16 @@ from datetime import date, datetime, timedelta
 
 from wxsky.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
 from wxsky.scene.camera import Camera
+from wxsky.scene.gather import Drift, NearRing, advance_drift, carry_drift, zero_drift
 from wxsky.scene.in_cloud import NO_LOCKS, Locks
 from wxsky.scene.layout import (
-    Drift,
     FrameScene,
-    NearRing,
     RingScene,
     SceneSettings,
     StageClock,
-    advance_drift,
     build_frame,
     build_ring,
-    carry_drift,
     empty_ring,
-    zero_drift,
 )
 from wxsky.scene.sky import SkyParams, sky_params
 from wxsky.weather.cockpit import CockpitUpdate, clock_target

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import Drift, NearRing, RingScene
+from wxsky.scene.gather import Drift, NearRing
+from wxsky.scene.layout import RingScene
 from wxsky.scene.ring import MOVE_HORIZONTAL_FRAC, MOVE_VERTICAL_FRAC, RING_SIZE
 from wxsky.scene.sky import SkyParams
 from wxsky.weather.state import WeatherState

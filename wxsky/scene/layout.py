@@ -2,8 +2,9 @@
 
 Blocks whose nearest point lies inside the ring radius (measured from the ring centre) are
 "near" and drawn as sprites every frame from the host camera; the rest, out to the maximum
-range, go into the impostor ring. Each layer drifts with the wind at its altitude: its blocks
-live in a frame moved by the integrated wind, so the clouds travel but never change shape.
+range, go into the impostor ring (which blocks: `gather`). Here they are sorted, shaded,
+faded with range, oriented, and for the near layer fogged in cloud, thinned by the far band,
+LOD and cap options, and split at the host's aircraft.
 """
 
 from __future__ import annotations
@@ -12,15 +13,15 @@ import contextlib
 import math
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
-from typing import NamedTuple, Protocol
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_lod import collapse_far_clouds
-from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
-from wxsky.scene.formation import layer_block
+from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.gather import Drift, NearRing, gather_far, gather_near
 from wxsky.scene.in_cloud import (
     NO_LOCKS,
     NO_VEIL,
@@ -31,13 +32,11 @@ from wxsky.scene.in_cloud import (
     in_cloud_fog,
     lock_facing,
 )
-from wxsky.scene.ring import RingGeometry, bin_far_sprites, in_impostors
+from wxsky.scene.ring import RingGeometry, bin_far_sprites
 from wxsky.scene.shading import DEFAULT_SHADING, ParticleLight, prepare_lighting, sprite_colours
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.weather.state import WeatherState
-
-Drift = tuple[tuple[float, float], ...]  # per cloud layer: (east, north) offset in metres
 
 
 @dataclass(frozen=True)
@@ -105,46 +104,6 @@ class FrameScene:
     near_dropped: int = 0  # near sprites left out by the per-frame cap
 
 
-def zero_drift(state: WeatherState) -> Drift:
-    return tuple((0.0, 0.0) for _ in state.layers)
-
-
-def carry_drift(old: WeatherState, new: WeatherState, drift: Drift) -> Drift:
-    """The drift of `new`'s layers: a layer that was already there keeps its offset (found by
-    its key), a new one starts at zero, so forming or dissipating a layer moves no other."""
-    if len(drift) != len(old.layers):
-        return zero_drift(new)
-    by_key = dict(zip(layer_keys(old.layers), drift, strict=True))
-    return tuple(by_key.get(key, (0.0, 0.0)) for key in layer_keys(new.layers))
-
-
-def advance_drift(state: WeatherState, drift: Drift, dt_s: float) -> Drift:
-    """Move every layer by the wind at its mid altitude for dt_s simulated seconds."""
-    if len(drift) != len(state.layers):
-        drift = zero_drift(state)
-    out = []
-    for (dx, dy), layer in zip(drift, state.layers, strict=True):
-        ve, vn = state.wind_at(0.5 * (layer.base_m + layer.top_m))
-        out.append((dx + ve * dt_s, dy + vn * dt_s))
-    return tuple(out)
-
-
-def gather_blocks(
-    state: WeatherState,
-    drift: Drift,
-    centre_m: tuple[float, float, float],
-    min_range_m: float,
-    max_range_m: float,
-    select_drift: Drift | None = None,
-) -> SpriteBatch:
-    """Sprites of every block whose nearest point to the centre lies in [min, max) metres,
-    placed with `drift`. Blocks are chosen with `select_drift` when given: the near layer
-    picks its blocks as they stood when the ring was built, so no block is drawn both as
-    sprites and in the ring, nor in neither, until the ring is rebuilt."""
-    ring = NearRing(centre_m, drift if select_drift is None else select_drift, 1.0)
-    return _gather(state, drift, (ring,), min_range_m, max_range_m)[0]
-
-
 class StageClock(Protocol):
     """Times named stages of a frame (`wxsky bench`); the scene only marks where they are."""
 
@@ -157,91 +116,6 @@ class _NoClock:
 
 
 NO_CLOCK: StageClock = _NoClock()
-
-
-class NearRing(NamedTuple):
-    """A ring the near layer complements: blocks within its radius of `centre_m` (as they
-    stood at `select_drift`) are near sprites, the rest are in the ring's impostors."""
-
-    centre_m: tuple[float, float, float]
-    select_drift: Drift
-    weight: float  # the ring's share of the picture: 1, or its side of a cross-fade
-
-
-def gather_near(
-    state: WeatherState,
-    drift: Drift,
-    rings: tuple[NearRing, ...],
-    radius_m: float,
-    max_range_m: float | None = None,
-) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
-    """The near sprites that complement the rings drawn, and (N,) the share of each to show:
-    a block inside the radius of rings whose weights add up to w shows at w. While an old and
-    a new ring cross-fade (weights 1 - f and f), every block then totals 1 between the near
-    layer and the two rings, wherever the two centres are, so nothing doubles or vanishes
-    mid-fade. The share is applied after shading, so a fade never changes the lighting.
-    With `max_range_m`, layers too far above or below the rings to go into impostors
-    (`ring.in_impostors`) are gathered out to it: they are drawn directly."""
-    if max_range_m is None or not rings:
-        return _gather(state, drift, rings, 0.0, radius_m)
-    centre_z = rings[0].centre_m[2]
-    ranges = [
-        (0.0, radius_m if in_impostors(lay.base_m, lay.top_m, centre_z) else max_range_m)
-        for lay in state.layers
-    ]
-    return _gather(state, drift, rings, 0.0, radius_m, ranges)
-
-
-def _gather(
-    state: WeatherState,
-    drift: Drift,
-    rings: tuple[NearRing, ...],
-    min_range_m: float,
-    max_range_m: float,
-    layer_ranges: list[tuple[float, float]] | None = None,
-) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
-    """`layer_ranges`: per layer, (min, max) in place of (min_range_m, max_range_m); a layer
-    with max <= min is skipped."""
-    if len(drift) != len(state.layers):
-        drift = zero_drift(state)
-    rings = tuple(
-        r if len(r.select_drift) == len(drift) else r._replace(select_drift=drift) for r in rings
-    )
-    batches: list[SpriteBatch] = []
-    shares: list[npt.NDArray[np.float32]] = []
-    for li, (key, layer, (dx, dy)) in enumerate(
-        zip(layer_keys(state.layers), state.layers, drift, strict=True)
-    ):
-        lo_m, hi_m = (min_range_m, max_range_m) if layer_ranges is None else layer_ranges[li]
-        if layer.cover_oktas <= 0.0 or hi_m <= lo_m:
-            continue
-        weights: dict[tuple[int, int], float] = {}
-        for ring in rings:
-            sx, sy = ring.select_drift[li]
-            qx, qy = ring.centre_m[0] - sx, ring.centre_m[1] - sy
-            bx0 = math.floor((qx - hi_m) / BLOCK_SIZE_M)
-            bx1 = math.floor((qx + hi_m) / BLOCK_SIZE_M)
-            by0 = math.floor((qy - hi_m) / BLOCK_SIZE_M)
-            by1 = math.floor((qy + hi_m) / BLOCK_SIZE_M)
-            for by in range(by0, by1 + 1):
-                for bx in range(bx0, bx1 + 1):
-                    near_x = min(max(qx, bx * BLOCK_SIZE_M), (bx + 1) * BLOCK_SIZE_M)
-                    near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
-                    d = math.hypot(near_x - qx, near_y - qy)
-                    if lo_m <= d < hi_m:
-                        weights[(bx, by)] = weights.get((bx, by), 0.0) + ring.weight
-        for (bx, by), weight in sorted(weights.items(), key=lambda kv: (kv[0][1], kv[0][0])):
-            if weight <= 0.0:
-                continue
-            # Cover only fades whole clouds in and out, so the cached generation of the
-            # block is reused while the weather forms or dissipates it.
-            block = layer_block(bx, by, key, layer, state.seed, (dx, dy))
-            if not len(block):
-                continue
-            batches.append(block)
-            shares.append(np.full(len(block), min(weight, 1.0), np.float32))
-    share = np.concatenate(shares) if shares else np.zeros(0, np.float32)
-    return SpriteBatch.concat(batches), share
 
 
 def sort_back_to_front(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> SpriteBatch:
@@ -323,13 +197,7 @@ def build_ring(
     sky: SkyParams,
     settings: SceneSettings,
 ) -> RingScene:
-    ring = NearRing(centre_m, drift, 1.0)
-    r_m, max_m = settings.ring_radius_m, settings.max_range_m
-    ranges = [
-        (r_m, max_m) if in_impostors(lay.base_m, lay.top_m, centre_m[2]) else (0.0, 0.0)
-        for lay in state.layers
-    ]
-    far = _gather(state, drift, (ring,), r_m, max_m, ranges)[0]
+    far = gather_far(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m)
     geometry, bins = bin_far_sprites(far, centre_m, settings.ring_radius_m)
     # Light the far clouds whole, before the bins cut those that straddle two impostors.
     light = prepare_lighting(far, sky, settings.shading)
