@@ -140,3 +140,31 @@ def test_lod_cross_fades_in_its_band_and_leaves_flat_clouds_alone() -> None:
     flat = dataclasses.replace(batch, flat=np.ones(2, np.bool_))
     kept = collapse_far_clouds(flat, rgba, (0.0, 0.0, 0.0), 1000.0, 100.0)
     assert kept.lod_clouds == 0 and len(kept.sprites) == 2
+
+
+def test_impostor_lod_puts_one_sprite_per_far_cloud_into_the_ring() -> None:
+    from wxsky.presets import load_preset
+    from wxsky.scene.gather import zero_drift
+    from wxsky.scene.layout import SceneSettings, build_ring
+
+    state = WeatherState().apply(load_preset("fair-cumulus", ()))
+    centre = (0.0, 0.0, state.observer.alt_m + 2.0)
+    settings = SceneSettings(max_range_m=30_000.0)
+
+    def far_part(lod_m: float) -> tuple[SpriteBatch, SpriteBatch]:
+        # One impostor (a cloud on a wedge's edge is in both neighbours).
+        ring = build_ring(
+            state,
+            zero_drift(state),
+            centre,
+            sky_params(state),
+            dataclasses.replace(settings, impostor_lod_m=lod_m),
+        )
+        batch = ring.impostors[3].sprites
+        dist = np.linalg.norm(batch.centre_m - np.asarray(centre), axis=1)
+        return batch.take(dist > 18_000.0), batch.take(dist < 15_000.0)
+
+    (far_lod, near_lod), (far_all, near_all) = far_part(16_000.0), far_part(0.0)
+    assert len(far_lod) and len(np.unique(far_lod.cloud_id)) == len(far_lod)  # one a cloud
+    assert 10 * len(far_lod) < len(far_all)
+    np.testing.assert_array_equal(near_lod.centre_m, near_all.centre_m)  # nearer: untouched

@@ -112,6 +112,8 @@ class SceneSection(_Section):
     far_band_m: float = _opt(3000.0, _Rule(0.0, 200_000.0))
     # Near clouds this far away are drawn as one sprite each (Wang's LOD; 0: never).
     lod_start_m: float = _opt(0.0, _Rule(0.0, 200_000.0))
+    # Clouds in the ring this far from its centre go into impostors as one sprite (0: never).
+    impostor_lod_m: float = _opt(0.0, _Rule(0.0, 500_000.0))
     # At most this many near sprites a frame: past it the farthest clouds fade out (0: no cap).
     max_near_sprites: int = _opt(20_000, _Rule(0, 10_000_000))
     block_size_m: float = _opt(
@@ -129,6 +131,7 @@ class SceneSection(_Section):
             shading=self.shading,
             far_band_m=self.far_band_m,
             lod_start_m=self.lod_start_m,
+            impostor_lod_m=self.impostor_lod_m,
             max_near_sprites=self.max_near_sprites,
         )
 

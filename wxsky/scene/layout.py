@@ -32,7 +32,7 @@ from wxsky.scene.in_cloud import (
     in_cloud_fog,
     lock_facing,
 )
-from wxsky.scene.ring import RingGeometry, bin_far_sprites
+from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
 from wxsky.scene.shading import DEFAULT_SHADING, ParticleLight, prepare_lighting, sprite_colours
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
@@ -52,6 +52,10 @@ class SceneSettings:
     # Near sprites this far from the eye are drawn at the ring impostors' resolution rather
     # than the near layer's (0: never); see Renderer._draw_near.
     far_band_m: float = 3000.0
+    # Clouds in the ring this far from its centre go into the impostors as one sprite each
+    # (0: never): halves an impostor's drawing time, but doubles the picture's difference
+    # from drawing every sprite (docs/performance.md), so it is off unless asked for.
+    impostor_lod_m: float = 0.0
     # At most this many near sprites a frame, farthest clouds left out first (0: no cap).
     max_near_sprites: int = 20_000
 
@@ -72,9 +76,11 @@ class SpriteDraw:
 
     def slice(self, start: int, stop: int) -> SpriteDraw:
         """Sprites start..stop of the draw, in its order."""
-        index = np.arange(start, stop)
-        normals = None if self.normals is None else self.normals[start:stop]
-        return SpriteDraw(self.sprites.take(index), self.rgba[start:stop], normals)
+        return self.take(np.arange(start, stop))
+
+    def take(self, index: npt.NDArray[np.intp]) -> SpriteDraw:
+        normals = None if self.normals is None else self.normals[index]
+        return SpriteDraw(self.sprites.take(index), self.rgba[index], normals)
 
 
 @dataclass(frozen=True)
@@ -198,16 +204,20 @@ def build_ring(
     settings: SceneSettings,
 ) -> RingScene:
     far = gather_far(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m)
-    geometry, bins = bin_far_sprites(far, centre_m, settings.ring_radius_m)
-    # Light the far clouds whole, before the bins cut those that straddle two impostors.
+    # Every impostor is seen from the ring's centre: light and shade the far clouds once,
+    # whole, before the bins cut those that straddle two impostors.
     light = prepare_lighting(far, sky, settings.shading)
-    impostors = tuple(
-        oriented(
-            shade_for_eye(b, centre_m, sky, settings.max_range_m, settings.shading, light),
-            centre_m,
-        )[0]
-        for b in bins
-    )
+    shaded = shade_for_eye(far, centre_m, sky, settings.max_range_m, settings.shading, light)
+    if settings.impostor_lod_m > 0.0:
+        # A cloud this far is a few texels of an impostor: one sprite draws it as well.
+        collapsed = collapse_far_clouds(
+            shaded.sprites, shaded.rgba, centre_m, settings.impostor_lod_m, settings.lod_band_m
+        )
+        if collapsed.lod_clouds:
+            order = sort_order(collapsed.sprites, centre_m)
+            shaded = SpriteDraw(collapsed.sprites.take(order), collapsed.rgba[order])
+    geometry, index = bin_indices(shaded.sprites, centre_m, settings.ring_radius_m)
+    impostors = tuple(oriented(shaded.take(idx), centre_m)[0] for idx in index)
     return RingScene(geometry=geometry, impostors=impostors, drift=drift)
 
 

@@ -110,12 +110,21 @@ def bin_far_sprites(
     far: SpriteBatch, centre_m: tuple[float, float, float], radius_m: float
 ) -> tuple[RingGeometry, tuple[SpriteBatch, ...]]:
     """Assign far sprites to the impostors whose 45° wedge they touch, and fit each window."""
+    geometry, index = bin_indices(far, centre_m, radius_m)
+    return geometry, tuple(far.take(idx) for idx in index)
+
+
+def bin_indices(
+    far: SpriteBatch, centre_m: tuple[float, float, float], radius_m: float
+) -> tuple[RingGeometry, tuple[npt.NDArray[np.intp], ...]]:
+    """`bin_far_sprites` as (8,) ascending index arrays into `far`, so a sorted batch's bins
+    keep its order."""
     c = np.asarray(centre_m)
     rel = far.centre_m - c
     azimuth = np.arctan2(rel[:, 0], rel[:, 1])  # from north, clockwise
     dist_h = np.maximum(np.hypot(rel[:, 0], rel[:, 1]), 1.0)
     half_extent = np.arctan(0.75 * far.size_m / dist_h)  # angular half-size, rotation included
-    bins: list[SpriteBatch] = []
+    bins: list[npt.NDArray[np.intp]] = []
     bottoms: list[float] = []
     tops: list[float] = []
     default_half = radius_m * math.tan(HALF_ANGLE_RAD)
@@ -123,15 +132,14 @@ def bin_far_sprites(
         axis_az = i * 2.0 * HALF_ANGLE_RAD
         delta = np.abs((azimuth - axis_az + math.pi) % (2.0 * math.pi) - math.pi)
         idx = np.nonzero(delta <= HALF_ANGLE_RAD + half_extent)[0]
-        batch = far.take(idx)
-        bins.append(batch)
+        bins.append(idx)
         if len(idx) == 0:
             bottoms.append(-default_half)
             tops.append(default_half)
             continue
         along = np.maximum(rel[idx, 0] * math.sin(axis_az) + rel[idx, 1] * math.cos(axis_az), 1.0)
         scale = radius_m / along
-        reach = 0.75 * batch.size_m
+        reach = 0.75 * far.size_m[idx]
         bottoms.append(float(np.min((rel[idx, 2] - reach) * scale)))
         tops.append(float(np.max((rel[idx, 2] + reach) * scale)))
     geometry = RingGeometry(
