@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sprite_helpers import sprite_batch
 
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import SpriteBatch
@@ -25,18 +26,8 @@ from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
 def batch(centres: list[tuple[float, float, float]], size_m: float = 400.0) -> SpriteBatch:
     n = len(centres)
-    return SpriteBatch(
-        centre_m=np.asarray(centres, np.float64).reshape(n, 3),
-        size_m=np.full(n, size_m, np.float32),
-        rotation_rad=np.linspace(0.1, 1.0, n).astype(np.float32),
-        texture=np.zeros(n, np.int32),
-        height_frac=np.full(n, 0.5, np.float32),
-        light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
-        opacity=np.ones(n, np.float32),
-        darkness=np.zeros(n, np.float32),
-        cloud_id=np.arange(n, dtype=np.int64) + 7,
-        core_frac=np.zeros(n, np.float32),
-    )
+    rotation = np.linspace(0.1, 1.0, n)
+    return sprite_batch(centres, size_m, texture=0, rotation=rotation, cloud_id=np.arange(n) + 7)
 
 
 def test_far_from_every_sprite_nothing_locks() -> None:

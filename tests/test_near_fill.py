@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from sprite_helpers import sprite_batch
 
 from wxsky.render.renderer import Renderer
 from wxsky.render.sprite_sheet import CELL_PX, load_sheet, support_radii
@@ -24,19 +25,7 @@ SKY = sky_params(WeatherState())
 
 
 def _batch(centres: list, sizes: list, cloud: list, texture: int = TEX_PUFFY[0], rot=0.0):
-    n = len(centres)
-    return SpriteBatch(
-        centre_m=np.asarray(centres, np.float64).reshape(n, 3),
-        size_m=np.asarray(sizes, np.float32),
-        rotation_rad=np.full(n, rot, np.float32),
-        texture=np.full(n, texture, np.int32),
-        height_frac=np.full(n, 0.5, np.float32),
-        light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
-        opacity=np.ones(n, np.float32),
-        darkness=np.zeros(n, np.float32),
-        cloud_id=np.asarray(cloud, np.int64),
-        core_frac=np.zeros(n, np.float32),
-    )
+    return sprite_batch(centres, sizes, texture=texture, rotation=rot, cloud_id=cloud)
 
 
 def test_support_radius_holds_every_visible_texel() -> None:

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from sprite_helpers import sprite_batch
 
 from wxsky.errors import RenderError
 from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring
@@ -56,19 +57,7 @@ def _camera(**kw: object) -> Camera:
 def _sprites(
     centres: list, sizes: list, texture: int = TEX_FOG[0], rotation: float = 0.0
 ) -> SpriteBatch:
-    n = len(centres)
-    return SpriteBatch(
-        centre_m=np.asarray(centres, np.float64).reshape(n, 3),
-        size_m=np.asarray(sizes, np.float32),
-        rotation_rad=np.full(n, rotation, np.float32),
-        texture=np.full(n, texture, np.int32),
-        height_frac=np.full(n, 0.5, np.float32),
-        light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
-        opacity=np.ones(n, np.float32),
-        darkness=np.zeros(n, np.float32),
-        cloud_id=np.zeros(n, np.int64),
-        core_frac=np.zeros(n, np.float32),
-    )
+    return sprite_batch(centres, sizes, texture=texture, rotation=rotation)
 
 
 def _draw(batch: SpriteBatch, rgba: tuple = (1.0, 1.0, 1.0, 1.0)) -> SpriteDraw:

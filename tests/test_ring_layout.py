@@ -7,6 +7,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 import pytest
+from sprite_helpers import sprite_batch
 
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch
@@ -28,19 +29,8 @@ TAN = math.tan(math.radians(22.5))
 
 
 def _sprites(centres: np.ndarray, sizes: np.ndarray, rotations: np.ndarray | None = None):
-    n = len(centres)
-    return SpriteBatch(
-        centre_m=np.asarray(centres, np.float64).reshape(n, 3),
-        size_m=np.asarray(sizes, np.float32).reshape(n),
-        rotation_rad=(np.zeros(n) if rotations is None else rotations).astype(np.float32),
-        texture=np.full(n, 4, np.int32),
-        height_frac=np.full(n, 0.5, np.float32),
-        light_dir=np.tile(np.float32([0, 0, 1]), (n, 1)),
-        opacity=np.ones(n, np.float32),
-        darkness=np.zeros(n, np.float32),
-        cloud_id=np.zeros(n, np.int64),
-        core_frac=np.zeros(n, np.float32),
-    )
+    rot = 0.0 if rotations is None else rotations
+    return sprite_batch(centres, np.asarray(sizes).reshape(-1), texture=4, rotation=rot)
 
 
 def _polar(centre: tuple, az_deg: float, dist: float, dz: float) -> list[float]:

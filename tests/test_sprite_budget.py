@@ -5,6 +5,7 @@ impostors)."""
 from __future__ import annotations
 
 import numpy as np
+from sprite_helpers import sprite_batch
 
 from wxsky.scene.gather import NearRing, gather_near, zero_drift
 from wxsky.scene.layout import SceneSettings, build_ring
@@ -19,18 +20,7 @@ def _clouds(n_clouds: int, per_cloud: int) -> tuple[SpriteBatch, np.ndarray]:
     n = n_clouds * per_cloud
     cloud = np.repeat(np.arange(n_clouds), per_cloud)
     centre = np.column_stack([np.zeros(n), 1000.0 * (cloud + 1), np.zeros(n)])
-    batch = SpriteBatch(
-        centre_m=centre,
-        size_m=np.full(n, 300.0, np.float32),
-        rotation_rad=np.zeros(n, np.float32),
-        texture=np.zeros(n, np.int32),
-        height_frac=np.zeros(n, np.float32),
-        light_dir=np.zeros((n, 3), np.float32),
-        opacity=np.ones(n, np.float32),
-        darkness=np.zeros(n, np.float32),
-        cloud_id=cloud.astype(np.int64) * 7919,
-        core_frac=np.zeros(n, np.float32),
-    )
+    batch = sprite_batch(centre, 300.0, cloud_id=cloud.astype(np.int64) * 7919)
     return batch, np.ones((n, 4), np.float32)
 
 
