@@ -30,6 +30,7 @@ from wxsky.png import write_png  # noqa: E402
 from wxsky.presets import list_presets, load_preset  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
+from wxsky.scene.layout import SceneSettings  # noqa: E402
 from wxsky.scene.shading import SHADING_MODELS  # noqa: E402
 from wxsky.scene.sky import sun_and_moon, sun_position  # noqa: E402
 from wxsky.snapshot import take_snapshot  # noqa: E402
@@ -59,14 +60,8 @@ def main() -> int:
             for moment in MOMENTS:
                 when, heading_deg = moment_time(base, moment)
                 state = dataclasses.replace(base, time_utc=when)
-                camera = Camera(
-                    position_m=(0.0, 0.0, state.observer.alt_m + 2.0),
-                    heading_deg=heading_deg,
-                    pitch_deg=12.0,
-                    width_px=width,
-                    height_px=height,
-                )
-                image = take_snapshot(state, camera, config.scene.settings(), renderer).image
+                settings = config.scene.settings()
+                image = shot(renderer, settings, state, heading_deg, 12.0, (width, height))
                 write_png(OUT / f"{name}-{moment}.png", image)
                 row.append(image)
                 print(f"{name} {moment}: {when:%Y-%m-%d %H:%M}Z, heading {heading_deg:.0f}")
@@ -95,15 +90,9 @@ def above_the_deck(renderer: Renderer, config: DaemonConfig, width: int, height:
     row = []
     for moment in ("dawn", "noon", "dusk"):
         when, heading_deg = moment_time(base, moment)
-        camera = Camera(
-            position_m=(0.0, 0.0, eye_m),
-            heading_deg=heading_deg,
-            pitch_deg=-12.0,
-            width_px=width,
-            height_px=height,
-        )
         state = dataclasses.replace(base, time_utc=when)
-        row.append(take_snapshot(state, camera, config.scene.settings(), renderer).image)
+        settings = config.scene.settings()
+        row.append(shot(renderer, settings, state, heading_deg, -12.0, (width, height), eye_m))
     return np.concatenate(_spaced(row, axis=1), axis=1)
 
 
@@ -113,26 +102,17 @@ def sky_pictures(renderer: Renderer, config: DaemonConfig) -> dict[str, np.ndarr
     right)."""
     clear = WeatherState().apply(load_preset("clear", ()))
     settings = config.scene.settings()
-
-    def shot(
-        state: WeatherState, heading: float, pitch: float, size: str, **kw: object
-    ) -> np.ndarray:
-        w, h = parse_size(size)
-        camera = Camera(
-            position_m=(0.0, 0.0, state.observer.alt_m + 2.0),
-            heading_deg=heading,
-            pitch_deg=pitch,
-            width_px=w,
-            height_px=h,
-        )
-        return take_snapshot(state, camera, dataclasses.replace(settings, **kw), renderer).image
-
+    wide, small = (640, 360), (320, 180)
     night, _ = moment_time(clear, "night")
     out = {
-        "night-sky.png": shot(dataclasses.replace(clear, time_utc=night), 180.0, 60.0, "640x360")
+        "night-sky.png": shot(
+            renderer, settings, dataclasses.replace(clear, time_utc=night), 180.0, 60.0, wide
+        )
     }
     when, azimuth = crescent_at_dusk(clear)
-    out["dusk-moon.png"] = shot(dataclasses.replace(clear, time_utc=when), azimuth, 8.0, "640x360")
+    out["dusk-moon.png"] = shot(
+        renderer, settings, dataclasses.replace(clear, time_utc=when), azimuth, 8.0, wide
+    )
     cumulus = WeatherState().apply(load_preset("fair-cumulus", ()))
     rows = []
     for moment in ("noon", "dusk"):
@@ -141,13 +121,45 @@ def sky_pictures(renderer: Renderer, config: DaemonConfig) -> dict[str, np.ndarr
         rows.append(
             np.concatenate(
                 _spaced(
-                    [shot(state, heading, 12.0, "320x180", shading=m) for m in SHADING_MODELS], 1
+                    [
+                        shot(
+                            renderer,
+                            dataclasses.replace(settings, shading=m),
+                            state,
+                            heading,
+                            12.0,
+                            small,
+                        )
+                        for m in SHADING_MODELS
+                    ],
+                    1,
                 ),
                 axis=1,
             )
         )
     out["shading-wang-vs-harris.png"] = np.concatenate(_spaced(rows, axis=0), axis=0)
     return out
+
+
+def shot(
+    renderer: Renderer,
+    settings: SceneSettings,
+    state: WeatherState,
+    heading_deg: float,
+    pitch_deg: float,
+    size: tuple[int, int],
+    eye_alt_m: float | None = None,
+) -> np.ndarray:
+    """One composited picture; the eye 2 m above the observer unless eye_alt_m (MSL)."""
+    alt_m = state.observer.alt_m + 2.0 if eye_alt_m is None else eye_alt_m
+    camera = Camera(
+        position_m=(0.0, 0.0, alt_m),
+        heading_deg=heading_deg,
+        pitch_deg=pitch_deg,
+        width_px=size[0],
+        height_px=size[1],
+    )
+    return take_snapshot(state, camera, settings, renderer).image
 
 
 def crescent_at_dusk(state: WeatherState) -> tuple[datetime, float]:

@@ -25,11 +25,10 @@ sys.path.insert(0, str(ROOT))
 
 from wxsky.config import DaemonConfig  # noqa: E402
 from wxsky.engine import SkyEngine  # noqa: E402
-from wxsky.host.compositor import composite, layers_from_images  # noqa: E402
 from wxsky.presets import load_preset  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
-from wxsky.snapshot import LAYER_NAMES  # noqa: E402
+from wxsky.snapshot import picture  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
 SAMPLES = 240  # points along the path for the visibility plot
@@ -77,13 +76,8 @@ def main() -> int:
             if cloud.visibility_m is not None:
                 visibility[i] = cloud.visibility_m
             if i in shot_at:
-                if ring_stale:
-                    renderer.render_ring(plan.ring)
-                    ring_stale = False
-                renderer.render_frame(plan.frame)
-                images = {name: renderer.read(name) for name in LAYER_NAMES}
-                quads = plan.ring.geometry.corners_m()
-                frames.append((x, composite(layers_from_images(images, quads), camera_at(x))))
+                frames.append((x, picture(renderer, plan, draw_ring=ring_stale).image))
+                ring_stale = False
     draw(args.out, args.preset, centre_m[0], path_x, inside, visibility, frames)
     entered = path_x[inside]
     span = (

@@ -263,10 +263,6 @@ class SkyEngine:
         with self._lock:
             self._aircraft_m = position_m
 
-    @property
-    def aircraft_m(self) -> tuple[float, float, float] | None:
-        return self._aircraft_m
-
     def set_time(
         self, time_utc: datetime, rate: float | None = None, source: Source = Source.CONTROL
     ) -> None:

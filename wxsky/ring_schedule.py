@@ -35,7 +35,7 @@ from typing import Any
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift, NearRing
 from wxsky.scene.layout import RingScene
-from wxsky.scene.ring import MOVE_HORIZONTAL_FRAC, MOVE_VERTICAL_FRAC, RING_SIZE
+from wxsky.scene.ring import MOVE_HORIZONTAL_FRAC, MOVE_VERTICAL_FRAC, RING_SIZE, moved_reason
 from wxsky.scene.sky import SkyParams
 from wxsky.weather.state import WeatherState
 
@@ -278,13 +278,11 @@ class RingSchedule:
         if _weather_differs(built.state, state):
             return "weather"
         p = self.policy
-        dx = camera.position_m[0] - built.centre_m[0]
-        dy = camera.position_m[1] - built.centre_m[1]
-        dz = camera.position_m[2] - built.centre_m[2]
-        if math.hypot(dx, dy) > p.horizontal_frac * self.radius_m:
-            return "moved_horizontal"
-        if abs(dz) > p.vertical_frac * self.radius_m:
-            return "moved_vertical"
+        moved = moved_reason(
+            built.centre_m, camera.position_m, self.radius_m, p.horizontal_frac, p.vertical_frac
+        )
+        if moved is not None:
+            return moved
         cos_sun = sum(a * b for a, b in zip(sky.sun.direction_enu, built.sun_dir, strict=True))
         if math.degrees(math.acos(max(-1.0, min(1.0, cos_sun)))) > p.sun_deg:
             return "sun"

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.engine import DEFAULT_TRANSITION_STEP_S, SkyEngine
+from wxsky.engine import DEFAULT_TRANSITION_STEP_S, FramePlan, SkyEngine
 from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
@@ -77,15 +77,22 @@ def take_snapshot(
     own = renderer is None
     r = renderer if renderer is not None else Renderer(settings.ring_texture_px)
     try:
-        r.render_ring(plan.ring)
-        r.render_frame(plan.frame)
-        images = {name: r.read(name) for name in LAYER_NAMES}
+        return picture(r, plan)
     finally:
         if own:
             r.close()
+
+
+def picture(renderer: Renderer, plan: FramePlan, draw_ring: bool = True) -> Snapshot:
+    """Draw a plan (its whole ring too, unless `draw_ring` is False because the renderer
+    already holds it) and composite it as a host would."""
+    if draw_ring:
+        renderer.render_ring(plan.ring)
+    renderer.render_frame(plan.frame)
+    images = {name: renderer.read(name) for name in LAYER_NAMES}
     quads = plan.ring.geometry.corners_m()
     return Snapshot(
-        image=composite(layers_from_images(images, quads), camera),
+        image=composite(layers_from_images(images, quads), plan.frame.camera),
         layers=images,
         ring_quads_m=quads,
         state=plan.state,

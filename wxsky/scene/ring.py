@@ -27,6 +27,23 @@ MOVE_VERTICAL_FRAC = 0.02
 IMPOSTOR_VERTICAL_REACH_M = 3048.0
 
 
+def moved_reason(
+    centre_m: tuple[float, float, float],
+    eye_m: tuple[float, float, float],
+    radius_m: float,
+    horizontal_frac: float = MOVE_HORIZONTAL_FRAC,
+    vertical_frac: float = MOVE_VERTICAL_FRAC,
+) -> str | None:
+    """ "moved_horizontal" or "moved_vertical" once the eye has left the share of the radius
+    around a ring's centre that its impostors serve (Wang: 15 % and 2 %), else None."""
+    dx, dy = eye_m[0] - centre_m[0], eye_m[1] - centre_m[1]
+    if math.hypot(dx, dy) > horizontal_frac * radius_m:
+        return "moved_horizontal"
+    if abs(eye_m[2] - centre_m[2]) > vertical_frac * radius_m:
+        return "moved_vertical"
+    return None
+
+
 def in_impostors(base_m: float, top_m: float, centre_z_m: float) -> bool:
     """Whether a layer from base_m to top_m is close enough in altitude to the ring's centre
     to go into impostors; if not, its far clouds are drawn directly as near sprites."""
@@ -91,12 +108,7 @@ class RingGeometry:
         return frustum(-w * k, w * k, self.bottom_m[i] * k, self.top_m[i] * k, NEAR_M, FAR_M)
 
     def needs_regeneration(self, eye_m: tuple[float, float, float]) -> bool:
-        dx, dy = eye_m[0] - self.centre_m[0], eye_m[1] - self.centre_m[1]
-        dz = eye_m[2] - self.centre_m[2]
-        return (
-            math.hypot(dx, dy) > MOVE_HORIZONTAL_FRAC * self.radius_m
-            or abs(dz) > MOVE_VERTICAL_FRAC * self.radius_m
-        )
+        return moved_reason(self.centre_m, eye_m, self.radius_m) is not None
 
     def to_dict(self) -> dict[str, object]:
         return {
