@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
-from wxsky.bench import STAGES, run_bench
-from wxsky.camera_path import straight_and_level
+from wxsky.app.bench import STAGES, run_bench
+from wxsky.app.camera_path import straight_and_level
+from wxsky.app.trace import TraceWriter
 from wxsky.cli import main
-from wxsky.presets import load_preset
 from wxsky.scene.layout import SceneSettings
-from wxsky.trace import TraceWriter
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 pytestmark = pytest.mark.gl

@@ -223,5 +223,5 @@ def test_invalid_camera_is_rejected(kwargs: dict) -> None:
 
 
 def test_boundary_values_are_accepted() -> None:
-    Camera((0.0, 0.0, 0.0), fov_deg=1.0, pitch_deg=90.0, width_px=1, height_px=8192)
-    Camera((0.0, 0.0, 0.0), fov_deg=170.0, pitch_deg=-90.0, width_px=8192, height_px=1)
+    Camera((0.0, 0.0, 0.0), fov_deg=1.0, pitch_deg=90.0, width_px=16, height_px=8192)
+    Camera((0.0, 0.0, 0.0), fov_deg=170.0, pitch_deg=-90.0, width_px=8192, height_px=16)

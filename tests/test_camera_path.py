@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from wxsky.camera_path import parse_camera_path, straight_and_level, turn_in_place
+from wxsky.app.camera_path import parse_camera_path, straight_and_level, turn_in_place
 from wxsky.errors import ConfigError
 
 GOOD = """# a climbing turn

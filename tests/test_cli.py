@@ -201,7 +201,9 @@ def test_snapshot_layers_are_byte_identical_across_processes(
 
 def test_a_later_time_shows_the_clouds_blown_on(tmp_path: Path) -> None:
     preset_time = tomllib.loads(
-        (Path(__file__).resolve().parents[1] / "configs/presets/fair-cumulus.toml").read_text()
+        (
+            Path(__file__).resolve().parents[1] / "wxsky/settings/presets/fair-cumulus.toml"
+        ).read_text()
     )["time_utc"]
     base = datetime.fromisoformat(preset_time.replace("Z", "+00:00"))
     later = (base + timedelta(seconds=0.5)).strftime("%Y-%m-%dT%H:%M:%S.%fZ")

@@ -14,7 +14,7 @@ from daemon_harness import running_daemon
 
 from wxsky.cli import main
 from wxsky.host.client import ControlClient
-from wxsky.presets import (
+from wxsky.settings.presets import (
     load_preset,
     load_preset_file,
     patch_from_metar_text,
@@ -23,7 +23,7 @@ from wxsky.presets import (
 from wxsky.weather.state import Source
 
 REPO = Path(__file__).resolve().parents[1]
-SHIPPED_DIR = REPO / "configs" / "presets"
+SHIPPED_DIR = REPO / "wxsky" / "settings" / "presets"
 METAR = "LSZH 211250Z 24012G25KT 9999 FEW030 BKN080 18/09 Q1012"
 FT = 0.3048
 

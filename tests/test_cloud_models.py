@@ -11,6 +11,9 @@ import numpy as np
 import pytest
 
 from wxsky.errors import ConfigError
+from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds
+from wxsky.scene.formation import layer_block
+from wxsky.scene.texture_slots import CATEGORIES
 from wxsky.scene.cloud_model_files import (
     BOX_KEYS,
     MODEL_KEYS,
@@ -20,14 +23,11 @@ from wxsky.scene.cloud_model_files import (
     load_cloud_model,
     load_cloud_models,
 )
-from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds
-from wxsky.scene.formation import layer_block
-from wxsky.scene.texture_slots import CATEGORIES
 from wxsky.weather.metar_clouds import CLOUD_TABLE
 from wxsky.weather.state import CloudLayer, CloudType
 
 REPO = Path(__file__).resolve().parents[1]
-SHIPPED = REPO / "configs" / "clouds"
+SHIPPED = REPO / "wxsky" / "scene" / "clouds"
 ALL_MODELS = [m for models in default_models().by_type.values() for m in models]
 # Stratiform layers at METAR-like depths: closed at 8/8.
 SLABS = {
@@ -99,7 +99,7 @@ def test_metar_towering_cumulus_gets_congestus() -> None:
 def test_shipped_files_ship_and_every_key_is_documented() -> None:
     project = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))
     data_files = project["tool"]["setuptools"]["data-files"]
-    assert data_files["share/wxsky/clouds"] == ["configs/clouds/*.toml"]
+    assert data_files["share/wxsky/clouds"] == ["wxsky/scene/clouds/*.toml"]
     readme = (SHIPPED / "README.md").read_text(encoding="utf-8")
     for key in [*MODEL_KEYS, *BOX_KEYS]:
         shown = "[[box]]" if key == "box" else f"`{key}`"

@@ -9,7 +9,7 @@ from datetime import UTC, date, datetime, timedelta
 
 import pytest
 
-from wxsky.engine import REORIGIN_M, SkyEngine
+from wxsky.engine.stages import REORIGIN_M, SkyEngine
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
 from wxsky.weather.cockpit import (

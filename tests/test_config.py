@@ -11,7 +11,8 @@ from typing import Any
 
 import pytest
 
-from wxsky.config import (
+from wxsky.errors import ConfigError
+from wxsky.settings.config import (
     BLOCK_SIZE_M,
     CameraSection,
     CanInputSection,
@@ -20,7 +21,6 @@ from wxsky.config import (
     config_to_toml_dict,
     load_config,
 )
-from wxsky.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_FILE = REPO / "configs" / "wxsky.toml"

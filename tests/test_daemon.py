@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from daemon_harness import running_daemon
 
+from wxsky.app.snapshot import take_snapshot
 from wxsky.errors import WxskyError
 from wxsky.host.client import RemoteError
 from wxsky.host.reference import ReferenceHost
-from wxsky.presets import load_preset
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
-from wxsky.snapshot import take_snapshot
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, parse_time_utc
 
 pytestmark = pytest.mark.gl

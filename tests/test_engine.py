@@ -9,7 +9,7 @@ from datetime import UTC, datetime, timedelta
 import numpy as np
 import pytest
 
-from wxsky.engine import SkyEngine, enu_from_geodetic
+from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
 from wxsky.weather.state import CloudLayer, CloudType, Source, WeatherPatch, WeatherState, WindLayer
@@ -307,7 +307,7 @@ def test_a_new_site_is_applied_at_once() -> None:
 
 
 def test_geodetic_round_trip() -> None:
-    from wxsky.engine import geodetic_from_enu
+    from wxsky.engine.stages import geodetic_from_enu
 
     east, north, _ = enu_from_geodetic(47.0, 8.0, 47.1, 8.2, 500.0)
     lat, lon = geodetic_from_enu(47.0, 8.0, east, north)

@@ -132,9 +132,9 @@ def test_lod_cross_fades_in_its_band_and_leaves_flat_clouds_alone() -> None:
 
 
 def test_impostor_lod_puts_one_sprite_per_far_cloud_into_the_ring() -> None:
-    from wxsky.presets import load_preset
     from wxsky.scene.gather import zero_drift
     from wxsky.scene.layout import SceneSettings, build_ring
+    from wxsky.settings.presets import load_preset
 
     state = WeatherState().apply(load_preset("fair-cumulus", ()))
     centre = (0.0, 0.0, state.observer.alt_m + 2.0)

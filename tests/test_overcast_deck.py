@@ -8,12 +8,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from wxsky.config import DaemonConfig
+from wxsky.app.snapshot import take_snapshot
 from wxsky.host.compositor import Layers, composite, layers_from_images
-from wxsky.presets import load_preset
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
-from wxsky.snapshot import take_snapshot
+from wxsky.settings.config import DaemonConfig
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 pytestmark = pytest.mark.gl

@@ -14,11 +14,11 @@ from typing import Any
 
 import pytest
 
-from wxsky.config import load_config
 from wxsky.errors import PresetError
-from wxsky.preset_check import check_preset_file, format_key, key_line
-from wxsky.preset_write import preset_diff, preset_to_toml
-from wxsky.presets import (
+from wxsky.settings.config import load_config
+from wxsky.settings.preset_check import check_preset_file, format_key, key_line
+from wxsky.settings.preset_write import preset_diff, preset_to_toml
+from wxsky.settings.presets import (
     builtin_preset_dirs,
     find_preset,
     list_presets,
@@ -43,7 +43,7 @@ from wxsky.weather.state import (
 )
 
 REPO = Path(__file__).resolve().parents[1]
-SHIPPED_DIR = REPO / "configs" / "presets"
+SHIPPED_DIR = REPO / "wxsky" / "settings" / "presets"
 SHIPPED = sorted(p.stem for p in SHIPPED_DIR.glob("*.toml"))
 REQUIRED = [
     "clear",

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from sprite_helpers import sprite_batch
 
+from wxsky.app.snapshot import LAYER_NAMES, take_snapshot
 from wxsky.errors import RenderError
 from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring
 from wxsky.render import shaders as shaders_mod
@@ -28,7 +29,6 @@ from wxsky.scene.layout import FrameScene, RingScene, SceneSettings, SpriteDraw
 from wxsky.scene.ring import RING_SIZE, RingGeometry, bin_far_sprites
 from wxsky.scene.sky import SkyParams, sky_params
 from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM, TEX_FOG
-from wxsky.snapshot import LAYER_NAMES, take_snapshot
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
 W, H = 161, 91  # odd: the centre pixel (45, 80) looks exactly along the camera axis

@@ -1,4 +1,4 @@
-"""The ring's rebuild schedule (`wxsky.ring_schedule`): when a rebuild starts and why, one
+"""The ring's rebuild schedule (`wxsky.engine.ring_schedule`): when a rebuild starts and why, one
 impostor per frame over 8 frames into the other texture set, the cross-fade, and the near
 layer's share of each ring while the two fade."""
 
@@ -11,7 +11,7 @@ from datetime import timedelta
 import numpy as np
 import pytest
 
-from wxsky.ring_schedule import RETRY_AFTER_S, RingSchedule
+from wxsky.engine.ring_schedule import RETRY_AFTER_S, RingSchedule
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift, NearRing, gather_near, zero_drift
 from wxsky.scene.layout import RingScene, empty_ring

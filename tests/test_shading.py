@@ -9,9 +9,7 @@ from datetime import UTC, datetime, timedelta
 import numpy as np
 import pytest
 
-from wxsky.config import SceneSection
 from wxsky.scene import shading_harris
-from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import SpriteBatch, block_clouds, layer_keys
 from wxsky.scene.layout import SceneSettings, shade_for_eye
 from wxsky.scene.shading import (
@@ -29,6 +27,8 @@ from wxsky.scene.shading_wang import (
     wang_colours,
 )
 from wxsky.scene.sky import SkyParams, SunPosition, sky_params
+from wxsky.scene.cloud_model_files import default_models
+from wxsky.settings.config import SceneSection
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])

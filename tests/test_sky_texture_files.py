@@ -17,8 +17,8 @@ import numpy.typing as npt
 import pytest
 from tool_loader import load_tool
 
+from wxsky.app.snapshot import take_snapshot
 from wxsky.png import encode_png
-from wxsky.presets import load_preset
 from wxsky.render.renderer import Renderer
 from wxsky.render.sky_texture_gen import (
     DOME_FILE,
@@ -42,7 +42,7 @@ from wxsky.render.sky_textures import (
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.sky import sky_params
-from wxsky.snapshot import take_snapshot
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 ROOT = Path(__file__).resolve().parents[1]

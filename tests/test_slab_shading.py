@@ -11,12 +11,12 @@ from datetime import UTC, datetime
 import numpy as np
 import pytest
 
-from wxsky.presets import load_preset
 from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.formation import layer_block
 from wxsky.scene.shading import prepare_lighting, sprite_colours
 from wxsky.scene.shading_slab import BETA, G_S, KAPPA_S_PER_M, limb, slab_energy, slab_radiance
 from wxsky.scene.sky import sky_params
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 OVERCAST = WeatherState().apply(load_preset("overcast-stratus", ()))

@@ -8,11 +8,11 @@ import itertools
 import numpy as np
 import pytest
 
-from wxsky.config import DaemonConfig
-from wxsky.presets import load_preset
+from wxsky.app.snapshot import Snapshot, Transition, take_snapshot
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
-from wxsky.snapshot import Snapshot, Transition, take_snapshot
+from wxsky.settings.config import DaemonConfig
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 pytestmark = pytest.mark.gl

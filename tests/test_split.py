@@ -13,16 +13,16 @@ import numpy as np
 import pytest
 from daemon_harness import running_daemon
 
+from wxsky.app.snapshot import LAYER_NAMES
 from wxsky.host.client import RemoteError
 from wxsky.host.compositor import composite, layers_from_images
 from wxsky.host.reference import ReferenceHost
-from wxsky.presets import load_preset
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import NearRing, zero_drift
 from wxsky.scene.layout import SceneSettings, build_frame, empty_ring, split_at_distance
 from wxsky.scene.sky import sky_params
-from wxsky.snapshot import LAYER_NAMES
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 STATE = WeatherState().apply(load_preset("scattered-cumulus", ()))

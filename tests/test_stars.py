@@ -14,14 +14,14 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from wxsky.presets import load_preset
+from wxsky.app.snapshot import take_snapshot
 from wxsky.render import sky_texture_gen, sky_textures
 from wxsky.render.renderer import Renderer
 from wxsky.scene import ephemeris
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, sky_params
-from wxsky.snapshot import take_snapshot
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 W, H = 640, 360

@@ -16,12 +16,12 @@ import statistics
 import threading
 import time
 
-from wxsky.config import DaemonConfig
-from wxsky.daemon import initial_patches
-from wxsky.engine import SkyEngine
+from wxsky.app.daemon import initial_patches
+from wxsky.engine.stages import SkyEngine
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.ring import RING_SIZE
+from wxsky.settings.config import DaemonConfig
 from wxsky.weather.state import WeatherState
 
 

@@ -9,7 +9,7 @@ processes, plus the image difference between the two modes and a check of the re
    each mode, interleaved ring/direct, `--repeat` times; each process's wall time less the
    startup the bench reports (interpreter, imports, GL context, shaders, first scene), medians.
    Also the medians of the per-stage timings the runs print.
-2. Pictures: `wxsky.snapshot.take_snapshot` in both modes at one static camera per preset;
+2. Pictures: `wxsky.app.snapshot.take_snapshot` in both modes at one static camera per preset;
    mean and largest absolute difference per channel of the composited images (/255).
 3. Trace: one longer ring run along the default flight (120 m/s at 1500 m, 30 fps), checking
    that every rebuild starts on the first frame past 15 % of the radius horizontally (or 2 %
@@ -35,12 +35,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from wxsky.app.snapshot import take_snapshot  # noqa: E402
 from wxsky.cli.common import parse_size  # noqa: E402
-from wxsky.config import DaemonConfig  # noqa: E402
-from wxsky.presets import load_preset  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
-from wxsky.snapshot import take_snapshot  # noqa: E402
+from wxsky.settings.config import DaemonConfig  # noqa: E402
+from wxsky.settings.presets import load_preset  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
 PRESETS = ("overcast-stratus", "broken-stratocumulus")

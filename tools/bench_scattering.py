@@ -31,12 +31,12 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT))
 
-from wxsky.presets import load_preset  # noqa: E402
 from wxsky.scene.gather import gather_blocks, zero_drift  # noqa: E402
 from wxsky.scene.scattering import incident_light  # noqa: E402
 from wxsky.scene.shading_harris import SHADOW_REACH, scene_lights, tau_of  # noqa: E402
 from wxsky.scene.sky import sky_params  # noqa: E402
 from wxsky.scene.sprites import SpriteBatch  # noqa: E402
+from wxsky.settings.presets import load_preset  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
 PRESETS = ("fair-cumulus", "scattered-cumulus", "broken-stratocumulus", "thunderstorm")

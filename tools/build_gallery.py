@@ -7,8 +7,9 @@ Times come from the sun at the preset's own place and date: dawn and dusk with t
 stands 2 m above the observer looking 12° up toward the sun's side of the sky (east at dawn,
 south at noon, west at dusk); overcast-stratus also from above its top, at dawn, noon and dusk
 (overcast-stratus-above.png). Also the night sky, a crescent moon at dusk and the two shading
-models side by side (`sky_pictures`). Every picture goes through `wxsky.snapshot.take_snapshot`, the
-daemon's own stages, so the gallery shows what a host would get.
+models side by side (`sky_pictures`). Every picture goes through
+`wxsky.app.snapshot.take_snapshot`, the daemon's own stages, so the gallery shows what a host
+would get.
 """
 
 from __future__ import annotations
@@ -24,16 +25,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from wxsky.app.snapshot import take_snapshot  # noqa: E402
 from wxsky.cli.common import parse_size  # noqa: E402
-from wxsky.config import DaemonConfig  # noqa: E402
 from wxsky.png import write_png  # noqa: E402
-from wxsky.presets import list_presets, load_preset  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
 from wxsky.scene.layout import SceneSettings  # noqa: E402
 from wxsky.scene.shading import SHADING_MODELS  # noqa: E402
 from wxsky.scene.sky import sun_and_moon, sun_position  # noqa: E402
-from wxsky.snapshot import take_snapshot  # noqa: E402
+from wxsky.settings.config import DaemonConfig  # noqa: E402
+from wxsky.settings.presets import list_presets, load_preset  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
 OUT = ROOT / "docs" / "gallery"

@@ -23,12 +23,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from wxsky.config import DaemonConfig  # noqa: E402
-from wxsky.engine import SkyEngine  # noqa: E402
-from wxsky.presets import load_preset  # noqa: E402
+from wxsky.app.snapshot import picture  # noqa: E402
+from wxsky.engine.stages import SkyEngine  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
-from wxsky.snapshot import picture  # noqa: E402
+from wxsky.settings.config import DaemonConfig  # noqa: E402
+from wxsky.settings.presets import load_preset  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
 SAMPLES = 240  # points along the path for the visibility plot

@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
+from wxsky.app.snapshot import take_snapshot
 from wxsky.cli.common import parse_size
 from wxsky.png import write_png
-from wxsky.presets import list_presets, load_preset
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
-from wxsky.snapshot import take_snapshot
+from wxsky.settings.presets import list_presets, load_preset
 from wxsky.weather.state import WeatherState
 
 COLUMNS = 4

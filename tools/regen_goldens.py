@@ -4,7 +4,7 @@
     .venv/bin/python tools/regen_goldens.py            # all cases
     .venv/bin/python tools/regen_goldens.py clear      # just the named ones
 
-Each case is a shipped weather preset rendered by `wxsky.snapshot.take_snapshot` (the same
+Each case is a shipped weather preset rendered by `wxsky.app.snapshot.take_snapshot` (the same
 engine, renderer passes and compositor as daemon + host) at a fixed time, camera and size.
 The PNGs go to tests/golden/<case>.png, and tests/golden/README.md records the GL renderer
 they were made on. Only this tool writes goldens; the test never does. Regenerate them when
@@ -27,13 +27,13 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT))
 
+from wxsky.app.snapshot import take_snapshot  # noqa: E402
 from wxsky.png import write_png  # noqa: E402
-from wxsky.presets import load_preset  # noqa: E402
 from wxsky.render.context import describe  # noqa: E402
 from wxsky.render.renderer import NEAR_SCALE, Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
 from wxsky.scene.layout import SceneSettings  # noqa: E402
-from wxsky.snapshot import take_snapshot  # noqa: E402
+from wxsky.settings.presets import load_preset  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
 GOLDEN_DIR = ROOT / "tests" / "golden"
@@ -134,7 +134,7 @@ def _readme(renderer_name: str) -> str:
     return f"""# Golden images
 
 Reference pictures for `tests/test_golden.py`: each is a shipped preset rendered through
-`wxsky.snapshot.take_snapshot` (engine, renderer and the reference compositor, as daemon +
+`wxsky.app.snapshot.take_snapshot` (engine, renderer and the reference compositor, as daemon +
 host) and compared with a tolerance (mean absolute difference and share of pixels far off).
 
 Made on: **{renderer_name}** (headless EGL), ring textures {RING_PX} px, near layer at

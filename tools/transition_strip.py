@@ -15,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
+from wxsky.app.snapshot import take_snapshot
 from wxsky.cli.common import parse_size
-from wxsky.config import TransitionSection
 from wxsky.png import write_png
-from wxsky.presets import load_preset
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
-from wxsky.snapshot import take_snapshot
+from wxsky.settings.config import TransitionSection
+from wxsky.settings.presets import load_preset
 from wxsky.weather.metar import decode
 from wxsky.weather.metar_clouds import metar_to_patch
 from wxsky.weather.state import WeatherState

@@ -1,4 +1,4 @@
-"""`wxsky bench`: frames along a camera path, timed per stage (see `wxsky.bench`)."""
+"""`wxsky bench`: frames along a camera path, timed per stage (see `wxsky.app.bench`)."""
 
 from __future__ import annotations
 
@@ -52,12 +52,12 @@ def add_commands(sub: Subparsers) -> None:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from wxsky.bench import run_bench
-    from wxsky.camera_path import parse_camera_path, straight_and_level, turn_in_place
-    from wxsky.config import load_config
+    from wxsky.app.bench import run_bench
+    from wxsky.app.camera_path import parse_camera_path, straight_and_level, turn_in_place
+    from wxsky.app.trace import TraceWriter
     from wxsky.errors import ConfigError
-    from wxsky.presets import load_preset
-    from wxsky.trace import TraceWriter
+    from wxsky.settings.config import load_config
+    from wxsky.settings.presets import load_preset
     from wxsky.weather.state import WeatherState
 
     if not 1 <= args.frames <= 100_000:

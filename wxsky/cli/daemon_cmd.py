@@ -100,9 +100,9 @@ def add_commands(sub: Subparsers) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     import asyncio
 
-    from wxsky.config import CanInputSection, SerialInputSection, load_config
-    from wxsky.daemon import Daemon, initial_patches
+    from wxsky.app.daemon import Daemon, initial_patches
     from wxsky.output.transport import parse_address
+    from wxsky.settings.config import CanInputSection, SerialInputSection, load_config
 
     config = load_config(args.config)
     setup_logging(config.daemon.log_level)
@@ -180,10 +180,10 @@ def _cmd_status(args: argparse.Namespace) -> int:
 
 
 def _cmd_snapshot(args: argparse.Namespace) -> int:
-    from wxsky.config import load_config
+    from wxsky.app.snapshot import take_snapshot
     from wxsky.png import write_png
     from wxsky.scene.camera import Camera
-    from wxsky.snapshot import take_snapshot
+    from wxsky.settings.config import load_config
     from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState, parse_time_utc
 
     config = load_config(args.config)
@@ -215,8 +215,8 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     settings = config.scene.settings()
     transition = None
     if args.transition_to:
-        from wxsky.presets import load_preset
-        from wxsky.snapshot import Transition
+        from wxsky.app.snapshot import Transition
+        from wxsky.settings.presets import load_preset
 
         if not 0.0 <= args.elapsed_s <= 86_400.0 or args.elapsed_s != args.elapsed_s:
             raise ValueError(f"--elapsed-s must be in 0..86400, got {args.elapsed_s}")
@@ -243,7 +243,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
 
 
 def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any:
-    from wxsky.presets import load_preset
+    from wxsky.settings.presets import load_preset
     from wxsky.weather.metar import decode
     from wxsky.weather.metar_clouds import metar_to_patch
     from wxsky.weather.state import WeatherState, parse_time_utc

@@ -87,10 +87,10 @@ def _decode_file(path: Path, fmt: str) -> int:
 
 
 def _cmd_fetch(args: argparse.Namespace) -> int:
-    from wxsky.config import load_config
     from wxsky.inputs.feed_sources import Fetched, gunzip_if_needed, open_source
     from wxsky.inputs.metar_input import MetarSettings, ingest, select
-    from wxsky.presets import load_preset
+    from wxsky.settings.config import load_config
+    from wxsky.settings.presets import load_preset
     from wxsky.weather.feeds import parse_feed
     from wxsky.weather.state import WeatherState, weather_to_dict
 

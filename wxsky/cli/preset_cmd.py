@@ -72,13 +72,13 @@ def _control_option(p: argparse.ArgumentParser) -> None:
 
 
 def _preset_dirs(args: argparse.Namespace) -> tuple[Path, ...]:
-    from wxsky.config import load_config
+    from wxsky.settings.config import load_config
 
     return load_config(args.config).presets.dirs if args.config else ()
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    from wxsky.presets import list_presets
+    from wxsky.settings.presets import list_presets
 
     infos = list_presets(_preset_dirs(args))
     origins = [
@@ -93,7 +93,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
-    from wxsky.presets import find_preset, load_preset_file
+    from wxsky.settings.presets import find_preset, load_preset_file
     from wxsky.weather.state import WeatherState, weather_to_dict
 
     path, origin = find_preset(args.name, _preset_dirs(args))
@@ -140,7 +140,7 @@ def _cmd_save(args: argparse.Namespace) -> int:
     from datetime import UTC, datetime
 
     from wxsky.errors import PresetError
-    from wxsky.presets import (
+    from wxsky.settings.presets import (
         find_preset,
         patch_from_metar_text,
         preset_to_toml,
@@ -171,7 +171,7 @@ def _cmd_save(args: argparse.Namespace) -> int:
 def _running_weather(args: argparse.Namespace) -> tuple[Any, str, list[str]]:
     from wxsky.errors import WxskyError
     from wxsky.host.client import ControlClient
-    from wxsky.presets import patch_from_weather_dict
+    from wxsky.settings.presets import patch_from_weather_dict
 
     address = control_address(args)
     with ControlClient.connect(address) as client:
@@ -191,7 +191,7 @@ def _running_weather(args: argparse.Namespace) -> tuple[Any, str, list[str]]:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from wxsky.presets import check_preset_file
+    from wxsky.settings.presets import check_preset_file
 
     bad = False
     for path in args.files:
@@ -206,8 +206,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _cmd_diff(args: argparse.Namespace) -> int:
-    from wxsky.preset_write import format_value
-    from wxsky.presets import preset_diff, resolve_preset
+    from wxsky.settings.preset_write import format_value
+    from wxsky.settings.presets import preset_diff, resolve_preset
 
     dirs = _preset_dirs(args)
     info_a, patch_a = resolve_preset(args.a, dirs)

@@ -14,7 +14,7 @@ from wxsky.protocols.result import Decoded
 from wxsky.weather.cockpit import ALL_GROUPS
 
 if TYPE_CHECKING:
-    from wxsky.config import CanInputSection
+    from wxsky.settings.config import CanInputSection
 
 MAX_BATCH = 256  # frames merged into one update when a bus delivers faster than we read
 

@@ -29,7 +29,7 @@ from wxsky.weather.state import WeatherPatch
 from wxsky.weather.stations import StationWeather, blend, nearest, split_by_age
 
 if TYPE_CHECKING:
-    from wxsky.config import MetarSection
+    from wxsky.settings.config import MetarSection
 
 log = logging.getLogger("wxsky.inputs.metar")
 

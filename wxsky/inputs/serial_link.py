@@ -15,7 +15,7 @@ from wxsky.protocols.result import Decoded
 from wxsky.weather.cockpit import ALL_GROUPS
 
 if TYPE_CHECKING:
-    from wxsky.config import SerialInputSection
+    from wxsky.settings.config import SerialInputSection
 
 DEFAULT_BAUD = 4800  # NMEA 0183's own rate
 READ_CHUNK_BYTES = 4096

@@ -17,11 +17,19 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.schema import Number
+
 Vec3 = tuple[float, float, float]
 Mat4 = npt.NDArray[np.float64]  # (4, 4)
 
 NEAR_M = 2.0
 FAR_M = 200_000.0
+
+# The one source of the camera's limits: the config, the control channel and the command line
+# check against these. 8192 is the largest texture every GL 3.3 driver we target allocates.
+VIEWPORT_PX = Number(16, 8192, integer=True, unit="px")
+FOV_DEG = Number(1.0, 170.0, unit="deg")  # horizontal
+PITCH_DEG = Number(-90.0, 90.0, unit="deg")
 
 
 @dataclass(frozen=True)
@@ -35,12 +43,10 @@ class Camera:
     height_px: int = 540
 
     def __post_init__(self) -> None:
-        if not 1.0 <= self.fov_deg <= 170.0:
-            raise ValueError(f"camera fov_deg must be in 1..170, got {self.fov_deg}")
-        if not (1 <= self.width_px <= 8192 and 1 <= self.height_px <= 8192):
-            raise ValueError(f"camera viewport {self.width_px}x{self.height_px} is outside 1..8192")
-        if not -90.0 <= self.pitch_deg <= 90.0:
-            raise ValueError(f"camera pitch_deg must be in -90..90, got {self.pitch_deg}")
+        FOV_DEG.validate("camera fov_deg", self.fov_deg)
+        VIEWPORT_PX.validate("camera width", self.width_px)
+        VIEWPORT_PX.validate("camera height", self.height_px)
+        PITCH_DEG.validate("camera pitch_deg", self.pitch_deg)
         if not all(math.isfinite(v) for v in (*self.position_m, self.heading_deg, self.roll_deg)):
             raise ValueError("camera position and angles must be finite")
 

@@ -1,11 +1,10 @@
-"""The cloud model files: `configs/clouds/*.toml` read into `cloud_models` dataclasses.
+"""The cloud model files: `wxsky/scene/clouds/*.toml` read into `cloud_models` dataclasses.
 
-Where the files are found, like the presets: `configs/clouds/` of the checkout this package
-lives in, else `<sys.prefix>/share/wxsky/clouds` where `pyproject.toml`'s data-files installs
-them. They are read once per process (`default_models` is cached). Unknown keys, wrong types
-and out-of-range values are errors naming the file and the dotted key (`box[2].sprites`).
-Every channel of a multi-channel setup must run the same files: the models decide the clouds
-as much as the seed does.
+The shipped files are package data (`wxsky/scene/clouds/`, found through
+`importlib.resources` wherever the package is installed). They are read once per process
+(`default_models` is cached). Unknown keys, wrong types and out-of-range values are errors
+naming the file and the dotted key (`box[2].sprites`). Every channel of a multi-channel setup
+must run the same files: the models decide the clouds as much as the seed does.
 """
 
 from __future__ import annotations
@@ -14,7 +13,6 @@ import difflib
 import functools
 import itertools
 import math
-import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -22,6 +20,7 @@ from typing import Any
 from wxsky.errors import ConfigError
 from wxsky.scene.cloud_models import BoxTemplate, CloudModel, CloudModels
 from wxsky.scene.texture_slots import CATEGORIES
+from wxsky.settings.package_data import package_data_dir
 from wxsky.weather.state import CloudType
 
 MAX_SPRITES_PER_BOX = 100  # Wang: "between 1 to 100, depending on the density"
@@ -88,10 +87,8 @@ BOX_DEFAULTS: dict[str, Any] = {
 
 
 def builtin_cloud_dirs() -> tuple[Path, ...]:
-    """Where the shipped models are looked for, in order; they need not exist."""
-    checkout = Path(__file__).resolve().parents[2] / "configs" / "clouds"
-    installed = Path(sys.prefix) / "share" / "wxsky" / "clouds"
-    return (checkout, installed)
+    """Where the shipped models are looked for, in order: the package data folder."""
+    return (package_data_dir("clouds"),)
 
 
 @functools.lru_cache(maxsize=1)

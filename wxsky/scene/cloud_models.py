@@ -5,7 +5,7 @@ each placed relative to the cloud and filled with sprites, as the artists of "Le
 Clouds!" built them in 3DS Max. Units inside a model: box x and y in cloud widths from the
 cloud's axis, z in cloud heights above its base, sprite sizes in cloud widths; a cloud's width
 is a share of its cell and its height a share of the layer thickness. The files that hold the
-models, `configs/clouds/*.toml`, are read by `cloud_model_files`; the generator takes these
+models, `wxsky/scene/clouds/*.toml`, are read by `cloud_model_files`; the generator takes these
 dataclasses and never reads a file.
 
 A layer's model is the one of its type with the largest `min_thickness_m` not above the layer's

@@ -9,7 +9,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from wxsky.engine import SkyEngine, enu_from_geodetic
+from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.errors import ProtocolError, WxskyError
 from wxsky.scene.camera import Camera
 from wxsky.weather.state import Source, parse_time_utc
@@ -138,7 +138,7 @@ def set_time(engine: SkyEngine, params: dict[str, Any]) -> None:
 
 
 def apply_preset(engine: SkyEngine, params: dict[str, Any], preset_dirs: Sequence[Path]) -> str:
-    from wxsky.presets import load_preset
+    from wxsky.settings.presets import load_preset
 
     _only("apply_preset", params, {"name"})
     name = params.get("name")

@@ -17,8 +17,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
+from wxsky.engine.ring_schedule import RingEvent
 from wxsky.errors import ConfigError
-from wxsky.ring_schedule import RingEvent
 
 
 class TraceWriter:

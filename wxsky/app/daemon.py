@@ -22,8 +22,7 @@ from types import FrameType
 from typing import Any
 
 from wxsky import __version__
-from wxsky.config import CanInputSection, DaemonConfig, SerialInputSection
-from wxsky.control import (
+from wxsky.app.control import (
     apply_metar,
     apply_preset,
     camera_from_params,
@@ -33,9 +32,10 @@ from wxsky.control import (
     set_aircraft,
     set_time,
 )
-from wxsky.engine import FramePlan, SkyEngine, geodetic_from_enu
+from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.trace import TraceWriter
+from wxsky.engine.stages import FramePlan, SkyEngine, geodetic_from_enu
 from wxsky.errors import ConfigError, WxskyError
-from wxsky.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.inputs.cockpit_link import CockpitLink, Mailbox
 from wxsky.inputs.drivers import open_link
 from wxsky.inputs.feed_sources import open_source
@@ -46,11 +46,11 @@ from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
-from wxsky.trace import TraceWriter
+from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
 
-log = logging.getLogger("wxsky.daemon")
+log = logging.getLogger("wxsky.app.daemon")
 
 FPS_WINDOW_S = 2.0
 
@@ -59,7 +59,7 @@ def initial_patches(
     config: DaemonConfig, preset: str | None = None, metar: str | None = None
 ) -> list[WeatherPatch]:
     """The weather the daemon starts on: a preset (the config's unless named), or a METAR."""
-    from wxsky.presets import load_preset
+    from wxsky.settings.presets import load_preset
     from wxsky.weather.metar import decode
     from wxsky.weather.metar_clouds import metar_to_patch
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.engine import DEFAULT_TRANSITION_STEP_S, FramePlan, SkyEngine
+from wxsky.engine.stages import DEFAULT_TRANSITION_STEP_S, FramePlan, SkyEngine
 from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera

@@ -19,17 +19,21 @@ from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
 from wxsky.errors import ConfigError, WxskyError
+from wxsky.schema import Number
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
 from wxsky.weather.cockpit import ALL_GROUPS
 from wxsky.weather.transition import TransitionRates
 
-# Shared with wxsky.presets; it lives here because presets import this module, not the reverse.
+# Shared with wxsky.settings.presets; it lives here because presets import this module.
 PRESET_NAME_PATTERN = r"[a-z0-9-]+"
 
 # The scene generator tiles the cloud field in blocks of this size; noise frequencies, seeds and
 # the impostor ring's texel density are all tuned to it, so it is a constant, not a setting.
 BLOCK_SIZE_M = 4000.0
+
+# How many nearby METAR stations may be blended (also the bound of `metar fetch --blend`).
+BLEND_STATIONS = Number(1, 10, integer=True)
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 
@@ -190,7 +194,7 @@ class MetarSection(_Section):
     station: str = _opt(
         "", _Rule(pattern=r"([A-Z][A-Z0-9]{3})?", pattern_desc="empty or a 4-character ICAO id")
     )
-    blend_stations: int = _opt(1, _Rule(1, 10))
+    blend_stations: int = _opt(1, _Rule(BLEND_STATIONS.lo, BLEND_STATIONS.hi))
     max_station_distance_km: float = _opt(200.0, _Rule(1.0, 20_000.0))
 
 

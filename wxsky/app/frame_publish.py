@@ -10,7 +10,7 @@ from __future__ import annotations
 from datetime import UTC
 from typing import Protocol
 
-from wxsky.engine import FramePlan
+from wxsky.engine.stages import FramePlan
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import LayerSpec
 from wxsky.scene.layout import RingScene

@@ -29,14 +29,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.camera_path import CameraPath
-from wxsky.engine import SkyEngine
-from wxsky.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.camera_path import CameraPath
+from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.trace import TraceWriter
+from wxsky.engine.stages import SkyEngine
 from wxsky.output.shm import FrameWriter
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw
 from wxsky.scene.shading_harris import particle_keys
-from wxsky.trace import TraceWriter
 from wxsky.weather.state import WeatherState
 
 if TYPE_CHECKING:

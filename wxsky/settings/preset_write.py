@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
-from wxsky.preset_check import TOP_KEYS, KeyPath, format_key
+from wxsky.settings.preset_check import TOP_KEYS, KeyPath, format_key
 from wxsky.weather.state import Provenance, Source, WeatherPatch, WeatherState
 
 

@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 
-from wxsky.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
+from wxsky.engine.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift, NearRing, advance_drift, carry_drift, zero_drift
 from wxsky.scene.in_cloud import NO_LOCKS, Locks

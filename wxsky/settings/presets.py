@@ -2,13 +2,14 @@
 
 A preset `<name>.toml` is looked up in the config's `presets.dirs`, then in the user folder
 (`$XDG_CONFIG_HOME/wxsky/presets`, by default `~/.config/wxsky/presets`, where
-`wxsky preset save` writes), then in `configs/presets/` of the checkout this package lives in,
-then in `<sys.prefix>/share/wxsky/presets`; the first file of a name wins, so a user preset
-overrides a built-in one. Every key but `description` is optional and the patch sets only what
-the file gives, so a preset that should clear the sky must say `layers = []`.
+`wxsky preset save` writes), then the built-in presets shipped as package data
+(`wxsky/settings/presets/`, found through `importlib.resources` wherever the package is
+installed); the first file of a name wins, so a user preset overrides a built-in one. Every
+key but `description` is optional and the patch sets only what the file gives, so a preset
+that should clear the sky must say `layers = []`.
 
-Parsing and checking live in `wxsky.preset_check` (every problem, with its line), writing and
-comparing in `wxsky.preset_write`.
+Parsing and checking live in `wxsky.settings.preset_check` (every problem, with its line),
+writing and comparing in `wxsky.settings.preset_write`.
 """
 
 from __future__ import annotations
@@ -16,17 +17,17 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import sys
 import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wxsky.config import PRESET_NAME_PATTERN
 from wxsky.errors import PresetError
-from wxsky.preset_check import PresetCheck, check_preset_file, parse_preset_data
-from wxsky.preset_write import preset_diff, preset_to_toml
+from wxsky.settings.config import PRESET_NAME_PATTERN
+from wxsky.settings.package_data import package_data_dir
+from wxsky.settings.preset_check import PresetCheck, check_preset_file, parse_preset_data
+from wxsky.settings.preset_write import preset_diff, preset_to_toml
 from wxsky.weather.state import WeatherPatch
 
 __all__ = [
@@ -77,12 +78,8 @@ def user_preset_dir() -> Path:
 
 
 def builtin_preset_dirs() -> tuple[Path, ...]:
-    """The built-in preset directories, in search order; they need not exist."""
-    # This module's own path rather than wxsky.__file__: the two name the same checkout, but a
-    # stale editable install can make `wxsky` a namespace package whose __file__ is None.
-    checkout = Path(__file__).resolve().parents[1] / "configs" / "presets"
-    installed = Path(sys.prefix) / "share" / "wxsky" / "presets"
-    return (checkout, installed)
+    """The built-in preset directories, in search order: the package data folder."""
+    return (package_data_dir("presets"),)
 
 
 def preset_search_path(extra_dirs: Iterable[Path | str] = ()) -> tuple[Path, ...]:

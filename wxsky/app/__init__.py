@@ -1,0 +1,1 @@
+"""The applications: the daemon, its control commands, frame publishing, snapshot and bench."""

@@ -1,0 +1,1 @@
+"""Settings: the config, presets and cloud model files, each checked by `wxsky.schema`."""
