@@ -342,7 +342,7 @@ def _check_update(update: CockpitUpdate) -> None:
     """Everything in a decoded update may reach the weather."""
     for key, value in update.values.items():
         assert isinstance(value, float)
-        lo, hi = RANGES[key]
+        lo, hi = RANGES[key].bounds
         assert lo <= value <= hi, (key, value)
         if key == WIND_DIR:
             assert checked(key, value) == value % 360.0

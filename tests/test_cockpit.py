@@ -79,7 +79,7 @@ def test_checked_accepts_and_normalises(key: str, value: float, expected: float)
         (WIND_DIR, math.inf, "not a finite number"),
         (WIND_DIR, 361.0, "out of range -180..360"),
         (layer_key(1, "cover_oktas"), 9.0, "layer1.cover_oktas 9 out of range 0..8"),
-        (layer_key(1, "thickness_m"), 0.0, "must be more than 0"),
+        (layer_key(1, "thickness_m"), 0.0, "out of range 0..25000 and more than 0"),
         (TEMPERATURE, 80.0, "out of range -90..60"),
         ("layer9.base_m", 1000.0, "unknown cockpit value"),
     ],

@@ -19,6 +19,7 @@ from wxsky.host.compositor import composite, layers_from_images
 from wxsky.host.reference import ReferenceHost
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
+from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.gather import NearRing, zero_drift
 from wxsky.scene.layout import SceneSettings, build_frame, empty_ring, split_at_distance
 from wxsky.scene.sky import sky_params
@@ -95,7 +96,9 @@ def test_a_host_gets_the_front_layer_after_set_aircraft(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d, ReferenceHost.connect(d.address) as host:
         with pytest.raises(RemoteError, match=r"set_aircraft: position_m must be"):
             host.call("set_aircraft", {"position_m": [1.0, 2.0]})
-        with pytest.raises(RemoteError, match=r"position_m\[2\] = 10000000.0 is outside"):
+        with pytest.raises(
+            RemoteError, match=r"position_m\[2\]: must be a number in -1000..100000, got 10000000.0"
+        ):
             host.call("set_aircraft", {"position_m": [1.0, 2.0, 1e7]})
         with pytest.raises(RemoteError, match="unknown field 'speed'"):
             host.call("set_aircraft", {"position_m": None, "speed": 3})
@@ -122,7 +125,10 @@ def test_run_trace_records_the_daemons_ring_cycle(tmp_path: Path) -> None:
                 break
             time.sleep(0.1)
         with d.client() as c:
-            assert c.call("scene")["ring"] is not None  # the first ring is on show
+            scene = c.call("scene")
+        assert scene["ring"] is not None  # the first ring is on show
+        assert scene["block_size_m"] == BLOCK_SIZE_M
+        assert -90.0 <= scene["sky"]["sun_elevation_deg"] <= 90.0
     lines = [json.loads(line) for line in trace.read_text().splitlines()]
     events = [line["event"] for line in lines]
     assert events[0] == "ring_rebuild_start" and lines[0]["reason"] == "initial"

@@ -186,7 +186,7 @@ class CanasId:
         """The wire values `checked` lets through, for reasons, the DBC and the docs."""
         if self.accepted_wire is not None:
             return self.accepted_wire
-        lo, hi = sorted(self.from_si(x) for x in RANGES[self.cockpit_key()])
+        lo, hi = sorted(self.from_si(x) for x in RANGES[self.cockpit_key()].bounds)
         return lo, hi
 
 

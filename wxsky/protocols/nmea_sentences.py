@@ -120,7 +120,7 @@ def _weather(key: str, value: float, what: str, unit: str, given: str = "") -> f
         return checked(key, value)
     except ValueError as exc:
         shown = f"{given} ({value:g} {unit})" if given else f"{value:g} {unit}"
-        lo, hi = RANGES[key]
+        lo, hi = RANGES[key].bounds
         if key.endswith(LAYER_THICKNESS) and lo <= value <= hi:
             raise SentenceError(f"{what} {shown} must be more than 0 {unit}") from None
         if lo <= value <= hi:  # refused for a reason checked() has and this function lacks

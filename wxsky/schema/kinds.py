@@ -8,6 +8,7 @@ control channel uses the same kind, so the limits cannot drift apart.
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from collections.abc import Callable, Sequence
@@ -29,7 +30,9 @@ __all__ = [
 
 def fmt_number(x: float) -> str:
     """A bound or value as a person writes it: 240, 0.1, -90, 1000000."""
-    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else repr(float(x))
+    if isinstance(x, int):
+        return str(x)
+    return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
 
 
 class Kind:
@@ -71,15 +74,32 @@ class Number(Kind):
 
     def describe(self) -> str:
         kind = "an integer" if self.integer else "a number"
+        limits = self.range_text()
         if self.lo is not None and self.hi is not None:
-            kind += f" in {fmt_number(self.lo)}..{fmt_number(self.hi)}"
-        elif self.lo is not None:
-            kind += f" of at least {fmt_number(self.lo)}"
-        elif self.hi is not None:
-            kind += f" of at most {fmt_number(self.hi)}"
-        if self.above_lo and self.lo is not None:
-            kind += f", above {fmt_number(self.lo)}"
-        return kind
+            return f"{kind} in {limits}"
+        return f"{kind} {limits}" if limits else kind
+
+    def range_text(self) -> str:
+        """The limits alone: `0..150`, `0..25000 and more than 0`, `at least 1`."""
+        lo = None if self.lo is None else fmt_number(self.lo)
+        hi = None if self.hi is None else fmt_number(self.hi)
+        if lo is not None and hi is not None:
+            text = f"{lo}..{hi}"
+        elif lo is not None:
+            text = f"more than {lo}" if self.above_lo else f"of at least {lo}"
+            return text
+        elif hi is not None:
+            return f"of at most {hi}"
+        else:
+            return ""
+        return f"{text} and more than {lo}" if self.above_lo else text
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """(lo, hi) of a kind bounded on both sides."""
+        if self.lo is None or self.hi is None:
+            raise ValueError(f"{self.describe()} is not bounded on both sides")
+        return (self.lo, self.hi)
 
     def contains(self, value: float) -> bool:
         if self.lo is not None and (value < self.lo or (self.above_lo and value == self.lo)):
@@ -176,7 +196,7 @@ class Items(Kind):
         out = tuple(self.item.check(v, (*path, i), problems) for i, v in enumerate(value))
         if len(problems) > before:
             return None
-        if self.ordered and any(a > b for a, b in zip(out, out[1:], strict=False)):
+        if self.ordered and any(a > b for a, b in itertools.pairwise(out)):
             problems.append(Problem(path, f"must be [lo, hi] with lo <= hi, got {list(value)!r}"))
             return None
         return out

@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from wxsky.errors import PresetError
+from wxsky.schema.toml_file import package_folder
 from wxsky.settings.config import PRESET_NAME_PATTERN
-from wxsky.settings.package_data import package_data_dir
 from wxsky.settings.preset_check import PresetCheck, check_preset_file, parse_preset_data
 from wxsky.settings.preset_write import preset_diff, preset_to_toml
 from wxsky.weather.state import WeatherPatch
@@ -79,7 +79,7 @@ def user_preset_dir() -> Path:
 
 def builtin_preset_dirs() -> tuple[Path, ...]:
     """The built-in preset directories, in search order: the package data folder."""
-    return (package_data_dir("presets"),)
+    return (package_folder("wxsky.settings", "presets"),)
 
 
 def preset_search_path(extra_dirs: Iterable[Path | str] = ()) -> tuple[Path, ...]:

@@ -26,8 +26,17 @@ from datetime import UTC, date, datetime, timedelta
 from types import MappingProxyType
 from typing import Any
 
+from wxsky.schema import Number
 from wxsky.weather.state import (
+    COVER_OKTAS,
+    LAYER_HEIGHT_M,
+    LAYER_THICKNESS_M,
     MAX_LAYERS,
+    QNH_HPA,
+    TEMPERATURE_C,
+    VISIBILITY_M,
+    WIND_DIR_DEG,
+    WIND_SPEED_MPS,
     CloudLayer,
     CloudType,
     Source,
@@ -68,17 +77,17 @@ WEATHER_KEYS: tuple[str, ...] = (WIND_SPEED, WIND_DIR, *SCALAR_KEYS, *LAYER_KEYS
 # The ranges a value must be in to reach the weather (the weather state's own limits, so that
 # nothing a cockpit sends can make a state that refuses to exist). Wind direction is normalised
 # to 0..360 before the check; a cloud layer's thickness must also be more than zero.
-RANGES: Mapping[str, tuple[float, float]] = MappingProxyType(
+RANGES: Mapping[str, Number] = MappingProxyType(
     {
-        WIND_SPEED: (0.0, 150.0),
-        WIND_DIR: (0.0, 360.0),
-        VISIBILITY: (0.0, 1_000_000.0),
-        TEMPERATURE: (-90.0, 60.0),
-        DEWPOINT: (-90.0, 60.0),
-        QNH: (850.0, 1100.0),
-        **{layer_key(n, LAYER_COVER): (0.0, 8.0) for n in range(1, COCKPIT_LAYERS + 1)},
-        **{layer_key(n, LAYER_BASE): (-500.0, 25_000.0) for n in range(1, COCKPIT_LAYERS + 1)},
-        **{layer_key(n, LAYER_THICKNESS): (0.0, 25_000.0) for n in range(1, COCKPIT_LAYERS + 1)},
+        WIND_SPEED: WIND_SPEED_MPS,
+        WIND_DIR: WIND_DIR_DEG,
+        VISIBILITY: VISIBILITY_M,
+        TEMPERATURE: TEMPERATURE_C,
+        DEWPOINT: TEMPERATURE_C,
+        QNH: QNH_HPA,
+        **{layer_key(n, LAYER_COVER): COVER_OKTAS for n in range(1, COCKPIT_LAYERS + 1)},
+        **{layer_key(n, LAYER_BASE): LAYER_HEIGHT_M for n in range(1, COCKPIT_LAYERS + 1)},
+        **{layer_key(n, LAYER_THICKNESS): LAYER_THICKNESS_M for n in range(1, COCKPIT_LAYERS + 1)},
     }
 )
 
@@ -112,11 +121,9 @@ def checked(key: str, value: float) -> float:
         normalised = float(value) % 360.0
         # A tiny negative angle wraps to exactly 360.0 in floating point: that is north, 0.
         return 0.0 if normalised >= 360.0 else normalised
-    lo, hi = RANGES[key]
-    if not lo <= value <= hi:
-        raise ValueError(f"{key} {value:g} out of range {lo:g}..{hi:g}")
-    if key.endswith(LAYER_THICKNESS) and value <= 0.0:
-        raise ValueError(f"{key} must be more than 0, got {value:g}")
+    kind = RANGES[key]
+    if not kind.contains(value):
+        raise ValueError(f"{key} {value:g} out of range {kind.range_text()}")
     return float(value)
 
 

@@ -13,7 +13,27 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
+from wxsky.schema import Number
+
 MAX_LAYERS = 6
+
+# The weather's limits, each written once: the state checks itself against them, and preset
+# files, cockpit values and control requests are checked against the same kinds.
+LAT_DEG = Number(-90.0, 90.0, unit="deg")
+LON_DEG = Number(-180.0, 180.0, unit="deg")
+ALT_M = Number(-500.0, 30_000.0, unit="m")  # the observer and wind levels, MSL
+LAYER_HEIGHT_M = Number(-500.0, 25_000.0, unit="m")  # cloud bases and tops, MSL
+LAYER_THICKNESS_M = Number(0.0, 25_000.0, unit="m", above_lo=True)
+# Reports and presets give whole oktas; the applied weather moves between them continuously.
+COVER_OKTAS = Number(0.0, 8.0, unit="oktas")
+WHOLE_OKTAS = Number(0, 8, integer=True, unit="oktas")
+WIND_DIR_DEG = Number(0.0, 360.0, unit="deg")  # from, true
+WIND_SPEED_MPS = Number(0.0, 150.0, unit="m/s")
+GUST_MPS = Number(0.0, 200.0, unit="m/s")
+VISIBILITY_M = Number(0.0, 1_000_000.0, unit="m")
+TEMPERATURE_C = Number(-90.0, 60.0, unit="degC")  # also the dew point
+QNH_HPA = Number(850.0, 1100.0, unit="hPa")
+SEED = Number(0, 2**63 - 1, integer=True)
 
 
 class CloudType(enum.IntEnum):
@@ -61,9 +81,9 @@ class Observer:
     alt_m: float
 
     def __post_init__(self) -> None:
-        _check_range("observer.lat_deg", self.lat_deg, -90.0, 90.0)
-        _check_range("observer.lon_deg", self.lon_deg, -180.0, 180.0)
-        _check_range("observer.alt_m", self.alt_m, -500.0, 30_000.0)
+        LAT_DEG.validate("observer.lat_deg", self.lat_deg)
+        LON_DEG.validate("observer.lon_deg", self.lon_deg)
+        ALT_M.validate("observer.alt_m", self.alt_m)
 
 
 @dataclass(frozen=True)
@@ -76,9 +96,9 @@ class CloudLayer:
     type: CloudType
 
     def __post_init__(self) -> None:
-        _check_range("cloud layer cover_oktas", self.cover_oktas, 0.0, 8.0)
-        _check_range("cloud layer base_m", self.base_m, -500.0, 25_000.0)
-        _check_range("cloud layer top_m", self.top_m, -500.0, 25_000.0)
+        COVER_OKTAS.validate("cloud layer cover_oktas", self.cover_oktas)
+        LAYER_HEIGHT_M.validate("cloud layer base_m", self.base_m)
+        LAYER_HEIGHT_M.validate("cloud layer top_m", self.top_m)
         if self.top_m <= self.base_m:
             raise ValueError(f"cloud layer top_m {self.top_m} must be above base_m {self.base_m}")
 
@@ -96,10 +116,10 @@ class WindLayer:
     variable: bool = False  # METAR VRB: direction not steady
 
     def __post_init__(self) -> None:
-        _check_range("wind alt_m", self.alt_m, -500.0, 30_000.0)
-        _check_range("wind dir_from_deg", self.dir_from_deg, 0.0, 360.0)
-        _check_range("wind speed_mps", self.speed_mps, 0.0, 150.0)
-        _check_range("wind gust_mps", self.gust_mps, 0.0, 200.0)
+        ALT_M.validate("wind alt_m", self.alt_m)
+        WIND_DIR_DEG.validate("wind dir_from_deg", self.dir_from_deg)
+        WIND_SPEED_MPS.validate("wind speed_mps", self.speed_mps)
+        GUST_MPS.validate("wind gust_mps", self.gust_mps)
 
     def velocity_mps(self) -> tuple[float, float]:
         """(east, north) velocity of the air; the wind blows *from* dir_from_deg."""
@@ -159,14 +179,13 @@ class WeatherState:
             raise ValueError("time_utc must be timezone-aware UTC")
         if len(self.layers) > MAX_LAYERS:
             raise ValueError(f"at most {MAX_LAYERS} cloud layers, got {len(self.layers)}")
-        _check_range("visibility_m", self.visibility_m, 0.0, 1_000_000.0)
-        _check_range("qnh_hpa", self.qnh_hpa, 850.0, 1100.0)
+        VISIBILITY_M.validate("visibility_m", self.visibility_m)
+        QNH_HPA.validate("qnh_hpa", self.qnh_hpa)
         if self.temperature_c is not None:
-            _check_range("temperature_c", self.temperature_c, -90.0, 60.0)
+            TEMPERATURE_C.validate("temperature_c", self.temperature_c)
         if self.dewpoint_c is not None:
-            _check_range("dewpoint_c", self.dewpoint_c, -90.0, 60.0)
-        if not 0 <= self.seed < 2**63:
-            raise ValueError(f"seed must be in 0..2**63-1, got {self.seed}")
+            TEMPERATURE_C.validate("dewpoint_c", self.dewpoint_c)
+        SEED.validate("seed", self.seed)
         object.__setattr__(self, "layers", tuple(sorted(self.layers, key=lambda lay: lay.base_m)))
         object.__setattr__(self, "wind", tuple(sorted(self.wind, key=lambda w: w.alt_m)))
 
@@ -271,10 +290,3 @@ def parse_time_utc(text: str) -> datetime:
     if t.tzinfo is None:
         t = t.replace(tzinfo=UTC)
     return t.astimezone(UTC)
-
-
-def _check_range(name: str, value: float, lo: float, hi: float) -> None:
-    if not isinstance(value, (int, float)) or isinstance(value, bool):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if not math.isfinite(value) or not lo <= value <= hi:
-        raise ValueError(f"{name} = {value} is outside {lo}..{hi}")

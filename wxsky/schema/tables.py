@@ -1,0 +1,127 @@
+"""Tables of settings: which keys a table may hold, each with its kind and default, plus the
+checks that need several keys at once (a layer's top above its base).
+
+A table check collects every problem, with the key path it is about, rather than stopping at
+the first: a user fixing a file wants the whole list.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+from wxsky.schema.kinds import Kind
+from wxsky.schema.problems import Invalid, KeyPath, Problem
+
+
+class _Sentinel:
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __repr__(self) -> str:
+        return self.name
+
+
+REQUIRED: Final[Any] = _Sentinel("REQUIRED")  # a key the table must give
+OMIT: Final[Any] = _Sentinel("OMIT")  # a key left out of the result when the table omits it
+
+# A check over the checked values of a whole table: appends problems (paths under `path`).
+TableCheck = Callable[[dict[str, Any], KeyPath, list[Problem]], None]
+
+
+@dataclass(frozen=True)
+class Field:
+    kind: Kind
+    default: Any = OMIT
+
+
+def unknown_key_hint(key: str, known: list[str]) -> str:
+    close = difflib.get_close_matches(key, known, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+@dataclass(frozen=True)
+class Table(Kind):
+    """A TOML table (or a control request's params): known keys only, each checked by its
+    kind. `checks` run only when every key passed, on the converted values."""
+
+    fields: Mapping[str, Field]
+    checks: tuple[TableCheck, ...] = field(default=(), compare=False)
+    what: str = "a table"
+
+    def describe(self) -> str:
+        return self.what
+
+    def check(self, value: Any, path: KeyPath, problems: list[Problem]) -> Any:
+        if not isinstance(value, dict):
+            problems.append(Problem(path, f"must be {self.what}, got {value!r}"))
+            return None
+        before = len(problems)
+        known = list(self.fields)
+        for key in value:
+            if key not in self.fields:
+                hint = unknown_key_hint(str(key), known)
+                problems.append(Problem((*path, key), f"unknown key{hint}"))
+        out: dict[str, Any] = {}
+        for name, f in self.fields.items():
+            if name in value:
+                out[name] = f.kind.check(value[name], (*path, name), problems)
+            elif f.default is REQUIRED:
+                problems.append(Problem((*path, name), "missing key"))
+            elif f.default is not OMIT:
+                out[name] = f.default
+        if len(problems) == before:
+            for check in self.checks:
+                check(out, path, problems)
+        return out if len(problems) == before else None
+
+    def _convert(self, value: Any) -> dict[str, Any]:
+
+        problems: list[Problem] = []
+        out = self.check(value, (), problems)
+        if problems:
+            raise Invalid(problems)
+        return dict(out)
+
+    def values(self, value: Any) -> dict[str, Any]:
+        """The checked values of a whole table; Invalid lists every problem."""
+        return self._convert(value)
+
+
+@dataclass(frozen=True)
+class Tables(Kind):
+    """An array of tables (`[[layers]]`), at most `max_items` of them."""
+
+    item: Table
+    name: str
+    max_items: int | None = None
+    noun: str = ""  # what the items are called in messages ("cloud layers"); default: name
+
+    def describe(self) -> str:
+        return f"an array of tables ([[{self.name}]])"
+
+    def check(self, value: Any, path: KeyPath, problems: list[Problem]) -> Any:
+        if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+            problems.append(Problem(path, f"must be {self.describe()}, got {value!r}"))
+            return None
+        before = len(problems)
+        out = tuple(self.item.check(t, (*path, i), problems) for i, t in enumerate(value))
+        if self.max_items is not None and len(value) > self.max_items:
+            problems.append(
+                Problem(
+                    path,
+                    f"at most {self.max_items} {self.noun or self.name}, got {len(value)}",
+                    at=(*path, self.max_items),
+                )
+            )
+        return out if len(problems) == before else None
+
+    def _convert(self, value: Any) -> tuple[Any, ...]:
+
+        problems: list[Problem] = []
+        out = self.check(value, (), problems)
+        if problems:
+            raise Invalid(problems)
+        return tuple(out)
