@@ -16,12 +16,11 @@ from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
-pytestmark = pytest.mark.gl
-
 STATE = WeatherState().apply(load_preset("scattered-cumulus", ()))
 SETTINGS = SceneSettings(ring_texture_px=64, max_range_m=20_000.0)
 
 
+@pytest.mark.gl
 def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None:
     trace_path = tmp_path / "trace.jsonl"
     with TraceWriter(trace_path) as trace:
@@ -54,6 +53,7 @@ def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None
     assert "impostor_slice" in result.table()
 
 
+@pytest.mark.gl
 def test_direct_mode_draws_every_cloud_as_a_sprite() -> None:
     args = (STATE, SETTINGS, straight_and_level(), 3)
     direct = run_bench(*args, "direct", (96, 54))
@@ -62,6 +62,7 @@ def test_direct_mode_draws_every_cloud_as_a_sprite() -> None:
     assert not direct.events  # no ring at all
 
 
+@pytest.mark.gl
 def test_the_command_prints_json(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     path = tmp_path / "path.csv"
     path.write_text("0, 0, 0, 1500, 45, 5\n1, 100, 100, 1500, 45, 5\n")
@@ -74,6 +75,7 @@ def test_the_command_prints_json(capsys: pytest.CaptureFixture[str], tmp_path: P
     assert out["frames"] == 3 and out["size"] == [64, 36] and out["path"] == str(path)
 
 
+# No GL: the path is read before anything is drawn.
 def test_a_bad_camera_path_is_a_one_line_error(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from daemon_harness import running_daemon
 
+from wxsky import __version__
 from wxsky.app.snapshot import take_snapshot
 from wxsky.errors import WxskyError
 from wxsky.host.client import RemoteError
@@ -23,9 +24,8 @@ from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, parse_time_utc
 
-pytestmark = pytest.mark.gl
 
-
+@pytest.mark.gl
 def test_status_json_reports_the_running_daemon(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d:
         # A rate needs two frames; on a loaded machine the first status may come before.
@@ -42,7 +42,7 @@ def test_status_json_reports_the_running_daemon(tmp_path: Path) -> None:
             if status["frames_published"] >= 3 or time.monotonic() > deadline:
                 break
             time.sleep(0.1)
-        assert status["version"] == "0.1.0"
+        assert status["version"] == __version__
         assert status["frames_published"] > 0
         assert status["uptime_s"] > 0
         assert status["fps"] > 0
@@ -66,6 +66,7 @@ def test_status_json_reports_the_running_daemon(tmp_path: Path) -> None:
         assert "cloud cumulus 3/8" in human
 
 
+@pytest.mark.gl
 def test_sigterm_stops_cleanly_and_removes_socket_and_segment(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d:
         assert Path(f"/dev/shm/{d.shm_name}").exists()
@@ -77,6 +78,7 @@ def test_sigterm_stops_cleanly_and_removes_socket_and_segment(tmp_path: Path) ->
         assert "stopped after" in d.log()
 
 
+@pytest.mark.gl
 def test_second_sigint_forces_exit_and_still_cleans_up(tmp_path: Path) -> None:
     # A long shutdown timeout would hold the first SIGINT; the second must not wait for it.
     with running_daemon(tmp_path) as d:
@@ -88,6 +90,7 @@ def test_second_sigint_forces_exit_and_still_cleans_up(tmp_path: Path) -> None:
         assert not d.socket_path.exists()
 
 
+@pytest.mark.gl
 def test_bad_control_input_is_answered_and_the_daemon_keeps_publishing(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d, d.client() as c:
         before = c.call("status")
@@ -119,6 +122,7 @@ def test_bad_control_input_is_answered_and_the_daemon_keeps_publishing(tmp_path:
         assert "rejected" in d.log()
 
 
+@pytest.mark.gl
 def test_apply_metar_and_preset_set_the_target_in_precedence_order(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d, d.client() as c:
         c.call("apply_metar", {"report": "LSZH 211250Z 24012G25KT 9999 FEW030 BKN080 18/09 Q1012"})
@@ -138,6 +142,7 @@ def test_apply_metar_and_preset_set_the_target_in_precedence_order(tmp_path: Pat
         assert c.call("status")["target"]["sources"]["layers"] == "metar"
 
 
+@pytest.mark.gl
 def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) -> None:
     when = "2026-06-21T15:30:00Z"
     with (
@@ -177,6 +182,7 @@ def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) 
     assert diff.max() <= 1, f"max diff {diff.max()}, {np.mean(diff > 1):.4f} of values off"
 
 
+@pytest.mark.gl
 def test_daemon_writes_a_preview_png(tmp_path: Path) -> None:
     from wxsky.png import read_png
 
@@ -195,6 +201,7 @@ def test_daemon_writes_a_preview_png(tmp_path: Path) -> None:
         assert image[..., :3].std() > 5
 
 
+# No GL: no daemon at all.
 def test_client_reports_a_missing_daemon(tmp_path: Path) -> None:
     from wxsky.host.client import ControlClient
 
@@ -202,6 +209,7 @@ def test_client_reports_a_missing_daemon(tmp_path: Path) -> None:
         ControlClient.connect(f"unix:{tmp_path / 'nobody.sock'}")
 
 
+@pytest.mark.gl
 def test_frame_notifications_say_whether_the_camera_is_in_cloud(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d, d.client() as c:
         c.subscribe(["frame"])

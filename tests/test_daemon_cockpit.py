@@ -21,6 +21,9 @@ from wxsky.host.client import ControlClient
 from wxsky.protocols.canaerospace import encode_date, encode_float, encode_time
 from wxsky.protocols.nmea import sentence
 
+# Every test runs a daemon, which draws every frame.
+pytestmark = pytest.mark.gl
+
 GROUP = f"239.74.163.{random.Random(os.getpid()).randrange(10, 250)}"
 
 

@@ -11,7 +11,11 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
+import pytest
 from daemon_harness import RunningDaemon, running_daemon
+
+# Every test runs a daemon, which draws every frame.
+pytestmark = pytest.mark.gl
 
 # The default preset's observer is Zurich airport, LSZH; LSZH's position comes from the
 # shipped station table, since plain-line feeds carry none.

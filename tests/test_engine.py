@@ -10,9 +10,18 @@ import numpy as np
 import pytest
 
 from wxsky.engine.stages import SkyEngine, enu_from_geodetic
+from wxsky.scene import sky as sky_module
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
-from wxsky.weather.state import CloudLayer, CloudType, Source, WeatherPatch, WeatherState, WindLayer
+from wxsky.weather.state import (
+    CloudLayer,
+    CloudType,
+    Observer,
+    Source,
+    WeatherPatch,
+    WeatherState,
+    WindLayer,
+)
 
 T0 = datetime(2026, 6, 21, 13, 0, tzinfo=UTC)
 SETTINGS = SceneSettings(ring_radius_m=8000.0, max_range_m=16_000.0, ring_texture_px=64)
@@ -196,6 +205,47 @@ def test_plan_state_carries_the_frame_time() -> None:
     assert plan.state.time_utc == T0 + timedelta(seconds=3)
     assert dataclasses.replace(plan.state, time_utc=T0) == _engine().state
     assert plan.frame.sky.sun.elevation_deg > 40.0  # Zurich early afternoon in June
+
+
+def _count_ephemeris(monkeypatch: pytest.MonkeyPatch) -> list[datetime]:
+    """The times the sky asks the ephemeris for, from now on."""
+    calls: list[datetime] = []
+    real = sky_module.sun_and_moon
+
+    def counted(time_utc: datetime, *args: float, **kw: bool) -> object:
+        calls.append(time_utc)
+        return real(time_utc, *args, **kw)
+
+    monkeypatch.setattr(sky_module, "sun_and_moon", counted)
+    return calls
+
+
+def test_one_ephemeris_per_frame_shared_with_the_scene_sky(monkeypatch: pytest.MonkeyPatch) -> None:
+    engine = _engine(rate=1.0)
+    calls = _count_ephemeris(monkeypatch)
+    plan = engine.advance(0.5)
+    # What the daemon reports as the scene after the frame is of the same moment.
+    scene_sky = engine.sky()
+    assert calls == [plan.state.time_utc]
+    assert scene_sky.sun == plan.frame.sky.sun and scene_sky.moon == plan.frame.sky.moon
+    # Only the eye differs: the scene's sky is the observer's, the frame's the camera's.
+    assert scene_sky == sky_module.sky_params(plan.state)
+    calls.clear()
+    later = engine.advance(0.5)
+    assert calls == [later.state.time_utc]
+
+
+def test_a_stopped_clock_needs_no_new_ephemeris(monkeypatch: pytest.MonkeyPatch) -> None:
+    engine = _engine(rate=0.0)
+    calls = _count_ephemeris(monkeypatch)
+    for _ in range(3):
+        engine.advance(1.0)
+    assert calls == [T0]
+    # A new site is another sky at the same moment.
+    engine.apply(WeatherPatch(source=Source.PRESET, observer=Observer(10.0, 20.0, 0.0)))
+    plan = engine.advance(1.0)
+    assert calls == [T0, T0]
+    assert plan.frame.sky.sun == sky_module.sky_params(plan.state).sun
 
 
 def test_enu_from_geodetic() -> None:

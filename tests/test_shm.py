@@ -324,11 +324,9 @@ def test_reader_process_exit_leaves_the_segment(name: str) -> None:
 
 @pytest.mark.gl
 def test_moderngl_reads_straight_into_a_layer_buffer(name: str) -> None:
-    moderngl = pytest.importorskip("moderngl")
-    try:
-        ctx = moderngl.create_context(standalone=True, backend="egl")
-    except Exception as exc:
-        pytest.skip(f"no EGL context: {exc}")
+    from wxsky.render.context import create_context
+
+    ctx = create_context()
     try:
         fbo = ctx.simple_framebuffer((8, 4))
         fbo.use()

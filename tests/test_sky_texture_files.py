@@ -1,8 +1,9 @@
-"""The sky pass's shipped textures: the PNGs are the generator's output, byte for byte; the
-tool's --check catches drift; the loaded arrays have their documented shapes and encodings;
-the star cells' channels mean what sky_textures says (R mean intensity, G flicker rate,
-B variance, A phase); the sunset gradient runs golden to red along the sunset control and red to
-pink up the sky, smoothly; and the sky pass tints the dusk dome from it.
+"""The sky pass's shipped textures: the PNGs hold the generator's output, pixel for pixel
+(not byte for byte: zlib builds differ); the tool's --check catches drift; the loaded arrays
+have their documented shapes and encodings; the star cells' channels mean what sky_textures
+says (R mean intensity, G flicker rate, B variance, A phase); the sunset gradient runs golden
+to red along the sunset control and red to pink up the sky, smoothly; and the sky pass tints
+the dusk dome from it.
 """
 
 from __future__ import annotations
@@ -15,10 +16,11 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
+from png_helpers import recompressed
 from tool_loader import load_tool
 
 from wxsky.app.snapshot import take_snapshot
-from wxsky.png import encode_png
+from wxsky.png import encode_png, read_png
 from wxsky.render.renderer import Renderer
 from wxsky.render.sky_texture_gen import (
     DOME_FILE,
@@ -67,8 +69,8 @@ def test_shipped_files_are_the_generators_output(generated: dict[str, U8]) -> No
     for name, img in generated.items():
         assert name.startswith("sky_") and name.endswith(".png")
         assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 4
-        path = DATA / name
-        assert path.read_bytes() == encode_png(img), f"{name} is stale: run the tool"
+        shipped = read_png(DATA / name)
+        np.testing.assert_array_equal(shipped, img, err_msg=f"{name} is stale: run the tool")
     np.testing.assert_array_equal(star_texture(), generated[STAR_FILE])
     np.testing.assert_array_equal(galaxy_texture(), generated[GALAXY_FILE][..., 0])
     np.testing.assert_array_equal(dome_noise_texture(), generated[DOME_FILE])
@@ -86,10 +88,16 @@ def test_check_flag_catches_drift(tmp_path: Path) -> None:
         shutil.copyfile(DATA / name, tmp_path / name)
     assert TOOL.main(["--check"]) == 0  # the package's own files
     assert TOOL.main(["--check", "--out", str(tmp_path)]) == 0
-    data = bytearray((tmp_path / GALAXY_FILE).read_bytes())
-    data[-20] ^= 1  # inside the compressed pixels
-    (tmp_path / GALAXY_FILE).write_bytes(bytes(data))
+    # The same pixels compressed otherwise (another machine's zlib) are up to date.
+    (tmp_path / GALAXY_FILE).write_bytes(recompressed((DATA / GALAXY_FILE).read_bytes()))
+    assert (tmp_path / GALAXY_FILE).read_bytes() != (DATA / GALAXY_FILE).read_bytes()
+    assert TOOL.main(["--check", "--out", str(tmp_path)]) == 0
+    changed = read_png(DATA / GALAXY_FILE)
+    changed[7, 9, :3] ^= 1
+    (tmp_path / GALAXY_FILE).write_bytes(encode_png(changed))
     assert TOOL.main(["--check", "--out", str(tmp_path)]) == 1
+    (tmp_path / GALAXY_FILE).write_bytes((DATA / GALAXY_FILE).read_bytes()[:-40])
+    assert TOOL.main(["--check", "--out", str(tmp_path)]) == 1  # cut short
     shutil.copyfile(DATA / GALAXY_FILE, tmp_path / GALAXY_FILE)
     assert TOOL.main(["--check", "--out", str(tmp_path)]) == 0
     (tmp_path / STAR_FILE).unlink()
@@ -104,7 +112,7 @@ def test_tool_writes_the_files(tmp_path: Path) -> None:
     assert TOOL.main(["--out", str(out)]) == 0
     assert sorted(p.name for p in out.iterdir()) == sorted(SKY_FILES)
     for name in SKY_FILES:
-        assert (out / name).read_bytes() == (DATA / name).read_bytes(), name
+        np.testing.assert_array_equal(read_png(out / name), read_png(DATA / name), err_msg=name)
 
 
 # -- what the renderer loads ------------------------------------------------------------

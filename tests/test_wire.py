@@ -207,11 +207,12 @@ def test_extension_types_are_refused() -> None:
         MessageDecoder().feed(data)
 
 
-def test_oversized_message_is_refused() -> None:
+def test_oversized_message_is_refused_naming_the_decoders_own_limit() -> None:
     decoder = MessageDecoder(max_message_size=1024)
     with pytest.raises(WireError, match="larger than") as info:
         decoder.feed(encode(Notification("big", {"b": b"x" * 2000})))
     assert not info.value.recoverable
+    assert str(info.value) == "control message 1: larger than 1024 bytes"
 
 
 class Custom:

@@ -9,7 +9,7 @@ sky_galaxy.png (the Milky Way's glow, grey in RGB, A = 255), sky_dome_noise.png 
 dome's four noise fields) and sky_sunset.png (the dome's sunset tint over the sunset control
 and the height in the sky, A = 255), all RGBA8, from the one generator,
 `wxsky.render.sky_texture_gen.build_sky_textures`, with its fixed seeds. `--check` regenerates in
-memory and byte-compares the shipped PNGs, so CI catches a generator change whose files were
+memory and compares the shipped PNGs' pixels, so CI catches a generator change whose files were
 not rebuilt; `--out DIR` writes to (or checks) another folder. After rebuilding, regenerate the
 goldens (tools/regen_goldens.py): the sky is drawn with these textures.
 """
@@ -27,7 +27,6 @@ for _path in (ROOT, ROOT / "tools"):  # run from a checkout without installing
 
 from shipped_files import write_or_check  # noqa: E402
 
-from wxsky.png import encode_png  # noqa: E402
 from wxsky.render.sky_texture_gen import SKY_FILES, build_sky_textures  # noqa: E402
 from wxsky.render.sky_textures import DATA_DIR  # noqa: E402
 
@@ -44,9 +43,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     out: Path = args.out if args.out is not None else DATA
-    files = {name: encode_png(img) for name, img in build_sky_textures().items()}
-    assert tuple(files) == SKY_FILES
-    return write_or_check(files, out, check=args.check, tool="tools/build_sky_textures.py")
+    images = build_sky_textures()
+    assert tuple(images) == SKY_FILES
+    return write_or_check(images, out, check=args.check, tool="tools/build_sky_textures.py")
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ Writes wxsky/render/data/cloud_sheet_{512,256,128,64,32}.png (Wang's 16 textures
 mip chain, straight-alpha RGBA8) from the one generator, `wxsky.render.sheet_textures`, with
 the fixed seed `SHEET_SEED`; and docs/gallery/texture-sheet.png, every level composited on a
 grey-blue sky so a person can judge the clouds. `--check` regenerates in memory and
-byte-compares the shipped PNGs (not the preview), so CI catches a generator change whose
+compares the shipped PNGs' pixels (not the preview), so CI catches a generator change whose
 sheet was not rebuilt. After rebuilding, regenerate the goldens (tools/regen_goldens.py):
 the clouds are drawn with these textures.
 """
@@ -29,7 +29,7 @@ for _path in (ROOT, ROOT / "tools"):  # run from a checkout without installing
 
 from shipped_files import shown, write_or_check  # noqa: E402
 
-from wxsky.png import encode_png, write_png  # noqa: E402
+from wxsky.png import write_png  # noqa: E402
 from wxsky.render.sheet_textures import build_levels  # noqa: E402
 from wxsky.render.sprite_sheet import (  # noqa: E402
     DATA_DIR,
@@ -79,9 +79,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     levels = build_levels(SHEET_SEED)
-    files = {level_filename(i): encode_png(img) for i, img in enumerate(levels)}
-    assert len(files) == MIP_LEVELS
-    status = write_or_check(files, DATA, check=args.check, tool="tools/build_sprite_sheet.py")
+    images = {level_filename(i): img for i, img in enumerate(levels)}
+    assert len(images) == MIP_LEVELS
+    status = write_or_check(images, DATA, check=args.check, tool="tools/build_sprite_sheet.py")
     if status or args.check:
         return status
     write_png(PREVIEW, preview(levels))

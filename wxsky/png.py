@@ -1,6 +1,7 @@
 """Minimal PNG writer and reader for RGBA8 images (stdlib zlib only).
 
-Output bytes depend only on the pixels, so equal images give byte-identical files.
+Output bytes depend on the pixels and on the zlib build: equal images give byte-identical
+files on one machine, not across machines, so compare decoded pixels (`read_png`), never files.
 """
 
 from __future__ import annotations

@@ -46,6 +46,7 @@ from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
+from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
@@ -415,8 +416,6 @@ class Daemon:
         }
 
     def scene_info(self) -> dict[str, Any]:
-        from wxsky.scene.sky import sky_params
-
         ring = self.engine.ring
         return {
             "shm_name": self.config.output.shm_name,
@@ -425,8 +424,8 @@ class Daemon:
             "ring": ring.geometry.to_dict() if ring is not None else None,
             "ring_texture_px": self.config.scene.ring_texture_px,
             "camera": camera_to_dict(self.engine.camera),
-            "sky": sky_params(self.engine.state).to_dict(),
-            "block_size_m": 4000.0,
+            "sky": self.engine.sky().to_dict(),
+            "block_size_m": BLOCK_SIZE_M,
             "layers": [s.name for s in layer_specs(self.config)],
         }
 

@@ -39,7 +39,7 @@ from wxsky.scene.layout import (
     build_ring,
     empty_ring,
 )
-from wxsky.scene.sky import SkyParams, sky_params
+from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
 from wxsky.weather.precedence import DEFAULT_COCKPIT_HOLD_S, SourceStack
 from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
@@ -123,6 +123,7 @@ class SkyEngine:
         self._rings: RingFrame | None = None
         self._capping = False  # the near-sprite cap left sprites out last frame
         self._locks: Locks = NO_LOCKS  # in-cloud facing locks, carried frame to frame
+        self._bodies: Bodies | None = None  # the latest frame's sun and moon
         self.weather_version = 0  # bumped when the applied weather or the target changes
         self.target_version = 0  # bumped when the target (or the clock, set from outside) changes
 
@@ -154,6 +155,11 @@ class SkyEngine:
     @property
     def camera(self) -> Camera:
         return self._camera
+
+    def sky(self, eye_alt_m: float | None = None) -> SkyParams:
+        """The sky of the applied weather from eye_alt_m (default: the observer's), with the
+        latest frame's sun and moon where it is still that frame's moment."""
+        return sky_params(self._state, eye_alt_m, self._bodies)
 
     @property
     def ring(self) -> RingScene | None:
@@ -333,7 +339,9 @@ class SkyEngine:
             state, drift, camera = self._state, self._drift, self._camera
             aircraft_m = self._aircraft_m
         # The scene stages read only the immutable values taken above: no lock from here on.
-        sky = sky_params(state, camera.position_m[2])
+        # One ephemeris per frame (and none while the clock stands still): `sky()` reuses it.
+        self._bodies = bodies = bodies_for(state, self._bodies)
+        sky = sky_params(state, camera.position_m[2], bodies)
         near_radius_m: float | None = None
         if self.render_mode == "direct":
             rings = RingFrame(None, 0, None, (), None, 1, 0.0, 0, ())

@@ -179,6 +179,7 @@ class MessageDecoder:
     """Turns a byte stream into messages, however the bytes are split. One per connection."""
 
     def __init__(self, max_message_size: int = MAX_MESSAGE_SIZE) -> None:
+        self.max_message_size = max_message_size
         self._unpacker = msgpack.Unpacker(
             max_buffer_size=max_message_size,
             raw=False,
@@ -208,7 +209,7 @@ class MessageDecoder:
             self._unpacker.feed(data)
         except msgpack.BufferFull:
             raise self._fail(
-                f"control message {self._count + 1}: larger than {MAX_MESSAGE_SIZE} bytes",
+                f"control message {self._count + 1}: larger than {self.max_message_size} bytes",
                 decoded,
             ) from None
         while True:

@@ -23,13 +23,15 @@ from wxsky.scene.ephemeris import (
     sun_and_moon,
 )
 from wxsky.scene.ephemeris import sun_position as _ephemeris_sun_position
-from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+from wxsky.weather.state import CloudLayer, CloudType, Observer, WeatherState
 
 __all__ = [
+    "Bodies",
     "DomeControls",
     "MoonPosition",
     "SkyParams",
     "SunPosition",
+    "bodies_for",
     "sky_params",
     "sun_position",
 ]
@@ -158,11 +160,36 @@ BOUNDARY_LAYER_M = 2_000.0  # depth of the hazy mixed layer over the ground, at 
 CLEAR_AIR_HAZE_M = 60_000.0  # haze distance in the clear air above it
 
 
-def sky_params(state: WeatherState, eye_alt_m: float | None = None) -> SkyParams:
-    """The sky seen from eye_alt_m MSL (default: the observer's): only cloud above the eye
-    greys and dims it, so a pilot who climbs out of an overcast deck sees the blue above it."""
+@dataclass(frozen=True)
+class Bodies:
+    """The sun and moon of one moment and site, with the moment and site they are for."""
+
+    time_utc: datetime
+    observer: Observer
+    sun: SunPosition
+    moon: MoonPosition
+
+
+def bodies_for(state: WeatherState, known: Bodies | None = None) -> Bodies:
+    """The sun and moon at the state's time and site: `known` where it is for exactly those,
+    else worked out afresh. The ephemeris is the dearest part of the sky, and a frame asks
+    for it more than once (its own sky, the scene the daemon reports)."""
     obs = state.observer
+    if known is not None and known.time_utc == state.time_utc and known.observer == obs:
+        return known
     sun, moon = sun_and_moon(state.time_utc, obs.lat_deg, obs.lon_deg, obs.alt_m)
+    return Bodies(state.time_utc, obs, sun, moon)
+
+
+def sky_params(
+    state: WeatherState, eye_alt_m: float | None = None, bodies: Bodies | None = None
+) -> SkyParams:
+    """The sky seen from eye_alt_m MSL (default: the observer's): only cloud above the eye
+    greys and dims it, so a pilot who climbs out of an overcast deck sees the blue above it.
+    `bodies`: the sun and moon already worked out for this moment, if they are (`bodies_for`)."""
+    obs = state.observer
+    known = bodies_for(state, bodies)
+    sun, moon = known.sun, known.moon
     el = sun.elevation_deg
     day = _smoothstep(-6.0, 10.0, el)  # civil twilight to well-lit day
     sunset = _smoothstep(-8.0, 0.0, el) * (1.0 - _smoothstep(2.0, 18.0, el))
