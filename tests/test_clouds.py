@@ -12,10 +12,10 @@ import textwrap
 import numpy as np
 import pytest
 
+from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds
 from wxsky.scene.formation import layer_block
 from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM
-from wxsky.scene.cloud_model_files import default_models
 from wxsky.weather.state import CloudLayer, CloudType
 
 # The undecorated generator, so determinism is not just the lru_cache handing back one object.

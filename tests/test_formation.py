@@ -9,6 +9,7 @@ import itertools
 import numpy as np
 import pytest
 
+from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModel
 from wxsky.scene.clouds import BLOCK_SIZE_M, BlockClouds, block_clouds
 from wxsky.scene.formation import cloud_progress, layer_block, sprite_alpha, visible_sprites
@@ -16,7 +17,6 @@ from wxsky.scene.gather import advance_drift, gather_blocks, zero_drift
 from wxsky.scene.layout import fade_by_range
 from wxsky.scene.sky import sky_params
 from wxsky.scene.sprites import SpriteBatch
-from wxsky.scene.cloud_model_files import default_models
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState, WindLayer
 
 ALL_MODELS = [m for models in default_models().by_type.values() for m in models]

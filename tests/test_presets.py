@@ -491,7 +491,8 @@ def test_check_reports_every_problem_in_file_order(tmp_path: Path) -> None:
     check = check_preset_file(path)
     assert check.patch is None
     assert check.lines() == [
-        f"{path}:{line_of(text, 'seed')}: seed: must be an integer in 0..9223372036854775807, got 'x'",
+        f"{path}:{line_of(text, 'seed')}: seed: must be an integer in "
+        "0..9223372036854775807, got 'x'",
         f"{path}:{line_of(text, '[[layers]]', 1)}: layers[1].cover_oktas: missing key",
         f"{path}:{line_of(text, 'cover = 4')}: layers[1].cover: unknown key "
         "(did you mean 'cover_oktas'?)",

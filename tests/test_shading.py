@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from wxsky.scene import shading_harris
+from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import SpriteBatch, block_clouds, layer_keys
 from wxsky.scene.layout import SceneSettings, shade_for_eye
 from wxsky.scene.shading import (
@@ -27,7 +28,6 @@ from wxsky.scene.shading_wang import (
     wang_colours,
 )
 from wxsky.scene.sky import SkyParams, SunPosition, sky_params
-from wxsky.scene.cloud_model_files import default_models
 from wxsky.settings.config import SceneSection
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
@@ -249,7 +249,7 @@ def test_ring_bins_read_the_light_of_their_whole_cloud() -> None:
 def test_shading_setting_and_config_key() -> None:
     assert SceneSettings().shading == DEFAULT_SHADING == SceneSection().shading == "harris"
     assert SceneSection(shading="Wang").settings().shading == "wang"
-    with pytest.raises(ValueError, match=r"scene\.shading must be one of wang, harris"):
+    with pytest.raises(ValueError, match=r"scene\.shading: must be one of wang, harris"):
         SceneSection(shading="phong")
     with pytest.raises(ValueError, match="shading must be one of"):
         sprite_colours(_cumulus(), _sky(NOON), EYE, "phong")
