@@ -20,11 +20,13 @@ from wxsky.schema import (
     Field,
     Invalid,
     Items,
+    Nullable,
     Number,
     Problem,
     Table,
     Tables,
     Text,
+    Tuple,
     format_key,
 )
 from wxsky.schema.toml_file import check_toml_bytes, key_lines
@@ -218,3 +220,16 @@ def test_the_config_drift_is_gone(tmp_path: Path) -> None:
         f"{path}:4: camera.width: must be an integer in 16..8192, got 10000",
     ]
     assert "camera" in CONFIG_TABLE.fields and "serial" in CONFIG_TABLE.fields
+
+
+def test_tuples_check_each_position_and_nullable_takes_null() -> None:
+    position = Tuple((Number(-10, 10), Number(-10, 10), Number(0, 5)), "[east_m, north_m, alt_m]")
+    maybe = Nullable(position)
+    assert maybe.validate("position_m", None) is None
+    assert maybe.validate("position_m", [1, 2, 3]) == (1.0, 2.0, 3.0)
+    with pytest.raises(ValueError, match=r"^position_m\[2\]: must be a number in 0\.\.5, got 9$"):
+        maybe.validate("position_m", [1, 2, 9])
+    with pytest.raises(ValueError, match=r"must be \[east_m, north_m, alt_m\] or null, got 'x'"):
+        maybe.validate("position_m", "x")
+    with pytest.raises(ValueError, match=r"must be \[east_m, north_m, alt_m\], got \[1, 2\]"):
+        maybe.validate("position_m", [1, 2])

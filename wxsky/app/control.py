@@ -11,7 +11,18 @@ from typing import Any
 from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.errors import ProtocolError, WxskyError
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, VIEWPORT_PX, Camera
-from wxsky.schema import Custom, Field, Invalid, Items, Number, Table, Text
+from wxsky.schema import (
+    REQUIRED,
+    Custom,
+    Field,
+    Invalid,
+    Items,
+    Nullable,
+    Number,
+    Table,
+    Text,
+    Tuple,
+)
 from wxsky.settings.config import CLOCK_RATE
 from wxsky.weather.state import ALT_M, LAT_DEG, LON_DEG, Source, parse_time_utc
 
@@ -25,7 +36,19 @@ class ControlError(ProtocolError):
 _ANY = Number()
 _POSITION = Items(_ANY, length=3, what="[east_m, north_m, alt_m]")
 _AIRCRAFT_EN = Number(-1e6, 1e6, unit="m")  # within 1000 km of the observer
-_AIRCRAFT_ALT = Number(-1000.0, 100_000.0, unit="m")
+SET_AIRCRAFT = Table(
+    {
+        "position_m": Field(
+            Nullable(
+                Tuple(
+                    (_AIRCRAFT_EN, _AIRCRAFT_EN, Number(-1000.0, 100_000.0, unit="m")),
+                    "[east_m, north_m, alt_m]",
+                )
+            ),
+            REQUIRED,
+        )
+    }
+)
 
 
 def _iso_time(value: Any) -> Any:
@@ -122,24 +145,10 @@ def camera_to_dict(cam: Camera) -> dict[str, Any]:
 def set_aircraft(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
     """`position_m`: [east_m, north_m, alt_m] of the host's own aircraft, or null to stop
     splitting the near layer at it."""
-    _only("set_aircraft", params, {"position_m"})
-    if "position_m" not in params:
-        raise ControlError("set_aircraft: give position_m ([east_m, north_m, alt_m] or null)")
-    pos = params["position_m"]
-    if pos is None:
-        engine.set_aircraft(None)
-        return {"position_m": None}
-    if not isinstance(pos, (list, tuple)) or len(pos) != 3:
-        raise ControlError("set_aircraft: position_m must be [east_m, north_m, alt_m] or null")
-    try:
-        east = _AIRCRAFT_EN.validate("position_m[0]", pos[0])
-        north = _AIRCRAFT_EN.validate("position_m[1]", pos[1])
-        alt = _AIRCRAFT_ALT.validate("position_m[2]", pos[2])
-    except ValueError as exc:
-        raise ControlError(f"set_aircraft: {exc}") from None
-    position = (east, north, alt)
+    v = checked_params("set_aircraft", SET_AIRCRAFT, params)
+    position = v["position_m"]
     engine.set_aircraft(position)
-    return {"position_m": list(position)}
+    return {"position_m": None if position is None else list(position)}
 
 
 def set_time(engine: SkyEngine, params: dict[str, Any]) -> None:
@@ -206,9 +215,3 @@ def dispatch_table(
             raise ControlError(f"{method}: {exc}") from None
 
     return dispatch
-
-
-def _only(command: str, params: dict[str, Any], allowed: set[str]) -> None:
-    unknown = sorted(set(params) - allowed)
-    if unknown:
-        raise ControlError(f"{command}: unknown field {unknown[0]!r} (known: {sorted(allowed)})")

@@ -6,7 +6,17 @@ weather state, the camera, the config), and every problem of a file is reported 
 Stdlib only, so every room (the pure weather and scene included) may use it.
 """
 
-from wxsky.schema.kinds import Bool, Custom, Items, Kind, Number, Text, fmt_number
+from wxsky.schema.kinds import (
+    Bool,
+    Custom,
+    Items,
+    Kind,
+    Nullable,
+    Number,
+    Text,
+    Tuple,
+    fmt_number,
+)
 from wxsky.schema.problems import Invalid, KeyPath, Problem, format_key
 from wxsky.schema.tables import OMIT, REQUIRED, Field, Table, Tables
 
@@ -20,11 +30,13 @@ __all__ = [
     "Items",
     "KeyPath",
     "Kind",
+    "Nullable",
     "Number",
     "Problem",
     "Table",
     "Tables",
     "Text",
+    "Tuple",
     "fmt_number",
     "format_key",
 ]

@@ -22,10 +22,16 @@ __all__ = [
     "Custom",
     "Items",
     "Kind",
+    "Nullable",
     "Number",
     "Text",
+    "Tuple",
     "fmt_number",
 ]
+
+
+def _suffix(path: KeyPath) -> str:
+    return "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in path)
 
 
 def fmt_number(x: float) -> str:
@@ -51,10 +57,11 @@ class Kind:
             return None
 
     def validate(self, name: str, value: Any) -> Any:
-        try:
-            return self._convert(value)
-        except ValueError as exc:
-            raise ValueError(f"{name}: {exc}") from None
+        problems: list[Problem] = []
+        out = self.check(value, (), problems)
+        if problems:
+            raise ValueError("; ".join(f"{name}{_suffix(p.path)}: {p.message}" for p in problems))
+        return out
 
     def _convert(self, value: Any) -> Any:
         """The value in its stored form, or ValueError with what is wrong."""
@@ -201,15 +208,6 @@ class Items(Kind):
             return None
         return out
 
-    def _convert(self, value: Any) -> tuple[Any, ...]:
-        problems: list[Problem] = []
-        out = self.check(value, (), problems)
-        if problems:
-            p = problems[0]
-            where = "".join(f"[{k}]" for k in p.path)
-            raise ValueError(f"{where}: {p.message}" if where else p.message)
-        return tuple(out)
-
     def _shape_problem(self, value: Sequence[Any]) -> str:
         n = len(value)
         if self.length is not None and n != self.length:
@@ -220,6 +218,48 @@ class Items(Kind):
         if self.max_len is not None and n > self.max_len:
             return f"must have at most {self.max_len} items, got {n}"
         return ""
+
+
+@dataclass(frozen=True)
+class Tuple(Kind):
+    """A list of fixed length with a kind for each position (`[east_m, north_m, alt_m]`)."""
+
+    kinds: tuple[Kind, ...]
+    what: str
+
+    def describe(self) -> str:
+        return self.what
+
+    def check(self, value: Any, path: KeyPath, problems: list[Problem]) -> Any:
+        if not isinstance(value, (list, tuple)) or len(value) != len(self.kinds):
+            problems.append(Problem(path, f"must be {self.what}, got {value!r}"))
+            return None
+        before = len(problems)
+        out = tuple(
+            k.check(v, (*path, i), problems)
+            for i, (k, v) in enumerate(zip(self.kinds, value, strict=True))
+        )
+        return out if len(problems) == before else None
+
+
+@dataclass(frozen=True)
+class Nullable(Kind):
+    """A value of `kind`, or null (None) where null means something (no aircraft)."""
+
+    kind: Kind
+
+    def describe(self) -> str:
+        return f"{self.kind.describe()} or null"
+
+    def check(self, value: Any, path: KeyPath, problems: list[Problem]) -> Any:
+        if value is None:
+            return None
+        before = len(problems)
+        out = self.kind.check(value, path, problems)
+        if len(problems) > before and not isinstance(value, (list, tuple, dict)):
+            # A wrong type: say null was fine too.
+            problems[before] = Problem(path, f"must be {self.describe()}, got {value!r}")
+        return out
 
 
 @dataclass(frozen=True)

@@ -77,17 +77,13 @@ class Table(Kind):
                 check(out, path, problems)
         return out if len(problems) == before else None
 
-    def _convert(self, value: Any) -> dict[str, Any]:
-
+    def values(self, value: Any) -> dict[str, Any]:
+        """The checked values of a whole table; Invalid lists every problem."""
         problems: list[Problem] = []
         out = self.check(value, (), problems)
         if problems:
             raise Invalid(problems)
         return dict(out)
-
-    def values(self, value: Any) -> dict[str, Any]:
-        """The checked values of a whole table; Invalid lists every problem."""
-        return self._convert(value)
 
 
 @dataclass(frozen=True)
@@ -117,11 +113,3 @@ class Tables(Kind):
                 )
             )
         return out if len(problems) == before else None
-
-    def _convert(self, value: Any) -> tuple[Any, ...]:
-
-        problems: list[Problem] = []
-        out = self.check(value, (), problems)
-        if problems:
-            raise Invalid(problems)
-        return tuple(out)
