@@ -167,7 +167,7 @@ def test_scattered_cumulus_leaves_blue_sky(tmp_path: Path) -> None:
 
 @pytest.mark.gl
 @pytest.mark.parametrize("time", [None, "2026-07-08T12:30:00Z"], ids=["preset-time", "drifted"])
-def test_snapshot_layers_are_byte_identical_across_processes(
+def test_snapshot_layers_are_pixel_identical_across_processes(
     tmp_path: Path, time: str | None
 ) -> None:
     runs = []
@@ -193,12 +193,14 @@ def test_snapshot_layers_are_byte_identical_across_processes(
     names = sorted(p.name for p in runs[0].iterdir())
     assert names == sorted(["sky.png", "near.png", *(f"ring_{i}.png" for i in range(8))])
     for name in names:
-        assert (runs[0] / name).read_bytes() == (runs[1] / name).read_bytes(), name
+        # Pixels, not file bytes: the PNG's compressed stream depends on the zlib build.
+        np.testing.assert_array_equal(read_png(runs[0] / name), read_png(runs[1] / name), name)
     # And the layers hold something: clouds in the near layer and in several impostors.
     assert read_png(runs[0] / "near.png")[..., 3].max() > 0
     assert sum(read_png(runs[0] / f"ring_{i}.png")[..., 3].max() > 0 for i in range(8)) >= 4
 
 
+@pytest.mark.gl
 def test_a_later_time_shows_the_clouds_blown_on(tmp_path: Path) -> None:
     preset_time = tomllib.loads(
         (

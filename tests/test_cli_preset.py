@@ -43,9 +43,11 @@ def wxsky(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str
     return code, out, err
 
 
-def one_line_error(capsys: pytest.CaptureFixture[str], *args: str) -> str:
+def one_line_error(capsys: pytest.CaptureFixture[str], *args: str, status: int = 2) -> str:
+    """The one stderr line of a command that fails with `status` (2: the user's mistake, 1: a
+    runtime failure)."""
     code, out, err = wxsky(capsys, *args)
-    assert code == 2, (out, err)
+    assert code == status, (out, err)
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("wxsky: error: "), err
     return lines[0]
@@ -146,14 +148,13 @@ def test_save_checks_name_and_source(capsys: pytest.CaptureFixture[str], user_di
     )
     assert "METAR" in one_line_error(capsys, "preset", "save", "x", "--from-metar", "!!! ???")
     assert not user_dir.exists() or not any(user_dir.iterdir())
-    for args in (
-        ("preset", "save", "x"),
-        ("preset", "save", "x", "--from-running", "--from-metar", METAR),
-    ):
-        with pytest.raises(SystemExit) as info:
-            main(list(args))
-        assert info.value.code == 2
-    assert "one of the arguments --from-running --from-metar is required" in capsys.readouterr().err
+    # argparse's own errors are one line and a return value too, not a SystemExit.
+    assert "one of the arguments --from-running --from-metar is required" in one_line_error(
+        capsys, "preset", "save", "x"
+    )
+    assert "not allowed with argument" in one_line_error(
+        capsys, "preset", "save", "x", "--from-running", "--from-metar", METAR
+    )
 
 
 # -- validate -----------------------------------------------------------------------------------
@@ -384,11 +385,14 @@ def test_release_hands_the_fields_back(capsys: pytest.CaptureFixture[str], tmp_p
 def test_apply_without_a_daemon_is_one_line(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
+    # No daemon is a runtime failure, not the user's mistake: status 1.
     address = f"unix:{tmp_path / 'nobody.sock'}"
     assert "cannot connect" in one_line_error(
-        capsys, "preset", "apply", "clear", "--control", address
+        capsys, "preset", "apply", "clear", "--control", address, status=1
     )
-    assert "cannot connect" in one_line_error(capsys, "preset", "release", "--control", address)
     assert "cannot connect" in one_line_error(
-        capsys, "preset", "save", "x", "--from-running", "--control", address
+        capsys, "preset", "release", "--control", address, status=1
+    )
+    assert "cannot connect" in one_line_error(
+        capsys, "preset", "save", "x", "--from-running", "--control", address, status=1
     )

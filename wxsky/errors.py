@@ -2,7 +2,13 @@
 
 
 class WxskyError(Exception):
-    """Base of every error wxsky reports to a user instead of a traceback."""
+    """Base of every error wxsky reports to a user instead of a traceback: something the user
+    gave was wrong (the command line exits 2), unless it is a RuntimeFailure."""
+
+
+class RuntimeFailure(WxskyError):
+    """The user's input was fine but something it needs failed while running: a daemon that
+    does not answer, a feed that cannot be read, no GL context (the command line exits 1)."""
 
 
 class ConfigError(WxskyError):
@@ -25,9 +31,13 @@ class PluginError(WxskyError):
     """A plugin that cannot be found or imported (the message names it)."""
 
 
-class RenderError(WxskyError):
+class RenderError(RuntimeFailure):
     """The GL context could not be created or a GL call failed."""
 
 
 class FeedError(WxskyError):
     """A weather feed that is not a METAR feed at all (the message names the source)."""
+
+
+class FeedUnavailable(FeedError, RuntimeFailure):
+    """A feed that cannot be read now: no such file, an I/O, HTTP or network failure."""

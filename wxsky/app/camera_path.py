@@ -17,9 +17,10 @@ import math
 from dataclasses import dataclass
 
 from wxsky.errors import ConfigError
+from wxsky.scene.camera import PITCH_DEG, ROLL_DEG
+from wxsky.weather.state import ALT_M
 
 MAX_OFFSET_M = 500_000.0
-ALT_RANGE_M = (-500.0, 30_000.0)
 
 
 @dataclass(frozen=True)
@@ -126,12 +127,13 @@ def parse_camera_path(text: str, where: str) -> CameraPath:
             raise ConfigError(f"{at}: t_s {t_s:g} must be >= 0 and after the previous pose's")
         if max(abs(x), abs(y)) > MAX_OFFSET_M:
             raise ConfigError(f"{at}: x/y more than {MAX_OFFSET_M / 1000:g} km from the observer")
-        if not ALT_RANGE_M[0] <= z <= ALT_RANGE_M[1]:
-            raise ConfigError(f"{at}: z_m {z:g} outside {ALT_RANGE_M[0]:g}..{ALT_RANGE_M[1]:g}")
-        if not -90.0 <= pitch <= 90.0:
-            raise ConfigError(f"{at}: pitch_deg {pitch:g} outside -90..90")
-        if not -180.0 <= roll <= 180.0:
-            raise ConfigError(f"{at}: roll_deg {roll:g} outside -180..180")
+        for name, kind, value in (
+            ("z_m", ALT_M, z),
+            ("pitch_deg", PITCH_DEG, pitch),
+            ("roll_deg", ROLL_DEG, roll),
+        ):
+            if not kind.contains(value):
+                raise ConfigError(f"{at}: {name} {value:g} outside {kind.range_text()}")
         poses.append(Pose(t_s, (x, y, z), heading % 360.0, pitch, roll))
     if not poses:
         raise ConfigError(f"{where}: no poses")

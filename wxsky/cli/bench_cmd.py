@@ -7,9 +7,13 @@ import json
 import time
 from pathlib import Path
 
-from wxsky.cli.common import Subparsers, parse_size
+from wxsky.cli.common import KindRef, NumberArg, Subparsers, UsageError, size_arg
+from wxsky.schema import Number
 
 STARTED_S = time.perf_counter()  # the command's start, for the startup figure
+
+FRAMES = Number(1, 100_000, integer=True)
+FPS = Number(1.0, 1000.0, unit="Hz")  # the simulated clock; the frames render as fast as they can
 
 
 def add_commands(sub: Subparsers) -> None:
@@ -17,25 +21,51 @@ def add_commands(sub: Subparsers) -> None:
         "bench",
         help="render frames along a camera path as the daemon would and time each stage",
     )
-    bench.add_argument("--preset", default="broken-stratocumulus", help="weather preset")
-    bench.add_argument("--config", type=Path, help="daemon config (TOML); default: built-in")
-    bench.add_argument("--frames", type=int, default=120, help="frames to render (1..100000)")
+    bench.add_argument(
+        "--preset", default="broken-stratocumulus", metavar="NAME", help="weather preset"
+    )
+    bench.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="daemon config: its [presets] dirs and [scene] (default: built-in)",
+    )
+    bench.add_argument(
+        "--frames",
+        type=NumberArg("--frames", FRAMES),
+        default=120,
+        metavar="N",
+        help="frames to render",
+    )
     bench.add_argument(
         "--mode",
         choices=("ring", "direct"),
         default="ring",
         help="ring: the daemon's pipeline; direct: every cloud as sprites every frame",
     )
-    bench.add_argument("--size", default="1280x720", help="WIDTHxHEIGHT")
-    bench.add_argument("--fov-deg", type=float, default=60.0, help="horizontal field of view")
+    bench.add_argument(
+        "--size", type=size_arg(), default="1280x720", metavar="WxH", help="frame size in pixels"
+    )
+    bench.add_argument(
+        "--fov-deg",
+        type=NumberArg("--fov-deg", KindRef("wxsky.scene.camera:FOV_DEG")),
+        default=60.0,
+        metavar="DEG",
+        help="horizontal field of view",
+    )
     bench.add_argument(
         "--camera-path",
         type=Path,
         metavar="FILE",
         help="timestamped poses (t_s, x_m, y_m, z_m, heading_deg, pitch_deg[, roll_deg] per "
-        "line); default: straight and level at 120 m/s and 1500 m, heading 090",
+        "line) (default: straight and level at 120 m/s and 1500 m, heading 090)",
     )
-    bench.add_argument("--fps", type=float, default=30.0, help="simulated frames per second")
+    bench.add_argument(
+        "--fps",
+        type=NumberArg("--fps", FPS),
+        default=30.0,
+        help="simulated frames per second (how far the camera moves between frames)",
+    )
     bench.add_argument(
         "--turn",
         action="store_true",
@@ -60,16 +90,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     from wxsky.settings.presets import load_preset
     from wxsky.weather.state import WeatherState
 
-    if not 1 <= args.frames <= 100_000:
-        raise ValueError(f"--frames must be in 1..100000, got {args.frames}")
-    if not 1.0 <= args.fps <= 1000.0:
-        raise ValueError(f"--fps must be in 1..1000, got {args.fps:g}")
-    if not 1.0 <= args.fov_deg <= 170.0:
-        raise ValueError(f"--fov-deg must be in 1..170, got {args.fov_deg:g}")
     if args.turn and args.camera_path is not None:
-        raise ValueError("--turn and --camera-path are two paths: give one")
+        raise UsageError("--turn and --camera-path are two paths: give one")
     config = load_config(args.config)
-    size = parse_size(args.size)
+    size = args.size
     state = WeatherState().apply(load_preset(args.preset, config.presets.dirs))
     if args.camera_path is not None:
         try:

@@ -1,34 +1,317 @@
-"""Helpers shared by the CLI's command modules."""
+"""Helpers shared by the CLI's command modules: exit statuses, the parser every command is
+built from (with the logging and verbosity options), option types whose limits come from the
+settings' own kinds, and logging to stderr."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib
 import logging
+import math
 import re
-from typing import Any
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any, NoReturn
 
-EXIT_USAGE = 2
+from wxsky.errors import WxskyError
+from wxsky.schema import Number, fmt_number
+
+# The exit statuses (the package docstring says which is which). Scripts tell a mistake in the
+# command from a failure while running by them, so every command uses these and no others.
+EXIT_OK = 0
+EXIT_FAILURE = 1  # the command was fine but failed while running (no daemon, unreadable feed)
+EXIT_USAGE = 2  # something the user gave is wrong: an option, a preset name, a file's content
+EXIT_DIFFERENT = 1  # `preset diff`: the presets differ, as diff(1) says it
+EXIT_INTERRUPTED = 130  # Ctrl-C, as a shell reports a process killed by SIGINT
+
+# Until a command sets its own (`run`: the config's [daemon] log_level).
+DEFAULT_LOG_LEVEL = "WARNING"
 
 # The type of `ArgumentParser.add_subparsers()`'s result, for the modules' add_commands.
 Subparsers = Any
 
 
+class UsageError(WxskyError):
+    """A bad command line: an option's value, a missing or conflicting option."""
+
+
+# -- the parser ---------------------------------------------------------------------------------
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Shows an option's limits and its default after its help, but no `default: None` or
+    `default: False` noise: an option that defaults to nothing says in its help what happens."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if text == argparse.SUPPRESS:
+            return text
+        limits = action.type.describe() if isinstance(action.type, OptionType) else ""
+        if limits:
+            # Before an explicit "(default: ...)", so that the default stays last.
+            at = text.rfind(" (default: ")
+            if at >= 0 and text.endswith(")"):
+                text = f"{text[:at]}, {limits}{text[at:]}"
+            else:
+                text = f"{text}, {limits}" if text else limits
+        default = action.default
+        # By identity: a default of 0 or 0.0 is worth showing, and it equals False.
+        nothing = default is None or default is False or default is argparse.SUPPRESS
+        shown = not nothing and default != [] and "default" not in text
+        if shown and (action.option_strings or action.nargs in ("?", "*")):
+            if isinstance(default, float):
+                default = fmt_number(default)
+            # The text is %-formatted by argparse next: a literal % must survive that.
+            text += " (default: " + str(default).replace("%", "%%") + ")"
+        return text or None
+
+
+class Parser(argparse.ArgumentParser):
+    """Every wxsky parser: the help shows defaults, a usage error is one line (the caller
+    prints it and exits 2) instead of a usage dump and sys.exit, and every command takes
+    --log-level, -v/--verbose and --debug, before or after its name."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+        add_logging_options(self)
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
+def add_logging_options(p: argparse.ArgumentParser) -> None:
+    # SUPPRESS: a subcommand's copy of an option must not overwrite what was given before the
+    # subcommand's name (`wxsky -v status`); main fills in the defaults after parsing.
+    g = p.add_argument_group("output and diagnostics")
+    g.add_argument(
+        "--log-level",
+        type=LogLevel(),
+        metavar="LEVEL",
+        default=argparse.SUPPRESS,
+        help="log this level and above to stderr (default: "
+        f"{DEFAULT_LOG_LEVEL}; for 'run' the config's [daemon] log_level)",
+    )
+    g.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=argparse.SUPPRESS,
+        help="log at DEBUG (unless --log-level says otherwise) and print the traceback of an "
+        "internal error instead of one line",
+    )
+    g.add_argument(
+        "--debug",
+        action="store_true",
+        default=argparse.SUPPRESS,
+        help="as -v, and print the traceback of every error, a user error's too",
+    )
+
+
+LOGGING_DEFAULTS: dict[str, Any] = {"log_level": None, "verbose": 0, "debug": False}
+
+
+def show_help(parser: argparse.ArgumentParser) -> Callable[[argparse.Namespace], int]:
+    """The action of a bare command group (`wxsky`, `wxsky metar`): its help, on stdout."""
+
+    def run(args: argparse.Namespace) -> int:
+        parser.print_help()
+        return EXIT_OK
+
+    return run
+
+
+# -- option types -------------------------------------------------------------------------------
+
+
+class OptionType:
+    """An argparse `type` that names its option in its errors and raises UsageError, which
+    argparse lets through to main, so the message is ours and one line. `describe` is the
+    values it takes, for the help."""
+
+    flag: str
+
+    def describe(self) -> str:
+        return ""
+
+    def fail(self, text: str, problem: str) -> UsageError:
+        return UsageError(f"{self.flag} {text}{problem}")
+
+
+@dataclass(frozen=True)
+class KindRef:
+    """Where a limit's kind lives, `module:NAME`; imported only when an option of that kind
+    is given or the help shows it, so that `wxsky status` need not load numpy and the config."""
+
+    spec: str
+
+    def get(self) -> Number:
+        module, _, name = self.spec.partition(":")
+        kind = getattr(importlib.import_module(module), name)
+        if not isinstance(kind, Number):
+            raise TypeError(f"{self.spec} is a {type(kind).__name__}, not a schema Number")
+        return kind
+
+
+def _resolve(kind: Number | KindRef) -> Number:
+    return kind.get() if isinstance(kind, KindRef) else kind
+
+
+def limits_text(kind: Number) -> str:
+    if kind.lo is not None and kind.hi is not None:
+        return f"{fmt_number(kind.lo)}..{fmt_number(kind.hi)}"
+    if kind.lo is not None:
+        return f"at least {fmt_number(kind.lo)}"
+    if kind.hi is not None:
+        return f"at most {fmt_number(kind.hi)}"
+    return ""
+
+
+class NumberArg(OptionType):
+    """A number within a `wxsky.schema.Number` kind, the same the config or the camera checks
+    against, so that an option cannot accept what the setting refuses or the other way round."""
+
+    def __init__(self, flag: str, kind: Number | KindRef) -> None:
+        self.flag = flag
+        self._kind = kind
+
+    @property
+    def kind(self) -> Number:
+        return _resolve(self._kind)
+
+    def describe(self) -> str:
+        return limits_text(self.kind)
+
+    def __call__(self, text: str) -> float | int:
+        kind = self.kind
+        try:
+            value: float | int = int(text) if kind.integer else float(text)
+        except ValueError:
+            what = "an integer" if kind.integer else "a number"
+            raise self.fail(text, f" is not {what}") from None
+        if not math.isfinite(value):
+            raise self.fail(text, " is not a finite number")
+        if not kind.contains(value):
+            raise self.fail(text, f" is outside {limits_text(kind)}")
+        return value
+
+
+class Checked(OptionType):
+    """A value parsed by `convert`, whose ValueError says what is wrong with it."""
+
+    def __init__(self, flag: str, convert: Callable[[str], Any]) -> None:
+        self.flag = flag
+        self._convert = convert
+
+    def __call__(self, text: str) -> Any:
+        try:
+            return self._convert(text)
+        except ValueError as exc:
+            message = str(exc)
+            # Converters shared with the tools name the option themselves (parse_size).
+            if message.startswith(self.flag):
+                raise UsageError(message) from None
+            if text in message:
+                raise UsageError(f"{self.flag}: {message}") from None
+            raise self.fail(repr(text), f": {message}") from None
+
+
+class LogLevel(OptionType):
+    flag = "--log-level"
+
+    def describe(self) -> str:
+        return "one of " + ", ".join(_log_levels())
+
+    def __call__(self, text: str) -> str:
+        level = text.strip().upper()
+        if level not in _log_levels():
+            raise self.fail(text, f" is not a log level ({', '.join(_log_levels())})")
+        return level
+
+
+def _log_levels() -> tuple[str, ...]:
+    from wxsky.settings.config import LOG_LEVELS
+
+    return tuple(LOG_LEVELS)
+
+
+class SizeArg(Checked):
+    def __init__(self, flag: str = "--size") -> None:
+        super().__init__(flag, parse_size)
+
+    def describe(self) -> str:
+        from wxsky.scene.camera import VIEWPORT_PX
+
+        return f"width and height {limits_text(VIEWPORT_PX)}"
+
+
+def size_arg(flag: str = "--size") -> SizeArg:
+    return SizeArg(flag)
+
+
 def parse_size(text: str) -> tuple[int, int]:
-    m = re.fullmatch(r"\s*(\d{1,5})\s*[xX]\s*(\d{1,5})\s*", text)
+    """`WIDTHxHEIGHT` in pixels, each within the camera's VIEWPORT_PX (ValueError otherwise:
+    the tools use this too)."""
+    from wxsky.scene.camera import VIEWPORT_PX
+
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     if not m:
         raise ValueError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 960x540")
     w, h = int(m.group(1)), int(m.group(2))
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise ValueError(f"--size {text!r}: width and height must be in 16..8192")
+    for name, value in (("width", w), ("height", h)):
+        if not VIEWPORT_PX.contains(value):
+            raise ValueError(
+                f"--size {text.strip()}: {name} must be {limits_text(VIEWPORT_PX)} px, got {value}"
+            )
     return w, h
 
 
+def time_arg(flag: str = "--time") -> Checked:
+    return Checked(flag, _parse_time)
+
+
+def _parse_time(text: str) -> Any:
+    from wxsky.weather.state import parse_time_utc
+
+    return parse_time_utc(text)
+
+
+# -- logging ------------------------------------------------------------------------------------
+
+
+def log_level(args: argparse.Namespace, default: str) -> str:
+    """The level the options ask for: --log-level, else DEBUG with -v/--debug, else `default`."""
+    if args.log_level:
+        return str(args.log_level)
+    return "DEBUG" if args.verbose or args.debug else default
+
+
 def setup_logging(level: str) -> None:
-    logging.basicConfig(
-        level=getattr(logging, level.upper(), logging.INFO),
-        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
-        datefmt="%H:%M:%S",
+    logging.getLogger().setLevel(getattr(logging, level.upper(), logging.INFO))
+
+
+@contextlib.contextmanager
+def logging_to_stderr(level: str) -> Iterator[None]:
+    """Log records to stderr for the length of a command, then leave logging as it was (the
+    tests call main in-process, many times)."""
+    root = logging.getLogger()
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(
+        logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s", "%H:%M:%S")
     )
+    before = root.level
+    root.addHandler(handler)
+    setup_logging(level)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(before)
+
+
+# -- the daemon ---------------------------------------------------------------------------------
 
 
 def control_address(args: argparse.Namespace) -> Any:
@@ -36,3 +319,12 @@ def control_address(args: argparse.Namespace) -> Any:
     from wxsky.output.transport import default_address, parse_address
 
     return parse_address(args.control) if args.control else default_address()
+
+
+def add_control_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--control",
+        metavar="ADDR",
+        help="the daemon's address, unix:PATH or tcp:127.0.0.1:PORT (default: "
+        "$XDG_RUNTIME_DIR/wxsky/wxsky.sock)",
+    )

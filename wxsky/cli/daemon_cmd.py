@@ -8,14 +8,44 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from wxsky.cli.common import Subparsers, control_address, parse_size, setup_logging
+from wxsky.cli.common import (
+    Checked,
+    KindRef,
+    NumberArg,
+    Subparsers,
+    UsageError,
+    add_control_option,
+    control_address,
+    log_level,
+    setup_logging,
+    size_arg,
+    time_arg,
+)
+from wxsky.schema import Number
+
+# How far into a change of weather a snapshot may look: a day is more than any transition.
+ELAPSED_S = Number(0.0, 86_400.0, unit="s")
 
 
 def add_commands(sub: Subparsers) -> None:
-    run = sub.add_parser("run", help="run the daemon in the foreground")
-    run.add_argument("--config", type=Path, help="daemon config (TOML); default: built-in")
-    run.add_argument("--preset", help="weather preset to start with (the base weather)")
-    run.add_argument("--metar", help="METAR report to start with (beats the preset's fields)")
+    run = sub.add_parser(
+        "run",
+        help="run the daemon in the foreground",
+        description="Run the daemon in the foreground; SIGINT/SIGTERM stop it cleanly, a "
+        "second Ctrl-C forces exit.",
+    )
+    run.add_argument(
+        "--config", type=Path, metavar="FILE", help="daemon config (TOML) (default: built-in)"
+    )
+    run.add_argument(
+        "--preset",
+        metavar="NAME",
+        help="weather preset to start with, the base weather (default: the config's "
+        "[daemon] preset)",
+    )
+    run.add_argument(
+        "--metar", metavar="REPORT", help="METAR report to start with (beats the preset's fields)"
+    )
     run.add_argument(
         "--metar-feed",
         action="append",
@@ -28,6 +58,7 @@ def add_commands(sub: Subparsers) -> None:
         "--serial",
         action="append",
         default=[],
+        type=Checked("--serial", _serial_spec),
         metavar="URL[@BAUD]",
         help="read NMEA 0183 from a serial device or pyserial URL, e.g. /dev/ttyUSB0@4800, "
         "socket://host:4001 (repeatable; adds to [[serial]] in the config)",
@@ -36,11 +67,12 @@ def add_commands(sub: Subparsers) -> None:
         "--can",
         action="append",
         default=[],
+        type=Checked("--can", _can_spec),
         metavar="INTERFACE:CHANNEL",
         help="read CANaerospace from a python-can bus, e.g. socketcan:can0, "
         "udp_multicast:239.74.163.2 (repeatable; adds to [[can]] in the config)",
     )
-    run.add_argument("--control", help="stream/control address: unix:PATH or tcp:127.0.0.1:PORT")
+    add_control_option(run)
     run.add_argument(
         "--preview",
         type=Path,
@@ -55,35 +87,101 @@ def add_commands(sub: Subparsers) -> None:
     )
     run.set_defaults(func=_cmd_run)
 
-    status = sub.add_parser("status", help="ask a running daemon")
-    status.add_argument("--control", help="address of the daemon (default: the user's socket)")
+    status = sub.add_parser(
+        "status",
+        help="ask a running daemon",
+        description="Ask a running daemon for its frame rate, weather and inputs; exits 1 when "
+        "no daemon answers at the address.",
+    )
+    add_control_option(status)
     status.add_argument("--json", action="store_true", help="print one JSON object")
     status.set_defaults(func=_cmd_status)
 
-    snap = sub.add_parser("snapshot", help="render one picture to a PNG")
+    snap = sub.add_parser(
+        "snapshot",
+        help="render one picture to a PNG",
+        description="Render one picture, composited exactly as the daemon and a host do.",
+    )
     src = snap.add_mutually_exclusive_group(required=True)
-    src.add_argument("--preset")
-    src.add_argument("--metar")
-    snap.add_argument("--config", type=Path)
-    snap.add_argument("--time", help="ISO 8601 UTC time, e.g. 2026-06-21T14:00:00Z")
-    snap.add_argument("--lat", type=float, help="observer latitude, degrees")
-    snap.add_argument("--lon", type=float, help="observer longitude, degrees")
-    snap.add_argument("--alt-m", type=float, help="camera altitude MSL, metres")
-    snap.add_argument("--heading-deg", type=float, default=0.0, help="0 = north")
-    snap.add_argument("--pitch-deg", type=float, default=10.0, help="positive = up")
-    snap.add_argument("--fov-deg", type=float, default=60.0, help="horizontal field of view")
-    snap.add_argument("--size", default="960x540", help="WIDTHxHEIGHT")
-    snap.add_argument("--seed", type=int, help="cloud seed (default: the weather's)")
+    src.add_argument("--preset", metavar="NAME", help="the weather of this preset")
+    src.add_argument(
+        "--metar",
+        metavar="REPORT",
+        help="the weather this METAR report states (its site's field at 0 m)",
+    )
+    snap.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="daemon config: its [presets] dirs, [scene], [camera] alt_agl_m and [transition] "
+        "rates (default: built-in)",
+    )
+    snap.add_argument(
+        "--time",
+        type=time_arg(),
+        help="ISO 8601 time, UTC unless it says, e.g. 2026-06-21T14:00:00Z (default: the "
+        "weather's own)",
+    )
+    snap.add_argument(
+        "--lat",
+        type=NumberArg("--lat", KindRef("wxsky.weather.state:LAT_DEG")),
+        metavar="DEG",
+        help="observer latitude, with --lon (default: the weather's)",
+    )
+    snap.add_argument(
+        "--lon",
+        type=NumberArg("--lon", KindRef("wxsky.weather.state:LON_DEG")),
+        metavar="DEG",
+        help="observer longitude, east, with --lat (default: the weather's)",
+    )
+    snap.add_argument(
+        "--alt-m",
+        type=NumberArg("--alt-m", KindRef("wxsky.weather.state:ALT_M")),
+        metavar="M",
+        help="camera altitude MSL (default: the observer's plus the config's [camera] alt_agl_m)",
+    )
+    snap.add_argument(
+        "--heading-deg",
+        type=NumberArg("--heading-deg", Number()),
+        default=0.0,
+        metavar="DEG",
+        help="0 = north, clockwise",
+    )
+    snap.add_argument(
+        "--pitch-deg",
+        type=NumberArg("--pitch-deg", KindRef("wxsky.scene.camera:PITCH_DEG")),
+        default=10.0,
+        metavar="DEG",
+        help="positive = up",
+    )
+    snap.add_argument(
+        "--fov-deg",
+        type=NumberArg("--fov-deg", KindRef("wxsky.scene.camera:FOV_DEG")),
+        default=60.0,
+        metavar="DEG",
+        help="horizontal field of view",
+    )
+    snap.add_argument(
+        "--size", type=size_arg(), default="960x540", metavar="WxH", help="picture size in pixels"
+    )
+    snap.add_argument(
+        "--seed",
+        type=NumberArg("--seed", KindRef("wxsky.weather.state:SEED")),
+        metavar="N",
+        help="cloud seed (default: the weather's)",
+    )
     snap.add_argument(
         "--transition-to",
         metavar="PRESET",
-        help="picture the sky --elapsed-s after the weather target changed to this preset",
+        help="picture the sky --elapsed-s after the weather target changed to this preset, "
+        "moving toward it at the config's [transition] rates",
     )
     snap.add_argument(
         "--elapsed-s",
-        type=float,
+        type=NumberArg("--elapsed-s", ELAPSED_S),
         default=0.0,
-        help="seconds since the change (with --transition-to); rates from [transition]",
+        metavar="S",
+        help="seconds since the change, with --transition-to",
     )
     snap.add_argument(
         "--mode",
@@ -92,9 +190,23 @@ def add_commands(sub: Subparsers) -> None:
         help="far clouds as ring impostors (what the daemon does), or every cloud drawn as "
         "sprites, to compare the two",
     )
-    snap.add_argument("--out", type=Path, required=True, help="output PNG")
-    snap.add_argument("--layers-out", type=Path, metavar="DIR", help="also write the raw layers")
+    snap.add_argument("--out", type=Path, required=True, metavar="FILE.png", help="output PNG")
+    snap.add_argument(
+        "--layers-out", type=Path, metavar="DIR", help="also write the raw layers there"
+    )
     snap.set_defaults(func=_cmd_snapshot)
+
+
+def _serial_spec(spec: str) -> Any:
+    from wxsky.settings.config import SerialInputSection
+
+    return SerialInputSection.from_spec(spec)
+
+
+def _can_spec(spec: str) -> Any:
+    from wxsky.settings.config import CanInputSection
+
+    return CanInputSection.from_spec(spec)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -102,10 +214,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     from wxsky.app.daemon import Daemon, initial_patches
     from wxsky.output.transport import parse_address
-    from wxsky.settings.config import CanInputSection, SerialInputSection, load_config
+    from wxsky.settings.config import load_config
 
     config = load_config(args.config)
-    setup_logging(config.daemon.log_level)
+    setup_logging(log_level(args, config.daemon.log_level))
     patches = initial_patches(config, preset=args.preset, metar=args.metar)
     address = parse_address(args.control) if args.control else None
     daemon = Daemon(
@@ -114,8 +226,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         address=address,
         preview_dir=args.preview,
         feeds=args.metar_feed,
-        serial=[SerialInputSection.from_spec(spec) for spec in args.serial],
-        can=[CanInputSection.from_spec(spec) for spec in args.can],
+        serial=args.serial,
+        can=args.can,
         trace_path=args.trace,
     )
     return asyncio.run(daemon.run())
@@ -181,29 +293,29 @@ def _cmd_status(args: argparse.Namespace) -> int:
 
 def _cmd_snapshot(args: argparse.Namespace) -> int:
     from wxsky.app.snapshot import take_snapshot
-    from wxsky.png import write_png
     from wxsky.scene.camera import Camera
     from wxsky.settings.config import load_config
-    from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState, parse_time_utc
+    from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
 
+    if (args.lat is None) != (args.lon is None):
+        raise UsageError("--lat and --lon go together")
+    if args.elapsed_s and not args.transition_to:
+        raise UsageError("--elapsed-s goes with --transition-to")
     config = load_config(args.config)
-    width, height = parse_size(args.size)
+    width, height = args.size
     state = WeatherState().apply(_weather_patch(args, config.presets.dirs))
     weather_time = state.time_utc
     overrides = WeatherPatch(
         source=Source.CONTROL,
-        time_utc=parse_time_utc(args.time) if args.time else None,
+        time_utc=args.time,
         seed=args.seed,
         observer=(
-            Observer(args.lat, args.lon, state.observer.alt_m)
-            if args.lat is not None and args.lon is not None
-            else None
+            Observer(args.lat, args.lon, state.observer.alt_m) if args.lat is not None else None
         ),
     )
-    if (args.lat is None) != (args.lon is None):
-        raise ValueError("--lat and --lon go together")
     state = state.apply(overrides)
-    alt_m = args.alt_m if args.alt_m is not None else state.observer.alt_m + 2.0
+    # Where the daemon puts its camera: the config's height above the observer.
+    alt_m = state.observer.alt_m + config.camera.alt_agl_m if args.alt_m is None else args.alt_m
     camera = Camera(
         position_m=(0.0, 0.0, alt_m),
         heading_deg=args.heading_deg % 360.0,
@@ -218,26 +330,22 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         from wxsky.app.snapshot import Transition
         from wxsky.settings.presets import load_preset
 
-        if not 0.0 <= args.elapsed_s <= 86_400.0 or args.elapsed_s != args.elapsed_s:
-            raise ValueError(f"--elapsed-s must be in 0..86400, got {args.elapsed_s}")
         transition = Transition(
             to=load_preset(args.transition_to, config.presets.dirs),
             elapsed_s=args.elapsed_s,
             rates=config.transition.rates(),
             step_s=config.transition.step_s,
         )
-    elif args.elapsed_s:
-        raise ValueError("--elapsed-s goes with --transition-to")
     # The weather was set at its own time (a preset's time_utc): a later --time sees the
     # clouds blown on by the wind since then.
     drift_s = (state.time_utc - weather_time).total_seconds()
     shot = take_snapshot(
         state, camera, settings, transition=transition, drift_s=drift_s, mode=args.mode
     )
-    write_png(args.out, shot.image)
+    _write_png("--out", args.out, shot.image)
     if args.layers_out:
         for name, image in shot.layers.items():
-            write_png(args.layers_out / f"{name}.png", image)
+            _write_png("--layers-out", args.layers_out / f"{name}.png", image)
     print(f"wrote {args.out} ({width}x{height}): {shot.state.summary()}")
     return 0
 
@@ -246,11 +354,21 @@ def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any
     from wxsky.settings.presets import load_preset
     from wxsky.weather.metar import decode
     from wxsky.weather.metar_clouds import metar_to_patch
-    from wxsky.weather.state import WeatherState, parse_time_utc
+    from wxsky.weather.state import WeatherState
 
     if args.metar:
         # The report names only its day; it belongs to the month of the snapshot.
-        when = parse_time_utc(args.time) if args.time else WeatherState().time_utc
+        when = args.time or WeatherState().time_utc
         report = decode(args.metar, year=when.year, month=when.month).require_usable()
         return metar_to_patch(report, field_elevation_m=0.0)
     return load_preset(args.preset, preset_dirs)
+
+
+def _write_png(flag: str, path: Path, image: Any) -> None:
+    from wxsky.png import write_png
+
+    try:
+        write_png(path, image)
+    except OSError as exc:
+        # A path the user gave that cannot be written is theirs to fix, like a bad --trace.
+        raise UsageError(f"{flag} {path}: cannot write it ({exc.strerror or exc})") from None

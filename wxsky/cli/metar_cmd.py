@@ -10,21 +10,36 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from wxsky.cli.common import Subparsers
+from wxsky.cli.common import KindRef, NumberArg, Subparsers, UsageError, show_help
+from wxsky.schema import Number
 
+# "auto" and wxsky.weather.feeds.FORMATS (a test keeps them equal; importing feeds here would
+# slow every command's start).
 FORMAT_CHOICES = ("auto", "awc-csv", "awc-xml", "tgftp", "lines")
+MONTH = Number(1, 12, integer=True)
 
 
 def add_commands(sub: Subparsers) -> None:
     metar = sub.add_parser("metar", help="METAR tools")
-    msub = metar.add_subparsers(dest="metar_command", required=True)
+    metar.set_defaults(func=show_help(metar))
+    msub = metar.add_subparsers(dest="metar_command", metavar="COMMAND", title="commands")
     dec = msub.add_parser("decode", help="decode one report, or every report of a feed file")
     dec.add_argument("report", nargs="?", help="the report text (or use --file)")
     dec.add_argument("--file", type=Path, help="a feed file; prints one JSON object per report")
     dec.add_argument("--format", choices=FORMAT_CHOICES, default="auto", help="with --file")
-    # A report names only its day; one typed on the command line is most likely current.
-    dec.add_argument("--year", type=int, help="for REPORT; default: the current UTC year")
-    dec.add_argument("--month", type=int, help="for REPORT; default: the current UTC month")
+    # A report names only its day; one typed on the command line is most likely recent.
+    dec.add_argument(
+        "--year",
+        type=NumberArg("--year", Number(integer=True)),
+        metavar="Y",
+        help="for REPORT (default: the latest that puts the report at or before now, UTC)",
+    )
+    dec.add_argument(
+        "--month",
+        type=NumberArg("--month", MONTH),
+        metavar="M",
+        help="for REPORT (default: the latest that puts the report at or before now, UTC)",
+    )
     dec.add_argument("--json", action="store_true", help="print the decoded fields as JSON")
     dec.set_defaults(func=_cmd_decode)
 
@@ -32,16 +47,41 @@ def add_commands(sub: Subparsers) -> None:
         "fetch", help="read a feed once and show what the daemon would take from it"
     )
     fetch.add_argument("source", help="a file, '-' for stdin, or an http(s) URL")
-    fetch.add_argument("--config", type=Path, help="daemon config ([metar] settings, preset)")
-    fetch.add_argument("--format", choices=FORMAT_CHOICES, help="default: the config's")
-    fetch.add_argument("--lat", type=float, help="observer latitude (default: the preset's)")
-    fetch.add_argument("--lon", type=float, help="observer longitude (default: the preset's)")
-    fetch.add_argument("--station", help="use this station only (ICAO)")
-    fetch.add_argument("--blend", type=int, help="blend the nearest N stations")
+    fetch.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="daemon config: its [metar] settings and [daemon] preset (default: built-in)",
+    )
+    fetch.add_argument(
+        "--format", choices=FORMAT_CHOICES, help="the feed's format (default: the config's)"
+    )
+    fetch.add_argument(
+        "--lat",
+        type=NumberArg("--lat", KindRef("wxsky.weather.state:LAT_DEG")),
+        metavar="DEG",
+        help="observer latitude, with --lon (default: the config's preset's)",
+    )
+    fetch.add_argument(
+        "--lon",
+        type=NumberArg("--lon", KindRef("wxsky.weather.state:LON_DEG")),
+        metavar="DEG",
+        help="observer longitude, with --lat (default: the config's preset's)",
+    )
+    fetch.add_argument(
+        "--station", metavar="ICAO", help="use this station only (default: the config's)"
+    )
+    fetch.add_argument(
+        "--blend",
+        type=NumberArg("--blend", KindRef("wxsky.settings.config:BLEND_STATIONS")),
+        metavar="N",
+        help="blend the nearest N stations (default: the config's [metar] blend_stations)",
+    )
     fetch.add_argument(
         "--age-reference",
         choices=("clock", "feed"),
-        help="measure report age against the clock or the feed's newest report",
+        help="measure report age against the clock or the feed's newest report (default: the "
+        "config's)",
     )
     fetch.add_argument("--json", action="store_true", help="print one JSON object")
     fetch.set_defaults(func=_cmd_fetch)
@@ -49,19 +89,16 @@ def add_commands(sub: Subparsers) -> None:
 
 def _cmd_decode(args: argparse.Namespace) -> int:
     if (args.report is None) == (args.file is None):
-        raise ValueError("give a REPORT or --file PATH (one of them)")
+        raise UsageError("give a REPORT or --file PATH (one of them)")
     if args.file is not None:
         return _decode_file(args.file, args.format)
     from wxsky.weather.metar import decode
 
-    now = datetime.now(UTC)
-    year = now.year if args.year is None else args.year
-    month = now.month if args.month is None else args.month
-    if not 1 <= month <= 12:
-        raise ValueError(f"--month {month} is not a month (1..12)")
-    report = decode(args.report, year=year, month=month)
-    if report.station is None or report.time_utc is None:
-        # Nothing a user could mean as a report; a partial body or a NIL report still prints.
+    # Without --year/--month: the latest date not after now (decode's rule, never the future).
+    report = decode(args.report, year=args.year, month=args.month)
+    if report.station is None or report.time_group is None:
+        # Nothing a user could mean as a report; a partial body, an impossible time (day 32) or
+        # a NIL report still prints.
         report.require_usable()
     if args.json:
         print(json.dumps(report.to_dict(), indent=2))
@@ -104,7 +141,7 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
         blend_stations=args.blend or m.blend_stations,
     )
     if (args.lat is None) != (args.lon is None):
-        raise ValueError("--lat and --lon go together")
+        raise UsageError("--lat and --lon go together")
     observer = WeatherState().apply(load_preset(config.daemon.preset, config.presets.dirs))
     lat = observer.observer.lat_deg if args.lat is None else args.lat
     lon = observer.observer.lon_deg if args.lon is None else args.lon

@@ -8,33 +8,41 @@ import json
 from pathlib import Path
 from typing import Any
 
-from wxsky.cli.common import EXIT_USAGE, Subparsers, control_address
+from wxsky.cli.common import (
+    EXIT_DIFFERENT,
+    EXIT_USAGE,
+    Subparsers,
+    add_control_option,
+    control_address,
+    show_help,
+)
 
 
 def add_commands(sub: Subparsers) -> None:
     preset = sub.add_parser("preset", help="weather presets")
-    psub = preset.add_subparsers(dest="preset_command", required=True)
+    preset.set_defaults(func=show_help(preset))
+    psub = preset.add_subparsers(dest="preset_command", metavar="COMMAND", title="commands")
 
     lst = psub.add_parser("list", help="list presets: name, origin, description")
     _config_option(lst)
     lst.set_defaults(func=_cmd_list)
 
     show = psub.add_parser("show", help="show one preset as the weather it makes")
-    show.add_argument("name")
+    show.add_argument("name", help="preset name")
     _config_option(show)
     show.set_defaults(func=_cmd_show)
 
     apply = psub.add_parser(
         "apply", help="apply a preset to the running daemon (held until 'preset release')"
     )
-    apply.add_argument("name")
-    _control_option(apply)
+    apply.add_argument("name", help="preset name (looked up by the daemon)")
+    add_control_option(apply)
     apply.set_defaults(func=_cmd_apply)
 
     release = psub.add_parser(
         "release", help="hand the fields a preset or control client holds back to METAR/config"
     )
-    _control_option(release)
+    add_control_option(release)
     release.set_defaults(func=_cmd_release)
 
     save = psub.add_parser("save", help="save the current or a METAR's weather as a user preset")
@@ -44,16 +52,28 @@ def add_commands(sub: Subparsers) -> None:
         "--from-running", action="store_true", help="the weather of the running daemon"
     )
     src.add_argument("--from-metar", metavar="REPORT", help="the weather a METAR report states")
-    save.add_argument("--description", help="the preset's description (default: its source)")
+    save.add_argument(
+        "--description", metavar="TEXT", help="the preset's description (default: its source)"
+    )
     save.add_argument("--force", action="store_true", help="replace an existing user preset")
-    _control_option(save)
+    add_control_option(save)
     save.set_defaults(func=_cmd_save)
 
-    validate = psub.add_parser("validate", help="check preset files, reporting every problem")
-    validate.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    validate = psub.add_parser(
+        "validate",
+        help="check preset files, reporting every problem",
+        description="Check preset files, reporting every problem as FILE:LINE: key: problem; "
+        "exits 2 when a file has one.",
+    )
+    validate.add_argument("files", nargs="+", type=Path, metavar="FILE", help="preset files")
     validate.set_defaults(func=_cmd_validate)
 
-    diff = psub.add_parser("diff", help="compare what two presets set, field by field")
+    diff = psub.add_parser(
+        "diff",
+        help="compare what two presets set, field by field",
+        description="Compare what two presets set, field by field; like diff(1), exits 0 when "
+        "they are the same and 1 when they differ.",
+    )
     diff.add_argument("a", help="preset name or file")
     diff.add_argument("b", help="preset name or file")
     diff.add_argument("--json", action="store_true", help="print one JSON object")
@@ -63,12 +83,11 @@ def add_commands(sub: Subparsers) -> None:
 
 def _config_option(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--config", type=Path, help="daemon config whose [presets] dirs are searched first"
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="daemon config whose [presets] dirs are searched first",
     )
-
-
-def _control_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--control", help="address of the daemon (default: the user's socket)")
 
 
 def _preset_dirs(args: argparse.Namespace) -> tuple[Path, ...]:
@@ -119,15 +138,16 @@ def _cmd_apply(args: argparse.Namespace) -> int:
 
 
 def _cmd_release(args: argparse.Namespace) -> int:
-    from wxsky.errors import WxskyError
-    from wxsky.host.client import ControlClient
+    from wxsky.host.client import ControlClient, DaemonUnavailable
 
     address = control_address(args)
     with ControlClient.connect(address) as client:
         result = client.call("release", {})
     released = result.get("released") if isinstance(result, dict) else None
     if not isinstance(released, list):
-        raise WxskyError(f"unexpected answer to release from the daemon at {address}: {result!r}")
+        raise DaemonUnavailable(
+            f"unexpected answer to release from the daemon at {address}: {result!r}"
+        )
     if not released:
         print(f"nothing to release: the daemon at {address} held no overrides")
     else:
@@ -169,8 +189,7 @@ def _cmd_save(args: argparse.Namespace) -> int:
 
 
 def _running_weather(args: argparse.Namespace) -> tuple[Any, str, list[str]]:
-    from wxsky.errors import WxskyError
-    from wxsky.host.client import ControlClient
+    from wxsky.host.client import ControlClient, DaemonUnavailable
     from wxsky.settings.presets import patch_from_weather_dict
 
     address = control_address(args)
@@ -178,7 +197,7 @@ def _running_weather(args: argparse.Namespace) -> tuple[Any, str, list[str]]:
         status = client.call("status")
     weather = status.get("weather") if isinstance(status, dict) else None
     if not isinstance(weather, dict):
-        raise WxskyError(f"the daemon at {address} sent no weather in its status")
+        raise DaemonUnavailable(f"the daemon at {address} sent no weather in its status")
     notes = [
         f"layers[{i}].cover_oktas {layer['cover_oktas']} rounded to whole oktas "
         "(the weather is changing)"
@@ -226,4 +245,4 @@ def _cmd_diff(args: argparse.Namespace) -> int:
         print(f"--- {args.a} ({info_a.path})\n+++ {args.b} ({info_b.path})")
         for d in diffs:
             print(f"{d.key}: {format_value(d.a)} -> {format_value(d.b)}")
-    return 1 if diffs else 0
+    return EXIT_DIFFERENT if diffs else 0

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from datetime import UTC, datetime
 
-from wxsky.cli.common import Subparsers
+from wxsky.cli.common import KindRef, NumberArg, Subparsers, time_arg
+from wxsky.schema import Number
+
+# Longitudes east of 180 are taken too (0..360 east, as some tables give them).
+SUN_LON_DEG = Number(-180.0, 360.0, unit="deg")
 
 
 def add_commands(sub: Subparsers) -> None:
@@ -17,22 +20,39 @@ def add_commands(sub: Subparsers) -> None:
         description="Apparent topocentric positions (parallax and refraction applied) and the "
         "moon's phase, from wxsky.scene.ephemeris.",
     )
-    sun.add_argument("--lat", type=float, required=True, help="observer latitude, degrees")
-    sun.add_argument("--lon", type=float, required=True, help="observer longitude, degrees east")
-    sun.add_argument("--time", help="ISO 8601 time (UTC unless it says); default: now")
-    sun.add_argument("--alt-m", type=float, default=0.0, help="observer height, metres")
+    sun.add_argument(
+        "--lat",
+        type=NumberArg("--lat", KindRef("wxsky.weather.state:LAT_DEG")),
+        required=True,
+        metavar="DEG",
+        help="observer latitude",
+    )
+    sun.add_argument(
+        "--lon",
+        type=NumberArg("--lon", SUN_LON_DEG),
+        required=True,
+        metavar="DEG",
+        help="observer longitude, east",
+    )
+    sun.add_argument(
+        "--time", type=time_arg(), help="ISO 8601 time, UTC unless it says (default: now)"
+    )
+    sun.add_argument(
+        "--alt-m",
+        type=NumberArg("--alt-m", KindRef("wxsky.weather.state:ALT_M")),
+        default=0.0,
+        metavar="M",
+        help="observer height MSL",
+    )
     sun.add_argument("--json", action="store_true", help="print one JSON object")
     sun.set_defaults(func=_cmd_sun)
 
 
 def _cmd_sun(args: argparse.Namespace) -> int:
     from wxsky.scene.ephemeris import sun_and_moon
-    from wxsky.weather.state import format_time_utc, parse_time_utc
+    from wxsky.weather.state import format_time_utc
 
-    _check("--lat", args.lat, -90.0, 90.0)
-    _check("--lon", args.lon, -180.0, 360.0)
-    _check("--alt-m", args.alt_m, -500.0, 30_000.0)
-    when = parse_time_utc(args.time) if args.time else datetime.now(UTC)
+    when = args.time or datetime.now(UTC)
     lon_deg = (args.lon + 180.0) % 360.0 - 180.0
     sun, moon = sun_and_moon(when, args.lat, lon_deg, args.alt_m)
     result = {
@@ -59,8 +79,3 @@ def _cmd_sun(args: argparse.Namespace) -> int:
         f"bright_limb_angle_deg {moon.bright_limb_angle_deg:.1f}"
     )
     return 0
-
-
-def _check(flag: str, value: float, lo: float, hi: float) -> None:
-    if not math.isfinite(value) or not lo <= value <= hi:
-        raise ValueError(f"{flag} {value:g} is outside {lo:g}..{hi:g}")

@@ -14,7 +14,7 @@ from collections.abc import Iterable
 from types import TracebackType
 from typing import Any
 
-from wxsky.errors import WxskyError
+from wxsky.errors import RuntimeFailure, WxskyError
 from wxsky.output.transport import Address, UnixAddress, parse_address
 from wxsky.output.wire import (
     MSGID_MAX,
@@ -33,6 +33,11 @@ _READ_SIZE = 65536
 
 class RemoteError(WxskyError):
     """The daemon answered a request with an error; the message is the daemon's, verbatim."""
+
+
+class DaemonUnavailable(RuntimeFailure):
+    """The daemon cannot be reached, stopped answering, hung up or sent what is not the
+    protocol: nothing the request itself did wrong."""
 
 
 class ControlClient:
@@ -64,7 +69,7 @@ class ControlClient:
                 sock = socket.create_connection((addr.host, addr.port), timeout=timeout_s)
         except OSError as exc:
             why = exc.strerror or str(exc) or type(exc).__name__
-            raise WxskyError(f"cannot connect to the wxsky daemon at {addr}: {why}") from exc
+            raise DaemonUnavailable(f"cannot connect to the wxsky daemon at {addr}: {why}") from exc
         return cls(sock, addr)
 
     @property
@@ -75,7 +80,7 @@ class ControlClient:
         self, method: str, params: dict[str, Any] | None = None, timeout_s: float = 5.0
     ) -> Any:
         """Send a request and wait for its result. Raises RemoteError with the daemon's message
-        on an error response, WxskyError on a timeout or a lost connection."""
+        on an error response, DaemonUnavailable on a timeout or a lost connection."""
         self._check_open()
         msgid = self._next_id
         self._next_id = (self._next_id + 1) % (MSGID_MAX + 1)
@@ -86,7 +91,7 @@ class ControlClient:
         try:
             while self._reply is None:
                 if not self._receive(deadline):
-                    raise WxskyError(
+                    raise DaemonUnavailable(
                         f"no answer to {method!r} from the wxsky daemon at {self._address} "
                         f"within {timeout_s} s"
                     )
@@ -101,7 +106,7 @@ class ControlClient:
         """Receive the notifications of `topics` from now on; returns all subscribed topics."""
         result = self.call("subscribe", {"topics": list(topics)}, timeout_s)
         if not isinstance(result, dict) or not isinstance(result.get("topics"), list):
-            raise WxskyError(f"unexpected answer to subscribe: {result!r}")
+            raise DaemonUnavailable(f"unexpected answer to subscribe: {result!r}")
         return [str(topic) for topic in result["topics"]]
 
     def next_notification(self, timeout_s: float | None = None) -> Notification | None:
@@ -118,7 +123,7 @@ class ControlClient:
 
     def _check_open(self) -> None:
         if self._closed:
-            raise WxskyError(f"connection to the wxsky daemon at {self._address} is closed")
+            raise DaemonUnavailable(f"connection to the wxsky daemon at {self._address} is closed")
 
     def _send(self, data: bytes, timeout_s: float) -> None:
         try:
@@ -128,7 +133,7 @@ class ControlClient:
             # A partial send leaves the stream out of step; the connection is unusable.
             self.close()
             why = exc.strerror or str(exc) or type(exc).__name__
-            raise WxskyError(f"lost the wxsky daemon at {self._address}: {why}") from exc
+            raise DaemonUnavailable(f"lost the wxsky daemon at {self._address}: {why}") from exc
 
     def _receive(self, deadline: float | None) -> bool:
         """Read once and sort what arrived; False if the deadline passed first."""
@@ -146,15 +151,17 @@ class ControlClient:
         except OSError as exc:
             self.close()
             why = exc.strerror or str(exc) or type(exc).__name__
-            raise WxskyError(f"lost the wxsky daemon at {self._address}: {why}") from exc
+            raise DaemonUnavailable(f"lost the wxsky daemon at {self._address}: {why}") from exc
         if not data:
             self.close()
-            raise WxskyError(f"the wxsky daemon at {self._address} closed the connection")
+            raise DaemonUnavailable(f"the wxsky daemon at {self._address} closed the connection")
         try:
             messages = self._decoder.feed(data)
         except WireError as exc:
             self.close()
-            raise WxskyError(f"bad data from the wxsky daemon at {self._address}: {exc}") from exc
+            raise DaemonUnavailable(
+                f"bad data from the wxsky daemon at {self._address}: {exc}"
+            ) from exc
         for message in messages:
             if isinstance(message, Notification):
                 self._notifications.append(message)

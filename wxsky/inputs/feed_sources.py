@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import BinaryIO, Protocol
 
 from wxsky import __version__
-from wxsky.errors import FeedError
+from wxsky.errors import FeedError, FeedUnavailable
 
 MAX_FEED_BYTES = 64 * 1024 * 1024  # a whole-world AWC cache is ~1 MB; more is not a feed
 GZIP_MAGIC = b"\x1f\x8b"
@@ -85,9 +85,9 @@ class FileSource:
         try:
             st = os.stat(self.path)
         except FileNotFoundError:
-            raise FeedError(f"{self.name}: no such file") from None
+            raise FeedUnavailable(f"{self.name}: no such file") from None
         except OSError as exc:
-            raise FeedError(f"{self.name}: cannot stat: {exc.strerror or exc}") from None
+            raise FeedUnavailable(f"{self.name}: cannot stat: {exc.strerror or exc}") from None
         key = (st.st_mtime_ns, st.st_size, st.st_ino)
         if key == self._seen:
             return None
@@ -96,7 +96,7 @@ class FileSource:
         try:
             data = self.path.read_bytes()
         except OSError as exc:
-            raise FeedError(f"{self.name}: cannot read: {exc.strerror or exc}") from None
+            raise FeedUnavailable(f"{self.name}: cannot read: {exc.strerror or exc}") from None
         self._seen = key
         mtime = datetime.fromtimestamp(st.st_mtime, tz=UTC)
         return Fetched(gunzip_if_needed(data, self.name), mtime)
@@ -140,7 +140,7 @@ class StreamSource:
             lines, self._lines = self._lines, []
         if not lines:
             if self._eof:
-                raise FeedError(f"{self.name}: end of input; keeping the last weather")
+                raise FeedUnavailable(f"{self.name}: end of input; keeping the last weather")
             return None
         return Fetched(b"".join(lines), datetime.now(UTC), format="lines")
 
@@ -178,11 +178,11 @@ class HttpSource:
         except urllib.error.HTTPError as exc:
             if exc.code == 304:
                 return None
-            raise FeedError(f"{self.url}: HTTP {exc.code} {exc.reason}") from None
+            raise FeedUnavailable(f"{self.url}: HTTP {exc.code} {exc.reason}") from None
         except urllib.error.URLError as exc:
-            raise FeedError(f"{self.url}: {exc.reason}") from None
+            raise FeedUnavailable(f"{self.url}: {exc.reason}") from None
         except (TimeoutError, OSError) as exc:
-            raise FeedError(f"{self.url}: {exc or type(exc).__name__}") from None
+            raise FeedUnavailable(f"{self.url}: {exc or type(exc).__name__}") from None
         if len(data) > MAX_FEED_BYTES:
             raise FeedError(f"{self.url}: more than {MAX_FEED_BYTES} bytes; not a METAR feed")
         self._etag, self._last_modified = etag, modified

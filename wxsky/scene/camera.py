@@ -30,6 +30,7 @@ FAR_M = 200_000.0
 VIEWPORT_PX = Number(16, 8192, integer=True, unit="px")
 FOV_DEG = Number(1.0, 170.0, unit="deg")  # horizontal
 PITCH_DEG = Number(-90.0, 90.0, unit="deg")
+ROLL_DEG = Number(-180.0, 180.0, unit="deg")  # right wing down positive
 
 
 @dataclass(frozen=True)

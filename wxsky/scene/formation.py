@@ -26,10 +26,10 @@ import dataclasses
 
 import numpy as np
 
+from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModels
 from wxsky.scene.clouds import BlockClouds, block_clouds
 from wxsky.scene.sprites import F32, SpriteBatch
-from wxsky.scene.cloud_model_files import default_models
 from wxsky.weather.state import CloudLayer
 
 FULL_OKTAS = 8.0

@@ -17,7 +17,7 @@ from typing import Any, ClassVar, TypeVar
 
 from wxsky.errors import ConfigError
 from wxsky.protocols.nmea import HEADING_SOURCES
-from wxsky.scene.camera import FOV_DEG, PITCH_DEG, VIEWPORT_PX
+from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX
 from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
@@ -141,7 +141,7 @@ class CameraSection(_Section):
 
     heading_deg: float = _opt(0.0, _num(0.0, 360.0, "deg"))
     pitch_deg: float = _opt(12.0, PITCH_DEG)
-    roll_deg: float = _opt(0.0, _num(-180.0, 180.0, "deg"))
+    roll_deg: float = _opt(0.0, ROLL_DEG)
     fov_deg: float = _opt(60.0, FOV_DEG)  # horizontal
     width: int = _opt(960, VIEWPORT_PX)
     height: int = _opt(540, VIEWPORT_PX)
