@@ -537,3 +537,15 @@ def test_snapshot_renders_from_the_configured_height(tmp_path: Path) -> None:
     config_png, alt_png, ground_png = (read_png(tmp_path / f"{n}.png") for n in runs)
     assert np.array_equal(config_png, alt_png)
     assert not np.array_equal(config_png, ground_png)
+
+
+@pytest.mark.gl
+def test_a_daemon_that_cannot_listen_is_a_runtime_failure(tmp_path: Path) -> None:
+    # The environment is in the way (a file where the socket should go), not the command.
+    blocker = tmp_path / "not-a-socket"
+    blocker.write_text("x", encoding="utf-8")
+    proc = run_wxsky("run", "--control", f"unix:{blocker}")
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f"wxsky: error: {blocker} exists and is not a socket; refusing to replace it"
+    )

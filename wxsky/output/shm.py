@@ -87,7 +87,7 @@ from types import TracebackType
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.errors import WxskyError
+from wxsky.errors import RuntimeFailure, WxskyError
 
 if sys.byteorder != "little":  # pragma: no cover - every supported host is little-endian
     raise ImportError("wxsky.output.shm needs a little-endian CPU (the segment layout is LE)")
@@ -286,7 +286,7 @@ def _replace_stale(name: str) -> None:
     except FileNotFoundError:
         return  # removed between our create attempt and now
     except OSError as exc:
-        raise WxskyError(
+        raise RuntimeFailure(
             f"shared-memory segment {name!r} already exists and cannot be opened: {exc.strerror}"
         ) from exc
     try:
@@ -294,15 +294,15 @@ def _replace_stale(name: str) -> None:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
-                raise WxskyError(f"cannot lock shared-memory segment {name!r}: {exc}") from exc
+                raise RuntimeFailure(f"cannot lock shared-memory segment {name!r}: {exc}") from exc
             pid = _writer_pid(fd)
             owner = f" (pid {pid})" if pid else ""
-            raise WxskyError(
+            raise RuntimeFailure(
                 f"shared-memory segment {name!r} is in use by another wxsky writer{owner}; "
                 "stop it or choose another segment name"
             ) from None
         if not _looks_like_ours(fd):
-            raise WxskyError(
+            raise RuntimeFailure(
                 f"shared-memory segment {name!r} exists and is not a wxsky frame segment; "
                 f"refusing to replace it (remove /dev/shm/{name} by hand if it is stale)"
             )
@@ -325,14 +325,14 @@ def _create_segment(name: str, size: int) -> int:
         try:
             fd = _shm_open(name, flags)
         except FileExistsError:
-            raise WxskyError(
+            raise RuntimeFailure(
                 f"shared-memory segment {name!r} was created by another writer while this one "
                 "was starting"
             ) from None
         except OSError as exc:
-            raise WxskyError(f"cannot create shared-memory segment {name!r}: {exc}") from exc
+            raise RuntimeFailure(f"cannot create shared-memory segment {name!r}: {exc}") from exc
     except OSError as exc:
-        raise WxskyError(f"cannot create shared-memory segment {name!r}: {exc}") from exc
+        raise RuntimeFailure(f"cannot create shared-memory segment {name!r}: {exc}") from exc
     try:
         # Taken before the segment has a magic, so a concurrent create sees it as in use.
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -344,7 +344,7 @@ def _create_segment(name: str, size: int) -> int:
     except OSError as exc:
         os.close(fd)
         _shm_unlink(name)
-        raise WxskyError(
+        raise RuntimeFailure(
             f"cannot allocate {size} bytes of shared memory for segment {name!r}: "
             f"{exc.strerror} (is /dev/shm large enough?)"
         ) from exc
@@ -390,7 +390,7 @@ class FrameWriter:
         except OSError as exc:
             os.close(fd)
             _shm_unlink(bare)
-            raise WxskyError(f"cannot map shared-memory segment {bare!r}: {exc}") from exc
+            raise RuntimeFailure(f"cannot map shared-memory segment {bare!r}: {exc}") from exc
         writer = cls(bare, fd, mm, layout)
         writer._init_header()
         return writer
@@ -552,7 +552,7 @@ class FrameWriter:
 def _parse_header(name: str, mm: mmap.mmap, size: int) -> _Layout:
     magic = mm[HDR_MAGIC : HDR_MAGIC + len(MAGIC)]
     if magic != MAGIC:
-        raise WxskyError(
+        raise RuntimeFailure(
             f"shared-memory segment {name!r} is not a wxsky frame segment "
             f"(magic {magic!r}; a writer still starting up has none yet)"
         )
@@ -560,7 +560,7 @@ def _parse_header(name: str, mm: mmap.mmap, size: int) -> _Layout:
         "<IIIIQI", mm, HDR_VERSION
     )
     if version != VERSION:
-        raise WxskyError(
+        raise RuntimeFailure(
             f"shared-memory segment {name!r} uses frame protocol version {version}; "
             f"this wxsky understands version {VERSION}"
         )
@@ -620,16 +620,16 @@ class FrameReader:
         try:
             fd = _shm_open(bare, os.O_RDONLY)
         except FileNotFoundError:
-            raise WxskyError(
+            raise RuntimeFailure(
                 f"no shared-memory frame segment named {bare!r} (is the wxsky daemon running?)"
             ) from None
         except OSError as exc:
-            raise WxskyError(f"cannot open shared-memory segment {bare!r}: {exc}") from exc
+            raise RuntimeFailure(f"cannot open shared-memory segment {bare!r}: {exc}") from exc
         try:
             info = os.fstat(fd)
             size = info.st_size
             if size < HDR_FIXED_SIZE or size % 8:
-                raise WxskyError(
+                raise RuntimeFailure(
                     f"shared-memory segment {bare!r} is not a wxsky frame segment ({size} bytes)"
                 )
             mm = mmap.mmap(fd, size, access=mmap.ACCESS_READ)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wxsky.errors import ProtocolError, WxskyError
+from wxsky.errors import ProtocolError, RuntimeFailure, WxskyError
 from wxsky.output.wire import (
     Message,
     MessageDecoder,
@@ -119,12 +119,12 @@ def _private_dir(directory: Path) -> Path:
     except FileExistsError:
         pass
     except OSError as exc:
-        raise WxskyError(f"cannot create socket directory {directory}: {exc.strerror}") from exc
+        raise RuntimeFailure(f"cannot create socket directory {directory}: {exc.strerror}") from exc
     info = os.lstat(directory)
     # In /tmp another user could have created the directory (or a symlink) first, to sit on
     # our socket; refuse rather than use it.
     if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid():
-        raise WxskyError(f"socket directory {directory} is not a directory owned by this user")
+        raise RuntimeFailure(f"socket directory {directory} is not a directory owned by this user")
     if stat.S_IMODE(info.st_mode) != 0o700:
         os.chmod(directory, 0o700)
     return directory
@@ -211,7 +211,7 @@ class ControlServer:
                     port = int(self._server.sockets[0].getsockname()[1])
                     self._address = TcpAddress(address.host, port)
         except OSError as exc:
-            raise WxskyError(f"cannot listen on {address}: {exc.strerror or exc}") from exc
+            raise RuntimeFailure(f"cannot listen on {address}: {exc.strerror or exc}") from exc
         logger.info("control server listening on %s", self._address)
 
     @staticmethod
@@ -221,7 +221,7 @@ class ControlServer:
         except FileNotFoundError:
             return
         if not stat.S_ISSOCK(info.st_mode):
-            raise WxskyError(f"{path} exists and is not a socket; refusing to replace it")
+            raise RuntimeFailure(f"{path} exists and is not a socket; refusing to replace it")
         try:
             _, writer = await asyncio.wait_for(asyncio.open_unix_connection(str(path)), 1.0)
         except (ConnectionRefusedError, FileNotFoundError):
@@ -230,11 +230,11 @@ class ControlServer:
                 os.unlink(path)
             return
         except (OSError, TimeoutError) as exc:
-            raise WxskyError(f"cannot tell whether {path} is in use: {_one_line(exc)}") from exc
+            raise RuntimeFailure(f"cannot tell whether {path} is in use: {_one_line(exc)}") from exc
         writer.close()
         with contextlib.suppress(OSError):
             await writer.wait_closed()
-        raise WxskyError(f"another wxsky daemon is listening on unix:{path}")
+        raise RuntimeFailure(f"another wxsky daemon is listening on unix:{path}")
 
     async def close(self) -> None:
         """Stop listening, disconnect every client and remove the socket file. Idempotent."""
