@@ -85,7 +85,7 @@ def test_second_sigint_forces_exit_and_still_cleans_up(tmp_path: Path) -> None:
         d.proc.send_signal(signal.SIGINT)
         d.proc.send_signal(signal.SIGINT)
         code = d.proc.wait(timeout=5)
-        assert code in (0, 1), d.log()
+        assert code in (0, 130), d.log()  # 0 if the first SIGINT finished shutting down
         assert not Path(f"/dev/shm/{d.shm_name}").exists()
         assert not d.socket_path.exists()
 

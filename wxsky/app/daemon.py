@@ -517,7 +517,7 @@ class Daemon:
         if self._signals > 1 and sig == signal.SIGINT:
             log.warning("second interrupt: forcing exit")
             self._force_cleanup()
-            os._exit(1)
+            os._exit(130)  # as a shell reports death by SIGINT, and as the CLI does
         log.info("received %s, shutting down", signal.Signals(sig).name)
         self._stop.set()
 
