@@ -5,6 +5,7 @@ must come back as FeedProblems or FeedError, never as another exception."""
 from __future__ import annotations
 
 import gzip
+import json
 import os
 import random
 import re
@@ -13,8 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from wxsky.cli import main
 from wxsky.errors import FeedError
-from wxsky.weather.feed_formats import MAX_PROBLEMS
+from wxsky.weather.feed_formats import MAX_PROBLEMS, clean_raw, month_of_day
 from wxsky.weather.feeds import (
     FORMATS,
     Feed,
@@ -120,6 +122,59 @@ def test_corpus_counts_and_vintage(name: str) -> None:
         if line not in junk_lines and _tokens_time(r.raw) != observed:
             disagree.add(" ".join(r.raw.split()[:2]))
     assert disagree == CLOCK_DISAGREES.get(name, set())
+
+
+@pytest.mark.parametrize("name", sorted(CORPORA))
+def test_decode_file_emits_every_report_of_the_feed(
+    name: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The reports are counted here from the file's own structure, not by the loader: a CSV row
+    # is a line after the header; a tgftp record is a timestamp line and the line after it, and
+    # records whose text repeats an earlier one (whitespace aside) are one report.
+    lines = gzip.decompress((DATA / name).read_bytes()).decode().replace("\r", "").split("\n")
+    fmt, count, duplicates = CORPORA[name][:3]
+    if fmt == "awc-csv":
+        header = next(i for i, line in enumerate(lines) if line.startswith("raw_text,"))
+        texts = None
+        expected = sum(1 for line in lines[header + 1 :] if line.strip())
+    else:
+        stamp = re.compile(r"[0-9]{4}/[0-9]{2}/[0-9]{2} [0-9]{2}:[0-9]{2}")
+        records = [lines[i + 1] for i, line in enumerate(lines[:-1]) if stamp.fullmatch(line)]
+        texts = {" ".join(record.split()) for record in records}
+        expected = len(texts)
+        assert len(records) - expected == duplicates
+    assert expected == count
+    assert main(["metar", "decode", "--file", str(DATA / name)]) == 0
+    decoded = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert len(decoded) == expected
+    assert len({d["where"] for d in decoded}) == expected  # each once
+    if texts is not None:
+        assert {d["raw"] for d in decoded} == texts
+
+
+def test_decode_file_keeps_reports_with_impossible_times(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "cycle.txt"
+    path.write_text(
+        "2025/07/26 15:60\nKAAA 261600Z 27010KT 10SM CLR 20/10 A3000\n\n"
+        "2025/07/26 16:00\nKBBB 261560Z 27010KT 10SM CLR 20/10 A3000\n\n"
+        "2025/07/26 16:00\nKCCC 321600Z 27010KT 10SM CLR 20/10 A3000\n\n"
+        "2025/07/32 16:00\nKDDD 262400Z 27010KT 10SM CLR 20/10 A3000\n\n"
+        "KEEE 261600Z 27010KT 10SM CLR 20/10 A3000\n"
+    )
+    assert main(["metar", "decode", "--file", str(path)]) == 0
+    out, err = capsys.readouterr()
+    decoded = {d["station"]: d for d in map(json.loads, out.splitlines())}
+    assert list(decoded) == ["KAAA", "KBBB", "KCCC", "KDDD", "KEEE"]
+    assert not decoded["KAAA"]["partial"] and decoded["KAAA"]["time_utc"] == "2025-07-26T16:00:00Z"
+    assert decoded["KBBB"]["time_utc"] == "2025-07-26T16:00:00Z" and decoded["KBBB"]["partial"]
+    assert decoded["KBBB"]["errors"] == ["group 2 '261560Z': 15:60 read as 2025-07-26 16:00Z"]
+    assert decoded["KCCC"]["time_utc"] is None and decoded["KCCC"]["time_group"] == "321600Z"
+    assert decoded["KCCC"]["wind"]["speed_kt"] == 10.0  # decoded as far as it goes
+    assert decoded["KDDD"]["time_utc"] == "2025-07-27T00:00:00Z"
+    assert decoded["KEEE"]["time_utc"] == "2025-07-26T16:00:00Z" and not decoded["KEEE"]["partial"]
+    assert "15:60" in err and "2025/07/32" in err and "without a timestamp line" in err
 
 
 @pytest.mark.parametrize("name", sorted(CORPORA))
@@ -424,10 +479,114 @@ def test_tgftp_broken_records() -> None:
         "2025/07/26 15:58\n"
     )
     feed = parse_feed(text, format="tgftp", name="c")
-    assert [r.station for r in feed.reports] == ["KTGI", None]
+    # No report line is lost: without a timestamp line, or after an impossible one, it is dated
+    # against the file's good timestamps.
+    assert [(r.station, r.where) for r in feed.reports] == [
+        (None, "c:1"),
+        ("KTGI", "c:4"),
+        ("KBAD", "c:6"),
+        (None, "c:8"),
+    ]
+    stray, _, kbad, notime = feed.reports
+    assert stray.observed_utc is None and (stray.year, stray.month) == (2025, 7)
+    assert kbad.observed_utc == datetime(2025, 7, 26, 15, 55, tzinfo=UTC)  # its own time group
     # A report without a time group is dated by the timestamp line.
-    assert feed.reports[1].observed_utc == datetime(2025, 7, 26, 15, 57, tzinfo=UTC)
-    assert [p.where for p in feed.problems] == ["c:1", "c:2", "c:5", "c:8", "c:9"]
+    assert notime.observed_utc == datetime(2025, 7, 26, 15, 57, tzinfo=UTC)
+    assert [p.where for p in feed.problems] == ["c:1", "c:1", "c:2", "c:5", "c:8", "c:9"]
+    assert feed.problems[3].reason == (
+        "impossible timestamp '2025/13/40 15:55'; its report is dated by the file"
+    )
+
+
+def test_tgftp_timestamp_hour_24_and_minute_60_roll_over() -> None:
+    text = (
+        "2025/07/26 15:60\nKXYZ 261600Z 00000KT 10SM CLR 20/10 A3000\n\n"
+        "2025/07/31 24:00\nKABC 010000Z 00000KT 10SM CLR 20/10 A3000\n\n"
+        "2025/07/26 23:60\nKDEF 00000KT 10SM CLR\n\n"
+    )
+    feed = parse_feed(text, name="t")
+    assert feed.format == "tgftp" and len(feed.reports) == 3
+    kxyz, kabc, kdef = feed.reports
+    assert kxyz.observed_utc == datetime(2025, 7, 26, 16, 0, tzinfo=UTC)
+    # The stamp is 1 August 00:00, so the report's day 1 is August's.
+    assert kabc.observed_utc == datetime(2025, 8, 1, 0, 0, tzinfo=UTC)
+    assert (kabc.year, kabc.month) == (2025, 8)
+    assert kdef.observed_utc == datetime(2025, 7, 27, 0, 0, tzinfo=UTC)  # the stamp's time
+    assert [(p.where, p.reason) for p in feed.problems] == [
+        ("t:1", "timestamp '2025/07/26 15:60' read as 2025/07/26 16:00"),
+        ("t:4", "timestamp '2025/07/31 24:00' read as 2025/08/01 00:00"),
+        ("t:7", "timestamp '2025/07/26 23:60' read as 2025/07/27 00:00"),
+        ("t:8", "no ddhhmmZ time group: 'KDEF 00000KT 10SM CLR'"),
+    ]
+
+
+@pytest.mark.parametrize(
+    "stamp",
+    [
+        "2025/07/26 15:61",
+        "2025/07/26 25:00",
+        "2025/07/32 10:00",
+        "2025/02/29 10:00",
+        "2025/00/10 10:00",
+        "0000/01/01 00:00",
+        "9999/12/31 24:00",
+        "9999/99/99 99:99",
+    ],
+)
+def test_tgftp_impossible_timestamp_keeps_its_report(stamp: str) -> None:
+    text = (
+        "2025/07/26 15:50\nKAAA 261550Z 00000KT 10SM CLR 20/10 A3000\n\n"
+        f"{stamp}\nKBBB 261555Z 00000KT 10SM CLR 20/10 A3000\n\n"
+        f"{stamp}\nKCCC 00000KT 10SM CLR 20/10 A3000\n"
+    )
+    feed = parse_feed(text, format="tgftp", name="t")
+    assert [r.station for r in feed.reports] == ["KAAA", "KBBB", "KCCC"]
+    kbbb, kccc = feed.reports[1:]
+    assert kbbb.observed_utc == datetime(2025, 7, 26, 15, 55, tzinfo=UTC)  # dated by the file
+    assert kccc.observed_utc is None and (kccc.year, kccc.month) == (2025, 7)
+    assert [p.where for p in feed.problems] == ["t:4", "t:7", "t:8"]
+    assert feed.problems[0].reason.startswith(f"impossible timestamp {stamp!r}")
+
+
+def _tgftp_report_lines(text: str) -> list[str]:
+    """What a tgftp file's reports must be, found without the loader's record logic: every
+    line that is not a timestamp line, its text cleaned as every loader does, repeats dropped."""
+    stamp = re.compile(r"[0-9]{4}/[0-9]{2}/[0-9]{2} [0-9]{2}:[0-9]{2}")
+    cleaned = (clean_raw(line) for line in text.split("\n") if not stamp.fullmatch(line.strip()))
+    return list(dict.fromkeys(raw for raw in cleaned if raw))
+
+
+TGFTP_SAMPLE = (
+    "2025/07/26 15:55\nKTGI 261555Z AUTO 10SM CLR 31/24 A3007 RMK AO1 T03090244\n\n"
+    "2025/07/26 15:60\nKXYZ 261560Z 27010KT 10SM CLR 20/10 A3000\n\n"
+    "2025/07/32 15:55\nKBAD 321555Z 27010KT 10SM CLR 20/10 A3000\n\n"
+    "2025/07/26 24:00\nKDAY 262400Z 27010KT 10SM CLR 20/10 A3000\n\n"
+    "KNOSTAMP 261555Z 27010KT\n"
+    "2025/07/26 16:35\nEGLL 261635Z 24010KT 9999 FEW030 20/10 Q1015\n\n"
+)
+
+
+def test_tgftp_truncated_anywhere_loses_no_report_line() -> None:
+    for cut in range(len(TGFTP_SAMPLE) + 1):
+        text = TGFTP_SAMPLE[:cut]
+        feed = parse_feed(text, format="tgftp")
+        assert [r.raw for r in feed.reports] == _tgftp_report_lines(text), cut
+
+
+def test_tgftp_garbled_loses_no_report_line() -> None:
+    rng = random.Random(2612)
+    alphabet = "0123456789/: \nKZ"
+    for _ in range(2000):
+        chars = list(TGFTP_SAMPLE)
+        for _ in range(rng.randint(1, 6)):
+            pos = rng.randrange(len(chars))
+            if rng.random() < 0.5:
+                chars[pos] = rng.choice(alphabet)
+            else:
+                chars.insert(pos, rng.choice(alphabet))
+        text = "".join(chars)
+        feed = parse_feed(text, format="tgftp")
+        assert [r.raw for r in feed.reports] == _tgftp_report_lines(text), text
 
 
 # --- one report per line (VATSIM text) ------------------------------------------------------------
@@ -463,9 +622,68 @@ def test_lines_bad_lines_are_problems() -> None:
     text = "EGLL 23008KT 9999\nhello there\nEGLL 320000Z 23008KT\nKXYZ 311200Z 00000KT\n"
     feed = parse_feed(text, format="lines", reference_utc=datetime(2025, 7, 1, tzinfo=UTC))
     assert [r.station for r in feed.reports] == ["EGLL", "EGLL", "KXYZ"]
-    assert [r.observed_utc for r in feed.reports] == [None, None, None]  # no June 31 either
-    assert [p.where for p in feed.problems] == ["<feed>:1", "<feed>:2", "<feed>:3", "<feed>:4"]
-    assert "impossible time group" in feed.problems[2].reason
+    # No 30 June 31: day 31 on 1 July is May's.
+    assert [r.observed_utc for r in feed.reports] == [
+        None,
+        None,
+        datetime(2025, 5, 31, 12, 0, tzinfo=UTC),
+    ]
+    assert (feed.reports[2].year, feed.reports[2].month) == (2025, 5)
+    assert [p.where for p in feed.problems] == ["<feed>:1", "<feed>:2", "<feed>:3"]
+    assert feed.problems[2].reason == (
+        "impossible time group (day 32 is not a day of any month): 'EGLL 320000Z 23008KT'"
+    )
+
+
+@pytest.mark.parametrize(
+    ("line", "observed", "problem"),
+    [
+        ("KXYZ 261560Z 00000KT", datetime(2025, 7, 26, 16, 0, tzinfo=UTC), None),
+        ("KXYZ 262400Z 00000KT", datetime(2025, 7, 27, 0, 0, tzinfo=UTC), None),
+        ("KXYZ 262500Z 00000KT", None, "25:00 is not a UTC time"),
+        ("KXYZ 261575Z 00000KT", None, "15:75 is not a UTC time"),
+        ("KXYZ 001200Z 00000KT", None, "day 00 is not a day of any month"),
+        ("KXYZ 991200Z 00000KT", None, "day 99 is not a day of any month"),
+    ],
+)
+def test_lines_out_of_range_times(
+    line: str, observed: datetime | None, problem: str | None
+) -> None:
+    feed = parse_feed(line, format="lines", reference_utc=datetime(2025, 7, 28, tzinfo=UTC))
+    (r,) = feed.reports
+    assert r.raw == line and r.observed_utc == observed and (r.year, r.month) == (2025, 7)
+    assert [p.reason for p in feed.problems] == (
+        [] if problem is None else [f"impossible time group ({problem}): {line!r}"]
+    )
+
+
+@pytest.mark.parametrize(
+    ("reference", "day", "expected"),
+    [
+        (datetime(2026, 12, 1, tzinfo=UTC), 1, (2026, 12)),
+        (datetime(2026, 12, 1, tzinfo=UTC), 30, (2026, 11)),
+        (datetime(2026, 12, 1, tzinfo=UTC), 31, (2026, 10)),  # November has no 31st
+        (datetime(2026, 3, 1, tzinfo=UTC), 29, (2026, 1)),
+        (datetime(2028, 3, 1, tzinfo=UTC), 29, (2028, 2)),
+        (datetime(2026, 3, 1, tzinfo=UTC), 31, (2026, 1)),
+        (datetime(2027, 1, 15, tzinfo=UTC), 20, (2026, 12)),
+        (datetime(2026, 7, 26, 0, 1, tzinfo=UTC), 26, (2026, 7)),  # later that day: same month
+    ],
+)
+def test_month_of_day(reference: datetime, day: int, expected: tuple[int, int]) -> None:
+    assert month_of_day(reference, day) == expected
+
+
+def test_csv_impossible_time_group() -> None:
+    dated = ROW_KBDN.replace("KBDN 262135Z", "KBDN 322135Z")
+    undated = ROW_KSTF.replace("KSTF 261135Z", "KSTF 261175Z").replace("2014-09-26T11:35:00Z", "")
+    feed = parse_feed(f"{HEADER}\n{dated}\n{undated}\n", name="c")
+    kbdn, kstf = feed.reports
+    assert kbdn.observed_utc == datetime(2014, 9, 26, 21, 35, tzinfo=UTC)  # AWC's column
+    assert kstf.observed_utc is None and (kstf.year, kstf.month) == (2014, 9)
+    assert [(p.where, p.reason) for p in feed.problems] == [
+        ("c:3", f"impossible time group (11:75 is not a UTC time): {kstf.raw[:60]!r}")
+    ]
 
 
 # --- files, gzip, detection, garbage --------------------------------------------------------------

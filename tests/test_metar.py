@@ -90,6 +90,68 @@ def test_time_group_without_z_is_accepted() -> None:
     assert r.errors == ()
 
 
+@pytest.mark.parametrize(
+    ("text", "year", "month", "expected"),
+    [
+        ("KXYZ 261560Z 27010KT", 2025, 7, datetime(2025, 7, 26, 16, 0)),
+        ("KXYZ 262360Z 27010KT", 2025, 7, datetime(2025, 7, 27, 0, 0)),
+        ("KXYZ 262400Z 27010KT", 2025, 7, datetime(2025, 7, 27, 0, 0)),
+        ("KXYZ 262460Z 27010KT", 2025, 7, datetime(2025, 7, 27, 1, 0)),
+        ("KXYZ 302400Z 27010KT", 2025, 6, datetime(2025, 7, 1, 0, 0)),
+        ("KXYZ 312400Z 27010KT", 2025, 12, datetime(2026, 1, 1, 0, 0)),
+        ("KXYZ 282400Z 27010KT", 2024, 2, datetime(2024, 2, 29, 0, 0)),
+        ("KXYZ 261560 27010KT", 2025, 7, datetime(2025, 7, 26, 16, 0)),  # no Z
+        ("METAR COR KXYZ AUTO 261560Z 27010KT", 2025, 7, datetime(2025, 7, 26, 16, 0)),
+    ],
+)
+def test_hour_24_and_minute_60_roll_over(
+    text: str, year: int, month: int, expected: datetime
+) -> None:
+    r = decode(text, year=year, month=month)
+    assert r.time_utc == expected.replace(tzinfo=UTC)
+    group = next(t for t in text.split() if t[:1].isdigit())
+    hhmm = f"{group[2:4]}:{group[4:6]}"
+    assert r.errors == (
+        f"group {text.split().index(group) + 1} {group!r}: {hhmm} read as "
+        f"{expected:%Y-%m-%d %H:%M}Z",
+    )
+    assert r.partial and r.time_group == group
+    assert r.wind is not None and r.require_usable() is r
+
+
+@pytest.mark.parametrize(
+    ("group", "reason"),
+    [
+        ("321550Z", "day 32 is not a day of any month"),
+        ("001550Z", "day 00 is not a day of any month"),
+        ("992359Z", "day 99 is not a day of any month"),
+        ("262500Z", "25:00 is not a UTC time"),
+        ("261561Z", "15:61 is not a UTC time"),
+        ("262461Z", "24:61 is not a UTC time"),
+        ("269999Z", "99:99 is not a UTC time"),
+    ],
+)
+def test_impossible_time_keeps_the_report_and_its_body(group: str, reason: str) -> None:
+    r = dec(f"KXYZ {group} 27010KT 9999 FEW030 20/10 Q1015")
+    assert (r.station, r.time_utc, r.time_group) == ("KXYZ", None, group)
+    assert r.errors == (f"group 2 {group!r}: {reason}; observation time unknown",)
+    assert r.wind is not None and r.visibility_m == 10_000.0 and len(r.sky) == 1
+    assert (r.temperature_c, r.altimeter_hpa) == (20.0, 1015.0)
+    d = r.to_dict()
+    assert (d["time_utc"], d["time_group"], d["partial"]) == (None, group, True)
+    assert "time n/a" in r.describe()
+
+
+@pytest.mark.parametrize("group", ["26155Z", "2615500Z", "26I550Z", "261550ZZ", "261550z", "Z"])
+def test_a_garbled_time_group_is_no_time_group(group: str) -> None:
+    r = dec(f"KXYZ {group} 27010KT 9999")
+    assert (r.time_utc, r.time_group, r.wind) == (None, None, None)  # the body is not decoded
+    assert r.errors == (
+        f"group 2 {group!r}: expected the time group (ddhhmmZ) after station 'KXYZ'; "
+        "the rest is not decoded",
+    )
+
+
 # --- wind -------------------------------------------------------------------------------------
 
 

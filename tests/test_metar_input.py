@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import json
+import logging
 from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
 
 from wxsky.cli import main
-from wxsky.inputs.metar_input import MetarSettings, ingest, select
+from wxsky.inputs.feed_sources import Fetched
+from wxsky.inputs.metar_input import Ingested, MetarFeedInput, MetarSettings, ingest, select
 from wxsky.inputs.station_table import StationPosition, station_table
+from wxsky.inputs.stats import InputStats
+from wxsky.weather import metar as metar_module
 from wxsky.weather.feeds import parse_feed, read_feed
 from wxsky.weather.state import CloudType
 
@@ -28,18 +32,19 @@ def test_station_table_has_positions_from_the_corpora() -> None:
 
 def test_ingest_a_world_cache_keeps_one_report_per_station() -> None:
     result = ingest(read_feed(AWC_2014))
-    assert result.reports == 4336
+    assert result.reports == 4336 and result.internal_errors == ()
     # Every row but the three junk rows and the rows without a position gives a station.
     assert 4200 < len(result.stations) <= 4336
     assert any("PART 1 OF 2" in p or "no time" in p or "station" in p for p in result.problems)
     jfk = result.stations["KJFK"]
-    assert jfk.observed_utc.year == 2014 and jfk.observed_utc.month == 9
+    assert jfk.observed_utc is not None
+    assert (jfk.observed_utc.year, jfk.observed_utc.month) == (2014, 9)
 
 
 def test_ingest_a_cycle_file_uses_the_station_table_for_positions() -> None:
     feed = read_feed(CYCLE)
     result = ingest(feed)
-    assert result.duplicates == 946 and result.reports == 554
+    assert result.duplicates == 946 and result.reports == 554 and result.internal_errors == ()
     unknown = {p.split(": ")[1] for p in result.problems if "position unknown" in p}
     # No report lost: every station is either placed or named as unplaceable.
     named = {r.raw.split()[0] for r in feed.reports}
@@ -124,3 +129,180 @@ def test_cli_fetch_of_an_html_page_is_a_one_line_error(
     assert main(["metar", "fetch", str(page)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "oops.txt" in err and "HTML" in err
+
+
+# --- impossible observation times: kept for their station -----------------------------------
+
+REF = datetime(2025, 7, 26, 16, 0, tzinfo=UTC)
+ZURICH = {"LSZH": StationPosition(47.48, 8.53, 424.0), "LSGG": StationPosition(46.24, 6.11, 411.0)}
+
+
+def _ingest(text: str, fmt: str = "lines", known: Ingested | None = None) -> Ingested:
+    feed = parse_feed(text, format=fmt, reference_utc=REF)
+    return ingest(feed, None if known is None else known.stations, ZURICH)
+
+
+def test_minute_60_report_is_used_and_fresh() -> None:
+    result = _ingest("LSZH 261560Z 24008KT 9999 OVC010 18/09 Q1016\n")
+    zurich = result.stations["LSZH"]
+    assert zurich.observed_utc == datetime(2025, 7, 26, 16, 0, tzinfo=UTC)
+    assert result.partial == 1 and result.accepted == 1
+    choice = select(result.stations, 47.4, 8.5, MetarSettings(), now_utc=REF)
+    assert choice.used[0][0] == "LSZH" and choice.patch is not None
+
+
+def test_day_32_report_is_dated_by_the_feed_where_it_can_be() -> None:
+    text = "2025/07/26 15:50\nLSZH 321550Z 24008KT 9999 OVC010 18/09 Q1016\n"
+    result = _ingest(text, "tgftp")
+    zurich = result.stations["LSZH"]
+    assert zurich.observed_utc == datetime(2025, 7, 26, 15, 50, tzinfo=UTC)  # the stamp
+    layers = zurich.patch.layers
+    assert layers is not None and layers[0].cover_oktas == 8  # the body was decoded
+    assert result.problems == (
+        "<feed>:2: impossible time group (day 32 is not a day of any month): 'LSZH 321550Z "
+        "24008KT 9999 OVC010 18/09 Q1016'",
+        "<feed>:2: LSZH: group 2 '321550Z': day 32 is not a day of any month; observation time "
+        "unknown; dated by the feed",
+    )
+    choice = select(result.stations, 47.4, 8.5, MetarSettings(), now_utc=REF)
+    assert choice.used[0][0] == "LSZH"
+
+
+def test_day_32_report_without_a_feed_time_is_kept_but_never_fresh() -> None:
+    result = _ingest("LSZH 321550Z 24008KT 9999 OVC010 18/09 Q1016\n")
+    assert result.stations["LSZH"].observed_utc is None
+    assert result.problems[-1].endswith(
+        "observation time unknown; kept without a time, so never fresh"
+    )
+    for settings in (
+        MetarSettings(),
+        MetarSettings(age_reference="feed"),
+        MetarSettings(station="LSZH"),
+    ):
+        choice = select(result.stations, 47.4, 8.5, settings, now_utc=REF)
+        assert choice.patch is None and choice.stale and choice.stale_stations == ("LSZH",)
+
+
+def test_report_of_unknown_time_never_replaces_one_of_known_time() -> None:
+    good = _ingest("LSZH 261520Z 24008KT 9999 FEW040 18/09 Q1016\n")
+    bad = _ingest("LSZH 321550Z 24008KT 9999 OVC010 18/09 Q1016\n", known=good)
+    assert bad.stations["LSZH"] == good.stations["LSZH"] and bad.accepted == 1
+    # The other way round, the report with a time takes over.
+    first = _ingest("LSZH 321550Z 24008KT 9999 OVC010 18/09 Q1016\n")
+    second = _ingest("LSZH 261520Z 24008KT 9999 FEW040 18/09 Q1016\n", known=first)
+    assert second.stations["LSZH"].observed_utc == datetime(2025, 7, 26, 15, 20, tzinfo=UTC)
+
+
+def test_age_against_the_feed_skips_reports_of_unknown_time() -> None:
+    text = "LSZH 321550Z 24008KT 9999 OVC010 18/09 Q1016\nLSGG 261320Z 24008KT 9999 FEW050 Q1016\n"
+    result = _ingest(text)
+    choice = select(result.stations, 46.3, 6.2, MetarSettings(age_reference="feed"))
+    assert choice.used[0][0] == "LSGG"  # aged against its own report, the newest with a time
+
+
+def test_text_without_a_time_group_is_no_report_for_station_choice() -> None:
+    result = _ingest("LSZH 24008KT 9999 OVC010 18/09 Q1016\nLSGG M01/M01 RMK T10081010\n")
+    assert result.stations == {} and len(result.problems) == 4  # the loader's two, ingest's two
+
+
+# --- a decoder defect is no bad report -------------------------------------------------------
+
+
+def test_a_decoder_defect_is_kept_apart_from_the_feeds_problems(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def fault(*args: object) -> int:
+        raise RuntimeError("injected")
+
+    monkeypatch.setitem(metar_module._MATCH_HANDLERS, "sky", fault)
+    text = "LSZH 261550Z 24008KT 9999 OVC010 18/09 Q1016\nLSGG 261550Z 24008KT 9999 NCD Q1016\n"
+    result = _ingest(text)
+    assert set(result.stations) == {"LSGG"}  # the other report is still used
+    assert result.problems == ()
+    (defect,) = result.internal_errors
+    assert defect.startswith("<feed>:1: METAR decoder defect: the sky handler failed on group 5")
+
+
+def test_a_decoder_defect_is_logged_as_an_error_by_the_input(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def fault(*args: object) -> int:
+        raise RuntimeError("injected")
+
+    monkeypatch.setitem(metar_module._MATCH_HANDLERS, "sky", fault)
+    stats = InputStats("test", "metar")
+    feed_input = MetarFeedInput(
+        _NoSource(), MetarSettings(), stats, lambda patch: None, lambda: (47.4, 8.5), ZURICH
+    )
+    data = b"LSZH 261550Z 24008KT 9999 OVC010 18/09 Q1016\n"
+    with caplog.at_level(logging.ERROR, logger="wxsky.inputs.metar"):
+        feed_input._ingest(Fetched(data, REF))
+    assert stats.detail["internal_errors"] == 1
+    (record,) = [r for r in caplog.records if r.levelno == logging.ERROR]
+    assert "a wxsky defect" in record.getMessage() and "sky handler" in record.getMessage()
+
+
+class _NoSource:
+    name = "test"
+
+    async def fetch(self) -> Fetched | None:
+        return None
+
+    def close(self) -> None:
+        pass
+
+
+# --- metar decode REPORT -----------------------------------------------------------------------
+
+
+def _decode_cli(capsys: pytest.CaptureFixture[str], *args: str) -> dict[str, object]:
+    assert main(["metar", "decode", *args, "--json"]) == 0
+    data: dict[str, object] = json.loads(capsys.readouterr().out)
+    return data
+
+
+def test_cli_decode_without_year_and_month_is_never_in_the_future(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(metar_module, "_utc_now", lambda: datetime(2026, 12, 1, 0, 10, tzinfo=UTC))
+    for group, when in (
+        ("302350Z", "2026-11-30T23:50:00Z"),
+        ("312350Z", "2026-10-31T23:50:00Z"),
+        ("012350Z", "2026-11-01T23:50:00Z"),
+        ("010005Z", "2026-12-01T00:05:00Z"),
+    ):
+        assert _decode_cli(capsys, f"KXYZ {group} 27010KT")["time_utc"] == when
+    explicit = _decode_cli(capsys, "KXYZ 012350Z 27010KT", "--year", "2026", "--month", "12")
+    assert explicit["time_utc"] == "2026-12-01T23:50:00Z"  # as given, even in the future
+    month_only = _decode_cli(capsys, "KXYZ 152350Z 27010KT", "--month", "12")
+    assert month_only["time_utc"] == "2025-12-15T23:50:00Z"
+
+
+def test_cli_decode_prints_a_report_with_an_impossible_time(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    d = _decode_cli(capsys, "KXYZ 321550Z 27010KT 9999 FEW030 20/10 Q1015")
+    assert (d["time_utc"], d["time_group"], d["partial"]) == (None, "321550Z", True)
+    assert d["errors"] == [
+        "group 2 '321550Z': day 32 is not a day of any month; observation time unknown"
+    ]
+    assert main(["metar", "decode", "KXYZ 321550Z 27010KT"]) == 0
+    text = capsys.readouterr().out
+    assert "time n/a" in text and "day 32" in text
+    # Text with no time group at all is still refused.
+    assert main(["metar", "decode", "KXYZ 27010KT 9999"]) == 2
+    assert "no valid observation time" in capsys.readouterr().err
+
+
+def test_cli_fetch_shows_a_decoder_defect_apart_from_the_problems(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def fault(*args: object) -> int:
+        raise RuntimeError("injected")
+
+    monkeypatch.setitem(metar_module._MATCH_HANDLERS, "sky", fault)
+    assert main(["metar", "fetch", str(CYCLE), "--lat", "40.64", "--lon", "-73.78", "--json"]) == 0
+    out, err = capsys.readouterr()
+    summary = json.loads(out)
+    assert summary["internal_errors"] and not any("defect" in p for p in summary["problems"])
+    assert err.count("wxsky: internal error: ") == len(summary["internal_errors"])

@@ -114,3 +114,10 @@ def test_stale_reports_are_split_off() -> None:
     old = StationWeather("OLD1", 0.0, 0.0, 0.0, T - timedelta(minutes=91), A.patch)
     fresh, stale = split_by_age([A, old], T, 90 * 60.0)
     assert fresh == [A] and stale == [old]
+
+
+def test_a_report_of_unknown_time_is_always_stale() -> None:
+    undated = StationWeather("UNDT", 0.0, 0.0, 0.0, None, A.patch)
+    future = StationWeather("FUTR", 0.0, 0.0, 0.0, T + timedelta(minutes=5), A.patch)
+    fresh, stale = split_by_age([undated, A, future], T, 1e12)
+    assert fresh == [A, future] and stale == [undated]

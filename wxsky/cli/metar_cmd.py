@@ -161,6 +161,9 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
         reference_utc=fetched.reference_utc,
     )
     result = ingest(feed)
+    for defect in result.internal_errors:
+        # A wxsky bug, not the feed's problem: on stderr, whatever the output format.
+        print(f"wxsky: internal error: {defect}", file=sys.stderr)
     choice = select(result.stations, lat, lon, settings)
     weather = None
     if choice.patch is not None:
@@ -174,6 +177,7 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
         "partial": result.partial,
         "nil": result.nil,
         "problems": list(result.problems),
+        "internal_errors": list(result.internal_errors),
         "observer": {"lat_deg": lat, "lon_deg": lon},
         "using": [{"station": s, "distance_km": round(d / 1000, 1)} for s, d in choice.used],
         "fresh": choice.fresh,

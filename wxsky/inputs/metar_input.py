@@ -5,6 +5,15 @@ Bad input never stops it: a malformed report, a junk row or a failed fetch is co
 input's status and logged (rate-limited) with its station and reason, and the weather stays
 what it was. When no report near the observer is fresh enough the last good weather stays and
 the status says `stale`.
+
+A report whose observation time is impossible (day 32, hour 25) still counts for its station: it
+is dated by the feed's own time for it (AWC observation_time, the tgftp timestamp line) and, where
+the feed has none, kept without a time, which makes it always stale (`stations.split_by_age`).
+Text without a time group at all is no report (`PART 1 OF 2`) and is only named as a problem.
+
+A defect of the decoder (`MetarInternalError`) is not bad input: it is kept apart from the
+feed's problems (`Ingested.internal_errors`) and logged as an error, and the other reports of
+the feed are still used.
 """
 
 from __future__ import annotations
@@ -23,7 +32,7 @@ from wxsky.inputs.feed_sources import FeedSource, Fetched, StreamSource
 from wxsky.inputs.station_table import StationPosition, station_table
 from wxsky.inputs.stats import InputStats, RateLimitedLog
 from wxsky.weather.feeds import Feed, parse_feed
-from wxsky.weather.metar import decode
+from wxsky.weather.metar import MetarInternalError, decode
 from wxsky.weather.metar_clouds import metar_to_patch
 from wxsky.weather.state import WeatherPatch
 from wxsky.weather.stations import StationWeather, blend, nearest, split_by_age
@@ -72,6 +81,7 @@ class Ingested:
     nil: int = 0
     duplicates: int = 0
     problems: tuple[str, ...] = ()
+    internal_errors: tuple[str, ...] = ()  # decoder defects, one per report (module docstring)
 
 
 @dataclass(frozen=True)
@@ -94,11 +104,17 @@ def ingest(
     positions = station_table() if positions is None else positions
     stations: dict[str, StationWeather] = dict(known or {})
     problems = [f"{p.where}: {p.reason}" for p in feed.problems]
+    internal: list[str] = []
     partial = nil = accepted = 0
     for report in feed.reports:
-        metar = decode(report.raw, year=report.year, month=report.month)
-        where = f"{report.where}: {metar.station or report.station or '?'}"
-        if metar.station is None or metar.time_utc is None:
+        try:
+            metar = decode(report.raw, year=report.year, month=report.month)
+        except MetarInternalError as exc:
+            internal.append(f"{report.where}: {exc}")
+            continue
+        station = metar.station or report.station
+        where = f"{report.where}: {station or '?'}"
+        if station is None or metar.time_group is None:
             reason = metar.errors[0] if metar.errors else "no station or time group"
             problems.append(f"{where}: {reason}")
             continue
@@ -106,14 +122,21 @@ def ingest(
             nil += 1
             continue
         partial += metar.partial
+        observed = metar.time_utc
+        if observed is None:
+            observed = report.observed_utc
+            trouble = next((e for e in metar.errors if repr(metar.time_group) in e), "no time")
+            kept = "dated by the feed" if observed else "kept without a time, so never fresh"
+            problems.append(f"{where}: {trouble}; {kept}")
         pos = _position(report.lat_deg, report.lon_deg, report.elevation_m)
-        pos = pos or positions.get(metar.station)
+        pos = pos or positions.get(station)
         if pos is None:
             problems.append(f"{where}: position unknown (not in the feed or the station table)")
             continue
-        old = stations.get(metar.station)
-        # Same time is a correction (COR, or a feed file rewritten): the later read wins.
-        if old is not None and old.observed_utc > metar.time_utc:
+        old = stations.get(station)
+        # Same time is a correction (COR, or a feed file rewritten): the later read wins. A
+        # report of unknown time never replaces one of known time.
+        if _superseded(old, observed):
             accepted += 1  # a good report, only superseded
             continue
         try:
@@ -122,8 +145,8 @@ def ingest(
             problems.append(f"{where}: {exc}")
             continue
         accepted += 1
-        stations[metar.station] = StationWeather(
-            metar.station, pos.lat_deg, pos.lon_deg, pos.elevation_m, metar.time_utc, patch
+        stations[station] = StationWeather(
+            station, pos.lat_deg, pos.lon_deg, pos.elevation_m, observed, patch
         )
     return Ingested(
         stations=stations,
@@ -133,7 +156,14 @@ def ingest(
         nil=nil,
         duplicates=feed.duplicates,
         problems=tuple(problems),
+        internal_errors=tuple(internal),
     )
+
+
+def _superseded(old: StationWeather | None, observed: datetime | None) -> bool:
+    if old is None or old.observed_utc is None:
+        return False
+    return observed is None or old.observed_utc > observed
 
 
 def _position(
@@ -157,8 +187,9 @@ def select(
     if not stations:
         return Selection(None, reason="no usable report yet")
     if settings.age_reference == "feed":
-        now_utc = max(s.observed_utc for s in stations.values())
-    elif now_utc is None:
+        known = (s.observed_utc for s in stations.values() if s.observed_utc is not None)
+        now_utc = max(known, default=None)
+    if now_utc is None:  # the clock; also for a feed none of whose reports has a time
         now_utc = datetime.now(UTC)
     candidates = list(stations.values())
     if settings.station:
@@ -258,11 +289,23 @@ class MetarFeedInput:
             self.stats.error(result.problems[-1], len(result.problems))
             for problem in result.problems:
                 self._warn.warning("report", f"METAR {problem}")
+        if result.internal_errors:
+            # A wxsky bug, not the feed's: an error, once per fetch, with what reproduces it.
+            count = len(result.internal_errors)
+            self.stats.error(result.internal_errors[-1], count)
+            log.error(
+                "%s: the METAR decoder failed on %d report(s), a wxsky defect; first: %s",
+                self.source.name,
+                count,
+                result.internal_errors[0],
+            )
         d = self.stats.detail
         d["format"] = feed.format
         d["stations"] = len(result.stations)
         d["partial"] = d.get("partial", 0) + result.partial
         d["duplicates"] = d.get("duplicates", 0) + result.duplicates
+        if result.internal_errors:
+            d["internal_errors"] = d.get("internal_errors", 0) + len(result.internal_errors)
 
     def reselect(self) -> None:
         lat, lon = self._position()

@@ -3,14 +3,23 @@
 Every parser takes the feed already decoded and split into lines (`\\r` removed, so line N of the
 list is line N of the file) and a `Problems` collector. Parsers never raise on bad input: a row
 they cannot use becomes a problem, and a row with report text but no usable time is still returned
-so that the decoder, not the loader, decides what a report is worth.
+so that the decoder, not the loader, decides what a report is worth. No report text is dropped:
+a tgftp report with an impossible timestamp line, or with none, is kept (and named in a problem).
 
 Year and month always come from the feed (AWC observation_time, the tgftp timestamp line) or, for
 feeds without dates, from the caller's reference time: a ddhhmmZ group alone names only the day.
+Against a reference the day decides (`month_of_day`): a report later on the reference's own day
+stays in that month, because feed and station clocks differ by minutes and a live feed's newest
+report must not be taken for last month's.
+
+Times that are out of range but readable roll over, as the decoder reads them: hour 24 is the next
+day's 00 hours, minute 60 the next hour (a tgftp `15:60` line is 16:00). An impossible time (day 32,
+hour 25) leaves the report's observed_utc to the feed's own time for it, where there is one.
 """
 
 from __future__ import annotations
 
+import calendar
 import csv
 import math
 import re
@@ -18,11 +27,17 @@ import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import MINYEAR, UTC, datetime
 from types import MappingProxyType
 from typing import Any
 
-from wxsky.weather.metar_groups import FIXED_GROUPS, STATION, GroupValueError, parse_time
+from wxsky.weather.metar_groups import (
+    FIXED_GROUPS,
+    STATION,
+    parse_time,
+    time_in_month,
+    time_problem,
+)
 
 REPORT_TYPES = ("METAR", "SPECI")
 # Beyond this a feed is garbage, not data: keep the first ones and count the rest.
@@ -86,7 +101,7 @@ class Head:
 
     kind: str | None
     station: str | None
-    time: tuple[int, int, int] | None  # (day, hour, minute)
+    time: tuple[int, int, int] | None  # (day, hour, minute) as written, possibly impossible
     trouble: str | None  # why time is None
 
 
@@ -118,28 +133,36 @@ def read_head(raw: str) -> Head:
     if i < len(tokens) and _is_correction(tokens[i]):
         i += 1
     token = tokens[i] if i < len(tokens) else ""
-    try:
-        time = parse_time(token)
-    except GroupValueError as exc:
-        return Head(kind, station, None, f"impossible time group {token!r} ({exc})")
+    time = parse_time(token)
     return Head(kind, station, time, None if time else "no ddhhmmZ time group")
 
 
 def month_of_day(reference: datetime, day: int) -> tuple[int, int]:
-    """(year, month) of a report's day-of-month seen at `reference`: a later day is last month's."""
+    """(year, month) of a report's day-of-month seen at `reference`: the reference's month up to
+    its own day, else the latest earlier month that has the day (31 on 1 December: October)."""
+    year, month = reference.year, reference.month
     if day <= reference.day:
-        return reference.year, reference.month
-    if reference.month == 1:
-        return reference.year - 1, 12
-    return reference.year, reference.month - 1
+        return year, month
+    for _ in range(3):  # any day up to 31 is in one of the three months before
+        year, month = (year, month - 1) if month > 1 else (year - 1, 12)
+        if year < MINYEAR:
+            break
+        if day <= calendar.monthrange(year, month)[1]:
+            return year, month
+    return reference.year, reference.month  # no such day at all: the caller finds no time
 
 
 def observed_at(year: int, month: int, time: tuple[int, int, int]) -> datetime | None:
-    day, hour, minute = time
-    try:
-        return datetime(year, month, day, hour, minute, tzinfo=UTC)
-    except ValueError:  # day 31 in a 30-day month
+    """The time of a report's (day, hour, minute) in a month, or None when there is none there
+    (day 32, hour 25, day 31 in a 30-day month); hour 24 and minute 60 roll over."""
+    if time_problem(*time) is not None:
         return None
+    return time_in_month(year, month, *time)
+
+
+def _time_trouble(time: tuple[int, int, int], year: int, month: int) -> str:
+    """Why observed_at found no time: for the problem line."""
+    return time_problem(*time) or f"day {time[0]} is not in {year}-{month:02d}"
 
 
 def _dated_report(
@@ -158,7 +181,9 @@ def _dated_report(
         year, month = month_of_day(reference, head.time[0])
         observed = observed_at(year, month, head.time)
         if observed is None:
-            problems.add(line, f"day {head.time[0]} is not in {year}-{month:02d}: {raw[:60]!r}")
+            why = _time_trouble(head.time, year, month)
+            problems.add(line, f"impossible time group ({why}): {raw[:60]!r}")
+            observed = undated
     return Report(raw, observed, year, month, head.station, head.kind, where=problems.where(line))
 
 
@@ -370,6 +395,9 @@ def awc_reports(
             # Only when no row is dated does the caller's reference time (file mtime) count.
             year, month = file_month or month_of_day(reference, head.time[0])
             observed = observed_at(year, month, head.time)
+            if observed is None:
+                why = _time_trouble(head.time, year, month)
+                problems.add(record.line, f"impossible time group ({why}): {record.raw[:60]!r}")
         else:
             year, month = file_month or (reference.year, reference.month)
         metar_type = record.hints.get("metar_type")
@@ -393,29 +421,43 @@ def awc_reports(
 
 # --- NOAA tgftp station and cycle files -------------------------------------------------------
 
-_STAMP = re.compile(r"(\d{4})/(\d\d)/(\d\d) (\d\d):(\d\d)")
+# [0-9], not \\d: other scripts' digits would match, and int() reads them.
+_STAMP = re.compile(r"([0-9]{4})/([0-9]{2})/([0-9]{2}) ([0-9]{2}):([0-9]{2})")
 
 
 def is_tgftp_stamp(line: str) -> bool:
     return _STAMP.fullmatch(line.strip()) is not None
 
 
-def _stamp(text: str) -> datetime | None:
+def _stamp(text: str) -> tuple[datetime | None, str | None]:
+    """The time of a timestamp line, and a problem: how an hour 24 or minute 60 was read, or why
+    there is no time (`2025/13/40 15:55`)."""
     m = _STAMP.fullmatch(text)
     if m is None:
-        return None
+        return None, f"not a timestamp line {text!r}"
     year, month, day, hour, minute = (int(g) for g in m.groups())
-    try:
-        return datetime(year, month, day, hour, minute, tzinfo=UTC)
-    except ValueError:
-        return None
+    time = time_in_month(year, month, day, hour, minute) if hour <= 24 and minute <= 60 else None
+    if time is None:
+        return None, f"impossible timestamp {text!r}; its report is dated by the file"
+    if hour == 24 or minute == 60:
+        return time, f"timestamp {text!r} read as {time:%Y/%m/%d %H:%M}"
+    return time, None
 
 
-def tgftp_reports(lines: Sequence[str], problems: Problems) -> tuple[list[Report], int]:
-    """Reports of a station or cycle file, exact repeats dropped; returns (reports, duplicates)."""
+def tgftp_reports(
+    lines: Sequence[str], problems: Problems, reference: datetime
+) -> tuple[list[Report], int]:
+    """Reports of a station or cycle file, exact repeats dropped; returns (reports, duplicates).
+
+    A report line whose timestamp line is impossible or missing is kept, dated against the last
+    good timestamp before it (the first in the file for one before any, the caller's reference
+    in a file without one).
+    """
     reports: list[Report] = []
     seen: set[str] = set()
     duplicates = 0
+    stamps = (_stamp(line.strip())[0] for line in lines if is_tgftp_stamp(line))
+    last_good = next((t for t in stamps if t is not None), reference)
     pending: tuple[int, datetime | None] | None = None  # the timestamp waiting for its report
     for number, line in enumerate(lines, start=1):
         text = line.strip()
@@ -424,24 +466,31 @@ def tgftp_reports(lines: Sequence[str], problems: Problems) -> tuple[list[Report
         if is_tgftp_stamp(text):
             if pending is not None:
                 problems.add(pending[0], "timestamp line without a report after it")
-            pending = (number, _stamp(text))
-            if pending[1] is None:
-                problems.add(number, f"impossible timestamp {text!r}")
+            stamp, trouble = _stamp(text)
+            if trouble is not None:
+                problems.add(number, trouble)
+            if stamp is not None:
+                last_good = stamp
+            pending = (number, stamp)
             continue
         if pending is None:
             problems.add(number, f"report line without a timestamp line before it: {text[:60]!r}")
-            continue
-        stamp = pending[1]
-        pending = None
+            stamp = None
+        else:
+            stamp = pending[1]
+            pending = None
         raw = clean_raw(text)
-        if stamp is None or not raw:
+        if not raw:
             continue
         if raw in seen:
             duplicates += 1
             continue
         seen.add(raw)
-        # Without a time group, when NOAA received the report is the best time there is.
-        reports.append(_dated_report(read_head(raw), raw, stamp, number, problems, undated=stamp))
+        # Without a usable time group, when NOAA received the report is the best time there is.
+        head = read_head(raw)
+        reports.append(
+            _dated_report(head, raw, stamp or last_good, number, problems, undated=stamp)
+        )
     if pending is not None:
         problems.add(pending[0], "timestamp line without a report after it (file cut short?)")
     return reports, duplicates

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-from wxsky.errors import FeedError
+from wxsky.errors import FeedError, FeedUnavailable
 from wxsky.weather.feed_formats import (
     FeedProblem,
     Problems,
@@ -148,7 +148,8 @@ def parse_feed(
     """Reports and problems of one feed. gzip bytes are decompressed.
 
     `reference_utc` (the file's mtime or the HTTP Date) dates reports of feeds that carry no date:
-    a report day after the reference day belongs to the previous month.
+    a report day after the reference day belongs to the latest earlier month that has that day
+    (`feed_formats.month_of_day`).
     """
     if format != "auto" and format not in FORMATS:
         raise FeedError(f"{name}: unknown feed format {format!r} (expected one of {FORMATS})")
@@ -173,7 +174,7 @@ def parse_feed(
     elif format == "awc-xml":
         reports = awc_reports(awc_xml_records(lines, problems), problems, reference)
     elif format == "tgftp":
-        reports, duplicates = tgftp_reports(lines, problems)
+        reports, duplicates = tgftp_reports(lines, problems, reference)
     else:
         reports = line_reports(lines, problems, reference)
     return Feed(format, tuple(reports), problems.result(), duplicates)
@@ -186,7 +187,7 @@ def read_feed(path: str | os.PathLike[str], *, format: str = "auto") -> Feed:
         mtime_s = file.stat().st_mtime
         data = file.read_bytes()
     except OSError as exc:
-        raise FeedError(f"{file}: cannot read ({exc.strerror or exc})") from None
+        raise FeedUnavailable(f"{file}: cannot read ({exc.strerror or exc})") from None
     mtime = datetime.fromtimestamp(mtime_s, UTC)
     return parse_feed(data, format=format, name=str(file), reference_utc=mtime)
 

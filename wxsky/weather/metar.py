@@ -9,13 +9,16 @@ kept verbatim in `trend` and never decoded into body fields. Body groups are rec
 in any order (`metar_groups`); the first group of a kind wins, so a stray group later in the
 report can never overwrite a value.
 
-Error policy: `decode` never raises. Whatever cannot be decoded becomes one line in `errors`
-(naming the group: `group 5 'FEW02': malformed cloud group`) and `partial` is true:
+Error policy: `decode` never raises on any text. Whatever cannot be decoded becomes one line in
+`errors` (naming the group: `group 5 'FEW02': malformed cloud group`) and `partial` is true:
 
 * no station group (`station` None; the body is still decoded: VATSIM-style text can lack it);
-* no valid time group (`time_utc` None; nothing after the header is decoded, because without
-  the time the text is most likely not a report at all: `PART 1 OF 2`, bulletin junk);
-* a day that does not exist in the given month (`time_utc` None, the body decoded);
+* no time group (`time_group` and `time_utc` None; nothing after the header is decoded, because
+  without the time the text is most likely not a report at all: `PART 1 OF 2`, bulletin junk);
+* a time group whose time is impossible: day 0 or above 31, hour above 24, minute above 60, or a
+  day the month does not have (`time_utc` None, `time_group` kept, the body decoded);
+* a time group with hour 24 or minute 60, which real stations send: it rolls over (`262400Z` is
+  27th 00:00, `261560Z` is 26th 16:00) and the error line says how it was read;
 * an unknown or garbled body group (skipped), a duplicate group (the first wins);
 * an out-of-range value, field by field: wind above 250 kt (the wind), gust above 250 kt (the
   gust), direction above 360° (the direction), temperature or dewpoint outside ±70 °C (that
@@ -24,6 +27,20 @@ Error policy: `decode` never raises. Whatever cannot be decoded becomes one line
 
 Callers that need a report to act on call `Metar.require_usable()`, which raises `MetarError`
 when the station or time is missing or the report is NIL.
+
+A defect of the decoder itself (any exception but the `GroupValueError` a value function raises
+on purpose for an impossible value) is never turned into an error line: it propagates as
+`MetarInternalError`, naming the group and the report, with the original exception as its
+cause. Otherwise a crashing group handler would look like one more garbled group, and the fuzz
+and corpus tests, which check that decoding never raises, could not catch it.
+
+Dates: the report names only the day. With `year` and `month` (from the feed, or the simulated
+time) the report is in that month, and a day that month lacks leaves the time unknown. Without
+them the report is in the latest month that puts its whole timestamp (day, hour and minute) at
+or before `now_utc` (the clock by default), never in the future: at 2026-12-01 00:10 UTC,
+`302350Z` is 2026-11-30 23:50, `312350Z` 2026-10-31 23:50 (November has no 31st), and
+`012350Z` 2026-11-01 23:50 (1 December 23:50 has not happened yet). With only one of `year` and
+`month`, the other is chosen by the same rule.
 
 Value conventions: `9999` and CAVOK mean 10 km; `M` (less than) and `P` (more than) visibility
 and wind prefixes give the bound itself; a wind group without a unit (`04014`) is read as knots,
@@ -34,11 +51,12 @@ group to within 1 °C (as AWC's own decode does); no other remark is decoded.
 
 from __future__ import annotations
 
+import calendar
 import dataclasses
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import MAXYEAR, MINYEAR, UTC, datetime
 from typing import Any, Literal
 
 from wxsky.errors import MetarError
@@ -46,7 +64,7 @@ from wxsky.units import FT_TO_M, mps_to_kt
 from wxsky.weather import metar_groups as g
 from wxsky.weather.metar_groups import MetarSkyGroup, MetarWind
 
-__all__ = ["Metar", "MetarSkyGroup", "MetarWind", "decode"]
+__all__ = ["Metar", "MetarInternalError", "MetarSkyGroup", "MetarWind", "decode"]
 
 # A megabyte of garbage would otherwise give a megabyte of error lines.
 MAX_ERRORS = 40
@@ -54,6 +72,13 @@ MAX_ERRORS = 40
 PRESSURE_AGREEMENT_HPA = 2.0
 # Digits of the knot values in to_dict: enough to give back the reported integer exactly.
 KT_DIGITS = 6
+
+
+class MetarInternalError(RuntimeError):
+    """A defect in the decoder, never a property of the report: see the module docstring.
+
+    Not a WxskyError or ValueError on purpose, so that no caller reports it as bad input.
+    """
 
 
 @dataclass(frozen=True)
@@ -84,6 +109,9 @@ class Metar:
     altimeter_hpa: float | None = None
     trend: str = ""
     remarks: str = ""
+    # The ddhhmmZ group as written, also when its time is impossible (then time_utc is None):
+    # it tells a report with a broken time from text that is no report at all.
+    time_group: str | None = None
 
     @property
     def partial(self) -> bool:
@@ -119,6 +147,7 @@ class Metar:
             "raw": self.raw,
             "station": self.station,
             "time_utc": None if self.time_utc is None else f"{self.time_utc:%Y-%m-%dT%H:%M:00Z}",
+            "time_group": self.time_group,
             "type": self.type,
             "auto": self.auto,
             "cor": self.cor,
@@ -225,42 +254,66 @@ def _describe_sky_group(s: MetarSkyGroup) -> str:
 # --- decoding ---------------------------------------------------------------------------------
 
 
-def decode(report: str, *, year: int, month: int) -> Metar:
-    """Decode one report; never raises (see the module docstring for the error policy).
+def decode(
+    report: str,
+    *,
+    year: int | None = None,
+    month: int | None = None,
+    now_utc: datetime | None = None,
+) -> Metar:
+    """Decode one report; never raises on any text (see the module docstring for the error
+    policy), but a defect of the decoder raises MetarInternalError.
 
-    year and month are those the feed says the report belongs to: the report itself carries
-    only the day, and guessing the month from it goes wrong around month ends.
+    year and month are those the feed says the report belongs to, where it says so: the report
+    itself carries only the day. Without them the report is dated at the latest time not after
+    now_utc (the clock when None); now_utc is ignored when both are given.
     """
+    if not (isinstance(year, int | None) and isinstance(month, int | None)):
+        # A caller's bug, not a report's fault: no error line for it.
+        raise TypeError(f"decode: year and month must be int or None, got {year!r}, {month!r}")
     if not isinstance(report, str):
         return Metar(raw="", errors=(f"report is a {type(report).__name__}, not text",))
+    now = None
+    if year is None or month is None:
+        now = _utc_now() if now_utc is None else _as_utc(now_utc)
+    tokens = report.split("=", 1)[0].split()
     try:
-        return _Decoder(report.split("=", 1)[0].split(), year, month).run()
-    except Exception as exc:
-        # The promise is "never raises". The fuzz tests keep this path unused; should it ever
-        # run, the report still says what happened instead of taking the caller down.
-        return Metar(
-            raw=" ".join(report.split("=", 1)[0].split()),
-            errors=(f"decoder failure {type(exc).__name__}: {exc}".replace("\n", " "),),
-        )
+        return _Decoder(tokens, year, month, now).run()
+    except MetarInternalError:
+        raise
+    except Exception as exc:  # outside the group loop: the header or the remarks
+        raise MetarInternalError(
+            f"METAR decoder defect outside the group handlers ({type(exc).__name__}: {exc}) "
+            f"on {' '.join(tokens)!r}"
+        ) from exc
+
+
+def _utc_now() -> datetime:
+    return datetime.now(UTC)
+
+
+def _as_utc(time: datetime) -> datetime:
+    return time.replace(tzinfo=UTC) if time.tzinfo is None else time.astimezone(UTC)
 
 
 def _group_message(index: int, token: str, reason: str) -> str:
     return f"group {index + 1} {token!r}: {reason}"
 
 
-def _year_month(year: object, month: object) -> str:
-    if isinstance(year, int) and isinstance(month, int):
-        return f"{year:04d}-{month:02d}"
-    return f"{year!r}-{month!r}"
+def _year_month(year: int, month: int) -> str:
+    return f"{year:04d}-{month:02d}"
 
 
 class _Decoder:
     """Walks the tokens once and collects the fields of a Metar."""
 
-    def __init__(self, tokens: list[str], year: int, month: int) -> None:
+    def __init__(
+        self, tokens: list[str], year: int | None, month: int | None, now: datetime | None
+    ) -> None:
         self.tokens = tokens
         self.year = year
         self.month = month
+        self.now = now  # set when year or month is None: the report is dated against it
         self.fields: dict[str, Any] = {}
         self.weather: list[str] = []
         self.sky: list[MetarSkyGroup] = []
@@ -313,6 +366,13 @@ class _Decoder:
             except g.GroupValueError as e:
                 self.error(i, f"{e}; group skipped")
                 used = 1
+            except Exception as exc:
+                # Anything else is a bug in a handler: an error line would hide it as one
+                # more garbled group (module docstring).
+                raise MetarInternalError(
+                    f"METAR decoder defect: the {kind or '(no kind)'} handler failed on group "
+                    f"{i + 1} {tok!r} ({type(exc).__name__}: {exc}) of {raw!r}"
+                ) from exc
             if used == 0:
                 break  # a trend, the remarks, or after NIL: the body ends here
             self.last_kind = kind or ""
@@ -352,21 +412,57 @@ class _Decoder:
 
     # --- header ---
 
+    def _time(self, day: int, hour: int, minute: int) -> tuple[datetime | None, str | None]:
+        """The time of the time group's values and what is wrong with them, if anything: why
+        the time is None, or how an hour 24 or minute 60 was read (the time is then set)."""
+        problem = g.time_problem(day, hour, minute)
+        if problem is not None:
+            return None, f"{problem}; observation time unknown"
+        year, month = self.year, self.month
+        if year is not None and month is not None:
+            if not (MINYEAR <= year <= MAXYEAR and 1 <= month <= 12):
+                return None, f"{_year_month(year, month)} is not a calendar month"
+            time = g.time_in_month(year, month, day, hour, minute)
+            if time is None:
+                if day > calendar.monthrange(year, month)[1]:
+                    return None, f"day {day} does not exist in {_year_month(year, month)}"
+                when = f"{_year_month(year, month)}-{day:02d} {hour:02d}:{minute:02d}"
+                return None, f"{when} is past the end of the calendar"
+        else:
+            assert self.now is not None  # decode sets it whenever year or month is missing
+            time = g.latest_time(day, hour, minute, self.now, year=year, month=month)
+            if time is None:
+                months = "month" if month is None else f"month {month:02d}"
+                of = "" if year is None else f" of {year}"
+                return None, (
+                    f"no {months}{of} has day {day} {hour:02d}:{minute:02d} at or before "
+                    f"{self.now:%Y-%m-%d %H:%M}Z; observation time unknown"
+                )
+        if g.rolls_over(hour, minute):
+            return time, f"{hour:02d}:{minute:02d} read as {time:%Y-%m-%d %H:%M}Z"
+        return time, None
+
     def _common_header(self, raw: str) -> int:
         """The header in one match when it has the usual shape; -1 to take the general path."""
         m = g.COMMON_HEADER.match(raw)
         if m is None:
             return -1
         day, hour, minute = int(m["day"]), int(m["hour"]), int(m["minute"])
-        if not 1 <= day <= 31 or hour > 23 or minute > 59:
-            return -1  # the general path says what is wrong
-        try:
-            time_utc = datetime(self.year, self.month, day, hour, minute, tzinfo=UTC)
-        except (TypeError, ValueError, OverflowError):
-            return -1
+        year, month = self.year, self.month
+        if year is None or month is None or not (1 <= day <= 31 and hour < 24 and minute < 60):
+            time_utc, problem = self._time(day, hour, minute)
+            if problem is not None:
+                return -1  # the general path says what is wrong
+        else:  # nearly every report: the feed's month and an ordinary time
+            try:
+                time_utc = datetime(year, month, day, hour, minute, tzinfo=UTC)
+            except (ValueError, OverflowError):
+                return -1
+        used = m["header"].count(" ") + 1
         fields = self.fields
         fields["station"] = m["station"]
         fields["time_utc"] = time_utc
+        fields["time_group"] = self.tokens[used - 1]
         if m["type"]:
             fields["type"] = m["type"]
         flags = m["flags"] + m["flags2"]
@@ -375,7 +471,7 @@ class _Decoder:
                 fields["auto"] = True
             if "C" in flags.replace("AUTO", ""):
                 fields["cor"] = True
-        return m["header"].count(" ") + 1
+        return used
 
     def _header(self) -> int:
         """Reads type, station, flags and time; the index of the first body token, or -1 when
@@ -406,19 +502,17 @@ class _Decoder:
         if i >= n:
             self.errors.append(f"no time group (ddhhmmZ){after}")
             return -1
-        try:
-            issued = g.parse_time(tokens[i])
-        except g.GroupValueError as e:
-            self.error(i, str(e))
-            return i + 1  # the shape of a time group: a report, so its body is decoded
+        issued = g.parse_time(tokens[i])
         if issued is None:
             self.error(i, f"expected the time group (ddhhmmZ){after}; the rest is not decoded")
             return -1
-        day, hour, minute = issued
-        try:
-            self.fields["time_utc"] = datetime(self.year, self.month, day, hour, minute, tzinfo=UTC)
-        except (TypeError, ValueError, OverflowError):
-            self.error(i, f"day {day} does not exist in {_year_month(self.year, self.month)}")
+        # The shape of a time group: a report, so its body is decoded even when the time is not.
+        self.fields["time_group"] = tokens[i]
+        time_utc, problem = self._time(*issued)
+        if problem is not None:
+            self.error(i, problem)
+        if time_utc is not None:
+            self.fields["time_utc"] = time_utc
         return i + 1
 
     def _flags(self, i: int) -> int:

@@ -10,7 +10,8 @@ kind name.
 
 The value functions turn a match into SI values. A token that has the shape of a group but an
 impossible value (wind 300 kt, QNH 99 hPa) raises `GroupValueError`, which the decoder turns into
-an error line naming the group. Heights are above ground level (AGL).
+an error line naming the group; that is the only exception a value function raises on purpose,
+and the decoder treats any other as a defect of its own. Heights are above ground level (AGL).
 
 Every pattern spells digits as `[0-9]` and letters as `[A-Z]`: `\\d` would accept other scripts'
 digits, which `int()` then reads, so a report in Arabic-Indic digits could decode.
@@ -21,6 +22,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import MINYEAR, UTC, datetime, timedelta
 
 from wxsky.units import FT_TO_M, INHG_TO_HPA, KMH_TO_MPS, KT_TO_MPS, STATUTE_MILE_TO_M, mps_to_kt
 
@@ -82,14 +84,77 @@ COMMON_HEADER = re.compile(
 
 
 def parse_time(token: str) -> tuple[int, int, int] | None:
-    """(day, hour, minute) of a ddhhmmZ group, or None. Raises GroupValueError if impossible."""
+    """(day, hour, minute) of a token shaped like a ddhhmmZ group, as written, or None.
+
+    The values are not checked: `time_problem` says whether they name a time at all, and
+    `time_in_month` or `latest_time` date them.
+    """
     m = TIME.fullmatch(token)
     if m is None:
         return None
-    day, hour, minute = int(m[1]), int(m[2]), int(m[3])
-    if not 1 <= day <= 31 or hour > 23 or minute > 59:
-        raise GroupValueError(f"day {day}, {hour:02d}:{minute:02d} is not a valid day and UTC time")
-    return day, hour, minute
+    return int(m[1]), int(m[2]), int(m[3])
+
+
+def time_problem(day: int, hour: int, minute: int) -> str | None:
+    """Why a ddhhmm value names no time in any month, or None.
+
+    Hour 24 and minute 60 are not problems here: real stations send them for the next day's
+    00 hours and the next hour's 00 minutes, and `time_in_month` reads them so (`rolls_over`).
+    """
+    if not 1 <= day <= 31:
+        return f"day {day:02d} is not a day of any month"
+    if hour > 24 or minute > 60:
+        return f"{hour:02d}:{minute:02d} is not a UTC time"
+    return None
+
+
+def rolls_over(hour: int, minute: int) -> bool:
+    """True for the out-of-range but readable times: hour 24, minute 60."""
+    return hour == 24 or minute == 60
+
+
+def time_in_month(year: int, month: int, day: int, hour: int, minute: int) -> datetime | None:
+    """The UTC time of a ddhhmm value (checked by `time_problem`) in one month; None when that
+    month has no such day or is not a calendar month. Hour 24 and minute 60 roll over."""
+    try:
+        if hour < 24 and minute < 60:  # the usual case, without the timedelta
+            return datetime(year, month, day, hour, minute, tzinfo=UTC)
+        return datetime(year, month, day, tzinfo=UTC) + timedelta(hours=hour, minutes=minute)
+    except (ValueError, OverflowError):
+        return None
+
+
+# Enough months to find any day: 29 February can be eight years from the last one (2096, 2104).
+_LOOKBACK_MONTHS = 12 * 9
+
+
+def latest_time(
+    day: int,
+    hour: int,
+    minute: int,
+    now_utc: datetime,
+    *,
+    year: int | None = None,
+    month: int | None = None,
+) -> datetime | None:
+    """The latest time of a ddhhmm value (checked by `time_problem`) that is not after `now_utc`,
+    in the given year and/or month where one is given; None when there is none.
+
+    The whole timestamp decides, not the day alone: at 2026-12-01 00:10, `012350Z` is
+    2026-11-01 23:50, `302400Z` is 2026-12-01 00:00, and `310000Z` is 2026-10-31 00:00.
+    """
+    y, m = now_utc.year, now_utc.month
+    for _ in range(_LOOKBACK_MONTHS):
+        if year is not None and y < year:
+            break
+        if (year is None or y == year) and (month is None or m == month):
+            time = time_in_month(y, m, day, hour, minute)
+            if time is not None and time <= now_utc:
+                return time
+        y, m = (y, m - 1) if m > 1 else (y - 1, 12)
+        if y < MINYEAR:
+            break
+    return None
 
 
 def looks_like_time(token: str) -> bool:

@@ -11,6 +11,10 @@ inverse distance squared, so flying from one station to the next changes the sky
 * visibility, temperature, dewpoint, QNH: weighted means over the stations that give them;
 * present weather: the nearest station's.
 
+A station whose report gives no usable observation time (day 32, and no time for it in the feed
+either) is kept, so it is still counted and named, but is always stale: its age cannot be shown
+to be within any limit.
+
 Pure: no I/O; distances on a sphere (haversine), good to 0.5 % for this purpose.
 """
 
@@ -37,7 +41,7 @@ class StationWeather:
     lat_deg: float
     lon_deg: float
     elevation_m: float
-    observed_utc: datetime
+    observed_utc: datetime | None  # None: the report's time is impossible and the feed has none
     patch: WeatherPatch
 
 
@@ -66,11 +70,12 @@ def nearest(
 def split_by_age(
     stations: Iterable[StationWeather], now_utc: datetime, max_age_s: float
 ) -> tuple[list[StationWeather], list[StationWeather]]:
-    """(fresh, stale): reports older than max_age_s at now_utc are stale."""
+    """(fresh, stale): reports older than max_age_s at now_utc, or of unknown time, are stale."""
     fresh: list[StationWeather] = []
     stale: list[StationWeather] = []
     for s in stations:
-        (fresh if (now_utc - s.observed_utc).total_seconds() <= max_age_s else stale).append(s)
+        t = s.observed_utc
+        (fresh if t is not None and (now_utc - t).total_seconds() <= max_age_s else stale).append(s)
     return fresh, stale
 
 
