@@ -191,10 +191,10 @@ def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
     if "report" not in v:
         raise ControlError("apply_metar: report must be a string")
     elevation = v.get("field_elevation_m", engine.state.observer.alt_m)
-    # The report names only its day; by default it belongs to the simulated month.
-    now = engine.state.time_utc
+    # The report names only its day; by default it is the latest such day and time not after
+    # the simulated clock, as a report never comes from the future.
     decoded = decode(
-        v["report"], year=v.get("year", now.year), month=v.get("month", now.month)
+        v["report"], year=v.get("year"), month=v.get("month"), now_utc=engine.state.time_utc
     ).require_usable()
     engine.apply(metar_to_patch(decoded, field_elevation_m=elevation))
     return decoded.station or ""

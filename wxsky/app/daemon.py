@@ -66,9 +66,9 @@ def initial_patches(
 
     patches = [load_preset(preset or config.daemon.preset, config.presets.dirs)]
     if metar:
-        # The report names only its day; it belongs to the month the daemon starts in.
+        # The report names only its day: the latest such day not after the start time.
         start = patches[0].time_utc or WeatherState().time_utc
-        report = decode(metar, year=start.year, month=start.month).require_usable()
+        report = decode(metar, now_utc=start).require_usable()
         patches.append(
             metar_to_patch(
                 report,

@@ -357,9 +357,9 @@ def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any
     from wxsky.weather.state import WeatherState
 
     if args.metar:
-        # The report names only its day; it belongs to the month of the snapshot.
+        # The report names only its day: the latest such day not after the snapshot's time.
         when = args.time or WeatherState().time_utc
-        report = decode(args.metar, year=when.year, month=when.month).require_usable()
+        report = decode(args.metar, now_utc=when).require_usable()
         return metar_to_patch(report, field_elevation_m=0.0)
     return load_preset(args.preset, preset_dirs)
 

@@ -10,7 +10,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from wxsky.cli.common import KindRef, NumberArg, Subparsers, UsageError, show_help
+from wxsky.cli.common import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    KindRef,
+    NumberArg,
+    Subparsers,
+    UsageError,
+    show_help,
+)
 from wxsky.schema import Number
 
 # "auto" and wxsky.weather.feeds.FORMATS (a test keeps them equal; importing feeds here would
@@ -161,6 +169,8 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
         reference_utc=fetched.reference_utc,
     )
     result = ingest(feed)
+    # A decoder defect on any report is a wxsky bug: the rest is shown, and the status says so.
+    status = EXIT_FAILURE if result.internal_errors else EXIT_OK
     for defect in result.internal_errors:
         # A wxsky bug, not the feed's problem: on stderr, whatever the output format.
         print(f"wxsky: internal error: {defect}", file=sys.stderr)
@@ -187,7 +197,7 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
     }
     if args.json:
         print(json.dumps(summary, indent=2))
-        return 0
+        return status
     print(
         f"{args.source}: {feed.format}, {result.reports} reports, {result.duplicates} duplicates, "
         f"{len(result.stations)} stations ({result.partial} partial, {result.nil} NIL), "
@@ -203,11 +213,11 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
     )
     if weather is None:
         print(f"the daemon would keep its weather: {choice.reason}")
-        return 0
+        return status
     using = ", ".join(f"{s} at {d / 1000:.1f} km" for s, d in choice.used)
     print(f"the daemon would take (source metar) from {using}:")
     print(json.dumps(weather, indent=2))
-    return 0
+    return status
 
 
 def _patch_fields(weather: dict[str, Any], patch: Any) -> dict[str, Any]:
