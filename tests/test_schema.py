@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import random
+import re
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,7 @@ import pytest
 from wxsky.app import control
 from wxsky.errors import ConfigError
 from wxsky.scene import camera
-from wxsky.scene.cloud_model_files import MODEL_TABLE
+from wxsky.scene.cloud_model_files import MODEL_TABLE, load_cloud_model
 from wxsky.schema import (
     REQUIRED,
     Bool,
@@ -32,7 +33,7 @@ from wxsky.schema import (
 from wxsky.schema.toml_file import check_toml_bytes, key_lines
 from wxsky.settings import config as cfg
 from wxsky.settings.config import CONFIG_TABLE, load_config
-from wxsky.settings.preset_check import PRESET_TABLE
+from wxsky.settings.preset_check import PRESET_TABLE, check_preset_file
 from wxsky.weather import cockpit, state
 
 WIDTH = Number(16, 8192, integer=True)
@@ -233,3 +234,46 @@ def test_tuples_check_each_position_and_nullable_takes_null() -> None:
         maybe.validate("position_m", "x")
     with pytest.raises(ValueError, match=r"must be \[east_m, north_m, alt_m\], got \[1, 2\]"):
         maybe.validate("position_m", [1, 2])
+
+
+def _prefixes(text: str, step: int) -> list[str]:
+    return [text[:n] for n in range(0, len(text) + 1, step)]
+
+
+@pytest.mark.parametrize("which", ["config", "preset", "cloud model"])
+def test_every_truncation_of_a_shipped_file_is_an_error_or_a_value(
+    tmp_path: Path, which: str
+) -> None:
+    root = Path(__file__).resolve().parents[1]
+    source, load = {
+        "config": (root / "configs" / "wxsky.toml", load_config),
+        "preset": (root / "wxsky" / "settings" / "presets" / "thunderstorm.toml", None),
+        "cloud model": (root / "wxsky" / "scene" / "clouds" / "cumulonimbus.toml", None),
+    }[which]
+    text = source.read_text(encoding="utf-8")
+    rng = random.Random(5)
+    samples = _prefixes(text, 7)
+    # Out-of-range and mistyped values in place of each number of the file.
+    for _ in range(60):
+        numbers = list(re.finditer(r"(?<== )-?[0-9][0-9_.]*", text))
+        m = rng.choice(numbers)
+        bad = rng.choice(["-1e9", "1e9", "nan", "true", '"x"', "[]", "{}"])
+        samples.append(text[: m.start()] + bad + text[m.end() :])
+    path = tmp_path / source.name
+    for sample in samples:
+        path.write_text(sample, encoding="utf-8")
+        if which == "config":
+            assert load is not None
+            try:
+                load(path)
+            except ConfigError as exc:
+                assert all(line.startswith(f"{path}:") for line in str(exc).splitlines())
+        elif which == "preset":
+            check = check_preset_file(path)
+            assert (check.patch is None) == bool(check.problems)
+            assert all(line.startswith(f"{path}:") for line in check.lines())
+        else:
+            try:
+                load_cloud_model(path)
+            except ConfigError as exc:
+                assert all(line.startswith(f"{path}:") for line in str(exc).splitlines())
