@@ -24,6 +24,7 @@ from wxsky.schema import (
     Nullable,
     Number,
     Problem,
+    Rule,
     Table,
     Tables,
     Text,
@@ -102,11 +103,14 @@ LAYER = Table(
         "top_m": Field(Number(-500.0, 25_000.0), REQUIRED),
         "wet": Field(Bool(), False),
     },
-    checks=(
-        lambda v, path, problems: (
-            None
-            if v["top_m"] > v["base_m"]
-            else problems.append(Problem((*path, "top_m"), "must be above base_m"))
+    rules=(
+        Rule(
+            ("base_m", "top_m"),
+            lambda v, path, problems: (
+                None
+                if v["top_m"] > v["base_m"]
+                else problems.append(Problem((*path, "top_m"), "must be above base_m"))
+            ),
         ),
     ),
 )
@@ -120,6 +124,7 @@ def test_a_table_reports_every_problem_at_once() -> None:
         "nmae: unknown key (did you mean 'name'?)",
         "name: missing key",
         "layers[0].wat: unknown key (did you mean 'wet'?)",
+        "layers[0].top_m: must be above base_m",
         "layers[1].base_m: missing key",
         "layers[1].top_m: missing key",
         "layers[2].base_m: missing key",
@@ -127,6 +132,19 @@ def test_a_table_reports_every_problem_at_once() -> None:
         "layers: at most 2 layers, got 3",
     ]
     assert info.value.problems[-1].at == ("layers", 2)
+
+
+def test_a_rule_runs_when_its_own_keys_are_good() -> None:
+    # The wet flag is wrong, but base and top are fine: their rule still speaks.
+    with pytest.raises(Invalid) as info:
+        LAYER.values({"base_m": 5.0, "top_m": 1.0, "wet": "yes"})
+    assert [str(p) for p in info.value.problems] == [
+        "wet: must be true or false, got 'yes'",
+        "top_m: must be above base_m",
+    ]
+    # A rule whose key failed stays quiet: its problem would only repeat the key's.
+    with pytest.raises(Invalid, match=r"^top_m: must be a number"):
+        LAYER.values({"base_m": 5.0, "top_m": "low"})
 
 
 def test_cross_key_checks_run_once_the_keys_are_good() -> None:

@@ -26,6 +26,7 @@ from wxsky.schema import (
     KeyPath,
     Number,
     Problem,
+    Rule,
     Table,
     Tables,
     Text,
@@ -112,7 +113,7 @@ BOX_TABLE = Table(
         "textures": Field(Items(Custom(_texture, "a texture category"), min_len=1), REQUIRED),
         "shading_group": Field(Number(0, MAX_SHADING_GROUP, integer=True), 0),
     },
-    checks=(_box_rules,),
+    rules=(Rule(("sprites", "grid", "width", "depth", "height", "sprite_size"), _box_rules),),
 )
 MODEL_TABLE = Table(
     {
@@ -132,7 +133,7 @@ MODEL_TABLE = Table(
         "formation_spread_oktas": Field(Number(0.1, 4.0, unit="oktas"), 1.5),
         "box": Field(Tables(BOX_TABLE, "box"), REQUIRED),
     },
-    checks=(_lattices_keep_their_sprites,),
+    rules=(Rule(("box", "cull_frac"), _lattices_keep_their_sprites),),
 )
 
 

@@ -18,7 +18,7 @@ from wxsky.schema.kinds import (
     fmt_number,
 )
 from wxsky.schema.problems import Invalid, KeyPath, Problem, format_key
-from wxsky.schema.tables import OMIT, REQUIRED, Field, Table, Tables
+from wxsky.schema.tables import OMIT, REQUIRED, Field, Rule, Table, Tables
 
 __all__ = [
     "OMIT",
@@ -33,6 +33,7 @@ __all__ = [
     "Nullable",
     "Number",
     "Problem",
+    "Rule",
     "Table",
     "Tables",
     "Text",

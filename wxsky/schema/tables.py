@@ -32,6 +32,15 @@ TableCheck = Callable[[dict[str, Any], KeyPath, list[Problem]], None]
 
 
 @dataclass(frozen=True)
+class Rule:
+    """A check across keys of one table, run when every key it names passed its own check
+    (its problem would only repeat theirs otherwise); keys the table omits do not stop it."""
+
+    keys: tuple[str, ...]
+    check: TableCheck = field(compare=False)
+
+
+@dataclass(frozen=True)
 class Field:
     kind: Kind
     default: Any = OMIT
@@ -45,10 +54,10 @@ def unknown_key_hint(key: str, known: list[str]) -> str:
 @dataclass(frozen=True)
 class Table(Kind):
     """A TOML table (or a control request's params): known keys only, each checked by its
-    kind. `checks` run only when every key passed, on the converted values."""
+    kind, then the rules across keys on the converted values."""
 
     fields: Mapping[str, Field]
-    checks: tuple[TableCheck, ...] = field(default=(), compare=False)
+    rules: tuple[Rule, ...] = field(default=(), compare=False)
     what: str = "a table"
 
     def describe(self) -> str:
@@ -65,16 +74,21 @@ class Table(Kind):
                 hint = unknown_key_hint(str(key), known)
                 problems.append(Problem((*path, key), f"unknown key{hint}"))
         out: dict[str, Any] = {}
+        failed: set[str] = set()
         for name, f in self.fields.items():
             if name in value:
+                n = len(problems)
                 out[name] = f.kind.check(value[name], (*path, name), problems)
+                if len(problems) > n:
+                    failed.add(name)
             elif f.default is REQUIRED:
                 problems.append(Problem((*path, name), "missing key"))
+                failed.add(name)
             elif f.default is not OMIT:
                 out[name] = f.default
-        if len(problems) == before:
-            for check in self.checks:
-                check(out, path, problems)
+        for rule in self.rules:
+            if failed.isdisjoint(rule.keys):
+                rule.check(out, path, problems)
         return out if len(problems) == before else None
 
     def values(self, value: Any) -> dict[str, Any]:

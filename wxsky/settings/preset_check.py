@@ -20,6 +20,7 @@ from wxsky.schema import (
     Items,
     KeyPath,
     Problem,
+    Rule,
     Table,
     Tables,
     Text,
@@ -153,7 +154,7 @@ LAYER_TABLE = Table(
         "base_m": Field(LAYER_HEIGHT_M, REQUIRED),
         "top_m": Field(LAYER_HEIGHT_M, REQUIRED),
     },
-    checks=(_top_above_base,),
+    rules=(Rule(("base_m", "top_m"), _top_above_base),),
 )
 WIND_TABLE = Table(
     {
@@ -163,7 +164,7 @@ WIND_TABLE = Table(
         "gust_mps": Field(GUST_MPS, 0.0),
         "variable": Field(Bool(), False),
     },
-    checks=(_gust_or_none,),
+    rules=(Rule(("speed_mps", "gust_mps"), _gust_or_none),),
 )
 PRESET_TABLE = Table(
     {
@@ -187,7 +188,10 @@ PRESET_TABLE = Table(
         "layers": Field(Tables(LAYER_TABLE, "layers", max_items=MAX_LAYERS, noun="cloud layers")),
         "wind": Field(Tables(WIND_TABLE, "wind")),
     },
-    checks=(_dewpoint_not_above_temperature, _distinct_wind_levels),
+    rules=(
+        Rule(("temperature_c", "dewpoint_c"), _dewpoint_not_above_temperature),
+        Rule(("wind",), _distinct_wind_levels),
+    ),
 )
 TOP_KEYS = tuple(PRESET_TABLE.fields)
 
