@@ -40,7 +40,6 @@ class FileCheck:
     path: Path
     value: Any
     problems: tuple[LocatedProblem, ...]
-    data: Any = None  # the parsed TOML, when it parsed
 
     @property
     def ok(self) -> bool:
@@ -106,7 +105,7 @@ def check_toml_bytes(path: Path, raw: bytes, kind: Kind) -> FileCheck:
 def check_toml_text(path: Path, text: str, data: dict[str, Any], kind: Kind) -> FileCheck:
     problems: list[Problem] = []
     value = kind.check(data, (), problems)
-    return FileCheck(Path(path), None if problems else value, locate(text, problems), data)
+    return FileCheck(Path(path), None if problems else value, locate(text, problems))
 
 
 def locate(text: str, problems: list[Problem] | tuple[Problem, ...]) -> tuple[LocatedProblem, ...]:

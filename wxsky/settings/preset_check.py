@@ -30,10 +30,10 @@ from wxsky.schema import (
 from wxsky.schema.toml_file import (
     FileCheck,
     LocatedProblem,
-    check_toml_bytes,
     key_line,
     key_lines,
     locate,
+    parse_toml,
     read_toml,
 )
 from wxsky.weather.state import (
@@ -228,10 +228,10 @@ def check_preset_file(path: Path) -> PresetCheck:
 
 def check_preset_bytes(path: Path, raw: bytes) -> PresetCheck:
     """Check a preset's bytes; `path` names it in messages and gives the preset its name."""
-    checked = check_toml_bytes(path, raw, Table({}))  # parse only: the table is checked below
-    if checked.data is None:
-        return PresetCheck(Path(path), "", None, checked.problems)
-    return _check_text(Path(path), raw.decode("utf-8"), checked.data)
+    parsed = parse_toml(raw)
+    if isinstance(parsed, LocatedProblem):
+        return PresetCheck(Path(path), "", None, (parsed,))
+    return _check_text(Path(path), *parsed)
 
 
 def _check_text(path: Path, text: str, data: dict[str, Any]) -> PresetCheck:
