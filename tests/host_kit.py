@@ -1,0 +1,46 @@
+"""Builds the C host kit (plugins/host-c) once per test session, plain and under
+AddressSanitizer + UndefinedBehaviorSanitizer, for the tests that run its programs."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+KIT = ROOT / "plugins" / "host-c"
+
+
+def _build(sanitize: bool) -> Path:
+    if shutil.which(os.environ.get("CC", "cc")) is None or shutil.which("make") is None:
+        pytest.skip("no C compiler or make (tools/setup installs them on Debian)")
+    args = ["make", "-s", "-C", str(KIT), f"-j{os.cpu_count() or 2}"]
+    if sanitize:
+        args.append("SANITIZE=1")
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return KIT / "build" / ("sanitize" if sanitize else "")
+
+
+@pytest.fixture(scope="session")
+def host_kit() -> Path:
+    """The build folder of the plain build."""
+    return _build(sanitize=False)
+
+
+@pytest.fixture(scope="session")
+def host_kit_sanitized() -> Path:
+    """The build folder of the sanitizer build (its programs abort on the first finding)."""
+    return _build(sanitize=True)
+
+
+def sanitizer_env() -> dict[str, str]:
+    """The environment for a sanitized program: any finding is a failure, leaks included."""
+    return {
+        **os.environ,
+        "ASAN_OPTIONS": "abort_on_error=0:halt_on_error=1:detect_leaks=1:exitcode=99",
+        "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1:exitcode=98",
+    }
