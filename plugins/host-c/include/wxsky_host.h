@@ -331,15 +331,17 @@ typedef struct wxsky_client wxsky_client;
  * while waiting for a response (0: 64). NULL only when out of memory. */
 wxsky_client *wxsky_client_new(size_t buffer_bytes, size_t queued);
 void wxsky_client_free(wxsky_client *c); /* closes; NULL is fine */
-/* The message of the last call that failed, "" after one that did not. Never NULL. For
- * WXSKY_EREMOTE, the daemon's message verbatim (cut at WXSKY_ERROR_MAX - 1 bytes). */
+/* The message of the last call that did not succeed (a request's WXSKY_AGAIN says why too),
+ * "" after one that did (a poll's WXSKY_AGAIN included). Never NULL. For WXSKY_EREMOTE, the
+ * daemon's message verbatim (cut at WXSKY_ERROR_MAX - 1 bytes). */
 const char *wxsky_client_error(const wxsky_client *c);
 
 /* Connects to "unix:PATH" (a leading ~ or ~user expanded; at most 107 bytes) or
  * "tcp:HOST:PORT" with HOST 127.x.y.z, localhost, ::1 or [::1] (§2.1: any other host is refused
  * with WXSKY_EINVAL before a socket is made; names other than localhost are never resolved),
  * or, when `address` is NULL, the default address of §2.1, whose directory must then exist and
- * belong to this user. WXSKY_ENOENT when nothing listens there. Waits at most 2 s; the socket
+ * belong to this user. WXSKY_ENOENT when nothing listens there. Waits at most 2 s (then
+ * WXSKY_ETIMEDOUT); the socket
  * is then non-blocking (and close-on-exec; tcp with TCP_NODELAY). Connecting a connected
  * client closes the old connection first. The subscription set is kept: after a connect to a
  * new address, call wxsky_subscribe again (or use wxsky_client_reconnect). */
