@@ -17,6 +17,7 @@ import math
 import os
 import queue
 import random
+import signal
 import socket
 import struct
 import subprocess
@@ -1029,3 +1030,31 @@ def test_against_a_real_daemon(plain_kit: Kit, sanitized_kit: Kit, tmp_path: Pat
             final = run.steps("status")[-1]["result"]
             assert final["camera"]["width"] == 320
             assert final["overrides"] == {}  # released
+
+
+@pytest.mark.gl
+def test_reconnect_after_a_real_daemon_restarts(plain_kit: Kit, tmp_path: Path) -> None:
+    # The daemon is stopped and a new one started on the same socket path (a new segment
+    # name too): the client sees the hang-up, reconnects, renews its subscription and talks
+    # to the new daemon.
+    with running_daemon(tmp_path) as first:
+        live = Live(
+            plain_kit,
+            ["session", "--timeout", "60000", first.address, "sub:frame", "note:frame",
+             "expect:WXSKY_ECLOSED", "reconnect:3000", "note:frame", "status"],
+        )  # fmt: skip
+        try:
+            live.wait_for(lambda line: line.get("kind") == "notification", timeout=30)
+            first.proc.send_signal(signal.SIGTERM)
+            assert first.proc.wait(timeout=30) == 0, first.log()
+            live.wait_for(lambda line: line.get("step") == "expect:WXSKY_ECLOSED", timeout=30)
+        except BaseException:
+            live.proc.kill()
+            raise
+    with running_daemon(tmp_path) as second:
+        code, stderr = live.finish(timeout=90)
+        assert code == 0, stderr
+        status = [line for line in live.seen if line.get("step") == "status"][-1]["result"]
+        assert status["shm_name"] == second.shm_name != first.shm_name
+        frames = [line for line in live.seen if line.get("kind") == "notification"]
+        assert len(frames) >= 2 and all(f["method"] == "frame" for f in frames)
