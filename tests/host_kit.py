@@ -44,3 +44,13 @@ def sanitizer_env() -> dict[str, str]:
         "ASAN_OPTIONS": "abort_on_error=0:halt_on_error=1:detect_leaks=1:exitcode=99",
         "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1:exitcode=98",
     }
+
+
+def gl_program(folder: Path, name: str) -> Path:
+    """A GL test program of a build; skips when the Makefile did not build it (no EGL/GL, or
+    no GLES for the `wxsky_gles_*` ones, found by pkg-config)."""
+    path = folder / name
+    if not path.exists():
+        what = "glesv2" if name.startswith("wxsky_gles_") else "egl and gl"
+        pytest.skip(f"{name} was not built (pkg-config finds no {what})")
+    return path

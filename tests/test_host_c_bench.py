@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 from daemon_harness import running_daemon
-from host_kit import host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
+from host_kit import gl_program, host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
 
 pytestmark = pytest.mark.gl
 
@@ -37,10 +37,7 @@ SMALL = "[camera]\nwidth = 320\nheight = 180\n"
 def run_bench(
     folder: Path, tmp_path: Path, env: dict[str, str] | None = None, exe_name: str = PROGRAM
 ) -> dict[str, Any]:
-    exe = folder / exe_name
-    if not exe.exists():
-        what = "glesv2" if exe_name == PROGRAM_GLES else "egl and gl"
-        pytest.skip(f"{exe_name} was not built (pkg-config finds no {what})")
+    exe = gl_program(folder, exe_name)
     with running_daemon(tmp_path, extra_config=SMALL) as d:
         proc = subprocess.run(
             [str(exe), d.shm_name, *ARGS, "--control", d.address],

@@ -23,7 +23,7 @@ import struct
 import subprocess
 import threading
 import time
-from collections.abc import Callable, Coroutine, Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -31,10 +31,10 @@ import msgpack
 import pytest
 from daemon_harness import running_daemon
 from host_kit import host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
+from server_thread import ServerThread as LoopServer
 
 from wxsky.errors import WxskyError
 from wxsky.host.client import RemoteError
-from wxsky.output.transport import ControlServer
 
 T = TypeVar("T")
 CHECK = "wxsky_client_check"
@@ -177,20 +177,12 @@ def packed(value: Any) -> str:
 # -- servers ----------------------------------------------------------------------------
 
 
-class ServerThread:
-    """A ControlServer on its own event loop in a background thread, as in the daemon."""
+class ServerThread(LoopServer):
+    """A ControlServer that records the requests it gets and answers like a small daemon."""
 
     def __init__(self, address: str) -> None:
         self.received: list[tuple[str, dict[str, Any]]] = []
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-        self.server = ControlServer(address, self.handle)
-        try:
-            self.run(self.server.start())
-        except BaseException:
-            self.stop()
-            raise
+        super().__init__(address, self.handle)
 
     async def handle(self, method: str, params: dict[str, Any]) -> Any:
         self.received.append((method, params))
@@ -221,24 +213,6 @@ class ServerThread:
         if method in ("set_aircraft", "set_time", "apply_preset", "apply_metar", "release"):
             return {"method": method}
         raise WxskyError(f"unknown method {method!r}")
-
-    def run(self, coro: Coroutine[Any, Any, T], timeout: float = 10) -> T:
-        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
-
-    def broadcast(self, method: str, params: dict[str, Any]) -> int:
-        async def send() -> int:
-            return self.server.broadcast(method, params)
-
-        return self.run(send())
-
-    def stop(self) -> None:
-        if self.loop.is_closed():
-            return
-        with contextlib.suppress(Exception):
-            self.run(self.server.close())
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(5)
-        self.loop.close()
 
 
 @contextlib.contextmanager

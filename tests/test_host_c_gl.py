@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 from daemon_harness import running_daemon
-from host_kit import host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
+from host_kit import gl_program, host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
 
 from wxsky.host.reference import host_frame
 from wxsky.output import shm
@@ -36,11 +36,7 @@ F64 = npt.NDArray[np.float64]
 
 
 def program(folder: Path, exe: str = PROGRAM) -> Path:
-    path = folder / exe
-    if not path.exists():
-        what = "glesv2" if exe == PROGRAM_GLES else "egl and gl"
-        pytest.skip(f"{exe} was not built (pkg-config finds no {what})")
-    return path
+    return gl_program(folder, exe)
 
 
 @pytest.fixture

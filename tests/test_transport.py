@@ -12,13 +12,13 @@ import logging
 import os
 import socket
 import stat
-import threading
 import time
-from collections.abc import Awaitable, Callable, Coroutine, Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
+from server_thread import ServerThread as LoopServer
 
 from wxsky.errors import WxskyError
 from wxsky.host.client import ControlClient, RemoteError
@@ -49,44 +49,20 @@ async def handler(method: str, params: dict[str, Any]) -> Any:
     raise WxskyError(f"unknown method {method!r}")
 
 
-class ServerThread:
+class ServerThread(LoopServer):
     def __init__(
         self,
         address: str,
         handler: Callable[[str, dict[str, Any]], Awaitable[Any]] = handler,
         **kwargs: Any,
     ) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-        self.server = ControlServer(address, handler, **kwargs)
-        try:
-            self.run(self.server.start())
-        except BaseException:
-            self.stop()
-            raise
-
-    def run(self, coro: Coroutine[Any, Any, T], timeout: float = 10) -> T:
-        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
-
-    def on_loop(self, fn: Callable[[], T]) -> T:
-        async def call() -> T:
-            return fn()
-
-        return self.run(call())
+        super().__init__(address, handler, **kwargs)
 
     def wait_for_clients(self, count: int) -> None:
         deadline = time.monotonic() + 5
         while self.on_loop(lambda: self.server.client_count) != count:
             assert time.monotonic() < deadline, f"client_count never became {count}"
             time.sleep(0.01)
-
-    def stop(self) -> None:
-        with contextlib.suppress(Exception):
-            self.run(self.server.close())
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(5)
-        self.loop.close()
 
 
 @pytest.fixture

@@ -10,9 +10,12 @@ camera's viewport, the scene's block size) are taken from their owners, not copi
 from __future__ import annotations
 
 import dataclasses
+import functools
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, ClassVar, TypeVar
 
 from wxsky.errors import ConfigError
@@ -105,15 +108,18 @@ class _Section:
 
     def __post_init__(self) -> None:
         problems: list[Problem] = []
-        for name, kind in section_kinds(type(self)).items():
+        cls: type = type(self)  # a class is hashable; mypy cannot see it through the dataclass
+        for name, kind in section_kinds(cls).items():
             value = kind.check(getattr(self, name), (self.SECTION, name), problems)
             object.__setattr__(self, name, value)
         if problems:
             raise Invalid(problems)
 
 
-def section_kinds(cls: type) -> dict[str, Kind]:
-    """Every key of a section with its kind."""
+@functools.cache
+def section_kinds(cls: type) -> Mapping[str, Kind]:
+    """Every key of a section with its kind (worked out once per class: every construction of a
+    section checks itself with it)."""
     hints = typing.get_type_hints(cls)
     out: dict[str, Kind] = {}
     for f in dataclasses.fields(cls):
@@ -121,7 +127,7 @@ def section_kinds(cls: type) -> dict[str, Kind]:
         if kind is None:
             raise TypeError(f"{cls.__name__}.{f.name}: no kind for {hints[f.name]!r}")
         out[f.name] = kind
-    return out
+    return MappingProxyType(out)
 
 
 @dataclass(frozen=True)
@@ -369,8 +375,9 @@ class DaemonConfig:
 def _config_table() -> Table:
     """The whole file's table, derived from the section dataclasses."""
     fields: dict[str, Field] = {}
+    hints = typing.get_type_hints(DaemonConfig)
     for f in dataclasses.fields(DaemonConfig):
-        hint = typing.get_type_hints(DaemonConfig)[f.name]
+        hint = hints[f.name]
         if typing.get_origin(hint) is tuple:
             cls = typing.get_args(hint)[0]
             fields[f.name] = Field(Tables(_section_table(cls, f"[[{f.name}]]"), f.name))
