@@ -91,6 +91,24 @@ def test_second_sigint_forces_exit_and_still_cleans_up(tmp_path: Path) -> None:
 
 
 @pytest.mark.gl
+def test_set_camera_by_position_flies_near_the_site_and_moves_the_site_when_far(
+    tmp_path: Path,
+) -> None:
+    with running_daemon(tmp_path) as d, d.client() as c:
+        site = c.call("status")["weather"]["observer"]
+        lat, lon = site["lat_deg"], site["lon_deg"]
+        # 0.1° north (11 km): the camera moves there in the local frame, same site.
+        cam = c.call("set_camera", {"lat_deg": lat + 0.1, "lon_deg": lon, "alt_m": 900.0})
+        np.testing.assert_allclose(cam["position_m"], [0.0, 11_054.0, 900.0], atol=0.5)
+        assert c.call("status")["weather"]["observer"]["lat_deg"] == pytest.approx(lat)
+        # 3° north (330 km): that place becomes the site and the camera stands over it.
+        cam = c.call("set_camera", {"lat_deg": lat + 3.0, "lon_deg": lon, "alt_m": 900.0})
+        np.testing.assert_allclose(cam["position_m"], [0.0, 0.0, 900.0], atol=1e-6)
+        moved = c.call("status")["weather"]["observer"]
+        assert (moved["lat_deg"], moved["lon_deg"]) == pytest.approx((lat + 3.0, lon))
+
+
+@pytest.mark.gl
 def test_bad_control_input_is_answered_and_the_daemon_keeps_publishing(tmp_path: Path) -> None:
     with running_daemon(tmp_path) as d, d.client() as c:
         before = c.call("status")
@@ -167,7 +185,11 @@ def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) 
         assert host.weather is not None
 
     state = WeatherState().apply(load_preset("fair-cumulus"))
+    preset_utc = state.time_utc
     state = state.apply(WeatherPatch(source=Source.CONTROL, time_utc=parse_time_utc(when)))
+    # The daemon started on the preset at its own time: by `when` the wind has blown the
+    # clouds on, there as here.
+    drift_s = (state.time_utc - preset_utc).total_seconds()
     camera = Camera(
         position_m=(0.0, 0.0, 434.0),
         heading_deg=225.0,
@@ -176,7 +198,7 @@ def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) 
         width_px=320,
         height_px=180,
     )
-    shot = take_snapshot(state, camera, SceneSettings())
+    shot = take_snapshot(state, camera, SceneSettings(), drift_s=drift_s)
     assert hosted.shape == shot.image.shape
     diff = np.abs(hosted.astype(int) - shot.image.astype(int))
     assert diff.max() <= 1, f"max diff {diff.max()}, {np.mean(diff > 1):.4f} of values off"

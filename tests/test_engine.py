@@ -80,6 +80,67 @@ def test_set_time_jumps_and_changes_rate() -> None:
     assert plan.ring_changed  # the sun is somewhere else entirely
 
 
+def test_drift_is_a_function_of_the_time_not_of_the_frames() -> None:
+    # 10 m/s from the west. One engine runs 90 frames of a second then has its clock set; the
+    # other has it set at once: both put the clouds where that time has them, as a one-shot
+    # picture of that time does (wind x time since the weather was set).
+    ran, fresh = _engine(rate=1.0, wind_mps=10.0), _engine(rate=1.0, wind_mps=10.0)
+    for _ in range(90):
+        ran.advance(1.0)
+    np.testing.assert_allclose(ran.drift, [(900.0, 0.0)], atol=1e-6)
+    t = T0 + timedelta(minutes=30)
+    ran.set_time(t)
+    fresh.set_time(t)
+    np.testing.assert_allclose(ran.drift, [(18_000.0, 0.0)], atol=1e-6)
+    assert ran.drift == fresh.drift
+    # Earlier than the weather: the clouds stand upwind; back to it: where they began.
+    ran.set_time(T0 - timedelta(seconds=60))
+    np.testing.assert_allclose(ran.drift, [(-600.0, 0.0)], atol=1e-6)
+    ran.set_time(T0)
+    np.testing.assert_allclose(ran.drift, [(0.0, 0.0)], atol=1e-9)
+
+
+def test_a_wind_change_carries_on_from_where_the_clouds_are() -> None:
+    engine = _engine(rate=1.0, wind_mps=10.0)
+    engine.advance(0.0)
+    engine.advance(100.0)  # 1000 m east
+    south = (WindLayer(500.0, 180.0, 5.0),)  # now from the south at 5 m/s
+    engine.apply(WeatherPatch(source=Source.CONTROL, wind=south))
+    np.testing.assert_allclose(engine.drift, [(1000.0, 0.0)], atol=1e-6)  # no jump
+    engine.advance(40.0)
+    np.testing.assert_allclose(engine.drift, [(1000.0, 200.0)], atol=1e-6)
+    engine.set_time(engine.state.time_utc + timedelta(seconds=60))
+    np.testing.assert_allclose(engine.drift, [(1000.0, 500.0)], atol=1e-6)
+
+
+def test_drift_for_moves_the_clouds_and_later_times_carry_on_from_there() -> None:
+    engine = _engine(rate=1.0, wind_mps=10.0)
+    engine.drift_for(50.0)
+    np.testing.assert_allclose(engine.drift, [(500.0, 0.0)], atol=1e-6)
+    engine.advance(0.0)
+    engine.advance(10.0)
+    np.testing.assert_allclose(engine.drift, [(600.0, 0.0)], atol=1e-6)
+
+
+@pytest.mark.parametrize(("jump_s", "rebuilt"), [(0.5, False), (-0.9, False), (2.0, True)])
+def test_setting_the_clock_rebuilds_the_ring_for_the_new_time(jump_s: float, rebuilt: bool) -> None:
+    # Two seconds moves neither the sun a degree nor the clouds 3 % of the radius, yet the
+    # ring is rebuilt for the new time, so the frames after a set_time are the sky of that
+    # time; a set within a second of the running clock (a cockpit keeping it in step) is not.
+    engine = _engine(rate=0.0, wind_mps=10.0)
+    first = engine.advance(0.0)
+    engine.set_time(T0 + timedelta(seconds=jump_s))
+    plan = engine.advance(0.0)
+    assert plan.ring_changed is rebuilt
+    starts = [e.fields.get("reason") for e in plan.events if e.event == "ring_rebuild_start"]
+    assert starts == (["time_set"] if rebuilt else [])
+    if rebuilt:
+        np.testing.assert_allclose(plan.ring.drift, [(10.0 * jump_s, 0.0)], atol=1e-9)
+    else:
+        assert plan.ring is first.ring
+    assert not engine.advance(0.0).ring_changed  # once, not on every frame after
+
+
 # -- ring rebuilds ------------------------------------------------------------------------
 
 

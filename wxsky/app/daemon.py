@@ -347,7 +347,11 @@ class Daemon:
         out = self.config.output
         camera = camera_from_params(self.engine, params, (out.max_width, out.max_height))
         self.engine.set_camera(camera)
-        return camera_to_dict(camera)
+        if "lat_deg" in params:
+            # As a cockpit's position: near the site the camera moves under the same sky;
+            # far away (where the flat local frame no longer holds) that place becomes the site.
+            self.engine.move_observer(params["lat_deg"], params["lon_deg"])
+        return camera_to_dict(self.engine.camera)
 
     def _feed_input(self, spec: str) -> MetarFeedInput:
         m = self.config.metar

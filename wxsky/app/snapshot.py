@@ -55,14 +55,18 @@ def take_snapshot(
     transition: Transition | None = None,
     drift_s: float = 0.0,
     mode: str = "ring",
+    position_deg: tuple[float, float] | None = None,
 ) -> Snapshot:
     """`drift_s`: how long the wind has blown the clouds since the weather was set (a picture
     later than its preset's time shows them moved on, the same in every process). `mode`:
     "ring" (far clouds in impostors, as the daemon draws them) or "direct" (every cloud as a
-    sprite, to compare)."""
+    sprite, to compare). `position_deg`: (lat, lon) of the camera, placed as the daemon's
+    `set_camera` places it (near the site: under the same sky; far: a new site)."""
     engine = SkyEngine(state, camera, settings, clock_rate=0.0, render_mode=mode)
     if drift_s:
         engine.drift_for(drift_s)
+    if position_deg is not None:
+        engine.move_observer(*position_deg)
     if transition is not None:
         engine.rates = transition.rates
         engine.transition_step_s = transition.step_s

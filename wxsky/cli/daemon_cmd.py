@@ -126,13 +126,15 @@ def add_commands(sub: Subparsers) -> None:
         "--lat",
         type=NumberArg("--lat", KindRef("wxsky.weather.state:LAT_DEG")),
         metavar="DEG",
-        help="observer latitude, with --lon (default: the weather's)",
+        help="camera latitude, with --lon (default: the weather's site); as the daemon's "
+        "set_camera: within 100 km of the site the camera flies there under the same sky, "
+        "farther that place becomes the site",
     )
     snap.add_argument(
         "--lon",
         type=NumberArg("--lon", KindRef("wxsky.weather.state:LON_DEG")),
         metavar="DEG",
-        help="observer longitude, east, with --lat (default: the weather's)",
+        help="camera longitude, east, with --lat (default: the weather's site)",
     )
     snap.add_argument(
         "--alt-m",
@@ -295,7 +297,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     from wxsky.app.snapshot import take_snapshot
     from wxsky.scene.camera import Camera
     from wxsky.settings.config import load_config
-    from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
+    from wxsky.weather.state import Source, WeatherPatch, WeatherState
 
     if (args.lat is None) != (args.lon is None):
         raise UsageError("--lat and --lon go together")
@@ -305,15 +307,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     width, height = args.size
     state = WeatherState().apply(_weather_patch(args, config.presets.dirs))
     weather_time = state.time_utc
-    overrides = WeatherPatch(
-        source=Source.CONTROL,
-        time_utc=args.time,
-        seed=args.seed,
-        observer=(
-            Observer(args.lat, args.lon, state.observer.alt_m) if args.lat is not None else None
-        ),
-    )
-    state = state.apply(overrides)
+    state = state.apply(WeatherPatch(source=Source.CONTROL, time_utc=args.time, seed=args.seed))
     # Where the daemon puts its camera: the config's height above the observer.
     alt_m = state.observer.alt_m + config.camera.alt_agl_m if args.alt_m is None else args.alt_m
     camera = Camera(
@@ -340,7 +334,13 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     # clouds blown on by the wind since then.
     drift_s = (state.time_utc - weather_time).total_seconds()
     shot = take_snapshot(
-        state, camera, settings, transition=transition, drift_s=drift_s, mode=args.mode
+        state,
+        camera,
+        settings,
+        transition=transition,
+        drift_s=drift_s,
+        mode=args.mode,
+        position_deg=None if args.lat is None else (args.lat, args.lon),
     )
     _write_png("--out", args.out, shot.image)
     if args.layers_out:

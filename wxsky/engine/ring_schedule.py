@@ -140,11 +140,18 @@ class RingSchedule:
         self._fade = 0.0
         self._version = 0
         self._retry_in_s = 0.0  # after a failed build, wait this long before the next
+        self._forced: str | None = None  # a reason to rebuild given from outside (invalidate)
         self._closed = False
 
     @property
     def current(self) -> RingScene | None:
         return self._current
+
+    def invalidate(self, reason: str) -> None:
+        """Rebuild at the next chance whatever the thresholds say (`reason` goes in the
+        trace): the clock was set, so the newest ring shows another time. A rebuild under way
+        is followed by one more, judged when it ends."""
+        self._forced = reason
 
     @property
     def busy(self) -> bool:
@@ -275,6 +282,9 @@ class RingSchedule:
         built = self._newest
         if built is None:
             return "initial"
+        if self._forced is not None:
+            reason, self._forced = self._forced, None
+            return reason
         if _weather_differs(built.state, state):
             return "weather"
         p = self.policy

@@ -54,6 +54,10 @@ DEFAULT_TRANSITION_STEP_S = 1.0
 REORIGIN_M = 100_000.0
 # A cockpit date (CANaerospace 1206) is paired with time frames (1200) this long after it.
 DATE_MEMORY_S = 5.0
+# A clock set from outside by more than this rebuilds the ring at once, whatever the sun and
+# drift thresholds say: the frames after a jump show the sky of the new time, exactly as a
+# one-shot picture of that time does, not a ring built for the old one.
+CLOCK_JUMP_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -111,7 +115,14 @@ class SkyEngine:
         self._wall_s = 0.0
         self._cockpit_date: tuple[date, float] | None = None  # (date, wall_s it arrived)
         self._since_step_s = 0.0
+        # The clouds' drift is a function of the time: each layer has moved with its wind
+        # since the anchor (the moment the applied weather last changed, at the drift it had
+        # then), so setting the clock anywhere puts the clouds where that time has them.
         self._drift: Drift = zero_drift(state)
+        self._anchor_utc = state.time_utc
+        self._anchor_drift: Drift = self._drift
+        self._clock_jumps = 0  # bumped by each clock set that moves it more than CLOCK_JUMP_S
+        self._clock_jumps_seen = 0
         self.render_mode = render_mode
         self._build_times: list[float] | None = None
         self._schedule = RingSchedule(
@@ -155,6 +166,12 @@ class SkyEngine:
     @property
     def camera(self) -> Camera:
         return self._camera
+
+    @property
+    def drift(self) -> Drift:
+        """Where the wind has moved each applied layer by the clock's time (metres east,
+        north): a function of the weather and the time, not of how the frames went."""
+        return self._drift
 
     def sky(self, eye_alt_m: float | None = None) -> SkyParams:
         """The sky of the applied weather from eye_alt_m (default: the observer's), with the
@@ -273,8 +290,11 @@ class SkyEngine:
         self, time_utc: datetime, rate: float | None = None, source: Source = Source.CONTROL
     ) -> None:
         with self._lock:
+            if abs((time_utc - self._state.time_utc).total_seconds()) > CLOCK_JUMP_S:
+                self._clock_jumps += 1
             sources = dataclasses.replace(self._state.sources, time_utc=source)
             self._state = dataclasses.replace(self._state, time_utc=time_utc, sources=sources)
+            self._drift = self._drift_at(time_utc)
             self._target = dataclasses.replace(
                 self._target,
                 time_utc=time_utc,
@@ -307,6 +327,8 @@ class SkyEngine:
         if new == self._state:
             return
         self._drift = carry_drift(self._state, new, self._drift)
+        # From now on the layers move with the new weather's winds.
+        self._anchor_utc, self._anchor_drift = self._state.time_utc, self._drift
         self._state = new
         self._settled = settled(new, self._target)
         self.weather_version += 1
@@ -338,6 +360,10 @@ class SkyEngine:
             self._step_weather(dt_wall_s)
             state, drift, camera = self._state, self._drift, self._camera
             aircraft_m = self._aircraft_m
+            clock_jumped = self._clock_jumps != self._clock_jumps_seen
+            self._clock_jumps_seen = self._clock_jumps
+        if clock_jumped:
+            self._schedule.invalidate("time_set")
         # The scene stages read only the immutable values taken above: no lock from here on.
         # One ephemeris per frame (and none while the clock stands still): `sky()` reuses it.
         self._bodies = bodies = bodies_for(state, self._bodies)
@@ -378,7 +404,8 @@ class SkyEngine:
         """Move every layer as the wind would have in `seconds` (negative: back), at once: a
         picture at a later time than its weather's shows the clouds blown on."""
         with self._lock:
-            self._drift = advance_drift(self._state, self._drift, seconds)
+            self._anchor_drift = advance_drift(self._state, self._anchor_drift, seconds)
+            self._drift = self._drift_at(self._state.time_utc)
 
     def run_weather(self, duration_s: float) -> WeatherState:
         """Advance the weather stages only (sources, transition, clock, drift) by duration_s
@@ -400,7 +427,12 @@ class SkyEngine:
             self._state = dataclasses.replace(
                 self._state, time_utc=self._state.time_utc + timedelta(seconds=dt_sim)
             )
-            self._drift = advance_drift(self._state, self._drift, dt_sim)
+            self._drift = self._drift_at(self._state.time_utc)
+
+    def _drift_at(self, time_utc: datetime) -> Drift:
+        """Where the applied weather's layers stand at `time_utc` (earlier: back upwind)."""
+        since_s = (time_utc - self._anchor_utc).total_seconds()
+        return advance_drift(self._state, self._anchor_drift, since_s)
 
 
 def enu_from_geodetic(
