@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 from daemon_harness import running_daemon
-from host_kit import gl_program, host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
+from host_kit import gl_program, gl_sanitizer_env, host_kit, host_kit_sanitized  # noqa: F401
 
 pytestmark = pytest.mark.gl
 
@@ -87,9 +87,5 @@ def test_the_benchmark_runs_clean_under_the_sanitizers(
     host_kit_sanitized: Path,  # noqa: F811
     tmp_path: Path,
 ) -> None:
-    env = sanitizer_env()
-    # As in test_host_c_gl.py: Mesa's llvmpipe keeps allocations for the life of the process,
-    # which LeakSanitizer reports at exit (from its unloaded driver, so no suppression can name
-    # them): leaks are not checked for this GL program; every other finding still fails it.
-    env["ASAN_OPTIONS"] = env["ASAN_OPTIONS"].replace("detect_leaks=1", "detect_leaks=0")
+    env = gl_sanitizer_env()
     check(run_bench(host_kit_sanitized, tmp_path, env=env), frames=3, rounds=3)

@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 from daemon_harness import running_daemon
-from host_kit import gl_program, host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
+from host_kit import gl_program, gl_sanitizer_env, host_kit, host_kit_sanitized  # noqa: F401
 
 from wxsky.host.reference import host_frame
 from wxsky.output import shm
@@ -366,11 +366,7 @@ def test_the_sanitized_build_composites_the_same(
     writer = publish(name, specs, images, meta)
     try:
         plain = c_composite(host_kit, name, (H, W))
-        env = sanitizer_env()
-        # Mesa's llvmpipe keeps allocations for the life of the process (its shader cache and
-        # screen), which LeakSanitizer reports at exit: leaks are not checked for this program
-        # only; every other finding still fails it.
-        env["ASAN_OPTIONS"] = env["ASAN_OPTIONS"].replace("detect_leaks=1", "detect_leaks=0")
+        env = gl_sanitizer_env()
         sanitized = c_composite(host_kit_sanitized, name, (H, W), "--twice", env=env)
         view = c_composite(host_kit_sanitized, name, (H, W), "--view", "--window", env=env)
         pbo = c_composite(host_kit_sanitized, name, (H, W), "--pbo", "--terrain-m", "1e6", env=env)

@@ -1,34 +1,22 @@
-/* The headless EGL context and the few helpers the GL test programs share (wxsky_gl_composite,
- * wxsky_gl_bench). Included by exactly one source file per program, so its functions are
- * static; not part of the kit. */
-#ifndef WXSKY_TESTS_GL_CONTEXT_H
-#define WXSKY_TESTS_GL_CONTEXT_H
+/* The headless EGL context and the few helpers the kit's GL programs share (the tests'
+ * wxsky_gl_composite and wxsky_gl_bench, the apps' app.c). Included by exactly one source file
+ * per program, so its functions are static; not part of the library. */
+#ifndef WXSKY_APPS_GL_CONTEXT_H
+#define WXSKY_APPS_GL_CONTEXT_H
 
 #include <string.h>
 
-#include <EGL/egl.h>
-#include <EGL/eglext.h>
-#ifdef WXSKY_GL_ES
-/* -DWXSKY_GL_ES: an OpenGL ES 3.0 context, for the GLES build of the library */
-#include <GLES3/gl3.h>
-#define WXSKY_EGL_API EGL_OPENGL_ES_API
-#define WXSKY_EGL_BIT EGL_OPENGL_ES3_BIT
-#define clear_depth(d) glClearDepthf((GLfloat)(d))
-#else
-#define GL_GLEXT_PROTOTYPES 1
-#include <GL/glcorearb.h>
-#define WXSKY_EGL_API EGL_OPENGL_API
-#define WXSKY_EGL_BIT EGL_OPENGL_BIT
-#define clear_depth(d) glClearDepth(d)
-#endif
+#include "gl_api.h"
 
 #include "wxsky_host.h"
 #include "wxsky_host_gl.h"
 
+#ifndef GL_CONTEXT_NO_DIE /* app.c reports its own errors */
 static int die(int code, const char *what, const char *msg) {
     printf("error %s: %s\n", what, msg);
     return code;
 }
+#endif
 
 static int has_ext(const char *list, const char *name) {
     size_t n = strlen(name);

@@ -1,0 +1,194 @@
+"""`wxsky-host-snapshot` (plugins/host-c/apps): a C host's picture of a running daemon's sky,
+held to `wxsky snapshot` of the same arguments. The daemon started on the preset at the
+preset's own time and ran its clock; the tool sets the time and camera; the one-shot path
+builds the same sky from the preset and that time alone. They must agree (mean within 2/255)
+because the sky is a function of the weather and the time wherever it is drawn: the clouds'
+drift included, the ring rebuilt for the new time."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+import pytest
+from daemon_harness import RunningDaemon, running_daemon
+from host_kit import gl_program, gl_sanitizer_env, host_kit, host_kit_sanitized  # noqa: F401
+
+from wxsky.png import read_png
+from wxsky.scene.ephemeris import sun_position
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import WeatherState
+
+pytestmark = pytest.mark.gl
+
+TOOL = "wxsky-host-snapshot"
+PRESETS = ("scattered-cumulus", "overcast-stratus")
+SIZE = "320x180"
+DUSK_SUN_DEG = 4.0
+
+
+def _moments(preset: str) -> dict[str, tuple[datetime, float]]:
+    """Noon (facing south) and dusk (the sun 4° up, facing it) on the preset's date and place."""
+    state = WeatherState().apply(load_preset(preset))
+    obs = state.observer
+    midnight = state.time_utc.replace(hour=0, minute=0, second=0, microsecond=0)
+    times = [midnight + timedelta(minutes=m) for m in range(0, 24 * 60, 2)]
+    suns = [sun_position(t, obs.lat_deg, obs.lon_deg) for t in times]
+    noon = int(np.argmax([s.elevation_deg for s in suns]))
+    dusk = max(i for i in range(noon, len(times)) if suns[i].elevation_deg >= DUSK_SUN_DEG)
+    return {"noon": (times[noon], 180.0), "dusk": (times[dusk], suns[dusk].azimuth_deg)}
+
+
+# up into the clouds, and down below the horizon (the ground colour and the cloud bases)
+VIEWS = {"up": 20.0, "below": -6.0}
+
+
+@pytest.fixture(scope="module", params=PRESETS)
+def daemon(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[tuple[str, RunningDaemon]]:
+    preset = request.param
+    with running_daemon(tmp_path_factory.mktemp(preset), args=("--preset", preset)) as d:
+        yield preset, d
+
+
+def _args(when: datetime, heading_deg: float, pitch_deg: float) -> list[str]:
+    return [
+        "--time",
+        when.strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "--alt-m",
+        "700",  # below both presets' cloud bases
+        "--heading-deg",
+        f"{heading_deg:.3f}",
+        "--pitch-deg",
+        f"{pitch_deg:g}",
+        "--fov-deg",
+        "75",
+        "--size",
+        SIZE,
+    ]
+
+
+def _mean_diff(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a[..., :3].astype(int) - b[..., :3].astype(int)).mean())
+
+
+@pytest.mark.parametrize("moment", ["noon", "dusk"])
+def test_the_c_hosts_snapshot_is_the_one_shot_snapshot(
+    daemon: tuple[str, RunningDaemon],
+    moment: str,
+    host_kit: Path,  # noqa: F811
+    tmp_path: Path,
+) -> None:
+    preset, d = daemon
+    tool = gl_program(host_kit, TOOL)
+    when, heading_deg = _moments(preset)[moment]
+    pictures: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for view, pitch_deg in VIEWS.items():
+        args = _args(when, heading_deg, pitch_deg)
+        c_png, py_png = tmp_path / f"c-{view}.png", tmp_path / f"py-{view}.png"
+        proc = subprocess.run(
+            [str(tool), "--control", d.address, "--shm", d.shm_name, *args, "--out", str(c_png)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        if proc.returncode == 2:
+            pytest.skip(proc.stderr.strip())
+        assert proc.returncode == 0, proc.stderr + d.log()[-2000:]
+        assert proc.stdout.startswith(f"wrote {c_png} (320x180), frame ")
+        shot = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "wxsky",
+                "snapshot",
+                "--preset",
+                preset,
+                *args,
+                "--out",
+                str(py_png),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert shot.returncode == 0, shot.stderr
+        c_img, py_img = read_png(c_png), read_png(py_png)
+        assert c_img.shape == py_img.shape == (180, 320, 4)
+        assert (c_img[..., 3] == 255).all()
+        mean = _mean_diff(c_img, py_img)
+        assert mean <= 2.0, f"{preset} {moment} {view}: mean difference {mean:.2f}/255"
+        pictures[view] = (c_img, py_img)
+    # The agreement means something: the two views differ by far more than it allows (under
+    # the deck at dusk the whole picture is dim, and still 4/255 apart).
+    assert _mean_diff(pictures["up"][0], pictures["below"][1]) > 4.0
+
+
+def test_the_tool_leaves_the_daemons_clock_running_and_says_what_is_wrong(
+    daemon: tuple[str, RunningDaemon],
+    host_kit: Path,  # noqa: F811
+    tmp_path: Path,
+) -> None:
+    _, d = daemon
+    tool = gl_program(host_kit, TOOL)
+    out = tmp_path / "x.png"
+    when = datetime(2026, 3, 1, 10, 0, tzinfo=UTC)
+    with d.client() as c:
+        rate = c.call("status")["clock_rate"]
+    proc = subprocess.run(
+        [str(tool), "--control", d.address, *_args(when, 90.0, 5.0), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    if proc.returncode == 2:
+        pytest.skip(proc.stderr.strip())
+    assert proc.returncode == 0, proc.stderr  # --shm found through `scene`
+    with d.client() as c:
+        status = c.call("status")
+    # Frozen at --time while the frame was drawn, then running again at the old rate.
+    assert status["clock_rate"] == rate == 1.0
+    assert status["weather"]["time_utc"].startswith("2026-03-01T10:00")
+    bad = [
+        (["--control", d.address, "--size", "10x10", "--out", str(out)], 64, "--size 10x10"),
+        (["--control", d.address, "--lat", "47", "--out", str(out)], 64, "go together"),
+        (["--control", d.address, "--pitch-deg", "95", "--out", str(out)], 64, "--pitch-deg 95"),
+        (["--out", str(out)], 64, "--control ADDR is required"),
+        (["--control", f"unix:{tmp_path}/none.sock", "--out", str(out)], 1, "none.sock"),
+        (["--control", d.address, "--time", "yesterday", "--out", str(out)], 1, "set_time"),
+        (["--control", d.address, "--out", str(tmp_path / "no" / "dir.png")], 1, "dir.png"),
+    ]
+    for args, code, says in bad:
+        proc = subprocess.run([str(tool), *args], capture_output=True, text=True, timeout=60)
+        assert proc.returncode == code, (args, proc.stderr)
+        first = proc.stderr.splitlines()[0]
+        assert first.startswith(f"{TOOL}: error: ") and says in first, (args, proc.stderr)
+    with d.client() as c:
+        assert c.call("status")["frames_published"] > 0  # the daemon carried on
+
+
+def test_the_tool_is_clean_under_the_sanitizers(
+    daemon: tuple[str, RunningDaemon],
+    host_kit_sanitized: Path,  # noqa: F811
+    tmp_path: Path,
+) -> None:
+    preset, d = daemon
+    tool = gl_program(host_kit_sanitized, TOOL)
+    when, heading_deg = _moments(preset)["noon"]
+    out = tmp_path / "s.png"
+    proc = subprocess.run(
+        [str(tool), "--control", d.address, *_args(when, heading_deg, 10.0), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        env=gl_sanitizer_env(),
+    )
+    if proc.returncode == 2:
+        pytest.skip(proc.stderr.strip())
+    assert proc.returncode == 0, proc.stderr
+    assert read_png(out).shape == (180, 320, 4)
