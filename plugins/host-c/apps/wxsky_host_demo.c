@@ -1,0 +1,381 @@
+/* wxsky-host-demo: a small host simulator: terrain with a runway, flown along a camera path,
+ * sending its camera to the daemon every frame and compositing wxsky's clouds in front of and
+ * behind its terrain with the GL compositor; writes the frames as a PNG strip.
+ *
+ *   wxsky-host-demo --control ADDR [--shm NAME] --out STRIP.png [--frames N] [--size WxH]
+ *       [--time ISO8601] [--fov-deg D] [--debug-out DIR --debug-frame K] [--timeout-s S]
+ *
+ * The path takes off from the runway (3 km long, north-south through the observer) and climbs
+ * north towards a ridge 7 km away that stands between the camera and the far clouds. For each
+ * frame the camera goes to the daemon (set_camera), the demo waits for the frame drawn for it
+ * once the ring has settled (a strip of stills; a live host would composite whatever frame is
+ * newest), then draws, into one framebuffer: its terrain (writing depth), the sky and ring
+ * (depth-tested: the ridge hides the clouds behind it, clouds in front of it stay), the near
+ * layer, and the near_front layer. --time sets the daemon's clock first (it keeps running).
+ *
+ * --debug-out DIR --debug-frame K: also writes, for frame K, terrain.png (the terrain alone,
+ * alpha 0 where there is none), distance.png (the terrain's distance from the camera: red in
+ * 100 m steps, green the fraction; alpha 0 where there is none), clouds.png (the frame
+ * composited without terrain), near.png and sky.png (those layers as the daemon sent them,
+ * premultiplied) and final.png, for tests/test_host_c_demo.py.
+ *
+ * Headless (EGL) only: a windowed build needs GLFW or SDL, which this kit does not require.
+ * Prints one line per frame and "wrote STRIP (WxH, N frames)"; on failure one line
+ * "wxsky-host-demo: error: ..." and exit 1 (2: no headless GL; 64: bad arguments). */
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "app.h"
+#include "demo_terrain.h"
+#include "png_write.h"
+
+#define PROG "wxsky-host-demo"
+#define USAGE                                                                                  \
+    "usage: " PROG " --control ADDR [--shm NAME] --out STRIP.png [--frames N] [--size WxH] "   \
+    "[--time ISO8601] [--fov-deg D] [--debug-out DIR --debug-frame K] [--timeout-s S]"
+#define GAP_PX 4
+#define MAX_FRAMES 32
+
+typedef struct args {
+    const char *control, *shm, *out, *time_utc, *debug_out;
+    int frames, debug_frame;
+    uint32_t width, height;
+    double fov_deg, timeout_s;
+} args;
+
+static int usage(const char *why) {
+    fprintf(stderr, "%s: error: %s\n%s\n", PROG, why, USAGE);
+    return 0;
+}
+
+static int parse(int argc, char **argv, args *a) {
+    memset(a, 0, sizeof *a);
+    a->frames = 6;
+    a->debug_frame = -1;
+    a->width = 480;
+    a->height = 270;
+    a->fov_deg = 70.0;
+    a->timeout_s = 120.0;
+    for (int i = 1; i < argc; i += 2) {
+        const char *f = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        char *end = NULL;
+        if (!v)
+            return usage(f);
+        errno = 0;
+        if (!strcmp(f, "--control"))
+            a->control = v;
+        else if (!strcmp(f, "--shm"))
+            a->shm = v;
+        else if (!strcmp(f, "--out"))
+            a->out = v;
+        else if (!strcmp(f, "--time"))
+            a->time_utc = v;
+        else if (!strcmp(f, "--debug-out"))
+            a->debug_out = v;
+        else if (!strcmp(f, "--frames") || !strcmp(f, "--debug-frame")) {
+            long n = strtol(v, &end, 10);
+            int lo = !strcmp(f, "--frames") ? 1 : 0;
+            if (errno || *end || n < lo || n > MAX_FRAMES) {
+                fprintf(stderr, "%s: error: %s %s is not a whole number in %d..%d\n", PROG, f, v,
+                        lo, MAX_FRAMES);
+                return 0;
+            }
+            if (lo)
+                a->frames = (int)n;
+            else
+                a->debug_frame = (int)n;
+        } else if (!strcmp(f, "--fov-deg") || !strcmp(f, "--timeout-s")) {
+            double x = strtod(v, &end);
+            int fov = !strcmp(f, "--fov-deg");
+            if (errno || *end || end == v || !isfinite(x) || x < (fov ? 1.0 : 0.1) ||
+                x > (fov ? 170.0 : 3600.0)) {
+                fprintf(stderr, "%s: error: %s %s is out of range\n", PROG, f, v);
+                return 0;
+            }
+            *(fov ? &a->fov_deg : &a->timeout_s) = x;
+        } else if (!strcmp(f, "--size")) {
+            unsigned w = 0, h = 0;
+            char x = 0, extra = 0;
+            if (sscanf(v, "%u%c%u%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') ||
+                w < 16 || h < 16 || w > 4096 || h > 4096) {
+                fprintf(stderr, "%s: error: --size %s is not WxH with each 16..4096\n", PROG, v);
+                return 0;
+            }
+            a->width = w;
+            a->height = h;
+        } else {
+            return usage(f);
+        }
+    }
+    if (!a->control)
+        return usage("--control ADDR is required");
+    if (!a->out)
+        return usage("--out STRIP.png is required");
+    if ((a->debug_out == NULL) != (a->debug_frame < 0))
+        return usage("--debug-out and --debug-frame go together");
+    if (a->debug_frame >= a->frames)
+        return usage("--debug-frame is past the last frame");
+    return 1;
+}
+
+/* Frame k of n along the path: off the runway's south end, climbing north. */
+static void path_camera(int k, int n, double ground_m, const args *a, wxsky_camera *cam) {
+    double u = n > 1 ? (double)k / (n - 1) : 0.0;
+    double north = -1300.0 + 4300.0 * u, east = 0.0;
+    double agl = 3.0 + 420.0 * pow(u, 1.5);
+    memset(cam, 0, sizeof *cam);
+    cam->position_m[0] = east;
+    cam->position_m[1] = north;
+    cam->position_m[2] = ground_m + terrain_height_m(east, north) + agl;
+    cam->heading_deg = 6.0 * u;
+    cam->pitch_deg = 3.0 - 1.5 * u;
+    cam->fov_deg = a->fov_deg;
+    cam->width = a->width;
+    cam->height = a->height;
+}
+
+/* The observer's ground altitude, from `status` (weather.observer.alt_m). */
+static int ground_alt(wxsky_client *c, int timeout_ms, double *alt_m, char *err) {
+    wxsky_message res;
+    wxsky_mp_reader r;
+    uint32_t n;
+    if (app_call(c, "status", NULL, timeout_ms, &res, err) != WXSKY_OK)
+        return -1;
+    wxsky_mp_reader_init(&r, res.body, res.body_len);
+    if (wxsky_mp_read_map(&r, &n) != WXSKY_OK || wxsky_mp_find_key(&r, n, "weather") != WXSKY_OK ||
+        wxsky_mp_read_map(&r, &n) != WXSKY_OK || wxsky_mp_find_key(&r, n, "observer") != WXSKY_OK ||
+        wxsky_mp_read_map(&r, &n) != WXSKY_OK || wxsky_mp_find_key(&r, n, "alt_m") != WXSKY_OK ||
+        wxsky_mp_read_double(&r, alt_m) != WXSKY_OK) {
+        snprintf(err, APP_ERR, "status: no weather.observer.alt_m in the result");
+        return -1;
+    }
+    return 0;
+}
+
+static int shm_from_scene(wxsky_client *c, int timeout_ms, char *name, size_t size, char *err) {
+    wxsky_message res;
+    wxsky_mp_reader r;
+    uint32_t n, len;
+    const char *s;
+    if (app_call(c, "scene", NULL, timeout_ms, &res, err) != WXSKY_OK)
+        return -1;
+    wxsky_mp_reader_init(&r, res.body, res.body_len);
+    if (wxsky_mp_read_map(&r, &n) != WXSKY_OK || wxsky_mp_find_key(&r, n, "shm_name") != WXSKY_OK ||
+        wxsky_mp_read_str(&r, &s, &len) != WXSKY_OK || len + 1 > size) {
+        snprintf(err, APP_ERR, "scene: no usable shm_name in the result");
+        return -1;
+    }
+    memcpy(name, s, len);
+    name[len] = '\0';
+    return 0;
+}
+
+static void clear(float a) {
+    glDepthMask(GL_TRUE);
+    glClearColor(0.0f, 0.0f, 0.0f, a);
+    clear_depth(1.0);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+}
+
+/* One picture of the frame: terrain (unless no_terrain), then the clouds (unless no_clouds).
+ * distance: the terrain's distance instead of its colours. */
+static int draw(demo_terrain *t, wxsky_gl_compositor *gl, const wxsky_record *rec,
+                int no_terrain, int no_clouds, int distance, char *err) {
+    double view[16], proj[16];
+    int st;
+    clear(no_clouds ? 0.0f : 1.0f);
+    wxsky_gl_camera_matrices(rec, 1, view, proj);
+    if (!no_terrain && demo_terrain_draw(t, rec, view, proj, distance) != 0) {
+        snprintf(err, APP_ERR, "%s", t->error);
+        return -1;
+    }
+    if (no_clouds)
+        return 0;
+    if ((st = wxsky_gl_draw_background(gl, view, proj)) != WXSKY_OK ||
+        (st = wxsky_gl_draw_near(gl)) != WXSKY_OK || (st = wxsky_gl_draw_near_front(gl)) != WXSKY_OK) {
+        snprintf(err, APP_ERR, "compositing: %s: %s", wxsky_status_name(st), wxsky_gl_error(gl));
+        return -1;
+    }
+    return 0;
+}
+
+static int save(const char *dir, const char *name, const app_gl *g, uint8_t *pixels, char *err) {
+    char path[1024];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    if (app_gl_read(g, pixels, err) != 0)
+        return -1;
+    return png_write_rgba(path, pixels, g->width, g->height, err, APP_ERR);
+}
+
+static int debug_pictures(const args *a, const app_gl *g, demo_terrain *t,
+                          wxsky_gl_compositor *gl, const wxsky_segment *seg,
+                          const wxsky_frame_copy *copy, const wxsky_record *rec, uint8_t *pixels,
+                          char *err) {
+    const char *const dumped[2] = {"near", "sky"};
+    char path[1024];
+    if (draw(t, gl, rec, 0, 1, 0, err) || save(a->debug_out, "terrain.png", g, pixels, err) ||
+        draw(t, gl, rec, 0, 1, 1, err) || save(a->debug_out, "distance.png", g, pixels, err) ||
+        draw(t, gl, rec, 1, 0, 0, err) || save(a->debug_out, "clouds.png", g, pixels, err))
+        return -1;
+    for (int i = 0; i < 2; ++i) {
+        int layer = wxsky_segment_find_layer(seg, dumped[i]);
+        if (layer < 0 || copy->width[layer] != g->width || copy->height[layer] != g->height) {
+            snprintf(err, APP_ERR, "the frame's %s layer is not %ux%u", dumped[i], g->width,
+                     g->height);
+            return -1;
+        }
+        snprintf(path, sizeof path, "%s/%s.png", a->debug_out, dumped[i]);
+        if (png_write_rgba(path, copy->pixels[layer], g->width, g->height, err, APP_ERR) != 0)
+            return -1;
+    }
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    args a;
+    char err[APP_ERR] = "", shm_name[256];
+    uint8_t params[256], *pixels = NULL, *strip = NULL;
+    wxsky_mp_writer w;
+    wxsky_message res;
+    wxsky_client *client = NULL;
+    wxsky_segment *seg = NULL;
+    wxsky_gl_compositor *gl = NULL;
+    wxsky_frame_copy copy;
+    wxsky_record rec;
+    demo_terrain terrain;
+    app_gl g;
+    int code = 1, st, timeout_ms, cols, rows;
+    uint32_t strip_w, strip_h;
+    double ground_m = 0.0;
+
+    memset(&copy, 0, sizeof copy);
+    memset(&g, 0, sizeof g);
+    memset(&terrain, 0, sizeof terrain);
+    if (argc == 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
+        printf("%s\n", USAGE);
+        return 0;
+    }
+    if (!parse(argc, argv, &a))
+        return 64;
+    timeout_ms = (int)(a.timeout_s * 1000.0);
+    cols = a.frames > 1 ? 2 : 1;
+    rows = (a.frames + cols - 1) / cols;
+    strip_w = (uint32_t)cols * a.width + (uint32_t)(cols - 1) * GAP_PX;
+    strip_h = (uint32_t)rows * a.height + (uint32_t)(rows - 1) * GAP_PX;
+
+    client = wxsky_client_new(0, 0);
+    seg = wxsky_segment_new();
+    gl = wxsky_gl_new();
+    pixels = malloc((size_t)a.width * a.height * 4);
+    strip = calloc((size_t)strip_w * strip_h, 4);
+    if (!client || !seg || !gl || !pixels || !strip) {
+        snprintf(err, sizeof err, "out of memory");
+        goto done;
+    }
+    memset(strip, 255, (size_t)strip_w * strip_h * 4);
+    if ((st = wxsky_client_connect(client, a.control)) != WXSKY_OK) {
+        snprintf(err, sizeof err, "%s: %s", a.control, wxsky_client_error(client));
+        goto done;
+    }
+    if (!a.shm) {
+        if (shm_from_scene(client, timeout_ms, shm_name, sizeof shm_name, err) != 0)
+            goto done;
+        a.shm = shm_name;
+    }
+    if (app_segment_open(seg, a.shm, timeout_ms, err) != WXSKY_OK)
+        goto done;
+    if (app_copy_alloc(seg, &copy) != 0) {
+        snprintf(err, sizeof err, "out of memory for the frame buffers");
+        goto done;
+    }
+    if (a.time_utc) {
+        wxsky_mp_writer_init(&w, params, sizeof params);
+        wxsky_mp_write_map(&w, 1);
+        wxsky_mp_write_cstr(&w, "time_utc");
+        wxsky_mp_write_cstr(&w, a.time_utc);
+        if (app_call(client, "set_time", &w, timeout_ms, &res, err) != WXSKY_OK)
+            goto done;
+    }
+    if (ground_alt(client, timeout_ms, &ground_m, err) != 0)
+        goto done;
+    if (app_gl_open(&g, a.width, a.height, err) != 0) {
+        code = 2;
+        goto done;
+    }
+    if ((st = wxsky_gl_init(gl, seg)) != WXSKY_OK) {
+        snprintf(err, sizeof err, "GL compositor: %s: %s", wxsky_status_name(st),
+                 wxsky_gl_error(gl));
+        goto done;
+    }
+    if (demo_terrain_init(&terrain, ground_m) != 0) {
+        snprintf(err, sizeof err, "%s", terrain.error);
+        goto done;
+    }
+
+    for (int k = 0; k < a.frames; ++k) {
+        wxsky_camera want, cam;
+        uint32_t x0, y0;
+        path_camera(k, a.frames, ground_m, &a, &want);
+        uint32_t id;
+        if ((st = wxsky_set_camera(client, &want, &id)) != WXSKY_OK ||
+            (st = wxsky_client_wait(client, id, timeout_ms, &res)) != WXSKY_OK) {
+            snprintf(err, sizeof err, "set_camera: %s: %s", wxsky_status_name(st),
+                     wxsky_client_error(client));
+            goto done;
+        }
+        if (app_camera_from_result(&res, &cam) != WXSKY_OK) {
+            snprintf(err, sizeof err, "set_camera: the result is not a camera");
+            goto done;
+        }
+        if (app_wait_frame(seg, &copy, &rec, wxsky_segment_latest_frame(seg) + 1, &cam,
+                           timeout_ms, err) != WXSKY_OK ||
+            app_wait_settled_frame(client, seg, &copy, &rec, &cam, timeout_ms, err) != WXSKY_OK)
+            goto done;
+        if ((st = wxsky_gl_upload_copy(gl, &copy, &rec)) != WXSKY_OK) {
+            snprintf(err, sizeof err, "upload: %s: %s", wxsky_status_name(st), wxsky_gl_error(gl));
+            goto done;
+        }
+        if (k == a.debug_frame &&
+            debug_pictures(&a, &g, &terrain, gl, seg, &copy, &rec, pixels, err) != 0)
+            goto done;
+        if (draw(&terrain, gl, &rec, 0, 0, 0, err) != 0 || app_gl_read(&g, pixels, err) != 0)
+            goto done;
+        if (k == a.debug_frame) {
+            char path[1024];
+            snprintf(path, sizeof path, "%s/final.png", a.debug_out);
+            if (png_write_rgba(path, pixels, a.width, a.height, err, sizeof err) != 0)
+                goto done;
+        }
+        x0 = (uint32_t)(k % cols) * (a.width + GAP_PX);
+        y0 = (uint32_t)(k / cols) * (a.height + GAP_PX);
+        for (uint32_t y = 0; y < a.height; ++y)
+            memcpy(strip + ((size_t)(y0 + y) * strip_w + x0) * 4, pixels + (size_t)y * a.width * 4,
+                   (size_t)a.width * 4);
+        printf("frame %d: camera (%.0f, %.0f, %.0f) m heading %.1f pitch %.1f, daemon frame %llu\n",
+               k, rec.position_m[0], rec.position_m[1], rec.position_m[2], rec.heading_deg,
+               rec.pitch_deg, (unsigned long long)rec.frame_number);
+    }
+    if (png_write_rgba(a.out, strip, strip_w, strip_h, err, sizeof err) != 0)
+        goto done;
+    printf("wrote %s (%ux%u, %d frames)\n", a.out, strip_w, strip_h, a.frames);
+    code = 0;
+done:
+    if (code != 0)
+        fprintf(stderr, "%s: error: %s\n", PROG, err[0] ? err : "failed");
+    if (g.egl_) {
+        demo_terrain_free(&terrain);
+        wxsky_gl_free(gl);
+        gl = NULL;
+        app_gl_close(&g);
+    }
+    wxsky_gl_free(gl);
+    free(pixels);
+    free(strip);
+    app_copy_free(&copy);
+    wxsky_segment_free(seg);
+    wxsky_client_free(client);
+    return code;
+}
