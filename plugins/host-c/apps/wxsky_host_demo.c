@@ -19,9 +19,14 @@
  * composited without terrain), near.png and sky.png (those layers as the daemon sent them,
  * premultiplied) and final.png, for tests/test_host_c_demo.py.
  *
- * Headless (EGL) only: a windowed build needs GLFW or SDL, which this kit does not require.
- * Prints one line per frame and "wrote STRIP (WxH, N frames)"; on failure one line
- * "wxsky-host-demo: error: ..." and exit 1 (2: no headless GL; 64: bad arguments). */
+ * --window (built where pkg-config finds glfw3; Debian: libglfw3-dev): instead of the strip,
+ * a window where the path is flown live, over and over, `--path-s` seconds a lap (default 40):
+ * every frame sends the camera without waiting and composites the newest frame the daemon has
+ * published, as a simulator would; Esc or closing the window ends it, or --duration-s.
+ *
+ * Prints one line per frame and "wrote STRIP (WxH, N frames)" (windowed: one summary line);
+ * on failure one line "wxsky-host-demo: error: ..." and exit 1 (2: no headless GL or no
+ * display; 64: bad arguments). */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -35,15 +40,16 @@
 #define PROG "wxsky-host-demo"
 #define USAGE                                                                                  \
     "usage: " PROG " --control ADDR [--shm NAME] --out STRIP.png [--frames N] [--size WxH] "   \
-    "[--time ISO8601] [--fov-deg D] [--debug-out DIR --debug-frame K] [--timeout-s S]"
+    "[--time ISO8601] [--fov-deg D] [--debug-out DIR --debug-frame K] [--timeout-s S] "         \
+    "[--window [--path-s S] [--duration-s S]]"
 #define GAP_PX 4
 #define MAX_FRAMES 32
 
 typedef struct args {
     const char *control, *shm, *out, *time_utc, *debug_out;
-    int frames, debug_frame;
+    int frames, debug_frame, window;
     uint32_t width, height;
-    double fov_deg, timeout_s;
+    double fov_deg, timeout_s, path_s, duration_s;
 } args;
 
 static int usage(const char *why) {
@@ -59,9 +65,15 @@ static int parse(int argc, char **argv, args *a) {
     a->height = 270;
     a->fov_deg = 70.0;
     a->timeout_s = 120.0;
+    a->path_s = 40.0;
     for (int i = 1; i < argc; i += 2) {
         const char *f = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         char *end = NULL;
+        if (!strcmp(f, "--window")) {
+            a->window = 1;
+            --i; /* a flag: no value */
+            continue;
+        }
         if (!v)
             return usage(f);
         errno = 0;
@@ -87,15 +99,19 @@ static int parse(int argc, char **argv, args *a) {
                 a->frames = (int)n;
             else
                 a->debug_frame = (int)n;
-        } else if (!strcmp(f, "--fov-deg") || !strcmp(f, "--timeout-s")) {
+        } else if (!strcmp(f, "--fov-deg") || !strcmp(f, "--timeout-s") ||
+                   !strcmp(f, "--path-s") || !strcmp(f, "--duration-s")) {
             double x = strtod(v, &end);
             int fov = !strcmp(f, "--fov-deg");
             if (errno || *end || end == v || !isfinite(x) || x < (fov ? 1.0 : 0.1) ||
-                x > (fov ? 170.0 : 3600.0)) {
+                x > (fov ? 170.0 : 86400.0)) {
                 fprintf(stderr, "%s: error: %s %s is out of range\n", PROG, f, v);
                 return 0;
             }
-            *(fov ? &a->fov_deg : &a->timeout_s) = x;
+            *(fov                          ? &a->fov_deg
+              : !strcmp(f, "--timeout-s")  ? &a->timeout_s
+              : !strcmp(f, "--path-s")     ? &a->path_s
+                                           : &a->duration_s) = x;
         } else if (!strcmp(f, "--size")) {
             unsigned w = 0, h = 0;
             char x = 0, extra = 0;
@@ -112,7 +128,11 @@ static int parse(int argc, char **argv, args *a) {
     }
     if (!a->control)
         return usage("--control ADDR is required");
-    if (!a->out)
+#ifndef WXSKY_DEMO_GLFW
+    if (a->window)
+        return usage("--window: this build has no GLFW (pkg-config finds no glfw3)");
+#endif
+    if (!a->out && !a->window)
         return usage("--out STRIP.png is required");
     if ((a->debug_out == NULL) != (a->debug_frame < 0))
         return usage("--debug-out and --debug-frame go together");
@@ -121,9 +141,8 @@ static int parse(int argc, char **argv, args *a) {
     return 1;
 }
 
-/* Frame k of n along the path: off the runway's south end, climbing north. */
-static void path_camera(int k, int n, double ground_m, const args *a, wxsky_camera *cam) {
-    double u = n > 1 ? (double)k / (n - 1) : 0.0;
+/* The camera at u (0..1) along the path: off the runway's south end, climbing north. */
+static void path_camera(double u, double ground_m, const args *a, wxsky_camera *cam) {
     double north = -1300.0 + 4300.0 * u, east = 0.0;
     double agl = 3.0 + 420.0 * pow(u, 1.5);
     memset(cam, 0, sizeof *cam);
@@ -201,6 +220,160 @@ static int draw(demo_terrain *t, wxsky_gl_compositor *gl, const wxsky_record *re
     }
     return 0;
 }
+
+#ifdef WXSKY_DEMO_GLFW
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+
+/* Flies the path live in a window until it is closed (Esc), or for --duration-s: each frame
+ * sends the camera (not waiting for the answer), takes whatever newest frame the daemon has,
+ * and composites it. Returns the exit code; *gl is freed here, in the window's context. */
+static int fly_window(const args *a, wxsky_client *client, wxsky_segment *seg,
+                      wxsky_frame_copy *copy, wxsky_gl_compositor **gl, double ground_m,
+                      char *err) {
+    GLFWwindow *win;
+    demo_terrain terrain;
+    wxsky_record rec;
+    wxsky_message msg;
+    uint64_t shown = 0;
+    long drawn = 0, composited = 0;
+    int code = 1, st, have = 0, kept = 0;
+    double t0, now;
+    char why[WXSKY_ERROR_MAX];
+    uint8_t *shot = malloc((size_t)a->width * a->height * 4);
+
+    memset(&terrain, 0, sizeof terrain);
+    if (!shot) {
+        snprintf(err, APP_ERR, "out of memory");
+        return 1;
+    }
+    if (!glfwInit()) {
+        free(shot);
+        snprintf(err, APP_ERR, "no display for a window (GLFW could not start)");
+        return 2;
+    }
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+    glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+    glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
+    glfwWindowHint(GLFW_RESIZABLE, GLFW_FALSE);
+    win = glfwCreateWindow((int)a->width, (int)a->height, PROG, NULL, NULL);
+    if (!win) {
+        snprintf(err, APP_ERR, "no OpenGL 3.3 core window on this display");
+        glfwTerminate();
+        free(shot);
+        return 2;
+    }
+    glfwMakeContextCurrent(win);
+    glfwSwapInterval(1);
+    if ((st = wxsky_gl_init(*gl, seg)) != WXSKY_OK) {
+        snprintf(err, APP_ERR, "GL compositor: %s: %s", wxsky_status_name(st),
+                 wxsky_gl_error(*gl));
+        goto done;
+    }
+    if (demo_terrain_init(&terrain, ground_m) != 0) {
+        snprintf(err, APP_ERR, "%s", terrain.error);
+        goto done;
+    }
+    t0 = app_now_ms();
+    while (!glfwWindowShouldClose(win)) {
+        wxsky_camera cam;
+        int fb_w, fb_h;
+        now = app_now_ms();
+        if (a->duration_s > 0.0 && now - t0 > a->duration_s * 1000.0)
+            break;
+        if (glfwGetKey(win, GLFW_KEY_ESCAPE) == GLFW_PRESS)
+            break;
+        path_camera(fmod((now - t0) / (a->path_s * 1000.0), 1.0), ground_m, a, &cam);
+        if ((st = wxsky_set_camera(client, &cam, NULL)) != WXSKY_OK && st != WXSKY_AGAIN) {
+            snprintf(err, APP_ERR, "set_camera: %s: %s", wxsky_status_name(st),
+                     wxsky_client_error(client));
+            goto done;
+        }
+        while ((st = wxsky_client_poll(client, &msg)) == WXSKY_OK)
+            if (msg.kind == WXSKY_RESPONSE && msg.error) {
+                snprintf(err, APP_ERR, "the daemon: %.*s", (int)msg.error_len, msg.error);
+                goto done;
+            }
+        if (st != WXSKY_AGAIN) {
+            snprintf(err, APP_ERR, "control: %s: %s", wxsky_status_name(st),
+                     wxsky_client_error(client));
+            goto done;
+        }
+        if (wxsky_segment_latest_frame(seg) > shown &&
+            wxsky_frame_read(seg, copy, 0) == WXSKY_OK &&
+            wxsky_record_decode(copy->meta, copy->meta_length, &rec, why, sizeof why) ==
+                WXSKY_OK &&
+            wxsky_gl_upload_copy(*gl, copy, &rec) == WXSKY_OK) {
+            shown = copy->frame_number;
+            have = 1;
+            ++composited;
+        }
+        glfwGetFramebufferSize(win, &fb_w, &fb_h);
+        glBindFramebuffer(GL_FRAMEBUFFER, 0);
+        glViewport(0, 0, fb_w, fb_h);
+        if (have) {
+            double view[16], proj[16];
+            glDepthMask(GL_TRUE);
+            glClearColor(0.0f, 0.0f, 0.0f, 1.0f);
+            clear_depth(1.0);
+            glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+            /* the record's camera for everything: the terrain then matches the clouds drawn
+             * for it, whatever the lag behind the camera sent */
+            wxsky_gl_camera_matrices(&rec, 0, view, proj);
+            if (demo_terrain_draw(&terrain, &rec, view, proj, 0) != 0) {
+                snprintf(err, APP_ERR, "%s", terrain.error);
+                goto done;
+            }
+            if ((st = wxsky_gl_draw_background(*gl, view, proj)) != WXSKY_OK ||
+                (st = wxsky_gl_draw_near(*gl)) != WXSKY_OK ||
+                (st = wxsky_gl_draw_near_front(*gl)) != WXSKY_OK) {
+                snprintf(err, APP_ERR, "compositing: %s: %s", wxsky_status_name(st),
+                         wxsky_gl_error(*gl));
+                goto done;
+            }
+        }
+        if (a->out && have) { /* keep the latest picture shown, for --out */
+            glPixelStorei(GL_PACK_ALIGNMENT, 4);
+            glReadPixels(0, 0, (GLsizei)a->width, (GLsizei)a->height, GL_RGBA, GL_UNSIGNED_BYTE,
+                         shot);
+            kept = 1;
+        }
+        glfwSwapBuffers(win);
+        glfwPollEvents();
+        ++drawn;
+    }
+    printf("flew %ld frames in %.1f s, %ld of them with a new frame from the daemon\n", drawn,
+           (app_now_ms() - t0) / 1000.0, composited);
+    if (a->out) {
+        size_t row = (size_t)a->width * 4;
+        if (!kept) {
+            snprintf(err, APP_ERR, "no frame from the daemon was shown");
+            goto done;
+        }
+        for (uint32_t y = 0; y < a->height / 2; ++y) { /* the window's rows run bottom up */
+            uint8_t *top = shot + (size_t)y * row, *bottom = shot + (size_t)(a->height - 1 - y) * row;
+            for (size_t i = 0; i < row; ++i) {
+                uint8_t t = top[i];
+                top[i] = bottom[i];
+                bottom[i] = t;
+            }
+        }
+        if (png_write_rgba(a->out, shot, a->width, a->height, err, APP_ERR) != 0)
+            goto done;
+        printf("wrote %s (%ux%u, the last frame shown)\n", a->out, a->width, a->height);
+    }
+    code = 0;
+done:
+    demo_terrain_free(&terrain);
+    wxsky_gl_free(*gl);
+    *gl = NULL;
+    glfwDestroyWindow(win);
+    glfwTerminate();
+    free(shot);
+    return code;
+}
+#endif
 
 static int save(const char *dir, const char *name, const app_gl *g, uint8_t *pixels, char *err) {
     char path[1024];
@@ -301,6 +474,12 @@ int main(int argc, char **argv) {
     }
     if (ground_alt(client, timeout_ms, &ground_m, err) != 0)
         goto done;
+#ifdef WXSKY_DEMO_GLFW
+    if (a.window) {
+        code = fly_window(&a, client, seg, &copy, &gl, ground_m, err);
+        goto done;
+    }
+#endif
     if (app_gl_open(&g, a.width, a.height, err) != 0) {
         code = 2;
         goto done;
@@ -318,7 +497,7 @@ int main(int argc, char **argv) {
     for (int k = 0; k < a.frames; ++k) {
         wxsky_camera want, cam;
         uint32_t x0, y0;
-        path_camera(k, a.frames, ground_m, &a, &want);
+        path_camera(a.frames > 1 ? (double)k / (a.frames - 1) : 0.0, ground_m, &a, &want);
         uint32_t id;
         if ((st = wxsky_set_camera(client, &want, &id)) != WXSKY_OK ||
             (st = wxsky_client_wait(client, id, timeout_ms, &res)) != WXSKY_OK) {
