@@ -191,7 +191,9 @@ def test_snapshot_layers_are_pixel_identical_across_processes(
         )
         runs.append(out / "layers")
     names = sorted(p.name for p in runs[0].iterdir())
-    assert names == sorted(["sky.png", "near.png", *(f"ring_{i}.png" for i in range(8))])
+    assert names == sorted(
+        ["sky.png", "near.png", *(f"ring_{i}.png" for i in range(8)), "shadow.png"]
+    )
     for name in names:
         # Pixels, not file bytes: the PNG's compressed stream depends on the zlib build.
         np.testing.assert_array_equal(read_png(runs[0] / name), read_png(runs[1] / name), name)

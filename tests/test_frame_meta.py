@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from wxsky.errors import ProtocolError
-from wxsky.output.frame_meta import RECORD_SIZE, FrameMeta
+from wxsky.output.frame_meta import RECORD_SIZE, RECORD_SIZE_V2, FrameMeta, ShadowPlacement
 from wxsky.scene.camera import Camera
 
 
@@ -28,7 +28,7 @@ def _meta() -> FrameMeta:
 def test_round_trip_is_exact() -> None:
     meta = _meta()
     data = meta.pack()
-    assert len(data) == RECORD_SIZE == 1736
+    assert len(data) == RECORD_SIZE == 1800
     back = FrameMeta.unpack(data)
     assert back.camera == meta.camera
     assert back.frame_number == meta.frame_number
@@ -38,7 +38,7 @@ def test_round_trip_is_exact() -> None:
 
 def test_field_offsets_match_the_protocol_doc() -> None:
     data = _meta().pack()
-    assert struct.unpack_from("<I", data, 0)[0] == 2
+    assert struct.unpack_from("<I", data, 0)[0] == 3
     assert struct.unpack_from("<Q", data, 8)[0] == 123456789012
     assert struct.unpack_from("<Q", data, 16)[0] == 7
     assert struct.unpack_from("<d", data, 56)[0] == 271.0  # heading_deg
@@ -94,3 +94,61 @@ def test_without_a_fade_the_incoming_ring_reads_back_as_absent() -> None:
     # ... even if a writer left a stale weight behind.
     stale = dataclasses.replace(_meta(), ring_fade=0.5).pack()
     assert FrameMeta.unpack(stale).ring_fade == 0.0
+
+
+SHADOW = ShadowPlacement(
+    version=12,
+    centre_m=(-1500.5, 250.25, 432.0),
+    size_m=16_000.0,
+    sun_direction_enu=(0.6, 0.0, 0.8),
+)
+
+
+def test_the_shadow_placement_round_trips_and_sits_where_the_doc_says() -> None:
+    data = dataclasses.replace(_meta(), shadow=SHADOW).pack()
+    assert FrameMeta.unpack(data).shadow == SHADOW
+    assert struct.unpack_from("<Q3dd3d", data, 1736) == (
+        12,
+        -1500.5,
+        250.25,
+        432.0,
+        16_000.0,
+        0.6,
+        0.0,
+        0.8,
+    )
+    # Without a map: version 0 and zeros, read back as None.
+    plain = _meta().pack()
+    assert plain[1736:] == bytes(64)
+    assert FrameMeta.unpack(plain).shadow is None
+
+
+def test_a_version_2_record_reads_without_a_shadow() -> None:
+    v3 = dataclasses.replace(_meta(), shadow=SHADOW).pack()
+    v2 = struct.pack("<I", 2) + v3[4:RECORD_SIZE_V2]
+    back = FrameMeta.unpack(v2)
+    assert back.shadow is None and back.camera == _meta().camera
+    with pytest.raises(ProtocolError, match="1735 bytes, expected 1736"):
+        FrameMeta.unpack(v2[:-1])
+    # A version 3 record cut to version 2's length is short.
+    with pytest.raises(ProtocolError, match="1736 bytes, expected 1800"):
+        FrameMeta.unpack(v3[:RECORD_SIZE_V2])
+
+
+@pytest.mark.parametrize("version", [1, 4])
+def test_versions_before_2_and_after_3_are_refused(version: int) -> None:
+    data = struct.pack("<I", version) + _meta().pack()[4:]
+    with pytest.raises(ProtocolError, match=f"version {version}, this reader knows 2 and 3"):
+        FrameMeta.unpack(data)
+
+
+@pytest.mark.parametrize(
+    ("offset", "value"),
+    [(1768, 0.0), (1768, -5.0), (1744, float("nan")), (1784, float("inf"))],
+    ids=["no-size", "negative-size", "nan-centre", "inf-sun"],
+)
+def test_an_impossible_shadow_placement_is_a_protocol_error(offset: int, value: float) -> None:
+    data = bytearray(dataclasses.replace(_meta(), shadow=SHADOW).pack())
+    struct.pack_into("<d", data, offset, value)
+    with pytest.raises(ProtocolError, match="shadow placement"):
+        FrameMeta.unpack(bytes(data))

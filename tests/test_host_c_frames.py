@@ -28,7 +28,7 @@ import pytest
 from host_kit import host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
 
 from wxsky.output import shm
-from wxsky.output.frame_meta import RECORD_SIZE, FrameMeta
+from wxsky.output.frame_meta import RECORD_SIZE, FrameMeta, ShadowPlacement
 from wxsky.output.shm import FrameWriter, LayerSpec
 from wxsky.scene.camera import Camera
 
@@ -183,6 +183,15 @@ def make_record(frame: int, fading: bool, seed: int = 0) -> FrameMeta:
         incoming_centre_m=(4000.125, 17.5, 1600.0) if fading else None,
         incoming_radius_m=21_000.5 if fading else 0.0,
         incoming_quads_m=quads(rng) if fading else None,
+        # A shadow map on odd frames, none on even ones.
+        shadow=ShadowPlacement(
+            version=2 * frame + 5,
+            centre_m=(1000.0 / 7.0, -2500.125, 432.0),
+            size_m=16_000.0,
+            sun_direction_enu=(0.6, 0.0, 0.8),
+        )
+        if frame % 2
+        else None,
     )
 
 
@@ -190,7 +199,7 @@ def expected_record(meta: FrameMeta) -> dict[str, Any]:
     cam = meta.camera
     no_quads = np.zeros((8, 4, 3))
     return {
-        "record_version": 2,
+        "record_version": 3,
         "frame_number": meta.frame_number,
         "ring_version": meta.ring_version,
         "time_utc_unix_s": meta.time_utc_unix_s,
@@ -213,6 +222,10 @@ def expected_record(meta: FrameMeta) -> dict[str, Any]:
         "ring_in_quads_m": (
             meta.incoming_quads_m if meta.incoming_quads_m is not None else no_quads
         ).tolist(),
+        "shadow_version": 0 if meta.shadow is None else meta.shadow.version,
+        "shadow_centre_m": list(meta.shadow.centre_m) if meta.shadow else [0.0] * 3,
+        "shadow_size_m": meta.shadow.size_m if meta.shadow else 0.0,
+        "shadow_sun_enu": list(meta.shadow.sun_direction_enu) if meta.shadow else [0.0] * 3,
     }
 
 
@@ -290,9 +303,10 @@ def test_the_record_decoded_by_c_equals_what_python_wrote(
     with FrameWriter.create(name, LAYERS) as writer:
         writer.publish(7, meta.pack())
         frame, summary = run_json(host_kit, mode, name)
-    assert frame["meta_length"] == RECORD_SIZE == 1736
+    assert frame["meta_length"] == RECORD_SIZE == 1800
     assert frame["record_status"] == "WXSKY_OK", frame["record_error"]
     assert frame["record"] == expected_record(meta)
+    assert frame["record"]["shadow_version"] == 19  # frame 7 has a map
     assert frame["consistent"], frame["inconsistency"]
     assert summary["summary"]["frames"] == 1
 
@@ -540,19 +554,40 @@ def bad_segments(data: bytes, w: dict[str, int]) -> dict[str, tuple[bytes, dict[
         ),
         "record_version_1": (
             patched(data, (meta, "<I", 1)),
-            reads("record", "WXSKY_EVERSION", "frame record version 1; this kit reads version 2"),
+            reads(
+                "record",
+                "WXSKY_EVERSION",
+                "frame record version 1; this kit reads versions 2 and 3",
+            ),
         ),
-        "record_version_3": (
-            patched(data, (meta, "<I", 3)),
-            reads("record", "WXSKY_EVERSION", "frame record version 3;"),
+        "record_version_4": (
+            patched(data, (meta, "<I", 4)),
+            reads("record", "WXSKY_EVERSION", "frame record version 4;"),
         ),
         "record_v1_length": (
             patched(data, (meta, "<I", 1), (slot + shm.SLOT_META_LENGTH, "<I", 920)),
             reads("record", "WXSKY_EVERSION", "frame record version 1;"),
         ),
         "record_short": (
-            patched(data, (slot + shm.SLOT_META_LENGTH, "<I", 1735)),
-            reads("record", "WXSKY_EFORMAT", "frame record is 1735 bytes, expected 1736"),
+            patched(data, (slot + shm.SLOT_META_LENGTH, "<I", 1799)),
+            reads("record", "WXSKY_EFORMAT", "frame record is 1799 bytes, expected 1800"),
+        ),
+        # A version 2 record (the daemon before the shadow map) still reads, at its length.
+        "record_version_2": (
+            patched(data, (meta, "<I", 2), (slot + shm.SLOT_META_LENGTH, "<I", 1736)),
+            reads("record", "WXSKY_OK", ""),
+        ),
+        "record_version_2_short": (
+            patched(data, (meta, "<I", 2), (slot + shm.SLOT_META_LENGTH, "<I", 1735)),
+            reads("record", "WXSKY_EFORMAT", "1735 bytes, expected 1736 (version 2)"),
+        ),
+        "record_shadow_without_size": (
+            patched(data, (meta + 1736, "<Q", 9), (meta + 1768, "<d", 0.0)),
+            reads("record", "WXSKY_EFORMAT", "shadow_size_m is 0 at offset 1768"),
+        ),
+        "record_shadow_nan_sun": (
+            patched(data, (meta + 1792, "<d", float("nan"))),
+            reads("record", "WXSKY_EFORMAT", "shadow_sun_enu[2] at offset 1792 is not finite"),
         ),
         "record_nan": (
             patched(data, (meta + 928, "<d", float("nan"))),

@@ -44,7 +44,7 @@ def cloud_alpha(shot: Snapshot) -> float:
         sum(
             img[..., 3].astype(np.float64).mean()
             for name, img in shot.layers.items()
-            if name != "sky"
+            if name not in ("sky", "shadow")  # the shadow map is opaque data, not cloud
         )
         / 255.0
     )

@@ -13,6 +13,13 @@ is paused (SIGSTOP) while the stages are timed, so its own rendering does not sh
 with the host's (on llvmpipe both are CPU work); the segment stays valid and the frames read
 are the last one it published. `--live` leaves it running. The latency runs with the daemon
 running, of course. Prints a table; --json writes every figure, --png a bar chart.
+
+`--zero-copy` measures instead, per size, the host's upload of a frame from the segment
+(wxsky_frame_begin, wxsky_gl_upload_view of every layer, glFinish) against its zero-copy
+import of the daemon's exported textures (wxsky_gl_import_view: GPU copies and a fence,
+docs/protocol.md §6), with `plugins/host-c/build/wxsky_gl_zero_copy --bench`; where the
+daemon exports nothing (llvmpipe: no EGL_MESA_image_dma_buf_export) it says so, with the
+daemon's reason, and gives the segment's figures alone.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 KIT = ROOT / "plugins" / "host-c"
 BENCH = KIT / "build" / "wxsky_gl_bench"
+ZERO_COPY = KIT / "build" / "wxsky_gl_zero_copy"
 STAGES = (
     "read",
     "upload_plain",
@@ -169,6 +177,24 @@ def measure(
     }
 
 
+def measure_zero_copy(folder: Path, width: int, height: int, args: argparse.Namespace) -> str:
+    """One size's segment upload vs zero-copy import, as a line of text."""
+    with daemon(folder, width, height, args.preset) as (_proc, shm_name, address):
+        result = run_bench(
+            ZERO_COPY, [address, shm_name, "--bench", str(args.frames)], timeout_s=300
+        )
+    stages = result["stages"]
+    shm = stages["shm_view_upload"]
+    line = (
+        f"{width}x{height} ({result['renderer']}): segment upload median "
+        f"{shm['median_ms']:.3f} ms, p95 {shm['p95_ms']:.3f} ms"
+    )
+    if result["mode"] != "zero-copy":
+        return f"{line}; zero-copy unavailable: {result['reason']}"
+    zc = stages["zero_copy_import"]
+    return f"{line}; zero-copy import median {zc['median_ms']:.3f} ms, p95 {zc['p95_ms']:.3f} ms"
+
+
 def figures(result: dict[str, Any], stage: str) -> dict[str, Any]:
     found: dict[str, Any] = result[stage] if stage in LATENCY else result["stages"][stage]
     return found
@@ -229,8 +255,21 @@ def main() -> int:
     p.add_argument("--live", action="store_true", help="do not pause the daemon for the stages")
     p.add_argument("--json", type=Path, default=None)
     p.add_argument("--png", type=Path, default=None)
+    p.add_argument(
+        "--zero-copy",
+        action="store_true",
+        help="time the segment upload against the zero-copy import (docs/protocol.md §6)",
+    )
     args = p.parse_args()
     exe = build_kit()
+    if args.zero_copy:
+        if not ZERO_COPY.exists():
+            raise SystemExit(f"{ZERO_COPY} was not built (pkg-config finds no egl and gl?)")
+        with tempfile.TemporaryDirectory(prefix="wxsky-benchzc-") as tmp:
+            for size in args.sizes.split(","):
+                w, h = parse_size(size)
+                print(measure_zero_copy(Path(tmp), w, h, args), flush=True)
+        return 0
     results = []
     with tempfile.TemporaryDirectory(prefix="wxsky-benchc-") as tmp:
         for size in args.sizes.split(","):

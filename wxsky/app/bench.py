@@ -199,7 +199,7 @@ def run_bench(
     build_s: list[float] = []
     times = _StageTimes()
     shm_name = f"wxsky-bench-{os.getpid()}"
-    specs = frame_layer_specs(width, height, settings.ring_texture_px)
+    specs = frame_layer_specs(width, height, settings.ring_texture_px, settings.shadow_map_px)
     with (
         Renderer(settings.ring_texture_px) as renderer,
         FrameWriter.create(shm_name, specs) as writer,

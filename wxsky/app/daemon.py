@@ -11,6 +11,7 @@ import asyncio
 import collections
 import concurrent.futures
 import contextlib
+import inspect
 import logging
 import os
 import signal
@@ -23,6 +24,7 @@ from typing import Any
 
 from wxsky import __version__
 from wxsky.app.control import (
+    ControlError,
     apply_metar,
     apply_preset,
     camera_from_params,
@@ -35,7 +37,7 @@ from wxsky.app.control import (
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.trace import TraceWriter
 from wxsky.engine.stages import FramePlan, SkyEngine, geodetic_from_enu
-from wxsky.errors import ConfigError, WxskyError
+from wxsky.errors import ConfigError, RenderError, WxskyError
 from wxsky.inputs.cockpit_link import CockpitLink, Mailbox
 from wxsky.inputs.drivers import open_link
 from wxsky.inputs.feed_sources import open_source
@@ -43,7 +45,7 @@ from wxsky.inputs.metar_input import MetarFeedInput, MetarSettings
 from wxsky.inputs.stats import InputStats
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
-from wxsky.output.transport import Address, ControlServer, default_address
+from wxsky.output.transport import Address, ControlServer, WithFds, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import BLOCK_SIZE_M
@@ -80,7 +82,10 @@ def initial_patches(
 
 def layer_specs(config: DaemonConfig) -> list[LayerSpec]:
     out = config.output
-    return frame_layer_specs(out.max_width, out.max_height, config.scene.ring_texture_px)
+    scene = config.scene
+    return frame_layer_specs(
+        out.max_width, out.max_height, scene.ring_texture_px, scene.shadow_map_px
+    )
 
 
 class Daemon:
@@ -162,6 +167,11 @@ class Daemon:
         self._server: ControlServer | None = None
         self._render_exec: concurrent.futures.ThreadPoolExecutor | None = None
         self._renderer: Any = None
+        # Zero-copy textures (docs/protocol.md §6): what the render context offers (probed
+        # with the renderer), and the exported slot textures once a host asked for them.
+        self._export_probe: Any = None
+        self._export_failed: str | None = None
+        self._slot_textures: Any = None
         self._preview_task: asyncio.Future[None] | None = None
         self._dispatch = dispatch_table(
             {
@@ -173,6 +183,7 @@ class Daemon:
                 "apply_preset": lambda p: apply_preset(self.engine, p, config.presets.dirs),
                 "release": lambda p: release(self.engine, p),
                 "apply_metar": lambda p: apply_metar(self.engine, p),
+                "export_textures": self._export_textures,
             }
         )
 
@@ -308,10 +319,19 @@ class Daemon:
 
     def _create_renderer(self) -> None:
         from wxsky.render.renderer import Renderer
+        from wxsky.render.texture_export import probe
 
         self._renderer = Renderer(self.config.scene.ring_texture_px)
+        self._export_probe = probe(self._renderer.ctx)
+        if self._export_probe.supported:
+            log.info("zero-copy textures: available (%s)", self._export_probe.export)
+        else:
+            log.info("zero-copy textures: unavailable: %s", self._export_probe.reason)
 
     def _close_renderer(self) -> None:
+        if self._slot_textures is not None:
+            self._slot_textures.close()
+            self._slot_textures = None
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
@@ -326,7 +346,14 @@ class Daemon:
         draw_ring(r, plan)
         r.render_frame(plan.frame)
         frame_number = self.frames_published + 1
-        meta = publish_plan(r, writer, plan, frame_number, self.config.scene.ring_texture_px)
+        export = None
+        if self._slot_textures is not None:
+            from wxsky.render.texture_export import SlotExport
+
+            export = SlotExport(self._slot_textures, r, writer.target_slot)
+        meta = publish_plan(
+            r, writer, plan, frame_number, self.config.scene.ring_texture_px, export
+        )
         if self._trace is not None:
             self._trace.write_events(frame_number, plan.frame.camera.position_m, plan.events)
         return meta
@@ -337,7 +364,10 @@ class Daemon:
         stats = self.inputs["control"]
         stats.message()
         try:
-            return self._dispatch(method, params)
+            result = self._dispatch(method, params)
+            if inspect.isawaitable(result):  # a command that needs the render thread
+                result = await result
+            return result
         except WxskyError as exc:
             stats.error(str(exc))
             log.warning("control %s rejected: %s", method, exc)
@@ -352,6 +382,54 @@ class Daemon:
             # far away (where the flat local frame no longer holds) that place becomes the site.
             self.engine.move_observer(params["lat_deg"], params["lon_deg"])
         return camera_to_dict(self.engine.camera)
+
+    async def _export_textures(self, params: dict[str, Any]) -> Any:
+        """`export_textures` (protocol §6): the layer textures of both segment slots as
+        dma-bufs, the fds sent with the answer, or why not (the host then uses the segment)."""
+        if params:
+            raise ControlError(
+                f"export_textures: takes no params (got {', '.join(sorted(params))})"
+            )
+        probe = self._export_probe
+        reason = self._export_failed or (probe.reason if probe is not None else "no renderer yet")
+        if reason is not None:
+            return _unsupported(reason)
+        loop = asyncio.get_running_loop()
+        try:
+            textures, fds = await loop.run_in_executor(self._render_exec, self._start_export)
+        except RenderError as exc:
+            self._export_failed = f"exporting the layer textures failed: {exc}: use the shm segment"
+            log.warning("zero-copy textures: %s", self._export_failed)
+            return _unsupported(self._export_failed)
+        result = {
+            "supported": True,
+            "slot_count": len({t["slot"] for t in textures}),
+            "sync": "seqlock",
+            "renderer": probe.gl_renderer,
+            "fd_count": len(fds),
+            "textures": textures,
+        }
+        return WithFds(
+            result,
+            fds,
+            without_fds=_unsupported(
+                "the control connection is tcp: file descriptors pass only over a unix socket"
+            ),
+        )
+
+    def _start_export(self) -> tuple[list[dict[str, Any]], tuple[int, ...]]:
+        """On the render thread: the slot textures, made and exported at the first request
+        (every frame from then on copies its layers into them)."""
+        if self._slot_textures is None:
+            from wxsky.render.texture_export import DmaBufExporter, SlotTextures
+
+            r = self._renderer
+            assert r is not None
+            layers = [(s.name, s.max_width, s.max_height) for s in layer_specs(self.config)]
+            self._slot_textures = SlotTextures(r.ctx, layers, 2, DmaBufExporter.create())
+            log.info("zero-copy textures: exported %d layers x 2 slots", len(layers))
+        textures, fds = self._slot_textures.descriptors()
+        return textures, fds
 
     def _feed_input(self, spec: str) -> MetarFeedInput:
         m = self.config.metar
@@ -417,6 +495,12 @@ class Daemon:
             "shm_name": self.config.output.shm_name,
             "camera": camera_to_dict(self.engine.camera),
             "clock_rate": self.engine.clock_rate,
+            "zero_copy": {
+                "supported": self._export_probe is not None and self._export_probe.supported,
+                "reason": self._export_failed
+                or (self._export_probe.reason if self._export_probe is not None else None),
+                "exported": self._slot_textures is not None,
+            },
         }
 
     def scene_info(self) -> dict[str, Any]:
@@ -534,6 +618,10 @@ class Daemon:
         if path is not None:
             with contextlib.suppress(OSError):
                 os.unlink(path)
+
+
+def _unsupported(reason: str) -> dict[str, Any]:
+    return {"supported": False, "reason": reason, "fallback": "shm"}
 
 
 def _parse(text: str) -> Address:

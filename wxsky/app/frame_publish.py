@@ -10,9 +10,12 @@ from __future__ import annotations
 from datetime import UTC
 from typing import Protocol
 
+import numpy as np
+
 from wxsky.engine.stages import FramePlan
-from wxsky.output.frame_meta import FrameMeta
+from wxsky.output.frame_meta import FrameMeta, ShadowPlacement
 from wxsky.output.shm import LayerSpec
+from wxsky.scene.cloud_shadow import SHADOW_MAP_PX
 from wxsky.scene.layout import RingScene
 from wxsky.scene.ring import RING_SIZE, ring_target_name
 
@@ -28,15 +31,30 @@ class RingRenderer(Protocol):
     def read_into(self, name: str, buffer: memoryview) -> None: ...
 
 
+class LayerExport(Protocol):
+    """The zero-copy textures of the slot being filled (render/texture_export.SlotTextures,
+    bound to a slot): a GPU copy of each published layer, then a finish before the publish."""
+
+    def copy(self, layer: str, source: str) -> None: ...
+
+    def write(self, layer: str, pixels: bytes, width: int, height: int, version: int) -> None: ...
+
+    def finish(self) -> None: ...
+
+
 class LayerSink(Protocol):
     def layer_buffer(self, layer: str, width: int, height: int) -> memoryview: ...
 
     def publish(self, frame_number: int, meta: bytes = b"") -> None: ...
 
 
-def frame_layer_specs(width: int, height: int, ring_px: int) -> list[LayerSpec]:
+def frame_layer_specs(
+    width: int, height: int, ring_px: int, shadow_px: int = SHADOW_MAP_PX
+) -> list[LayerSpec]:
     """The segment's layers: sky and near at most width x height, the current ring's 8
-    images, and the incoming ring's 8 while it fades in (absent otherwise)."""
+    images, the incoming ring's 8 while it fades in (absent otherwise), and the cloud-shadow
+    map of the ring on show (`shadow_px` square; none with 0)."""
+    shadow = [LayerSpec("shadow", shadow_px, shadow_px)] if shadow_px > 0 else []
     return [
         LayerSpec("sky", width, height),
         LayerSpec("near", width, height),
@@ -44,6 +62,7 @@ def frame_layer_specs(width: int, height: int, ring_px: int) -> list[LayerSpec]:
         LayerSpec("near_front", width, height),
         *(LayerSpec(f"ring_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
         *(LayerSpec(f"ring_in_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
+        *shadow,
     ]
 
 
@@ -58,26 +77,55 @@ def draw_ring(renderer: RingRenderer, plan: FramePlan) -> None:
 
 
 def publish_plan(
-    renderer: RingRenderer, sink: LayerSink, plan: FramePlan, frame_number: int, ring_px: int
+    renderer: RingRenderer,
+    sink: LayerSink,
+    plan: FramePlan,
+    frame_number: int,
+    ring_px: int,
+    export: LayerExport | None = None,
 ) -> FrameMeta:
     """Copy the drawn layers into the slot being filled (the current ring as ring_i, the
-    incoming one as ring_in_i while it fades in), write the frame record and publish."""
+    incoming one as ring_in_i while it fades in), write the frame record and publish. With
+    `export` (a host takes zero-copy textures), each layer also goes to the slot's texture,
+    finished before the publish so the seqlock covers it too."""
     rings = plan.rings
     cam = plan.frame.camera
     names = ("sky", "near", "near_front") if plan.frame.near_front is not None else ("sky", "near")
+    copies: list[tuple[str, str]] = [(name, name) for name in names]
     for name in names:
         renderer.read_into(name, sink.layer_buffer(name, cam.width_px, cam.height_px))
     for i in range(RING_SIZE):
-        renderer.read_into(
-            ring_target_name(i, rings.current_set), sink.layer_buffer(f"ring_{i}", ring_px, ring_px)
-        )
+        source = ring_target_name(i, rings.current_set)
+        renderer.read_into(source, sink.layer_buffer(f"ring_{i}", ring_px, ring_px))
+        copies.append((f"ring_{i}", source))
     incoming = rings.incoming if rings.fade > 0.0 else None
     if incoming is not None:
         for i in range(RING_SIZE):
-            renderer.read_into(
-                ring_target_name(i, rings.incoming_set),
-                sink.layer_buffer(f"ring_in_{i}", ring_px, ring_px),
-            )
+            source = ring_target_name(i, rings.incoming_set)
+            renderer.read_into(source, sink.layer_buffer(f"ring_in_{i}", ring_px, ring_px))
+            copies.append((f"ring_in_{i}", source))
+    # The ring on show's shadow map, changing with it. Its 1 MB (at 512 px) is copied into
+    # every slot: slots alternate and the writer keeps no layer from frame to frame, and a
+    # memcpy of it is a tenth of a millisecond.
+    shadow = plan.ring.shadow
+    placement = None
+    if shadow is not None:
+        buffer = sink.layer_buffer("shadow", shadow.px, shadow.px)
+        np.frombuffer(buffer, np.uint8)[:] = shadow.rgba.reshape(-1)
+        placement = ShadowPlacement(
+            version=shadow.serial,
+            # Moved on with the clouds since the map was made, so shadows stay under them.
+            centre_m=shadow.centre_at(plan.state.time_utc),
+            size_m=shadow.size_m,
+            sun_direction_enu=shadow.sun_direction_enu,
+        )
+    if export is not None:
+        # After the first layer_buffer (the slot's seq is odd) and before the publish.
+        for layer, source in copies:
+            export.copy(layer, source)
+        if shadow is not None:  # made on the CPU: uploaded, once per map and slot
+            export.write("shadow", shadow.rgba.tobytes(), shadow.px, shadow.px, shadow.serial)
+        export.finish()
     geo = plan.ring.geometry
     meta = FrameMeta(
         frame_number=frame_number,
@@ -93,6 +141,7 @@ def publish_plan(
         incoming_centre_m=incoming.geometry.centre_m if incoming else None,
         incoming_radius_m=incoming.geometry.radius_m if incoming else 0.0,
         incoming_quads_m=incoming.geometry.corners_m() if incoming else None,
+        shadow=placement,
     )
     sink.publish(frame_number, meta.pack())
     return meta

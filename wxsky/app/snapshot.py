@@ -16,11 +16,15 @@ from wxsky.engine.stages import DEFAULT_TRANSITION_STEP_S, FramePlan, SkyEngine
 from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
+from wxsky.scene.cloud_shadow import CloudShadow
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.ring import RING_SIZE
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
 from wxsky.weather.transition import TransitionRates
 
+# The renderer's layers. A snapshot's `layers` also hold "shadow", the ring's cloud-shadow
+# map (the segment's `shadow` layer), except in direct mode (no ring) or with
+# [scene] shadow_map_px 0.
 LAYER_NAMES: tuple[str, ...] = ("sky", "near", *(f"ring_{i}" for i in range(RING_SIZE)))
 
 U8 = npt.NDArray[np.uint8]
@@ -29,9 +33,10 @@ U8 = npt.NDArray[np.uint8]
 @dataclass(frozen=True)
 class Snapshot:
     image: U8  # (H, W, 4) composited, opaque
-    layers: dict[str, U8]  # raw premultiplied layers by name (LAYER_NAMES)
+    layers: dict[str, U8]  # raw premultiplied layers by name (LAYER_NAMES, "shadow")
     ring_quads_m: npt.NDArray[np.float64]  # (8, 4, 3)
     state: WeatherState  # the applied weather the picture shows
+    shadow: CloudShadow | None = None  # the ring's cloud-shadow map (layers["shadow"])
 
 
 @dataclass(frozen=True)
@@ -94,10 +99,13 @@ def picture(renderer: Renderer, plan: FramePlan, draw_ring: bool = True) -> Snap
         renderer.render_ring(plan.ring)
     renderer.render_frame(plan.frame)
     images = {name: renderer.read(name) for name in LAYER_NAMES}
+    if plan.ring.shadow is not None:
+        images["shadow"] = np.array(plan.ring.shadow.rgba)
     quads = plan.ring.geometry.corners_m()
     return Snapshot(
         image=composite(layers_from_images(images, quads), plan.frame.camera),
         layers=images,
         ring_quads_m=quads,
         state=plan.state,
+        shadow=plan.ring.shadow,
     )

@@ -1,8 +1,10 @@
 """The reference compositor: what a host simulator does with wxsky's layers.
 
 Given the sky and near layers (drawn for one camera) and the 8 ring images with their world
-quads, it draws, per pixel of that camera: sky, then the ring quad the view ray meets, then
-the near layer, each premultiplied-alpha "over" the last. While a rebuilt ring fades in, the
+quads, it draws, per pixel of that camera: sky, then (optionally) the host's own flat ground,
+lit by the sun and darkened by the cloud-shadow map, then the ring quad the view ray meets
+where it is nearer than the ground, then the near layer, each premultiplied-alpha "over" the
+last. While a rebuilt ring fades in, the
 ring is the old one's and the new one's pictures mixed by the fade weight, each seen through
 its own quads. Pure numpy, so it is an independent check of the protocol rather than a second
 copy of the renderer.
@@ -15,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.scene.camera import Camera
+from wxsky.scene.camera import FAR_M, Camera
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
@@ -33,6 +35,51 @@ class Layers:
     fade: float = 0.0
     # The near sprites in front of the host's aircraft (drawn after it); None: not split.
     near_front: U8 | None = None
+    # The cloud-shadow map and where it lies; None: the frame has none (T = 1 everywhere).
+    shadow: ShadowMap | None = None
+
+
+@dataclass(frozen=True)
+class ShadowMap:
+    """The segment's `shadow` layer with its placement from the frame record (protocol
+    "Cloud shadows"): R holds T, the share of direct sunlight the clouds let through, over a
+    square of size_m on the plane up = centre_m[2], row 0 its north edge, column 0 its west."""
+
+    image: U8  # (N, N, 4)
+    centre_m: tuple[float, float, float]
+    size_m: float
+    sun_direction_enu: tuple[float, float, float]  # the sun the map was made for
+
+    def transmittance(self, points_m: F64) -> F64:
+        """(...) T at world points (..., 3) (east, north, up): each point moved along the
+        map's sun to its plane, then the map sampled bilinearly with texel centres at
+        (i + 0.5) / N and clamped edges (as GL's LINEAR with CLAMP_TO_EDGE); 1 outside the
+        map, or for a sun at or below the horizon. NaN in, NaN out."""
+        p = np.asarray(points_m, np.float64)
+        s = np.asarray(self.sun_direction_enu, np.float64)
+        out = np.ones(p.shape[:-1])
+        if not s[2] > 0.0:
+            return out
+        lift = (self.centre_m[2] - p[..., 2]) / s[2]
+        # Across (east, from the west edge) and down (south, from the north edge), 0..1.
+        a = (p[..., 0] + s[0] * lift - self.centre_m[0]) / self.size_m + 0.5
+        b = 0.5 - (p[..., 1] + s[1] * lift - self.centre_m[1]) / self.size_m
+        inside = (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0)
+        out[inside] = bilinear(self.image, a[inside], b[inside])[:, 0]
+        out[np.isnan(a) | np.isnan(b)] = np.nan
+        return out
+
+
+@dataclass(frozen=True)
+class Ground:
+    """A host's own flat ground at up_m (MSL), Lambertian, lit by the frame's sun:
+    colour = rgb (ambient + (1 - ambient) T max(0, n.s)), n = up, T the cloud shadow there:
+    what a host does with the shadow map, in its simplest form."""
+
+    up_m: float
+    sun_direction_enu: tuple[float, float, float]
+    rgb: tuple[float, float, float] = (0.30, 0.38, 0.20)
+    ambient: float = 0.35
 
 
 def layers_from_images(
@@ -40,9 +87,15 @@ def layers_from_images(
     ring_quads_m: F64,
     incoming_quads_m: F64 | None = None,
     fade: float = 0.0,
+    shadow: tuple[tuple[float, float, float], float, tuple[float, float, float]] | None = None,
 ) -> Layers:
     """Layers from images named as the daemon names them: sky, near, ring_0 .. ring_7, and
-    while a new ring fades in (`incoming_quads_m` given), ring_in_0 .. ring_in_7."""
+    while a new ring fades in (`incoming_quads_m` given), ring_in_0 .. ring_in_7; with
+    `shadow` (the record's map centre, size and sun), the `shadow` image too."""
+    shadow_image = images.get("shadow")
+    shadow_map = None
+    if shadow is not None and shadow_image is not None and shadow_image.size:
+        shadow_map = ShadowMap(shadow_image, *shadow)
     n = len(ring_quads_m)
     fading = incoming_quads_m is not None
     front = images.get("near_front")  # absent (0 x 0) unless the near layer is split
@@ -55,11 +108,14 @@ def layers_from_images(
         incoming_quads_m=incoming_quads_m,
         fade=fade if fading else 0.0,
         near_front=front if front is not None and front.size else None,
+        shadow=shadow_map,
     )
 
 
-def composite(layers: Layers, camera: Camera) -> U8:
-    """(H, W, 4) opaque RGBA8 picture for the camera the sky and near layers were drawn for."""
+def composite(layers: Layers, camera: Camera, ground: Ground | None = None) -> U8:
+    """(H, W, 4) opaque RGBA8 picture for the camera the sky and near layers were drawn for;
+    with `ground`, the host's flat ground drawn over the sky and hiding the ring's clouds
+    beyond it (as a host's depth buffer does)."""
     h, w = camera.height_px, camera.width_px
     if layers.sky.shape[:2] != (h, w) or layers.near.shape[:2] != (h, w):
         raise ValueError(
@@ -67,10 +123,16 @@ def composite(layers: Layers, camera: Camera) -> U8:
             f"the camera viewport {(h, w)}"
         )
     out = layers.sky.astype(np.float64) / 255.0
-    ring = sample_ring(layers.ring, layers.ring_quads_m, camera)
+    ring, ring_t = sample_ring_depth(layers.ring, layers.ring_quads_m, camera)
     if layers.incoming_quads_m is not None and layers.fade > 0.0:
-        incoming = sample_ring(layers.incoming_ring, layers.incoming_quads_m, camera)
+        incoming, in_t = sample_ring_depth(layers.incoming_ring, layers.incoming_quads_m, camera)
         ring = (1.0 - layers.fade) * ring + layers.fade * incoming
+        ring_t = np.minimum(ring_t, in_t)
+    if ground is not None:
+        hit_t, colour = ground_colour(ground, layers.shadow, camera)
+        on_ground = np.isfinite(hit_t)
+        out[on_ground] = colour[on_ground]
+        ring = np.where((ring_t < hit_t)[..., None], ring, 0.0)
     out = ring + (1.0 - ring[..., 3:4]) * out
     near = layers.near.astype(np.float64) / 255.0
     out = near + (1.0 - near[..., 3:4]) * out
@@ -83,8 +145,34 @@ def composite(layers: Layers, camera: Camera) -> U8:
     return result
 
 
+def ground_colour(ground: Ground, shadow: ShadowMap | None, camera: Camera) -> tuple[F64, F64]:
+    """(H, W) distance along each pixel's ray to the ground (inf: no hit) and (H, W, 4) the
+    opaque lit colour there (Ground's formula)."""
+    rays = camera.pixel_rays()
+    eye = np.asarray(camera.position_m, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (ground.up_m - eye[2]) / rays[..., 2]
+    # Beyond the far plane a host's depth buffer clips its ground: the sky shows there.
+    depth = t * (rays @ camera.basis()[2])
+    t = np.where(np.isfinite(t) & (t > 0.0) & (depth <= FAR_M), t, np.inf)
+    hit = np.isfinite(t)
+    points = eye + rays * np.where(hit, t, 0.0)[..., None]
+    sun = np.asarray(ground.sun_direction_enu, np.float64)
+    direct = max(0.0, float(sun[2]) / float(np.linalg.norm(sun)))
+    shade = np.ones(t.shape) if shadow is None else shadow.transmittance(points)
+    light = ground.ambient + (1.0 - ground.ambient) * shade * direct
+    colour = np.ones((*t.shape, 4))
+    colour[..., :3] = light[..., None] * np.asarray(ground.rgb)
+    return t, colour
+
+
 def sample_ring(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> F64:
     """(H, W, 4) premultiplied colour of a ring (images on their quads) through each pixel."""
+    return sample_ring_depth(ring, quads_m, camera)[0]
+
+
+def sample_ring_depth(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> tuple[F64, F64]:
+    """sample_ring, and (H, W) the distance along each ray to the quad it met (inf: none)."""
     rays = camera.pixel_rays()
     eye = np.asarray(camera.position_m, dtype=np.float64)
     h, w = rays.shape[:2]
@@ -106,7 +194,7 @@ def sample_ring(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> F64:
             continue
         out[hit] = bilinear(image, a[hit], b[hit])
         best_t[hit] = t[hit]
-    return out
+    return out, best_t
 
 
 def bilinear(image: U8, a: F64, b: F64) -> F64:

@@ -13,7 +13,7 @@ import numpy.typing as npt
 
 from wxsky.errors import WxskyError
 from wxsky.host.client import ControlClient
-from wxsky.host.compositor import Layers, composite, layers_from_images
+from wxsky.host.compositor import Ground, Layers, composite, layers_from_images
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import Frame, FrameReader
 from wxsky.output.transport import Address
@@ -26,15 +26,26 @@ class HostFrame:
     meta: FrameMeta
     layers: Layers
 
-    def composite(self) -> npt.NDArray[np.uint8]:
-        return composite(self.layers, self.meta.camera)
+    def composite(self, ground: Ground | None = None) -> npt.NDArray[np.uint8]:
+        return composite(self.layers, self.meta.camera, ground)
+
+    def shadow_at(self, points_m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """(...) the cloud shadow T at world points (..., 3): 1 where the frame has no map."""
+        if self.layers.shadow is None:
+            return np.ones(np.shape(points_m)[:-1])
+        return self.layers.shadow.transmittance(points_m)
 
 
 def host_frame(frame: Frame) -> HostFrame:
     """Pixels and record of one shared-memory frame, ready to composite."""
     meta = FrameMeta.unpack(frame.meta)
+    shadow = meta.shadow
     layers = layers_from_images(
-        frame.layers, meta.ring_quads_m, meta.incoming_quads_m, meta.ring_fade
+        frame.layers,
+        meta.ring_quads_m,
+        meta.incoming_quads_m,
+        meta.ring_fade,
+        None if shadow is None else (shadow.centre_m, shadow.size_m, shadow.sun_direction_enu),
     )
     return HostFrame(meta, layers)
 

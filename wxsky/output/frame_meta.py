@@ -2,9 +2,9 @@
 
 It tells a host, for exactly the pixels in that slot, which camera drew the sky and near
 layers and where the 8 ring quads stand, so a reader never pairs pixels with stale geometry.
-Layout (little-endian, 1736 bytes), documented in docs/protocol.md:
+Layout (little-endian, 1800 bytes), documented in docs/protocol.md:
 
-    u32 record_version (2), u32 reserved
+    u32 record_version (3), u32 reserved
     u64 frame_number
     u64 ring_version          (increments whenever the ring images or the fade change)
     f64 time_utc_unix_s
@@ -18,10 +18,18 @@ Layout (little-endian, 1736 bytes), documented in docs/protocol.md:
     u32 fading                (1: the incoming ring's layers are in the slot)
     f64 ring_fade             (weight of the incoming ring, 0..1; 0 unless fading)
     f64 incoming centre_m[3], radius_m, quads_m[8][4][3]  (zeros unless fading)
+    -- version 3 from here: the cloud-shadow map (the slot's `shadow` layer) --
+    u64 shadow_version        (0: no map in this slot; otherwise changes with the map)
+    f64 shadow centre_m[3]    (map centre east, north; up: the plane the map lies on)
+    f64 shadow size_m         (edge of the square map)
+    f64 shadow sun_direction_enu[3]  (the sun the map was made for: project along it)
+
+Readers take version 2 records too (1736 bytes, no shadow map) and refuse other versions.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 
@@ -31,10 +39,27 @@ import numpy.typing as npt
 from wxsky.errors import ProtocolError
 from wxsky.scene.camera import Camera
 
-RECORD_VERSION = 2
-_FORMAT = struct.Struct("<IIQQd3d4dII3d3dd96dIId3dd96d")
+RECORD_VERSION = 3
+_FORMAT_V2 = struct.Struct("<IIQQd3d4dII3d3dd96dIId3dd96d")
+_SHADOW = struct.Struct("<Q3dd3d")  # appended by version 3
+_FORMAT = struct.Struct("<IIQQd3d4dII3d3dd96dIId3dd96dQ3dd3d")
 _NO_QUADS = np.zeros((8, 4, 3))
 RECORD_SIZE = _FORMAT.size
+RECORD_SIZE_V2 = _FORMAT_V2.size
+READ_VERSIONS = (2, 3)
+
+
+@dataclass(frozen=True)
+class ShadowPlacement:
+    """Where the slot's cloud-shadow map lies (docs/protocol.md, "Cloud shadows"): a square
+    of size_m on the horizontal plane up = centre_m[2], centred at (centre_m[0], centre_m[1]),
+    row 0 its north edge; a point P is shaded by the texel at P moved along
+    sun_direction_enu to that plane."""
+
+    version: int  # > 0; changes whenever the map's pixels do
+    centre_m: tuple[float, float, float]
+    size_m: float
+    sun_direction_enu: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -54,6 +79,8 @@ class FrameMeta:
     incoming_centre_m: tuple[float, float, float] | None = None
     incoming_radius_m: float = 0.0
     incoming_quads_m: npt.NDArray[np.float64] | None = None
+    # The slot's cloud-shadow map, or None when it has none (or the record is version 2).
+    shadow: ShadowPlacement | None = None
 
     @property
     def fading(self) -> bool:
@@ -90,15 +117,20 @@ class FrameMeta:
             *(self.incoming_centre_m or (0.0, 0.0, 0.0)),
             self.incoming_radius_m if self.fading else 0.0,
             *incoming.tolist(),
+            *_pack_shadow(self.shadow),
         )
 
     @staticmethod
     def unpack(data: bytes) -> FrameMeta:
-        if len(data) < RECORD_SIZE:
-            raise ProtocolError(f"frame record is {len(data)} bytes, expected {RECORD_SIZE}")
-        v = _FORMAT.unpack_from(data)
-        if v[0] != RECORD_VERSION:
-            raise ProtocolError(f"frame record version {v[0]}, this reader knows {RECORD_VERSION}")
+        # The version first: a record of another version may well have another length.
+        version = struct.unpack_from("<I", data)[0] if len(data) >= 4 else None
+        if version is not None and version not in READ_VERSIONS:
+            known = " and ".join(map(str, READ_VERSIONS))
+            raise ProtocolError(f"frame record version {version}, this reader knows {known}")
+        size = RECORD_SIZE_V2 if version == 2 else RECORD_SIZE
+        if len(data) < size:
+            raise ProtocolError(f"frame record is {len(data)} bytes, expected {size}")
+        v = _FORMAT_V2.unpack_from(data)
         try:
             camera = Camera(
                 position_m=(v[5], v[6], v[7]),
@@ -125,4 +157,29 @@ class FrameMeta:
             incoming_centre_m=(v[120], v[121], v[122]) if v[118] else None,
             incoming_radius_m=v[123] if v[118] else 0.0,
             incoming_quads_m=np.array(v[124:220]).reshape(8, 4, 3) if v[118] else None,
+            shadow=_unpack_shadow(data, v[2]) if version == 3 else None,
         )
+
+
+def _pack_shadow(shadow: ShadowPlacement | None) -> tuple[float | int, ...]:
+    if shadow is None:
+        return (0, *(0.0,) * 7)
+    if shadow.version <= 0:
+        raise ValueError(f"shadow version must be positive, got {shadow.version}")
+    return (shadow.version, *shadow.centre_m, shadow.size_m, *shadow.sun_direction_enu)
+
+
+def _unpack_shadow(data: bytes, frame_number: int) -> ShadowPlacement | None:
+    version, *f = _SHADOW.unpack_from(data, RECORD_SIZE_V2)
+    if version == 0:
+        return None
+    if not all(math.isfinite(x) for x in f) or not f[3] > 0.0:
+        raise ProtocolError(
+            f"frame record {frame_number}: shadow placement {f} is not finite or has no size"
+        )
+    return ShadowPlacement(
+        version=version,
+        centre_m=(f[0], f[1], f[2]),
+        size_m=f[3],
+        sun_direction_enu=(f[4], f[5], f[6]),
+    )

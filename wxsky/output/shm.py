@@ -407,6 +407,12 @@ class FrameWriter:
     def segment_size(self) -> int:
         return self._layout.total_size
 
+    @property
+    def target_slot(self) -> int:
+        """The slot the next `publish` fills (0 or 1): where the zero-copy textures of the
+        same frame go (docs/protocol.md §6)."""
+        return self._target
+
     def _put32(self, offset: int, value: int) -> None:
         self._u32[offset // 4] = value
 

@@ -9,6 +9,10 @@ clients that subscribed to them. It is built so a misbehaving client cannot hurt
 client that stops reading loses its oldest queued notifications instead of growing memory or
 blocking `broadcast`, and a client that sends bytes that are not MessagePack-RPC is answered and
 disconnected without disturbing the others.
+
+A handler may return `WithFds`: the response then carries open file descriptors (SCM_RIGHTS,
+sent with the response's first byte) on a unix connection, and the handler's alternative
+answer on a tcp one (docs/protocol.md §6: the zero-copy textures).
 """
 
 from __future__ import annotations
@@ -18,7 +22,9 @@ import contextlib
 import ipaddress
 import logging
 import os
+import socket
 import stat
+from array import array
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -47,6 +53,27 @@ UNSUBSCRIBE = "unsubscribe"
 DEFAULT_MAX_QUEUED = 256
 _READ_SIZE = 65536
 _SUN_PATH_MAX = 107  # Linux sockaddr_un.sun_path is 108 bytes including the NUL
+SCM_MAX_FD = 253  # Linux: the most descriptors one sendmsg may carry
+
+
+@dataclass(frozen=True)
+class WithFds:
+    """A handler's result to send together with open file descriptors.
+
+    On a unix connection the response goes out in one sendmsg whose ancillary data carries
+    `fds` (SCM_RIGHTS) with the response's first byte; the receiver gets its own copies and
+    the fds stay the handler's (the server closes none). On a connection that cannot carry
+    descriptors (tcp) the server sends `without_fds` as the result instead."""
+
+    result: Any
+    fds: tuple[int, ...]
+    without_fds: Any
+
+    def __post_init__(self) -> None:
+        if not 0 < len(self.fds) <= SCM_MAX_FD:
+            raise ValueError(
+                f"{len(self.fds)} file descriptors: one message carries 1..{SCM_MAX_FD}"
+            )
 
 
 @dataclass(frozen=True)
@@ -157,6 +184,9 @@ class _Client:
         self.queue: deque[bytes] = deque()
         self.wakeup = asyncio.Event()
         self.dropped = 0
+        sock = writer.get_extra_info("socket")
+        # Only a unix socket can carry file descriptors (WithFds).
+        self.unix = sock is not None and sock.family == socket.AF_UNIX
 
 
 class ControlServer:
@@ -342,7 +372,11 @@ class ControlServer:
 
     async def _dispatch(self, client: _Client, message: Message) -> None:
         if isinstance(message, Request):
-            await self._send(client, await self._answer(client, message))
+            data, fds = await self._answer(client, message)
+            if fds:
+                await self._send_with_fds(client, data, fds)
+            else:
+                await self._send(client, data)
         elif isinstance(message, Notification):
             try:
                 await self._handler(message.method, message.params)
@@ -353,23 +387,27 @@ class ControlServer:
         else:
             logger.info("control client %s sent an unexpected response; ignored", client.peer)
 
-    async def _answer(self, client: _Client, request: Request) -> bytes:
+    async def _answer(self, client: _Client, request: Request) -> tuple[bytes, tuple[int, ...]]:
+        """The encoded response, and the file descriptors to send with it (none mostly)."""
+        fds: tuple[int, ...] = ()
         try:
             if request.method in (SUBSCRIBE, UNSUBSCRIBE):
                 result: Any = _update_topics(client, request.method, request.params)
             else:
                 result = await self._handler(request.method, request.params)
         except WxskyError as exc:
-            return encode(Response(request.msgid, _one_line(exc), None))
+            return encode(Response(request.msgid, _one_line(exc), None)), ()
         except Exception as exc:
             logger.exception("control request %r failed", request.method)
             message = f"internal error: {type(exc).__name__}: {_one_line(exc)}"
-            return encode(Response(request.msgid, message, None))
+            return encode(Response(request.msgid, message, None)), ()
+        if isinstance(result, WithFds):
+            fds, result = (result.fds, result.result) if client.unix else ((), result.without_fds)
         try:
-            return encode(Response(request.msgid, None, result))
+            return encode(Response(request.msgid, None, result)), fds
         except ProtocolError as exc:
             logger.error("result of control request %r cannot be sent: %s", request.method, exc)
-            return encode(Response(request.msgid, f"internal error: {_one_line(exc)}", None))
+            return encode(Response(request.msgid, f"internal error: {_one_line(exc)}", None)), ()
 
     @staticmethod
     async def _send(client: _Client, data: bytes) -> None:
@@ -377,6 +415,40 @@ class ControlServer:
         # back-pressure we want: a client that does not read its responses stops being read.
         client.writer.write(data)
         await client.writer.drain()
+
+    @staticmethod
+    async def _send_with_fds(client: _Client, data: bytes, fds: tuple[int, ...]) -> None:
+        """`data` with `fds` attached to its first byte. The asyncio transport cannot send
+        ancillary data, so: wait until it has handed every earlier byte to the kernel (the
+        stream stays in order; the notification sender runs on this loop too, and nothing
+        awaits between the check and the send), sendmsg on a duplicate of the socket, and
+        give the transport whatever the kernel did not take at once."""
+        writer = client.writer
+        transport = writer.transport
+        pause = 0.001
+        while True:
+            if transport.is_closing():
+                raise ConnectionError(f"control client {client.peer} went away")
+            if transport.get_write_buffer_size() == 0:
+                sock = socket.fromfd(
+                    writer.get_extra_info("socket").fileno(), socket.AF_UNIX, socket.SOCK_STREAM
+                )
+                try:
+                    sock.setblocking(False)
+                    sent = sock.sendmsg(
+                        [data], [(socket.SOL_SOCKET, socket.SCM_RIGHTS, array("i", fds))]
+                    )
+                    break
+                except (BlockingIOError, InterruptedError):
+                    pass  # the socket is full: the host is not reading yet
+                finally:
+                    sock.close()  # the duplicate only; the connection stays open
+            # As drain() would: this client's reads wait, nobody else's.
+            await asyncio.sleep(pause)
+            pause = min(pause * 2, 0.05)
+        if sent < len(data):
+            writer.write(data[sent:])
+        await writer.drain()
 
     @staticmethod
     async def _send_notifications(client: _Client) -> None:

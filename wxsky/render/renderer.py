@@ -200,6 +200,11 @@ class Renderer:
         self._finish()  # wait for the drawing GIL-free, so the read itself only copies
         self._targets[name].fbo.read_into(buffer, components=4, alignment=1)
 
+    def target_framebuffer(self, name: str) -> moderngl.Framebuffer:
+        """The framebuffer of a drawn layer, exactly its size (for the zero-copy slot copies,
+        `texture_export.SlotTextures.copy`)."""
+        return self._targets[name].fbo
+
     def read(self, name: str) -> npt.NDArray[np.uint8]:
         """A layer as a (H, W, 4) uint8 array."""
         w, h = self.layer_size(name)

@@ -20,6 +20,7 @@ import numpy.typing as npt
 
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_lod import collapse_far_clouds
+from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.gather import Drift, NearRing, gather_far, gather_near
 from wxsky.scene.in_cloud import (
@@ -58,6 +59,8 @@ class SceneSettings:
     impostor_lod_m: float = 0.0
     # At most this many near sprites a frame, farthest clouds left out first (0: no cap).
     max_near_sprites: int = 20_000
+    # Texels per side of the cloud-shadow map made with each ring (cloud_shadow; 0: none).
+    shadow_map_px: int = SHADOW_MAP_PX
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,9 @@ class RingScene:
     geometry: RingGeometry
     impostors: tuple[SpriteDraw, ...]  # (8,)
     drift: Drift  # the drift the ring was built with
+    # The clouds' shadow on the ground over the ring's area (2 ring radii square), made with
+    # the ring's drift and sun; None for an empty ring or with `shadow_map_px` 0.
+    shadow: CloudShadow | None = None
 
 
 @dataclass(frozen=True)
@@ -218,7 +224,20 @@ def build_ring(
             shaded = SpriteDraw(collapsed.sprites.take(order), collapsed.rgba[order])
     geometry, index = bin_indices(shaded.sprites, centre_m, settings.ring_radius_m)
     impostors = tuple(oriented(shaded.take(idx), centre_m)[0] for idx in index)
-    return RingScene(geometry=geometry, impostors=impostors, drift=drift)
+    shadow = None
+    if settings.shadow_map_px > 0:
+        # With the ring, on its worker thread: a map costs tens of milliseconds, too much
+        # for a frame, and it must match the ring's clouds (the same drift and sun).
+        shadow = cloud_shadow(
+            state,
+            drift,
+            centre_m,
+            sky.sun.direction_enu,
+            2.0 * settings.ring_radius_m,
+            settings.shadow_map_px,
+            settings.max_range_m,
+        )
+    return RingScene(geometry=geometry, impostors=impostors, drift=drift, shadow=shadow)
 
 
 def empty_ring(centre_m: tuple[float, float, float], radius_m: float, drift: Drift) -> RingScene:

@@ -21,6 +21,7 @@ from typing import Any, ClassVar, TypeVar
 from wxsky.errors import ConfigError
 from wxsky.protocols.nmea import HEADING_SOURCES
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX
+from wxsky.scene.cloud_shadow import SHADOW_MAP_PX
 from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
@@ -171,6 +172,9 @@ class SceneSection(_Section):
     impostor_lod_m: float = _opt(0.0, _num(0.0, 500_000.0, "m"))
     # At most this many near sprites a frame: past it the farthest clouds fade out (0: no cap).
     max_near_sprites: int = _opt(20_000, _int(0, 10_000_000))
+    # Texels per side of the cloud-shadow map over the ring's area (the segment's `shadow`
+    # layer, made with each ring; 0: no map and no layer).
+    shadow_map_px: int = _opt(SHADOW_MAP_PX, _int(0, 4096, "px"))
     block_size_m: float = _opt(
         BLOCK_SIZE_M, _fixed(BLOCK_SIZE_M, "the cloud field is generated in 4 km blocks by design")
     )
@@ -187,6 +191,7 @@ class SceneSection(_Section):
             lod_start_m=self.lod_start_m,
             impostor_lod_m=self.impostor_lod_m,
             max_near_sprites=self.max_near_sprites,
+            shadow_map_px=self.shadow_map_px,
         )
 
 

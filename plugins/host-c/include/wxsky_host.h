@@ -2,7 +2,7 @@
  * wxsky_host.h - the wxsky host kit: read wxsky's frames and talk to its daemon from C or C++.
  *
  * Written from docs/protocol.md (protocol version 1, frame segment version 1, frame record
- * version 2). C99, no global state: every object carries its own last error message. Objects
+ * version 3, and version 2 read too). C99, no global state: every object carries its own last error message. Objects
  * are allocated once (`*_new`); nothing in the per-frame path allocates. Every function that
  * can fail returns a `wxsky_status` (0 or a positive "not now" code on success, negative on
  * error) and leaves a one-line message in its object (`wxsky_segment_error`,
@@ -23,11 +23,11 @@ extern "C" {
 
 /* The kit's own API version: MAJOR changes break source compatibility. */
 #define WXSKY_HOST_VERSION_MAJOR 0
-#define WXSKY_HOST_VERSION_MINOR 1
+#define WXSKY_HOST_VERSION_MINOR 2 /* 2: frame record v3 (the cloud-shadow fields) */
 /* The protocol versions this kit speaks (docs/protocol.md). */
 #define WXSKY_PROTOCOL_VERSION 1
 #define WXSKY_SEGMENT_VERSION 1
-#define WXSKY_RECORD_VERSION 2
+#define WXSKY_RECORD_VERSION 3 /* the newest; wxsky_record_decode reads 2 as well */
 
 #define WXSKY_MAX_LAYERS 64      /* protocol §1.2: layer_count is 1..64 */
 #define WXSKY_LAYER_NAME_MAX 16  /* protocol §1.2: name is char[16] */
@@ -192,7 +192,8 @@ typedef struct wxsky_frame_copy {
  * read into a second set of buffers. Never allocates. */
 int wxsky_frame_read(wxsky_segment *seg, wxsky_frame_copy *out, int timeout_ms);
 
-/* The frame record, version 2 (§3). */
+/* The frame record, version 3 (§3), or version 2 (whose fields are version 3's but the
+ * shadow fields, which then read as zeros). */
 typedef struct wxsky_record {
     uint32_t record_version;
     uint64_t frame_number;
@@ -211,13 +212,21 @@ typedef struct wxsky_record {
     double ring_in_centre_m[3];
     double ring_in_radius_m;
     double ring_in_quads_m[8][4][3];
+    /* The cloud-shadow map, the slot's `shadow` layer (§1.5, §3.3); version 3 only. */
+    uint64_t shadow_version;     /* 0: no map in this slot (the fields below are zeros) */
+    double shadow_centre_m[3];   /* map centre east, north; up: the plane it lies on (MSL) */
+    double shadow_size_m;        /* the square map's edge */
+    double shadow_sun_enu[3];    /* the unit sun the map was made for: project along it */
 } wxsky_record;
 
-#define WXSKY_RECORD_SIZE 1736
+#define WXSKY_RECORD_SIZE 1800    /* version 3 */
+#define WXSKY_RECORD_V2_SIZE 1736 /* version 2 */
 
 /* Decodes a record (little-endian, by byte offset; `meta` needs no alignment). WXSKY_EVERSION
- * for another record_version; WXSKY_EFORMAT when shorter than WXSKY_RECORD_SIZE (bytes beyond
- * it are ignored) or a value is impossible (a non-finite float, fading or ring_set not 0/1).
+ * for a record_version other than 2 and 3; WXSKY_EFORMAT when shorter than its version's size
+ * (WXSKY_RECORD_SIZE, WXSKY_RECORD_V2_SIZE; bytes beyond are ignored) or a value is impossible
+ * (a non-finite float, fading or ring_set not 0/1, a shadow_version not 0 with a
+ * shadow_size_m not above 0). A version 2 record decodes with shadow_version 0.
  * `error` (may be NULL) gets a one-line message ("" on success). `*out` is unspecified after
  * an error. */
 int wxsky_record_decode(const uint8_t *meta, size_t length, wxsky_record *out, char *error,
@@ -439,6 +448,61 @@ int wxsky_client_wait(wxsky_client *c, uint32_t msgid, int timeout_ms, wxsky_mes
  * waited for too). */
 int wxsky_client_call(wxsky_client *c, const char *method, const uint8_t *params_msgpack,
                       size_t params_len, int timeout_ms, wxsky_message *response);
+
+/* ---------------------------------------------------------------------------------------
+ * Zero-copy textures (protocol §6): the daemon's layer textures as dma-bufs, where its GPU
+ * driver exports them, passed over the unix socket (SCM_RIGHTS) with the export_textures
+ * answer. The GL compositor imports them (wxsky_gl_import_textures); everywhere else a host
+ * keeps reading the segment, which needs no configuration.
+ * ------------------------------------------------------------------------------------- */
+
+#define WXSKY_TEXTURE_PLANES 4                    /* EGL_EXT_image_dma_buf_import_modifiers */
+#define WXSKY_TEXTURES_MAX (2 * WXSKY_MAX_LAYERS) /* one per layer per segment slot */
+#define WXSKY_TEXTURE_FDS_MAX 253                 /* Linux SCM_MAX_FD */
+#define WXSKY_DRM_FORMAT_MOD_INVALID 0x00ffffffffffffffull
+
+typedef struct wxsky_texture_plane {
+    int fd; /* one of wxsky_textures.fds (several planes may share one) */
+    uint32_t stride;
+    uint32_t offset;
+} wxsky_texture_plane;
+
+typedef struct wxsky_texture {
+    char layer[WXSKY_LAYER_NAME_MAX + 1]; /* the segment layer it holds, NUL-terminated */
+    uint32_t slot;                        /* the segment slot (0 or 1) whose frame it holds */
+    uint32_t width, height;               /* the texture: the layer's capacity */
+    uint32_t fourcc;                      /* DRM fourcc: 'AB24' (ABGR8888) = RGBA8 in memory */
+    uint64_t modifier;                    /* DRM format modifier (MOD_INVALID: implicit) */
+    uint32_t plane_count;                 /* 1..WXSKY_TEXTURE_PLANES */
+    wxsky_texture_plane planes[WXSKY_TEXTURE_PLANES];
+} wxsky_texture;
+
+typedef struct wxsky_textures {
+    int supported;                /* 1: textures and fds below; 0: use the segment (reason) */
+    char reason[WXSKY_ERROR_MAX]; /* the daemon's reason when not supported */
+    uint32_t slot_count;
+    uint32_t count;
+    wxsky_texture textures[WXSKY_TEXTURES_MAX];
+    int fds[WXSKY_TEXTURE_FDS_MAX]; /* owned: wxsky_textures_close closes them */
+    uint32_t fd_count;
+} wxsky_textures;
+
+/* An empty set (no fds): call before the first request, so close is always safe. */
+void wxsky_textures_init(wxsky_textures *t);
+/* Closes the fds (an importer may close them once imported: EGL keeps its own reference)
+ * and empties the set; NULL is fine. */
+void wxsky_textures_close(wxsky_textures *t);
+
+/* Sends export_textures on a unix-socket client and waits up to timeout_ms for the answer
+ * and its descriptors. Closes what *out held first. WXSKY_OK: out->supported 1 with
+ * out->count textures and out->fd_count fds (the caller's), or out->supported 0 with the
+ * daemon's reason (no textures on this GPU, or a tcp connection): use the segment.
+ * WXSKY_EREMOTE: the daemon answered with an error (one that predates the command says
+ * "unknown command"): use the segment too. WXSKY_EFORMAT: an answer not in §6's shape;
+ * WXSKY_ESYS: the descriptors the answer announces did not all arrive (the message says how
+ * many did); WXSKY_ENOSPC: more than WXSKY_TEXTURES_MAX textures; otherwise as
+ * wxsky_client_call. On any result but WXSKY_OK with supported 1, *out holds no fds. */
+int wxsky_request_textures(wxsky_client *c, int timeout_ms, wxsky_textures *out);
 
 #ifdef __cplusplus
 }

@@ -17,7 +17,8 @@
  * Per frame:
  *     wxsky_frame_read(seg, &copy, ...);  wxsky_record_decode(copy.meta, ..., &rec, ...);
  *     wxsky_gl_upload_copy(gl, &copy, &rec);      // only the layers that changed
- *     (the host draws its opaque terrain and scenery, writing depth: optional, see below)
+ *     (the host draws its opaque terrain and scenery, writing depth: optional, see below;
+ *      wxsky_gl_shadow_bind(gl, terrain_program, unit) darkens it under the clouds)
  *     wxsky_gl_draw_background(gl, view, proj);   // sky, then the ring with its cross-fade
  *     wxsky_gl_draw_near(gl);
  *     (the host draws its own aircraft)
@@ -58,7 +59,7 @@ extern "C" {
 
 /* The GL compositor's API version: MAJOR changes break source compatibility. */
 #define WXSKY_HOST_GL_VERSION_MAJOR 0
-#define WXSKY_HOST_GL_VERSION_MINOR 1
+#define WXSKY_HOST_GL_VERSION_MINOR 2 /* 2: the cloud-shadow map (wxsky_gl_shadow*) */
 
 /* Runtime version of the GL library, (MAJOR << 16) | MINOR, to compare with the header's. */
 uint32_t wxsky_gl_version(void);
@@ -79,8 +80,8 @@ const char *wxsky_gl_error(const wxsky_gl_compositor *comp);
 
 /* Compiles the shaders and makes one texture per layer, sized to the layer's capacity, for
  * the open segment `seg` (only its layer table is read: the segment may be closed afterwards).
- * The segment must have `sky`, `near` and `ring_0` .. `ring_7`; `near_front` and
- * `ring_in_0` .. `ring_in_7` are used when present; every ring layer must have ring_0's
+ * The segment must have `sky`, `near` and `ring_0` .. `ring_7`; `near_front`,
+ * `ring_in_0` .. `ring_in_7` and `shadow` are used when present; every ring layer must have ring_0's
  * capacity. Other layers are ignored. Initialising again (e.g. for a reopened segment with
  * other capacities) first deletes the old objects. WXSKY_OK; WXSKY_EINVAL (NULL, a segment
  * not open); WXSKY_EFORMAT (a layer missing, ring capacities that differ, a capacity above
@@ -92,7 +93,8 @@ int wxsky_gl_init(wxsky_gl_compositor *comp, const wxsky_segment *seg);
 /* Uploads a frame and keeps its record (a struct copy) for the draws that follow. `sky`,
  * `near` and `near_front` are uploaded every time (a layer of width 0 is then not drawn);
  * the ring layers (ring_i, and ring_in_i while `rec->fading`) only when rec->ring_version
- * differs from the last upload's, or after wxsky_gl_invalidate. Layers are matched by the
+ * differs from the last upload's, or after wxsky_gl_invalidate; `shadow` likewise by
+ * rec->shadow_version (see wxsky_gl_shadow). Layers are matched by the
  * indices of the segment given to wxsky_gl_init. WXSKY_OK; WXSKY_EINVAL (not initialised,
  * NULL, a layer larger than its capacity); WXSKY_ESYS (a GL error).
  *
@@ -131,6 +133,109 @@ int wxsky_gl_draw_background(wxsky_gl_compositor *comp, const double view[16],
 int wxsky_gl_draw_near(wxsky_gl_compositor *comp);
 /* `near_front` full-screen, when the last upload had it (else nothing is drawn, WXSKY_OK). */
 int wxsky_gl_draw_near_front(wxsky_gl_compositor *comp);
+
+/* Zero-copy textures (protocol §6). Where the daemon exports its layer textures
+ * (wxsky_request_textures gave supported 1) and this EGL display and GL context import
+ * dma-bufs, the frame's pixels never pass through the CPU:
+ *
+ *     wxsky_request_textures(client, 2000, &tex);        // once, on a unix-socket client
+ *     if (st == WXSKY_OK && tex.supported &&
+ *         wxsky_gl_import_textures(gl, seg, &tex, eglGetCurrentDisplay(),
+ *                                  (wxsky_gl_get_proc)eglGetProcAddress) == WXSKY_OK)
+ *         zero_copy = 1;                                 // else: the segment, as before
+ *     wxsky_textures_close(&tex);                        // EGL keeps its own references
+ *     per frame: wxsky_frame_begin(seg, &view);  wxsky_record_decode(view.meta, ...);
+ *                wxsky_gl_import_view(gl, &view, &rec);  // GPU copies, then a fence wait
+ *                if (wxsky_frame_end(seg, &view) == WXSKY_ETORN) { wxsky_gl_invalidate(gl);
+ *                    try again }                         // then draw as usual
+ *
+ * The daemon keeps one texture per layer per segment slot and fills the slot's textures
+ * before it publishes the slot (glFinish first); wxsky_gl_import_view copies the view's
+ * slot textures into the compositor's own (glCopyTexSubImage*, the ring layers only when
+ * ring_version changed, as an upload) and waits for those copies (glFenceSync +
+ * glClientWaitSync), so the seqlock check after it covers every byte the host took, and
+ * the composite then reads the host's own textures while the daemon draws on. */
+typedef void (*wxsky_gl_proc)(void);
+typedef wxsky_gl_proc (*wxsky_gl_get_proc)(const char *name);
+
+/* Imports every texture of `tex` that holds a layer this compositor draws, for both slots,
+ * as EGLImages (EGL_LINUX_DMA_BUF_EXT) bound to GL textures (glEGLImageTargetTexture2DOES),
+ * after checking at run time that the display has EGL_EXT_image_dma_buf_import (and
+ * _modifiers for a texture with a modifier) and the context GL_OES_EGL_image. `egl_display`
+ * is the EGLDisplay of the current context, `get_proc` eglGetProcAddress (so this library
+ * links no EGL). The fds stay the caller's. WXSKY_OK; WXSKY_EINVAL (not initialised, NULL,
+ * tex not supported); WXSKY_EFORMAT (an extension or entry point missing, a texture not at
+ * its layer's capacity, a layer without a texture: the message names it); WXSKY_ESYS (an
+ * EGL or GL call failed: the EGL error code). On failure nothing stays imported and the
+ * compositor uploads from the segment as before. Changes the GL_TEXTURE_2D binding of
+ * unit 0; the read framebuffer binding is restored. */
+int wxsky_gl_import_textures(wxsky_gl_compositor *comp, const wxsky_segment *seg,
+                             const wxsky_textures *tex, void *egl_display,
+                             wxsky_gl_get_proc get_proc);
+/* The zero-copy upload of a view (wxsky_frame_begin): copies its slot's imported textures
+ * into the compositor's and waits for the copies; then wxsky_frame_end decides (WXSKY_ETORN:
+ * wxsky_gl_invalidate and take the frame again). WXSKY_OK; WXSKY_EINVAL (nothing imported,
+ * NULL, a layer beyond its capacity); WXSKY_ESYS (a GL error, or the copies not done in
+ * 1 s). Changes the unit 0 texture bindings; the read framebuffer binding is restored. */
+int wxsky_gl_import_view(wxsky_gl_compositor *comp, const wxsky_frame_view *view,
+                         const wxsky_record *rec);
+/* 1 after a successful wxsky_gl_import_textures, until released (or re-initialised). */
+int wxsky_gl_zero_copy(const wxsky_gl_compositor *comp);
+/* Drops the imported textures (back to uploads from the segment). */
+void wxsky_gl_release_textures(wxsky_gl_compositor *comp);
+
+/* The cloud-shadow map (protocol §1.5 `shadow`, §3.3) for the host's terrain shader. The
+ * compositor keeps it in a texture of its own (GL_TEXTURE_2D, RGBA8, LINEAR, CLAMP_TO_EDGE,
+ * at the layer's capacity; made by wxsky_gl_init when the segment has a `shadow` layer),
+ * uploaded by wxsky_gl_upload_* only when the record's shadow_version changes (or after
+ * wxsky_gl_invalidate); the placement comes from the last uploaded record, whose centre
+ * moves every frame with the clouds.
+ *
+ * The host pastes WXSKY_GL_SHADOW_GLSL into its terrain's fragment (or vertex) shader, after
+ * its #version and precision lines (GLSL 3.30 core or ES 3.00), and calls
+ * wxsky_shadow(world_m): world_m in the record's coordinates (east, north, up metres MSL
+ * around the observer, protocol §0). It returns T, 0 (full shadow) .. 1 (none): 1 where the
+ * frame has no map, outside the map, or with the sun at or below the horizon. Light with it,
+ * e.g. colour = albedo * (ambient + (1 - ambient) * T * max(0, dot(n, sun))), sun the
+ * record's sun_direction_enu (not the map's). Each frame, with the program bound or not,
+ * wxsky_gl_shadow_bind sets the uniforms; a host that sets uniforms its own way reads them
+ * from wxsky_gl_shadow. The function is exactly the reference host's
+ * (wxsky/host/compositor.py, ShadowMap.transmittance), down to GL's bilinear weights. */
+#define WXSKY_GL_SHADOW_GLSL                                                                   \
+    "uniform sampler2D wxsky_shadow_map;\n"                                                    \
+    "uniform vec4 wxsky_shadow_rect;   /* west edge east_m, north edge north_m, 1/size_m, "     \
+    "present */\n"                                                                             \
+    "uniform vec4 wxsky_shadow_sun;    /* the map's sun (unit, ENU), its plane's up_m */\n"     \
+    "uniform vec4 wxsky_shadow_texels; /* used width, height; texture width, height */\n"      \
+    "float wxsky_shadow(vec3 p) {\n"                                                           \
+    "    vec3 s = wxsky_shadow_sun.xyz;\n"                                                     \
+    "    if (wxsky_shadow_rect.w == 0.0 || !(s.z > 0.0)) return 1.0;\n"                        \
+    "    vec2 q = p.xy + s.xy * ((wxsky_shadow_sun.w - p.z) / s.z);\n"                         \
+    "    vec2 f = vec2(q.x - wxsky_shadow_rect.x, wxsky_shadow_rect.y - q.y) * "               \
+    "wxsky_shadow_rect.z;\n"                                                                   \
+    "    if (f.x < 0.0 || f.x > 1.0 || f.y < 0.0 || f.y > 1.0) return 1.0;\n"                  \
+    "    vec2 px = clamp(f * wxsky_shadow_texels.xy, vec2(0.5), wxsky_shadow_texels.xy - 0.5);\n" \
+    "    return texture(wxsky_shadow_map, px / wxsky_shadow_texels.zw).r;\n"                    \
+    "}\n"
+
+/* The uniforms of WXSKY_GL_SHADOW_GLSL for the last uploaded frame. */
+typedef struct wxsky_gl_shadow_params {
+    unsigned int texture; /* the GL texture name (GL_TEXTURE_2D); 0: the segment has no map */
+    int present;          /* 1: the last frame had a map; 0: wxsky_shadow gives 1 */
+    float rect[4];        /* wxsky_shadow_rect */
+    float sun[4];         /* wxsky_shadow_sun */
+    float texels[4];      /* wxsky_shadow_texels */
+} wxsky_gl_shadow_params;
+
+/* Fills *out (zeros, present 0, when nothing was uploaded yet: then WXSKY_EINVAL). Needs no
+ * GL context. WXSKY_OK; WXSKY_EINVAL (NULL, not initialised, no frame uploaded). */
+int wxsky_gl_shadow(const wxsky_gl_compositor *comp, wxsky_gl_shadow_params *out);
+/* Binds the map's texture to texture unit `unit` and sets the four uniforms in `program` (the
+ * host's, linked with WXSKY_GL_SHADOW_GLSL; uniforms the linker dropped are skipped). Leaves
+ * `program` in use (glUseProgram), the texture bound to `unit`, and GL_TEXTURE0 active.
+ * WXSKY_OK; WXSKY_EINVAL (not initialised, no frame uploaded, program 0, a unit outside
+ * GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS); WXSKY_ESYS (a GL error: e.g. not a program). */
+int wxsky_gl_shadow_bind(wxsky_gl_compositor *comp, unsigned int program, int unit);
 
 /* The view and projection matrices (column-major) of a record's camera, exactly as
  * wxsky/scene/camera.py makes them: near WXSKY_GL_NEAR_M, far WXSKY_GL_FAR_M, horizontal

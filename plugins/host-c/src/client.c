@@ -12,6 +12,13 @@
  *  - `q` + `qe`: copies of the messages read while waiting for a response, a FIFO ring of
  *    contiguous entries (an entry never wraps, so it can be handed out as one span). The
  *    entry handed out last stays in place, marked taken, until the next poll/wait.
+ *  - `fds`: file descriptors that came with the bytes (SCM_RIGHTS, protocol §6: only the
+ *    export_textures response carries any), each with the stream range [start, end) of the
+ *    recvmsg that brought it. The message they belong to begins inside that range (the
+ *    daemon attaches them to the response's first byte; Linux may glue earlier bytes in
+ *    front of it in one read, never a second message with descriptors), so a response that
+ *    begins at stream position p claims the ones with start <= p < end. Any not claimed once
+ *    every byte of their read is consumed are closed at the next poll/wait.
  */
 #include "internal.h"
 #include "msgpack_scan.h"
@@ -23,6 +30,7 @@
 #include <netinet/tcp.h>
 #include <poll.h>
 #include <pwd.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -35,6 +43,11 @@
 #define READ_ROOM 65536u        /* compact the receive buffer when less than this is free */
 #define CONNECT_TIMEOUT_MS 2000
 #define SUN_PATH_MAX 107        /* §2.1: sockaddr_un.sun_path is 108 bytes with the NUL */
+#define FDS_MAX 256             /* descriptors held for messages not yet handed out */
+#define RECV_FDS 253            /* Linux SCM_MAX_FD: the most one message carries */
+#ifndef MSG_CMSG_CLOEXEC
+#define MSG_CMSG_CLOEXEC 0 /* then FD_CLOEXEC is set on each one received */
+#endif
 
 typedef struct qentry {
     size_t off;
@@ -70,6 +83,17 @@ struct wxsky_client {
 
     char topics[WXSKY_SUBSCRIPTION_MAX]; /* NUL-terminated names back to back */
     size_t topics_len;
+
+    /* stream positions: of in[0], and of the message wait_until returned last (from the
+     * stream, not the queue: from_stream) */
+    uint64_t in_pos;
+    uint64_t last_pos;
+    int last_from_stream;
+    /* received descriptors, oldest first, each with its read's stream range */
+    int fds[FDS_MAX];
+    uint64_t fd_start[FDS_MAX], fd_end[FDS_MAX];
+    size_t fd_count;
+    uint64_t fds_lost; /* closed at once: the table was full, or the kernel cut them */
 };
 
 /* ---------------------------------------------------------------------------------------
@@ -148,10 +172,18 @@ int wxsky_client_fd(const wxsky_client *c) { return c == NULL ? -1 : c->fd; }
 
 uint64_t wxsky_client_dropped(const wxsky_client *c) { return c == NULL ? 0 : c->dropped; }
 
+static void close_fds(wxsky_client *c) {
+    for (size_t i = 0; i < c->fd_count; i++) close(c->fds[i]);
+    c->fd_count = 0;
+}
+
 void wxsky_client_close(wxsky_client *c) {
     if (c == NULL) return;
     if (c->fd >= 0) close(c->fd);
     c->fd = -1;
+    close_fds(c);
+    c->in_pos = 0;
+    c->last_from_stream = 0;
     /* The bytes stay where they are (a message handed out may still point at them) until
      * the next poll or wait; only the bookkeeping starts again. */
     c->in_start = c->in_end = 0;
@@ -819,11 +851,54 @@ static int parse_next(wxsky_client *c, wxsky_message *msg, size_t *size) {
 }
 
 /* One read() into `in`: OK (bytes came), AGAIN (none now), or negative (closed). */
+/* Keeps the descriptors a recvmsg brought, with its stream range. */
+static void keep_fds(wxsky_client *c, struct msghdr *mh, uint64_t start, uint64_t end) {
+    for (struct cmsghdr *cm = CMSG_FIRSTHDR(mh); cm != NULL; cm = CMSG_NXTHDR(mh, cm)) {
+        if (cm->cmsg_level != SOL_SOCKET || cm->cmsg_type != SCM_RIGHTS) continue;
+        size_t n = (cm->cmsg_len - CMSG_LEN(0)) / sizeof(int);
+        const unsigned char *data = CMSG_DATA(cm);
+        for (size_t i = 0; i < n; i++) {
+            int fd;
+            memcpy(&fd, data + i * sizeof fd, sizeof fd);
+            if (MSG_CMSG_CLOEXEC == 0) (void)fcntl(fd, F_SETFD, FD_CLOEXEC);
+            if (c->fd_count == FDS_MAX) {
+                close(fd);
+                c->fds_lost++;
+                continue;
+            }
+            c->fds[c->fd_count] = fd;
+            c->fd_start[c->fd_count] = start;
+            c->fd_end[c->fd_count] = end;
+            c->fd_count++;
+        }
+    }
+    if (mh->msg_flags & MSG_CTRUNC) c->fds_lost++; /* the kernel closed those that did not fit */
+}
+
+/* Closes the descriptors whose read is consumed entirely and that nobody claimed. */
+static void drop_consumed_fds(wxsky_client *c) {
+    uint64_t consumed = c->in_pos + c->in_start;
+    size_t k = 0;
+    for (size_t i = 0; i < c->fd_count; i++) {
+        if (c->fd_end[i] <= consumed) {
+            close(c->fds[i]);
+            continue;
+        }
+        c->fds[k] = c->fds[i];
+        c->fd_start[k] = c->fd_start[i];
+        c->fd_end[k] = c->fd_end[i];
+        k++;
+    }
+    c->fd_count = k;
+}
+
 static int fill(wxsky_client *c) {
     if (c->in_start == c->in_end) {
+        c->in_pos += c->in_end;
         c->in_start = c->in_end = 0;
     } else if (c->in_start > 0 && c->in_cap - c->in_end < READ_ROOM) {
         memmove(c->in, c->in + c->in_start, c->in_end - c->in_start);
+        c->in_pos += c->in_start;
         c->in_end -= c->in_start;
         c->in_start = 0;
     }
@@ -834,8 +909,22 @@ static int fill(wxsky_client *c) {
                     "receive buffer (%zu bytes); connection closed", cap);
     }
     for (;;) {
-        ssize_t n = read(c->fd, c->in + c->in_end, c->in_cap - c->in_end);
+        /* recvmsg rather than read: the export_textures response brings descriptors (§6) */
+        union {
+            struct cmsghdr align;
+            unsigned char buf[CMSG_SPACE(sizeof(int) * RECV_FDS)];
+        } ctl;
+        struct iovec iov = {c->in + c->in_end, c->in_cap - c->in_end};
+        struct msghdr mh;
+        memset(&mh, 0, sizeof mh);
+        mh.msg_iov = &iov;
+        mh.msg_iovlen = 1;
+        mh.msg_control = ctl.buf;
+        mh.msg_controllen = sizeof ctl.buf;
+        ssize_t n = recvmsg(c->fd, &mh, MSG_CMSG_CLOEXEC);
         if (n > 0) {
+            uint64_t start = c->in_pos + c->in_end;
+            if (mh.msg_controllen > 0) keep_fds(c, &mh, start, start + (uint64_t)n);
             c->in_end += (size_t)n;
             return WXSKY_OK;
         }
@@ -915,6 +1004,8 @@ static void take_entry(wxsky_client *c, size_t i, wxsky_message *msg) {
 int wxsky_client_poll(wxsky_client *c, wxsky_message *msg) {
     if (c == NULL || msg == NULL) return c == NULL ? WXSKY_EINVAL : FAIL(c, WXSKY_EINVAL, "msg NULL");
     release_taken(c);
+    drop_consumed_fds(c);
+    c->last_from_stream = 0;
     for (size_t i = 0; i < c->qe_count; i++) {
         if (!c->qe[(c->qe_head + i) % c->qe_max].taken) {
             take_entry(c, i, msg);
@@ -947,6 +1038,8 @@ static int answer(wxsky_client *c, const wxsky_message *m, wxsky_message *respon
 static int wait_until(wxsky_client *c, uint32_t msgid, int64_t deadline,
                       wxsky_message *response) {
     release_taken(c);
+    drop_consumed_fds(c);
+    c->last_from_stream = 0;
     /* A response that came during an earlier wait is in the queue already. */
     for (size_t i = 0; i < c->qe_count; i++) {
         const qentry *e = &c->qe[(c->qe_head + i) % c->qe_max];
@@ -969,6 +1062,8 @@ static int wait_until(wxsky_client *c, uint32_t msgid, int64_t deadline,
             if (st < 0) return st;
             if (st == WXSKY_AGAIN) break;
             if (m.kind == WXSKY_RESPONSE && (!m.has_msgid || m.msgid == msgid)) {
+                c->last_pos = c->in_pos + c->in_start;
+                c->last_from_stream = 1;
                 c->in_start += size;
                 if (m.has_msgid) return answer(c, &m, response);
                 /* The daemon could not read what we sent and hangs up after saying so. */
@@ -1018,4 +1113,36 @@ int wxsky_client_call(wxsky_client *c, const char *method, const uint8_t *params
         if (n > 0) (void)flush_out(c);
     }
     return wait_until(c, id, deadline, response);
+}
+
+int wxsky_client_call_fds(wxsky_client *c, const char *method, const uint8_t *params_msgpack,
+                          size_t params_len, int timeout_ms, wxsky_message *response,
+                          int *fds, size_t max_fds, size_t *fd_count) {
+    *fd_count = 0;
+    int st = wxsky_client_call(c, method, params_msgpack, params_len, timeout_ms, response);
+    if (st != WXSKY_OK || !c->last_from_stream) return st;
+    size_t k = 0, n = 0;
+    for (size_t i = 0; i < c->fd_count; i++) {
+        if (c->fd_start[i] <= c->last_pos && c->last_pos < c->fd_end[i] && n < max_fds) {
+            fds[n++] = c->fds[i]; /* now the caller's */
+            continue;
+        }
+        c->fds[k] = c->fds[i];
+        c->fd_start[k] = c->fd_start[i];
+        c->fd_end[k] = c->fd_end[i];
+        k++;
+    }
+    c->fd_count = k;
+    *fd_count = n;
+    return WXSKY_OK;
+}
+
+uint64_t wxsky_client_fds_lost(const wxsky_client *c) { return c == NULL ? 0 : c->fds_lost; }
+
+int wxsky_client_fail(wxsky_client *c, int status, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(c->error, sizeof c->error, fmt, ap);
+    va_end(ap);
+    return status;
 }

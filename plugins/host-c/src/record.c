@@ -1,6 +1,7 @@
-/* The frame record, version 2 (protocol §3): decoded field by field from little-endian bytes at
- * the offsets of the table, never by casting the buffer to a struct (no alignment or padding
- * assumptions, and the same result on any CPU). */
+/* The frame record, version 3 or 2 (protocol §3): decoded field by field from little-endian
+ * bytes at the offsets of the table, never by casting the buffer to a struct (no alignment or
+ * padding assumptions, and the same result on any CPU). Version 3 only appends the shadow
+ * fields, so both share one decoder. */
 #include "internal.h"
 
 #include <math.h>
@@ -83,14 +84,16 @@ int wxsky_record_decode(const uint8_t *meta, size_t length, wxsky_record *out, c
     }
     /* The version first: a record of another version may well have another length. */
     uint32_t version = get32(meta);
-    if (version != WXSKY_RECORD_VERSION) {
+    if (version != 2 && version != WXSKY_RECORD_VERSION) {
         return wxsky_fail(error, error_size, WXSKY_EVERSION,
-                          "frame record version %u; this kit reads version %d", (unsigned)version,
-                          WXSKY_RECORD_VERSION);
+                          "frame record version %u; this kit reads versions 2 and %d",
+                          (unsigned)version, WXSKY_RECORD_VERSION);
     }
-    if (length < WXSKY_RECORD_SIZE) {
+    size_t size = version == 2 ? WXSKY_RECORD_V2_SIZE : WXSKY_RECORD_SIZE;
+    if (length < size) {
         return wxsky_fail(error, error_size, WXSKY_EFORMAT,
-                          "frame record is %zu bytes, expected %d", length, WXSKY_RECORD_SIZE);
+                          "frame record is %zu bytes, expected %zu (version %u)", length, size,
+                          (unsigned)version);
     }
     decoder d = {meta, error, error_size, WXSKY_OK};
     out->record_version = version;
@@ -114,5 +117,22 @@ int wxsky_record_decode(const uint8_t *meta, size_t length, wxsky_record *out, c
     vec3(&d, 936, out->ring_in_centre_m, "ring_in_centre_m");
     f64(&d, 960, &out->ring_in_radius_m, "ring_in_radius_m", -1, -1, -1);
     quads(&d, 968, out->ring_in_quads_m, "ring_in_quads_m");
+    out->shadow_version = 0;
+    memset(out->shadow_centre_m, 0, sizeof out->shadow_centre_m);
+    out->shadow_size_m = 0.0;
+    memset(out->shadow_sun_enu, 0, sizeof out->shadow_sun_enu);
+    if (version >= 3) {
+        out->shadow_version = get64(meta + 1736);
+        vec3(&d, 1744, out->shadow_centre_m, "shadow_centre_m");
+        f64(&d, 1768, &out->shadow_size_m, "shadow_size_m", -1, -1, -1);
+        vec3(&d, 1776, out->shadow_sun_enu, "shadow_sun_enu");
+        if (d.status == WXSKY_OK && out->shadow_version != 0 && !(out->shadow_size_m > 0.0)) {
+            d.status = wxsky_fail(d.error, d.error_size, WXSKY_EFORMAT,
+                                  "frame record: shadow_size_m is %g at offset 1768 with "
+                                  "shadow_version %llu, expected above 0",
+                                  out->shadow_size_m,
+                                  (unsigned long long)out->shadow_version);
+        }
+    }
     return d.status;
 }

@@ -19,6 +19,9 @@
  *         drain:MS                      every message for MS milliseconds
  *         reconnect:TRIES               wxsky_client_reconnect, every 20 ms until it works
  *         sleep:MS  dropped  close
+ *         textures                      wxsky_request_textures (§6): the answer, and each
+ *                                       descriptor's first 16 bytes (pread) and st_ino
+ *         fds                           how many descriptors this process has open
  *       A WXSKY_EREMOTE answer is printed and the script goes on; any other error ends it.
  *   mp-encode TOKEN...     one msgpack object from tokens (n t f u:N i:N d:HEX64 s:HEX b:HEX
  *                          a:COUNT m:COUNT); prints {"hex": ...}
@@ -32,6 +35,8 @@
  */
 #include "wxsky_host.h"
 
+#include <dirent.h>
+#include <fcntl.h>
 #include <errno.h>
 #include <math.h>
 #include <poll.h>
@@ -40,6 +45,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
@@ -271,6 +277,55 @@ static int poll_wait(session *s, wxsky_message *m, int64_t deadline) {
         struct pollfd p = {wxsky_client_fd(s->c), POLLIN, 0};
         (void)poll(&p, 1, left);
     }
+}
+
+static int open_fds(void) {
+    int n = 0;
+    DIR *d = opendir("/proc/self/fd");
+    if (d == NULL) return -1;
+    for (struct dirent *e = readdir(d); e != NULL; e = readdir(d))
+        if (e->d_name[0] != '.') n++;
+    closedir(d);
+    return n - 1; /* the directory's own */
+}
+
+static void print_textures(session *s, int st, const wxsky_textures *t) {
+    printf("{\"step\":");
+    put_json_str(stdout, s->step, strlen(s->step));
+    printf(",\"status\":\"%s\",\"supported\":%s,\"reason\":", wxsky_status_name(st),
+           t->supported ? "true" : "false");
+    put_json_str(stdout, st == WXSKY_OK ? t->reason : wxsky_client_error(s->c),
+                 strlen(st == WXSKY_OK ? t->reason : wxsky_client_error(s->c)));
+    printf(",\"slot_count\":%u,\"fd_count\":%u,\"fds\":[", t->slot_count, t->fd_count);
+    for (uint32_t i = 0; i < t->fd_count; i++) {
+        uint8_t head[16];
+        struct stat sb;
+        ssize_t n = pread(t->fds[i], head, sizeof head, 0);
+        int cloexec = (fcntl(t->fds[i], F_GETFD) & FD_CLOEXEC) != 0;
+        printf("%s{\"head\":\"", i ? "," : "");
+        if (n > 0) put_hex(stdout, head, (size_t)n);
+        printf("\",\"ino\":%llu,\"cloexec\":%s}",
+               fstat(t->fds[i], &sb) == 0 ? (unsigned long long)sb.st_ino : 0ull,
+               cloexec ? "true" : "false");
+    }
+    printf("],\"textures\":[");
+    for (uint32_t i = 0; i < t->count; i++) {
+        const wxsky_texture *x = &t->textures[i];
+        printf("%s{\"layer\":", i ? "," : "");
+        put_json_str(stdout, x->layer, strlen(x->layer));
+        printf(",\"slot\":%u,\"width\":%u,\"height\":%u,\"fourcc\":%u,\"modifier\":%llu,"
+               "\"planes\":[", x->slot, x->width, x->height, x->fourcc,
+               (unsigned long long)x->modifier);
+        for (uint32_t p = 0; p < x->plane_count; p++) {
+            int index = -1;
+            for (uint32_t k = 0; k < t->fd_count; k++)
+                if (t->fds[k] == x->planes[p].fd) index = (int)k;
+            printf("%s{\"fd\":%d,\"stride\":%u,\"offset\":%u}", p ? "," : "", index,
+                   x->planes[p].stride, x->planes[p].offset);
+        }
+        printf("]}");
+    }
+    printf("]}\n");
 }
 
 static size_t split(char *text, const char **parts, size_t max) {
@@ -509,6 +564,21 @@ static int run_session(int argc, char **argv) {
             }
         } else if (strcmp(verb, "sleep") == 0) {
             sleep_ms(arg ? atoi(arg) : 100);
+        } else if (strcmp(verb, "textures") == 0) {
+            wxsky_textures *t = malloc(sizeof *t);
+            check(t != NULL, "malloc");
+            wxsky_textures_init(t);
+            st = wxsky_request_textures(s.c, s.timeout_ms, t);
+            if (st != WXSKY_OK && st != WXSKY_EREMOTE && st != WXSKY_ESYS &&
+                st != WXSKY_EFORMAT) {
+                free(t);
+                fail_step(&s, st);
+            }
+            print_textures(&s, st, t);
+            wxsky_textures_close(t);
+            free(t);
+        } else if (strcmp(verb, "fds") == 0) {
+            printf("{\"step\":\"fds\",\"open\":%d}\n", open_fds());
         } else if (strcmp(verb, "dropped") == 0) {
             printf("{\"step\":\"dropped\",\"dropped\":%llu}\n",
                    (unsigned long long)wxsky_client_dropped(s.c));

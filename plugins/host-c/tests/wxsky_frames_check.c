@@ -203,6 +203,13 @@ static void print_record(const wxsky_record *r) {
     js_double(r->ring_in_radius_m);
     printf(",\"ring_in_quads_m\":");
     js_quads((const double(*)[4][3])r->ring_in_quads_m);
+    printf(",\"shadow_version\":%llu,\"shadow_centre_m\":",
+           (unsigned long long)r->shadow_version);
+    js_vec(r->shadow_centre_m, 3);
+    printf(",\"shadow_size_m\":");
+    js_double(r->shadow_size_m);
+    printf(",\"shadow_sun_enu\":");
+    js_vec(r->shadow_sun_enu, 3);
     putchar('}');
 }
 
@@ -729,7 +736,7 @@ static uint64_t get64(const uint8_t *p) {
 static uint64_t interesting(uint64_t size, uint64_t old) {
     const uint64_t values[] = {0,          1,          2,           3,          7,
                                8,          15,         16,          24,         63,
-                               64,         65,         1736,        1735,       4095,
+                               64,         65,         1736,        1799,       4095,
                                4096,       4097,       8192,        0x7fffffff, 0x80000000,
                                0xffffffff, 0x100000000, 1ull << 63, UINT64_MAX, UINT64_MAX - 7};
     size_t n = sizeof values / sizeof values[0];
@@ -852,7 +859,7 @@ static int cmd_fuzz(const char *src, const char *dst, uint64_t seed, long iterat
             } else if (region < 95) {
                 uint64_t base = header_size + (uint64_t)active * slot_size;
                 start = base + get32(orig + base + 20);
-                length = 1736;
+                length = WXSKY_RECORD_SIZE;
             } else {
                 out_size = (size_t)rng_below(size);
                 continue;

@@ -11,7 +11,11 @@
  * fade weight, and the hit's depth goes to gl_FragDepth for the host's depth test. One pass
  * makes the cross-fade exact (two blended passes cannot mix two "over"s), and the ray is
  * relative to the eye, computed in double on the CPU, so world coordinates of any size keep
- * float precision. */
+ * float precision.
+ *
+ * The cloud-shadow map (`shadow`, protocol §3.3) is not drawn: it gets a texture of its own,
+ * uploaded when the record's shadow_version changes, for the host's terrain shader
+ * (wxsky_gl_shadow, wxsky_gl_shadow_bind, WXSKY_GL_SHADOW_GLSL). */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -53,6 +57,15 @@ struct wxsky_gl_compositor {
     uint32_t ring_cap_w, ring_cap_h;
     int32_t ring_size[RING_LAYERS * 2]; /* as uploaded: width, height */
 
+    /* the cloud-shadow map: segment layer index (-1: absent), capacity, texture, and what
+     * the last upload left in it (w 0: the frame has no map) */
+    int shadow_index;
+    uint32_t shadow_cap_w, shadow_cap_h;
+    uint32_t shadow_w, shadow_h;
+    int shadow_valid;
+    uint64_t shadow_version;
+    GLuint shadow_tex;
+
     wxsky_record rec;
 
     int pbo; /* stream the full-screen layers through pixel-unpack buffers */
@@ -67,7 +80,19 @@ struct wxsky_gl_compositor {
     GLint u_ring_tex, u_ring_size, u_ring_tl, u_ring_u, u_ring_v, u_ring_inv, u_ring_vp,
         u_ring_viewport, u_ring_count, u_ring_fade;
     GLfloat tl[RING_LAYERS * 3], du[RING_LAYERS * 3], dv[RING_LAYERS * 3];
+
+    /* zero-copy (protocol §6, wxsky_gl_import_textures): the daemon's slot textures imported
+     * as EGLImages, by segment slot and layer index (0: none), the read framebuffer the
+     * per-frame copies read them through, and what destroys the images */
+    int zc;
+    GLuint zc_tex[2][WXSKY_MAX_LAYERS];
+    void *zc_image[2][WXSKY_MAX_LAYERS];
+    GLuint zc_fbo;
+    void *zc_dpy;
+    unsigned (*zc_destroy)(void *dpy, void *image);
 };
+
+static void release_imports(wxsky_gl_compositor *c);
 
 static int fail(wxsky_gl_compositor *c, int status, const char *fmt, ...)
 #if defined(__GNUC__)
@@ -262,6 +287,7 @@ static void reset_indices(wxsky_gl_compositor *c) {
         c->fs_index[i] = -1;
     for (int i = 0; i < RING_LAYERS; ++i)
         c->ring_index[i] = -1;
+    c->shadow_index = -1;
 }
 
 wxsky_gl_compositor *wxsky_gl_new(void) {
@@ -293,6 +319,7 @@ static void make_pbos(wxsky_gl_compositor *c) {
 }
 
 static void release(wxsky_gl_compositor *c) {
+    release_imports(c);
     if (c->fs_prog)
         glDeleteProgram(c->fs_prog);
     if (c->ring_prog)
@@ -304,6 +331,11 @@ static void release(wxsky_gl_compositor *c) {
             glDeleteTextures(1, &c->fs_tex[i]);
     if (c->ring_tex)
         glDeleteTextures(1, &c->ring_tex);
+    if (c->shadow_tex)
+        glDeleteTextures(1, &c->shadow_tex);
+    c->shadow_tex = 0;
+    c->shadow_valid = 0;
+    c->shadow_w = c->shadow_h = 0;
     delete_pbos(c);
     c->fs_prog = c->ring_prog = c->vao = c->ring_tex = 0;
     memset(c->fs_tex, 0, sizeof c->fs_tex);
@@ -388,6 +420,24 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
                     w, h, RING_LAYERS, (int)max_size, (int)max_layers);
     }
 
+    {
+        /* the shadow map: optional (a daemon with [scene] shadow_map_px 0 has none) */
+        int k = wxsky_segment_find_layer(seg, "shadow");
+        if (k >= 0) {
+            wxsky_segment_layer(seg, (uint32_t)k, &info);
+            if (info.max_width == 0 || info.max_height == 0 ||
+                info.max_width > (uint32_t)max_size || info.max_height > (uint32_t)max_size) {
+                reset_indices(c);
+                return fail(c, WXSKY_EFORMAT,
+                            "layer 'shadow' capacity %ux%u outside 1..%d (GL_MAX_TEXTURE_SIZE)",
+                            info.max_width, info.max_height, (int)max_size);
+            }
+            c->shadow_index = k;
+            c->shadow_cap_w = info.max_width;
+            c->shadow_cap_h = info.max_height;
+        }
+    }
+
     c->fs_prog = link_program(c, FS_LAYER, "full-screen layer");
     c->ring_prog = c->fs_prog ? link_program(c, FS_RING, "ring") : 0;
     if (!c->ring_prog) {
@@ -428,6 +478,14 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
     tex_params(GL_TEXTURE_2D_ARRAY, GL_NEAREST);
     glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RGBA8, (GLsizei)c->ring_cap_w, (GLsizei)c->ring_cap_h,
                  RING_LAYERS, 0, GL_RGBA, GL_UNSIGNED_BYTE, NULL);
+    if (c->shadow_index >= 0) {
+        /* LINEAR + CLAMP_TO_EDGE: the bilinear sampling protocol §3.3 asks for */
+        glGenTextures(1, &c->shadow_tex);
+        glBindTexture(GL_TEXTURE_2D, c->shadow_tex);
+        tex_params(GL_TEXTURE_2D, GL_LINEAR);
+        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, (GLsizei)c->shadow_cap_w,
+                     (GLsizei)c->shadow_cap_h, 0, GL_RGBA, GL_UNSIGNED_BYTE, NULL);
+    }
     st = gl_check(c, "wxsky_gl_init (making textures)");
     if (st != WXSKY_OK) {
         char msg[WXSKY_ERROR_MAX];
@@ -450,6 +508,39 @@ static void unpack_state(void) {
     glPixelStorei(GL_UNPACK_SKIP_PIXELS, 0);
     glPixelStorei(GL_UNPACK_IMAGE_HEIGHT, 0);
     glPixelStorei(GL_UNPACK_SKIP_IMAGES, 0);
+}
+
+/* The shadow map of a frame: uploaded only when the record's shadow_version differs from the
+ * last upload's (or after wxsky_gl_invalidate); a record without a map (version 0, or a
+ * version 2 record) leaves none to sample. */
+static int upload_shadow(wxsky_gl_compositor *c, const uint8_t *const *pixels,
+                         const uint32_t *width, const uint32_t *height, uint32_t count,
+                         const wxsky_record *rec) {
+    int k = c->shadow_index;
+    uint32_t w, h;
+    if (k < 0 || (uint32_t)k >= count || rec->shadow_version == 0) {
+        c->shadow_w = c->shadow_h = 0;
+        return WXSKY_OK;
+    }
+    if (c->shadow_valid && rec->shadow_version == c->shadow_version)
+        return WXSKY_OK;
+    w = width[k];
+    h = height[k];
+    if (w > c->shadow_cap_w || h > c->shadow_cap_h)
+        return fail(c, WXSKY_EINVAL, "layer %d is %ux%u, beyond its capacity %ux%u", k, w, h,
+                    c->shadow_cap_w, c->shadow_cap_h);
+    if (!pixels[k])
+        return WXSKY_OK; /* not given: keep what the texture had */
+    if (w && h) {
+        glBindTexture(GL_TEXTURE_2D, c->shadow_tex);
+        glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, (GLsizei)w, (GLsizei)h, GL_RGBA,
+                        GL_UNSIGNED_BYTE, pixels[k]);
+    }
+    c->shadow_w = w && h ? w : 0;
+    c->shadow_h = w && h ? h : 0;
+    c->shadow_version = rec->shadow_version;
+    c->shadow_valid = 1;
+    return WXSKY_OK;
 }
 
 /* One upload from per-layer-index pointers and sizes (pixels NULL: not given). */
@@ -532,6 +623,11 @@ static int upload(wxsky_gl_compositor *c, const uint8_t *const *pixels, const ui
         c->ring_version = rec->ring_version;
         c->rings_valid = 1;
     }
+    {
+        int st = upload_shadow(c, pixels, width, height, count, rec);
+        if (st != WXSKY_OK)
+            return st;
+    }
     c->rec = *rec;
     {
         int st = gl_check(c, "wxsky_gl upload");
@@ -590,8 +686,69 @@ int wxsky_gl_set_streaming(wxsky_gl_compositor *c, int pbo) {
 }
 
 void wxsky_gl_invalidate(wxsky_gl_compositor *c) {
-    if (c)
+    if (c) {
         c->rings_valid = 0;
+        c->shadow_valid = 0;
+    }
+}
+
+/* ---- the cloud-shadow map for the host's terrain (protocol §3.3) ------------------------ */
+
+int wxsky_gl_shadow(const wxsky_gl_compositor *c, wxsky_gl_shadow_params *out) {
+    const wxsky_record *r;
+    if (!c || !out)
+        return WXSKY_EINVAL;
+    memset(out, 0, sizeof *out);
+    if (!c->ready || !c->have_frame)
+        return WXSKY_EINVAL;
+    r = &c->rec;
+    out->texture = c->shadow_tex;
+    out->present = c->shadow_w > 0 && c->shadow_h > 0 && r->shadow_version != 0;
+    if (!out->present)
+        return WXSKY_OK;
+    /* the record's placement, in double until here: the host's world coordinates are the
+     * record's, so float keeps millimetres over the kilometres of a map */
+    out->rect[0] = (float)(r->shadow_centre_m[0] - 0.5 * r->shadow_size_m);
+    out->rect[1] = (float)(r->shadow_centre_m[1] + 0.5 * r->shadow_size_m);
+    out->rect[2] = (float)(1.0 / r->shadow_size_m);
+    out->rect[3] = 1.0f;
+    for (int i = 0; i < 3; ++i)
+        out->sun[i] = (float)r->shadow_sun_enu[i];
+    out->sun[3] = (float)r->shadow_centre_m[2];
+    out->texels[0] = (float)c->shadow_w;
+    out->texels[1] = (float)c->shadow_h;
+    out->texels[2] = (float)c->shadow_cap_w;
+    out->texels[3] = (float)c->shadow_cap_h;
+    return WXSKY_OK;
+}
+
+int wxsky_gl_shadow_bind(wxsky_gl_compositor *c, unsigned int program, int unit) {
+    wxsky_gl_shadow_params p;
+    GLint max_units = 0;
+    int st;
+    if (!c)
+        return WXSKY_EINVAL;
+    if (!program)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_shadow_bind: no program");
+    if (!c->ready || !c->have_frame)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_shadow_bind: %s",
+                    c->ready ? "no frame uploaded" : "the compositor is not initialised");
+    glGetIntegerv(GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS, &max_units);
+    if (unit < 0 || unit >= max_units)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_shadow_bind: texture unit %d outside 0..%d", unit,
+                    (int)max_units - 1);
+    wxsky_gl_shadow(c, &p);
+    glUseProgram((GLuint)program);
+    glActiveTexture(GL_TEXTURE0 + (GLenum)unit);
+    glBindTexture(GL_TEXTURE_2D, p.texture);
+    glUniform1i(glGetUniformLocation((GLuint)program, "wxsky_shadow_map"), unit);
+    glUniform4fv(glGetUniformLocation((GLuint)program, "wxsky_shadow_rect"), 1, p.rect);
+    glUniform4fv(glGetUniformLocation((GLuint)program, "wxsky_shadow_sun"), 1, p.sun);
+    glUniform4fv(glGetUniformLocation((GLuint)program, "wxsky_shadow_texels"), 1, p.texels);
+    glActiveTexture(GL_TEXTURE0);
+    if ((st = gl_check(c, "wxsky_gl_shadow_bind")) != WXSKY_OK)
+        return st;
+    return ok(c);
 }
 
 /* ---- matrices ------------------------------------------------------------------------ */
@@ -829,4 +986,329 @@ int wxsky_gl_draw_near(wxsky_gl_compositor *c) {
 
 int wxsky_gl_draw_near_front(wxsky_gl_compositor *c) {
     return draw_layer(c, FS_FRONT, "wxsky_gl_draw_near_front");
+}
+
+/* ---- zero-copy textures (protocol §6) -------------------------------------------------- */
+
+/* EGL_EXT_image_dma_buf_import(_modifiers): the values, so this file needs no EGL headers. */
+#define ZC_EGL_EXTENSIONS 0x3055
+#define ZC_EGL_NONE 0x3038
+#define ZC_EGL_WIDTH 0x3057
+#define ZC_EGL_HEIGHT 0x3056
+#define ZC_EGL_LINUX_DMA_BUF 0x3270
+#define ZC_EGL_FOURCC 0x3271
+
+typedef const char *(*zc_query_string_fn)(void *dpy, int32_t name);
+typedef void *(*zc_create_image_fn)(void *dpy, void *ctx, unsigned target, void *buffer,
+                                    const int32_t *attribs);
+typedef unsigned (*zc_destroy_image_fn)(void *dpy, void *image);
+typedef int32_t (*zc_get_error_fn)(void);
+typedef void (*zc_image_target_fn)(GLenum target, void *image);
+
+static int zc_has(const char *list, const char *name) {
+    size_t n = strlen(name);
+    for (const char *p = list; p && (p = strstr(p, name)) != NULL; p += n)
+        if ((p == list || p[-1] == ' ') && (p[n] == ' ' || p[n] == '\0'))
+            return 1;
+    return 0;
+}
+
+static int zc_gl_has(const char *name) {
+    GLint n = 0;
+    glGetIntegerv(GL_NUM_EXTENSIONS, &n);
+    for (GLint i = 0; i < n; ++i) {
+        const char *e = (const char *)glGetStringi(GL_EXTENSIONS, (GLuint)i);
+        if (e && !strcmp(e, name))
+            return 1;
+    }
+    return 0;
+}
+
+static void release_imports(wxsky_gl_compositor *c) {
+    for (int s = 0; s < 2; ++s)
+        for (int k = 0; k < WXSKY_MAX_LAYERS; ++k) {
+            if (c->zc_tex[s][k])
+                glDeleteTextures(1, &c->zc_tex[s][k]);
+            if (c->zc_image[s][k] && c->zc_destroy)
+                c->zc_destroy(c->zc_dpy, c->zc_image[s][k]);
+            c->zc_tex[s][k] = 0;
+            c->zc_image[s][k] = NULL;
+        }
+    if (c->zc_fbo)
+        glDeleteFramebuffers(1, &c->zc_fbo);
+    c->zc_fbo = 0;
+    c->zc = 0;
+}
+
+void wxsky_gl_release_textures(wxsky_gl_compositor *c) {
+    if (c) {
+        release_imports(c);
+        /* the next upload, from the segment, sends every layer */
+        c->rings_valid = c->shadow_valid = 0;
+    }
+}
+
+int wxsky_gl_zero_copy(const wxsky_gl_compositor *c) { return c ? c->zc : 0; }
+
+/* Is segment layer k one the compositor draws? */
+static int zc_used(const wxsky_gl_compositor *c, int k) {
+    for (int i = 0; i < FS_COUNT; ++i)
+        if (c->fs_index[i] == k)
+            return 1;
+    for (int i = 0; i < RING_LAYERS; ++i)
+        if (c->ring_index[i] == k)
+            return 1;
+    return k >= 0 && c->shadow_index == k;
+}
+
+int wxsky_gl_import_textures(wxsky_gl_compositor *c, const wxsky_segment *seg,
+                             const wxsky_textures *tex, void *egl_display,
+                             wxsky_gl_get_proc get_proc) {
+    static const int32_t plane_attr[WXSKY_TEXTURE_PLANES][5] = {
+        /* fd, offset, pitch, modifier lo, modifier hi */
+        {0x3272, 0x3273, 0x3274, 0x3443, 0x3444},
+        {0x3275, 0x3276, 0x3277, 0x3445, 0x3446},
+        {0x3278, 0x3279, 0x327A, 0x3447, 0x3448},
+        {0x3440, 0x3441, 0x3442, 0x3449, 0x344A},
+    };
+    zc_query_string_fn query;
+    zc_create_image_fn create;
+    zc_get_error_fn get_error;
+    zc_image_target_fn target;
+    const char *ext;
+    GLint prev_read = 0;
+    int st = WXSKY_ESYS;
+    if (!c)
+        return WXSKY_EINVAL;
+    if (!c->ready)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_import_textures: the compositor is not initialised");
+    if (!seg || !tex || !egl_display || !get_proc)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_import_textures: NULL argument");
+    if (!tex->supported)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_import_textures: the daemon exports none (%.200s)",
+                    tex->reason);
+    release_imports(c);
+    query = (zc_query_string_fn)get_proc("eglQueryString");
+    create = (zc_create_image_fn)get_proc("eglCreateImageKHR");
+    c->zc_destroy = (zc_destroy_image_fn)get_proc("eglDestroyImageKHR");
+    get_error = (zc_get_error_fn)get_proc("eglGetError");
+    target = (zc_image_target_fn)get_proc("glEGLImageTargetTexture2DOES");
+    c->zc_dpy = egl_display;
+    if (!query || !create || !c->zc_destroy || !get_error || !target)
+        return fail(c, WXSKY_EFORMAT, "wxsky_gl_import_textures: get_proc finds no %s",
+                    !query ? "eglQueryString" : !create ? "eglCreateImageKHR"
+                    : !c->zc_destroy ? "eglDestroyImageKHR" : !get_error ? "eglGetError"
+                    : "glEGLImageTargetTexture2DOES");
+    ext = query(egl_display, ZC_EGL_EXTENSIONS);
+    if (!ext || !zc_has(ext, "EGL_KHR_image_base") || !zc_has(ext, "EGL_EXT_image_dma_buf_import"))
+        return fail(c, WXSKY_EFORMAT, "no EGL_EXT_image_dma_buf_import on this EGL display: use "
+                    "the segment");
+    if (!zc_gl_has("GL_OES_EGL_image"))
+        return fail(c, WXSKY_EFORMAT, "no GL_OES_EGL_image in this GL context: use the segment");
+    glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &prev_read);
+    glGenFramebuffers(1, &c->zc_fbo);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, c->zc_fbo);
+    glActiveTexture(GL_TEXTURE0);
+    for (uint32_t i = 0; i < tex->count && i < WXSKY_TEXTURES_MAX; ++i) {
+        const wxsky_texture *t = &tex->textures[i];
+        int32_t attr[6 + WXSKY_TEXTURE_PLANES * 10 + 1];
+        int n = 0, k = wxsky_segment_find_layer(seg, t->layer);
+        wxsky_layer_info info;
+        void *image;
+        GLuint name = 0;
+        if (k < 0 || !zc_used(c, k) || t->slot > 1)
+            continue; /* a layer this compositor does not draw */
+        wxsky_segment_layer(seg, (uint32_t)k, &info);
+        if (t->width != info.max_width || t->height != info.max_height) {
+            st = fail(c, WXSKY_EFORMAT, "texture '%s' slot %u is %ux%u, not the layer's capacity %ux%u",
+                 t->layer, t->slot, t->width, t->height, info.max_width, info.max_height);
+            goto failed;
+        }
+        if (t->modifier != WXSKY_DRM_FORMAT_MOD_INVALID &&
+            !zc_has(ext, "EGL_EXT_image_dma_buf_import_modifiers")) {
+            st = fail(c, WXSKY_EFORMAT, "texture '%s' has modifier 0x%016llx and this EGL display has "
+                 "no EGL_EXT_image_dma_buf_import_modifiers", t->layer,
+                 (unsigned long long)t->modifier);
+            goto failed;
+        }
+        attr[n++] = ZC_EGL_WIDTH;
+        attr[n++] = (int32_t)t->width;
+        attr[n++] = ZC_EGL_HEIGHT;
+        attr[n++] = (int32_t)t->height;
+        attr[n++] = ZC_EGL_FOURCC;
+        attr[n++] = (int32_t)t->fourcc;
+        for (uint32_t p = 0; p < t->plane_count && p < WXSKY_TEXTURE_PLANES; ++p) {
+            attr[n++] = plane_attr[p][0];
+            attr[n++] = t->planes[p].fd;
+            attr[n++] = plane_attr[p][1];
+            attr[n++] = (int32_t)t->planes[p].offset;
+            attr[n++] = plane_attr[p][2];
+            attr[n++] = (int32_t)t->planes[p].stride;
+            if (t->modifier != WXSKY_DRM_FORMAT_MOD_INVALID) {
+                attr[n++] = plane_attr[p][3];
+                attr[n++] = (int32_t)(uint32_t)(t->modifier & 0xffffffffu);
+                attr[n++] = plane_attr[p][4];
+                attr[n++] = (int32_t)(uint32_t)(t->modifier >> 32);
+            }
+        }
+        attr[n++] = ZC_EGL_NONE;
+        (void)get_error();
+        image = create(egl_display, NULL, ZC_EGL_LINUX_DMA_BUF, NULL, attr);
+        if (!image) {
+            st = fail(c, WXSKY_ESYS, "eglCreateImageKHR(EGL_LINUX_DMA_BUF_EXT) for '%s' slot %u "
+                 "(fourcc 0x%08x, modifier 0x%016llx) failed: EGL error 0x%04x", t->layer,
+                 t->slot, t->fourcc, (unsigned long long)t->modifier, (unsigned)get_error());
+            goto failed;
+        }
+        c->zc_image[t->slot][k] = image;
+        glGenTextures(1, &name);
+        c->zc_tex[t->slot][k] = name;
+        glBindTexture(GL_TEXTURE_2D, name);
+        target(GL_TEXTURE_2D, image);
+        tex_params(GL_TEXTURE_2D, GL_NEAREST);
+        glFramebufferTexture2D(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, name, 0);
+        if (glCheckFramebufferStatus(GL_READ_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE ||
+            glGetError() != GL_NO_ERROR) {
+            st = fail(c, WXSKY_ESYS, "the imported texture '%s' slot %u cannot be read through a "
+                 "framebuffer", t->layer, t->slot);
+            goto failed;
+        }
+    }
+    glFramebufferTexture2D(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, 0, 0);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, (GLuint)prev_read);
+    /* every layer drawn, in both slots */
+    for (int s = 0; s < 2; ++s)
+        for (int k = 0; k < WXSKY_MAX_LAYERS; ++k)
+            if (zc_used(c, k) && !c->zc_tex[s][k]) {
+                fail(c, WXSKY_EFORMAT, "the daemon exported no texture for layer %d slot %d", k, s);
+                release_imports(c);
+                return WXSKY_EFORMAT;
+            }
+    if (gl_check(c, "wxsky_gl_import_textures") != WXSKY_OK) {
+        release_imports(c);
+        return WXSKY_ESYS;
+    }
+    c->zc = 1;
+    c->rings_valid = c->shadow_valid = 0;
+    return ok(c);
+failed:
+    glFramebufferTexture2D(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, 0, 0);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, (GLuint)prev_read);
+    while (glGetError() != GL_NO_ERROR) {
+    }
+    release_imports(c);
+    return st;
+}
+
+/* One GPU copy of the view's slot texture k (w x h) into the compositor's own texture. */
+static void zc_copy(wxsky_gl_compositor *c, int slot, int k, GLenum dst_target, GLuint dst,
+                    int layer, uint32_t w, uint32_t h) {
+    glFramebufferTexture2D(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D,
+                           c->zc_tex[slot][k], 0);
+    glBindTexture(dst_target, dst);
+    if (dst_target == GL_TEXTURE_2D)
+        glCopyTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, 0, 0, (GLsizei)w, (GLsizei)h);
+    else
+        glCopyTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, layer, 0, 0, (GLsizei)w, (GLsizei)h);
+}
+
+int wxsky_gl_import_view(wxsky_gl_compositor *c, const wxsky_frame_view *view,
+                         const wxsky_record *rec) {
+    GLint prev_read = 0;
+    GLsync fence;
+    GLenum waited;
+    int rings, slot;
+    if (!c)
+        return WXSKY_EINVAL;
+    if (!c->ready || !c->zc)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_import_view: no textures imported");
+    if (!view || !rec)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_import_view: no view or record");
+    slot = (int)view->slot_;
+    if (slot < 0 || slot > 1)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_import_view: a view of no slot");
+    glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &prev_read);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, c->zc_fbo);
+    glActiveTexture(GL_TEXTURE0);
+    for (int i = 0; i < FS_COUNT; ++i) {
+        int k = c->fs_index[i];
+        uint32_t w = 0, h = 0;
+        if (k >= 0 && (uint32_t)k < view->layer_count) {
+            w = view->layers[k].width;
+            h = view->layers[k].height;
+        }
+        if (w > c->fs_cap_w[i] || h > c->fs_cap_h[i]) {
+            glBindFramebuffer(GL_READ_FRAMEBUFFER, (GLuint)prev_read);
+            return fail(c, WXSKY_EINVAL, "layer %d is %ux%u, beyond its capacity %ux%u", k, w, h,
+                        c->fs_cap_w[i], c->fs_cap_h[i]);
+        }
+        c->fs_w[i] = w;
+        c->fs_h[i] = h;
+        if (w && h)
+            zc_copy(c, slot, k, GL_TEXTURE_2D, c->fs_tex[i], 0, w, h);
+    }
+    rings = !c->rings_valid || rec->ring_version != c->ring_version;
+    if (rings) {
+        for (int i = 0; i < RING_LAYERS; ++i) {
+            int k = c->ring_index[i];
+            uint32_t w = 0, h = 0;
+            if (k >= 0 && (uint32_t)k < view->layer_count && (i < RING_QUADS || rec->fading)) {
+                w = view->layers[k].width;
+                h = view->layers[k].height;
+                if (w > c->ring_cap_w || h > c->ring_cap_h) {
+                    glBindFramebuffer(GL_READ_FRAMEBUFFER, (GLuint)prev_read);
+                    return fail(c, WXSKY_EINVAL, "layer %d is %ux%u, beyond its capacity %ux%u",
+                                k, w, h, c->ring_cap_w, c->ring_cap_h);
+                }
+                if (w && h)
+                    zc_copy(c, slot, k, GL_TEXTURE_2D_ARRAY, c->ring_tex, i, w, h);
+            }
+            c->ring_size[2 * i] = (int32_t)(w && h ? w : 0);
+            c->ring_size[2 * i + 1] = (int32_t)(w && h ? h : 0);
+        }
+        c->ring_version = rec->ring_version;
+        c->rings_valid = 1;
+    }
+    /* the shadow map, as upload_shadow: only when its version changed */
+    if (c->shadow_index < 0 || (uint32_t)c->shadow_index >= view->layer_count ||
+        rec->shadow_version == 0) {
+        c->shadow_w = c->shadow_h = 0;
+    } else if (!c->shadow_valid || rec->shadow_version != c->shadow_version) {
+        int k = c->shadow_index;
+        uint32_t w = view->layers[k].width, h = view->layers[k].height;
+        if (w > c->shadow_cap_w || h > c->shadow_cap_h) {
+            glBindFramebuffer(GL_READ_FRAMEBUFFER, (GLuint)prev_read);
+            return fail(c, WXSKY_EINVAL, "layer %d is %ux%u, beyond its capacity %ux%u", k, w,
+                        h, c->shadow_cap_w, c->shadow_cap_h);
+        }
+        if (w && h)
+            zc_copy(c, slot, k, GL_TEXTURE_2D, c->shadow_tex, 0, w, h);
+        c->shadow_w = w && h ? w : 0;
+        c->shadow_h = w && h ? h : 0;
+        c->shadow_version = rec->shadow_version;
+        c->shadow_valid = 1;
+    }
+    glFramebufferTexture2D(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, 0, 0);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, (GLuint)prev_read);
+    /* The copies must be done before wxsky_frame_end checks the slot: until then the daemon
+     * may come back to it (protocol §6). The wait covers the copies only; the composite that
+     * follows reads the compositor's own textures, asynchronously. */
+    fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+    waited = fence ? glClientWaitSync(fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1000000000ull)
+                   : GL_WAIT_FAILED;
+    if (fence)
+        glDeleteSync(fence);
+    c->rec = *rec;
+    if (waited != GL_ALREADY_SIGNALED && waited != GL_CONDITION_SATISFIED) {
+        c->rings_valid = c->shadow_valid = 0;
+        (void)gl_check(c, "wxsky_gl_import_view");
+        return fail(c, WXSKY_ESYS, "wxsky_gl_import_view: the copies did not finish within 1 s "
+                    "(glClientWaitSync 0x%04x)", (unsigned)waited);
+    }
+    if (gl_check(c, "wxsky_gl_import_view") != WXSKY_OK) {
+        c->rings_valid = c->shadow_valid = 0;
+        return WXSKY_ESYS;
+    }
+    c->have_frame = 1;
+    return ok(c);
 }
