@@ -53,7 +53,7 @@ static const char *FRAGMENT_SRC =
     "in vec3 v_pos;\n"
     "in vec3 v_normal;\n"
     "out vec4 frag;\n"
-    "float sun_visible(vec3 p) { return 1.0; }\n"
+    WXSKY_GL_SHADOW_GLSL
     "float hash(vec2 c) { return fract(sin(dot(c, vec2(127.1, 311.7))) * 43758.5453); }\n"
     "void main() {\n"
     "    if (u_mode == 1) {\n"
@@ -82,8 +82,8 @@ static const char *FRAGMENT_SRC =
     "    }\n"
     "    float day = smoothstep(-0.05, 0.15, u_sun.z);\n"
     "    vec3 sun_col = mix(vec3(1.0, 0.55, 0.30), vec3(1.0, 0.96, 0.90), smoothstep(0.0, 0.35, u_sun.z));\n"
-    "    float direct = max(dot(n, u_sun), 0.0) * sun_visible(v_pos) * u_sun_light;\n"
-    "    vec3 light = vec3(0.28 * day + 0.02) + 0.85 * direct * day * sun_col;\n"
+    "    float direct = max(dot(n, u_sun), 0.0) * wxsky_shadow(v_pos) * u_sun_light;\n"
+    "    vec3 light = vec3(0.38 * day + 0.02) + 0.75 * direct * day * sun_col;\n"
     "    col *= light;\n"
     "    float d = length(v_pos - u_eye);\n"
     "    vec3 haze = vec3(0.62, 0.70, 0.80) * (0.15 + 0.85 * day);\n"
@@ -207,8 +207,8 @@ static void mat_mul(const double a[16], const double b[16], float out[16]) {
         }
 }
 
-int demo_terrain_draw(demo_terrain *t, const wxsky_record *rec, const double view[16],
-                      const double proj[16], int distance) {
+int demo_terrain_draw(demo_terrain *t, wxsky_gl_compositor *gl, const wxsky_record *rec,
+                      const double view[16], const double proj[16], int distance) {
     float vp[16];
     GLenum code;
     mat_mul(proj, view, vp);
@@ -221,6 +221,11 @@ int demo_terrain_draw(demo_terrain *t, const wxsky_record *rec, const double vie
     glUniform1f(t->u_ground_m, (float)t->ground_m);
     glUniform1f(t->u_sun_light, 1.0f);
     glUniform1i(t->u_mode, distance ? 1 : 0);
+    /* the frame's cloud shadows, on texture unit 2 (the compositor's are 0 and 1) */
+    if (wxsky_gl_shadow_bind(gl, t->program, 2) != WXSKY_OK) {
+        snprintf(t->error, sizeof t->error, "cloud shadows: %s", wxsky_gl_error(gl));
+        return -1;
+    }
     glDisable(GL_BLEND);
     glEnable(GL_DEPTH_TEST);
     glDepthFunc(GL_LESS);

@@ -32,12 +32,13 @@ typedef struct demo_terrain {
 
 /* Builds the mesh and the program (a GL context current). 0, or -1 with t->error. */
 int demo_terrain_init(demo_terrain *t, double ground_m);
-/* Draws it for the record's camera (depth test LESS, depth written), lit by the record's sun;
+/* Draws it for the record's camera (depth test LESS, depth written), lit by the record's sun
+ * and shaded by the cloud-shadow map of the frame last uploaded to `gl`;
  * distance 1: instead of colours, each pixel's distance from the camera in 100 m steps (red:
  * whole steps, capped at 255; green: the fraction), for the tests. Leaves blending disabled and
  * the depth mask on. 0 or -1 with t->error. */
-int demo_terrain_draw(demo_terrain *t, const wxsky_record *rec, const double view[16],
-                      const double proj[16], int distance);
+int demo_terrain_draw(demo_terrain *t, wxsky_gl_compositor *gl, const wxsky_record *rec,
+                      const double view[16], const double proj[16], int distance);
 void demo_terrain_free(demo_terrain *t);
 
 #endif

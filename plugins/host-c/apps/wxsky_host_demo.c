@@ -207,7 +207,7 @@ static int draw(demo_terrain *t, wxsky_gl_compositor *gl, const wxsky_record *re
     int st;
     clear(no_clouds ? 0.0f : 1.0f);
     wxsky_gl_camera_matrices(rec, 1, view, proj);
-    if (!no_terrain && demo_terrain_draw(t, rec, view, proj, distance) != 0) {
+    if (!no_terrain && demo_terrain_draw(t, gl, rec, view, proj, distance) != 0) {
         snprintf(err, APP_ERR, "%s", t->error);
         return -1;
     }
@@ -321,7 +321,7 @@ static int fly_window(const args *a, wxsky_client *client, wxsky_segment *seg,
             /* the record's camera for everything: the terrain then matches the clouds drawn
              * for it, whatever the lag behind the camera sent */
             wxsky_gl_camera_matrices(&rec, 0, view, proj);
-            if (demo_terrain_draw(&terrain, &rec, view, proj, 0) != 0) {
+            if (demo_terrain_draw(&terrain, *gl, &rec, view, proj, 0) != 0) {
                 snprintf(err, APP_ERR, "%s", terrain.error);
                 goto done;
             }
