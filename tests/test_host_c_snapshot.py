@@ -158,7 +158,7 @@ def test_the_tool_leaves_the_daemons_clock_running_and_says_what_is_wrong(
         (["--control", d.address, "--size", "10x10", "--out", str(out)], 64, "--size 10x10"),
         (["--control", d.address, "--lat", "47", "--out", str(out)], 64, "go together"),
         (["--control", d.address, "--pitch-deg", "95", "--out", str(out)], 64, "--pitch-deg 95"),
-        (["--out", str(out)], 64, "--control ADDR is required"),
+        (["--control", d.address], 64, "--out FILE.png is required"),
         (["--control", f"unix:{tmp_path}/none.sock", "--out", str(out)], 1, "none.sock"),
         (["--control", d.address, "--time", "yesterday", "--out", str(out)], 1, "set_time"),
         (["--control", d.address, "--out", str(tmp_path / "no" / "dir.png")], 1, "dir.png"),

@@ -1,6 +1,7 @@
 /* The programs' shared plumbing (app.h). */
 #include "app.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -302,4 +303,73 @@ int app_composite(wxsky_gl_compositor *gl, const wxsky_frame_copy *copy, const w
         return st;
     }
     return WXSKY_OK;
+}
+
+/* The segment's name from `scene` into name (size bytes). */
+static int scene_shm_name(wxsky_client *c, int timeout_ms, char *name, size_t size, char *err) {
+    wxsky_message res;
+    wxsky_mp_reader r;
+    uint32_t n, len;
+    const char *s;
+    if (app_call(c, "scene", NULL, timeout_ms, &res, err) != WXSKY_OK)
+        return -1;
+    wxsky_mp_reader_init(&r, res.body, res.body_len);
+    if (wxsky_mp_read_map(&r, &n) != WXSKY_OK || wxsky_mp_find_key(&r, n, "shm_name") != WXSKY_OK ||
+        wxsky_mp_read_str(&r, &s, &len) != WXSKY_OK || len + 1 > size) {
+        snprintf(err, APP_ERR, "scene: no usable shm_name in the result");
+        return -1;
+    }
+    memcpy(name, s, len);
+    name[len] = '\0';
+    return 0;
+}
+
+int app_attach(wxsky_client *c, wxsky_segment *seg, wxsky_frame_copy *copy, const char *control,
+               const char *shm, int timeout_ms, char *err) {
+    char name[256];
+    int st;
+    if ((st = wxsky_client_connect(c, control)) != WXSKY_OK) {
+        snprintf(err, APP_ERR, "%s: %s", control ? control : "the default address",
+                 wxsky_client_error(c));
+        return -1;
+    }
+    if (!shm) {
+        if (scene_shm_name(c, timeout_ms, name, sizeof name, err) != 0)
+            return -1;
+        shm = name;
+    }
+    if (app_segment_open(seg, shm, timeout_ms, err) != WXSKY_OK)
+        return -1;
+    if (app_copy_alloc(seg, copy) != 0) {
+        snprintf(err, APP_ERR, "out of memory for the frame buffers");
+        return -1;
+    }
+    return 0;
+}
+
+int app_parse_size(const char *prog, const char *flag, const char *text, uint32_t max_px,
+                   uint32_t *width, uint32_t *height) {
+    unsigned w = 0, h = 0;
+    char x = 0, extra = 0;
+    if (sscanf(text, "%u%c%u%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') || w < 16 ||
+        h < 16 || w > max_px || h > max_px) {
+        fprintf(stderr, "%s: error: %s %s is not WxH with each 16..%u\n", prog, flag, text,
+                max_px);
+        return 0;
+    }
+    *width = w;
+    *height = h;
+    return 1;
+}
+
+int app_parse_number(const char *prog, const char *flag, const char *text, double lo, double hi,
+                     double *out) {
+    char *end;
+    errno = 0;
+    *out = strtod(text, &end);
+    if (errno || end == text || *end || !isfinite(*out) || *out < lo || *out > hi) {
+        fprintf(stderr, "%s: error: %s %s is not a number in %g..%g\n", prog, flag, text, lo, hi);
+        return 0;
+    }
+    return 1;
 }

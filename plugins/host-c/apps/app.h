@@ -37,6 +37,18 @@ void app_copy_free(wxsky_frame_copy *copy);
 /* Opens a segment, waiting up to timeout_ms while the daemon is still making it. */
 int app_segment_open(wxsky_segment *seg, const char *name, int timeout_ms, char *err);
 
+/* Connects c to the daemon at `control` (NULL: the default address, §2.1), opens its segment
+ * `shm` (NULL: the one `scene` names) and allocates copy for it. 0, or -1 with err. */
+int app_attach(wxsky_client *c, wxsky_segment *seg, wxsky_frame_copy *copy, const char *control,
+               const char *shm, int timeout_ms, char *err);
+
+/* Command-line values: "WxH" with each 16..max_px, and a finite number in lo..hi. 1 on
+ * success; 0 after printing "PROG: error: FLAG TEXT is not ..." on stderr. */
+int app_parse_size(const char *prog, const char *flag, const char *text, uint32_t max_px,
+                   uint32_t *width, uint32_t *height);
+int app_parse_number(const char *prog, const char *flag, const char *text, double lo, double hi,
+                     double *out);
+
 /* Milliseconds on the monotonic clock; a sleep. */
 double app_now_ms(void);
 void app_sleep_ms(double ms);

@@ -2,7 +2,7 @@
  * sending its camera to the daemon every frame and compositing wxsky's clouds in front of and
  * behind its terrain with the GL compositor; writes the frames as a PNG strip.
  *
- *   wxsky-host-demo --control ADDR [--shm NAME] --out STRIP.png [--frames N] [--size WxH]
+ *   wxsky-host-demo [--control ADDR] [--shm NAME] --out STRIP.png [--frames N] [--size WxH]
  *       [--time ISO8601] [--fov-deg D] [--debug-out DIR --debug-frame K] [--timeout-s S]
  *
  * The path takes off from the runway (3 km long, north-south through the observer) and climbs
@@ -39,7 +39,7 @@
 
 #define PROG "wxsky-host-demo"
 #define USAGE                                                                                  \
-    "usage: " PROG " --control ADDR [--shm NAME] --out STRIP.png [--frames N] [--size WxH] "   \
+    "usage: " PROG " [--control ADDR] [--shm NAME] --out STRIP.png [--frames N] [--size WxH] "   \
     "[--time ISO8601] [--fov-deg D] [--debug-out DIR --debug-frame K] [--timeout-s S] "         \
     "[--window [--path-s S] [--duration-s S]]"
 #define GAP_PX 4
@@ -101,33 +101,21 @@ static int parse(int argc, char **argv, args *a) {
                 a->debug_frame = (int)n;
         } else if (!strcmp(f, "--fov-deg") || !strcmp(f, "--timeout-s") ||
                    !strcmp(f, "--path-s") || !strcmp(f, "--duration-s")) {
-            double x = strtod(v, &end);
+            double x;
             int fov = !strcmp(f, "--fov-deg");
-            if (errno || *end || end == v || !isfinite(x) || x < (fov ? 1.0 : 0.1) ||
-                x > (fov ? 170.0 : 86400.0)) {
-                fprintf(stderr, "%s: error: %s %s is out of range\n", PROG, f, v);
+            if (!app_parse_number(PROG, f, v, fov ? 1.0 : 0.1, fov ? 170.0 : 86400.0, &x))
                 return 0;
-            }
             *(fov                          ? &a->fov_deg
               : !strcmp(f, "--timeout-s")  ? &a->timeout_s
               : !strcmp(f, "--path-s")     ? &a->path_s
                                            : &a->duration_s) = x;
         } else if (!strcmp(f, "--size")) {
-            unsigned w = 0, h = 0;
-            char x = 0, extra = 0;
-            if (sscanf(v, "%u%c%u%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') ||
-                w < 16 || h < 16 || w > 4096 || h > 4096) {
-                fprintf(stderr, "%s: error: --size %s is not WxH with each 16..4096\n", PROG, v);
+            if (!app_parse_size(PROG, f, v, 4096, &a->width, &a->height))
                 return 0;
-            }
-            a->width = w;
-            a->height = h;
         } else {
             return usage(f);
         }
     }
-    if (!a->control)
-        return usage("--control ADDR is required");
 #ifndef WXSKY_DEMO_GLFW
     if (a->window)
         return usage("--window: this build has no GLFW (pkg-config finds no glfw3)");
@@ -171,24 +159,6 @@ static int ground_alt(wxsky_client *c, int timeout_ms, double *alt_m, char *err)
         snprintf(err, APP_ERR, "status: no weather.observer.alt_m in the result");
         return -1;
     }
-    return 0;
-}
-
-static int shm_from_scene(wxsky_client *c, int timeout_ms, char *name, size_t size, char *err) {
-    wxsky_message res;
-    wxsky_mp_reader r;
-    uint32_t n, len;
-    const char *s;
-    if (app_call(c, "scene", NULL, timeout_ms, &res, err) != WXSKY_OK)
-        return -1;
-    wxsky_mp_reader_init(&r, res.body, res.body_len);
-    if (wxsky_mp_read_map(&r, &n) != WXSKY_OK || wxsky_mp_find_key(&r, n, "shm_name") != WXSKY_OK ||
-        wxsky_mp_read_str(&r, &s, &len) != WXSKY_OK || len + 1 > size) {
-        snprintf(err, APP_ERR, "scene: no usable shm_name in the result");
-        return -1;
-    }
-    memcpy(name, s, len);
-    name[len] = '\0';
     return 0;
 }
 
@@ -409,7 +379,7 @@ static int debug_pictures(const args *a, const app_gl *g, demo_terrain *t,
 
 int main(int argc, char **argv) {
     args a;
-    char err[APP_ERR] = "", shm_name[256];
+    char err[APP_ERR] = "";
     uint8_t params[256], *pixels = NULL, *strip = NULL;
     wxsky_mp_writer w;
     wxsky_message res;
@@ -449,21 +419,8 @@ int main(int argc, char **argv) {
         goto done;
     }
     memset(strip, 255, (size_t)strip_w * strip_h * 4);
-    if ((st = wxsky_client_connect(client, a.control)) != WXSKY_OK) {
-        snprintf(err, sizeof err, "%s: %s", a.control, wxsky_client_error(client));
+    if (app_attach(client, seg, &copy, a.control, a.shm, timeout_ms, err) != 0)
         goto done;
-    }
-    if (!a.shm) {
-        if (shm_from_scene(client, timeout_ms, shm_name, sizeof shm_name, err) != 0)
-            goto done;
-        a.shm = shm_name;
-    }
-    if (app_segment_open(seg, a.shm, timeout_ms, err) != WXSKY_OK)
-        goto done;
-    if (app_copy_alloc(seg, &copy) != 0) {
-        snprintf(err, sizeof err, "out of memory for the frame buffers");
-        goto done;
-    }
     if (a.time_utc) {
         wxsky_mp_writer_init(&w, params, sizeof params);
         wxsky_mp_write_map(&w, 1);

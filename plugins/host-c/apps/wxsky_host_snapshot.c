@@ -1,10 +1,10 @@
 /* wxsky-host-snapshot: a picture of a running daemon's sky, composited by the C host kit.
  *
- *   wxsky-host-snapshot --control ADDR [--shm NAME] [--time ISO8601] [--lat DEG --lon DEG]
+ *   wxsky-host-snapshot [--control ADDR] [--shm NAME] [--time ISO8601] [--lat DEG --lon DEG]
  *       [--alt-m M] [--heading-deg D] [--pitch-deg D] [--fov-deg D] [--size WxH]
  *       --out FILE.png [--timeout-s S]
  *
- * Connects to the daemon at ADDR (protocol §2.1), sets its clock (set_time) and camera
+ * Connects to the daemon at ADDR (protocol §2.1; default: the default address there), sets its clock (set_time) and camera
  * (set_camera) to what is given (anything not given stays as the daemon has it), waits for a
  * frame drawn for that camera once the ring has settled (§3.1), composites it on a headless
  * EGL context with the GL compositor and writes the PNG. --shm defaults to the segment the
@@ -13,7 +13,6 @@
  *
  * Prints "wrote FILE (WxH), frame N" on success; otherwise one line "wxsky-host-snapshot:
  * error: ..." and exits 1 (2: no headless GL context could be made; 64: bad arguments). */
-#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -32,25 +31,13 @@ typedef struct args {
 } args;
 
 #define USAGE                                                                              \
-    "usage: " PROG " --control ADDR [--shm NAME] [--time ISO8601] [--lat DEG --lon DEG] "  \
+    "usage: " PROG " [--control ADDR] [--shm NAME] [--time ISO8601] [--lat DEG --lon DEG] "  \
     "[--alt-m M] [--heading-deg D] [--pitch-deg D] [--fov-deg D] [--size WxH] "           \
     "--out FILE.png [--timeout-s S]"
 
 static int usage(const char *why) {
     fprintf(stderr, "%s: error: %s\n%s\n", PROG, why, USAGE);
     return 64;
-}
-
-static int number(const char *flag, const char *text, double lo, double hi, double *out) {
-    char *end;
-    errno = 0;
-    *out = strtod(text, &end);
-    if (errno || end == text || *end || !isfinite(*out) || *out < lo || *out > hi) {
-        fprintf(stderr, "%s: error: %s %s is not a number in %g..%g\n", PROG, flag, text, lo,
-                hi);
-        return 0;
-    }
-    return 1;
 }
 
 static int parse(int argc, char **argv, args *a) {
@@ -70,48 +57,39 @@ static int parse(int argc, char **argv, args *a) {
         else if (!strcmp(f, "--out"))
             a->out = v;
         else if (!strcmp(f, "--lat")) {
-            if (!number(f, v, -90, 90, &a->lat))
+            if (!app_parse_number(PROG, f, v, -90, 90, &a->lat))
                 return 0;
             a->has_lat = 1;
         } else if (!strcmp(f, "--lon")) {
-            if (!number(f, v, -180, 180, &a->lon))
+            if (!app_parse_number(PROG, f, v, -180, 180, &a->lon))
                 return 0;
             a->has_lon = 1;
         } else if (!strcmp(f, "--alt-m")) {
-            if (!number(f, v, -500, 100000, &a->alt_m))
+            if (!app_parse_number(PROG, f, v, -500, 100000, &a->alt_m))
                 return 0;
             a->has_alt = 1;
         } else if (!strcmp(f, "--heading-deg")) {
-            if (!number(f, v, -360, 360, &a->heading_deg))
+            if (!app_parse_number(PROG, f, v, -360, 360, &a->heading_deg))
                 return 0;
             a->has_heading = 1;
         } else if (!strcmp(f, "--pitch-deg")) {
-            if (!number(f, v, -90, 90, &a->pitch_deg))
+            if (!app_parse_number(PROG, f, v, -90, 90, &a->pitch_deg))
                 return 0;
             a->has_pitch = 1;
         } else if (!strcmp(f, "--fov-deg")) {
-            if (!number(f, v, 1, 170, &a->fov_deg))
+            if (!app_parse_number(PROG, f, v, 1, 170, &a->fov_deg))
                 return 0;
             a->has_fov = 1;
         } else if (!strcmp(f, "--timeout-s")) {
-            if (!number(f, v, 0.1, 3600, &a->timeout_s))
+            if (!app_parse_number(PROG, f, v, 0.1, 3600, &a->timeout_s))
                 return 0;
         } else if (!strcmp(f, "--size")) {
-            unsigned w = 0, h = 0;
-            char x = 0, extra = 0;
-            if (sscanf(v, "%u%c%u%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') ||
-                w < 16 || h < 16 || w > 8192 || h > 8192) {
-                fprintf(stderr, "%s: error: --size %s is not WxH with each 16..8192\n", PROG, v);
+            if (!app_parse_size(PROG, f, v, 8192, &a->width, &a->height))
                 return 0;
-            }
-            a->width = w;
-            a->height = h;
         } else {
             return usage(f), 0;
         }
     }
-    if (!a->control)
-        return usage("--control ADDR is required"), 0;
     if (!a->out)
         return usage("--out FILE.png is required"), 0;
     if (a->has_lat != a->has_lon)
@@ -154,25 +132,6 @@ static void camera_params(const args *a, wxsky_mp_writer *w) {
     }
 }
 
-/* The segment's name from `scene` into name (size bytes). */
-static int scene_shm_name(wxsky_client *c, int timeout_ms, char *name, size_t size, char *err) {
-    wxsky_message res;
-    wxsky_mp_reader r;
-    uint32_t n, len;
-    const char *s;
-    if (app_call(c, "scene", NULL, timeout_ms, &res, err) != WXSKY_OK)
-        return -1;
-    wxsky_mp_reader_init(&r, res.body, res.body_len);
-    if (wxsky_mp_read_map(&r, &n) != WXSKY_OK || wxsky_mp_find_key(&r, n, "shm_name") != WXSKY_OK ||
-        wxsky_mp_read_str(&r, &s, &len) != WXSKY_OK || len + 1 > size) {
-        snprintf(err, APP_ERR, "scene: no usable shm_name in the result");
-        return -1;
-    }
-    memcpy(name, s, len);
-    name[len] = '\0';
-    return 0;
-}
-
 /* The daemon's clock rate, from `status`. */
 static int clock_rate(wxsky_client *c, int timeout_ms, double *rate, char *err) {
     wxsky_message res;
@@ -202,7 +161,7 @@ static int restart_clock(wxsky_client *c, double rate, int timeout_ms, char *err
 
 int main(int argc, char **argv) {
     args a;
-    char err[APP_ERR] = "", shm_name[256];
+    char err[APP_ERR] = "";
     uint8_t params[512], *pixels = NULL;
     wxsky_mp_writer w;
     wxsky_message res;
@@ -236,21 +195,8 @@ int main(int argc, char **argv) {
         snprintf(err, sizeof err, "out of memory");
         goto done;
     }
-    if ((st = wxsky_client_connect(client, a.control)) != WXSKY_OK) {
-        snprintf(err, sizeof err, "%s: %s", a.control, wxsky_client_error(client));
+    if (app_attach(client, seg, &copy, a.control, a.shm, timeout_ms, err) != 0)
         goto done;
-    }
-    if (!a.shm) {
-        if (scene_shm_name(client, timeout_ms, shm_name, sizeof shm_name, err) != 0)
-            goto done;
-        a.shm = shm_name;
-    }
-    if (app_segment_open(seg, a.shm, timeout_ms, err) != WXSKY_OK)
-        goto done;
-    if (app_copy_alloc(seg, &copy) != 0) {
-        snprintf(err, sizeof err, "out of memory for the frame buffers");
-        goto done;
-    }
 
     if (a.time_utc) {
         /* The picture is of that very moment: the clock stands still there while the frame is
