@@ -73,12 +73,7 @@ void app_gl_close(app_gl *g) {
         glDeleteRenderbuffers(1, &g->color);
     if (g->depth)
         glDeleteRenderbuffers(1, &g->depth);
-    eglMakeCurrent(e->dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
-    if (e->surf != EGL_NO_SURFACE)
-        eglDestroySurface(e->dpy, e->surf);
-    eglDestroyContext(e->dpy, e->ctx);
-    eglTerminate(e->dpy);
-    eglReleaseThread();
+    close_context(e);
     free(e);
     memset(g, 0, sizeof *g);
 }

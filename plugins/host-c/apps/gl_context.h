@@ -104,4 +104,14 @@ static int make_context(egl_state *e) {
     return try_display(e, eglGetDisplay(EGL_DEFAULT_DISPLAY));
 }
 
+/* Releases what make_context made (the context current on this thread). */
+static void close_context(egl_state *e) {
+    eglMakeCurrent(e->dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+    if (e->surf != EGL_NO_SURFACE)
+        eglDestroySurface(e->dpy, e->surf);
+    eglDestroyContext(e->dpy, e->ctx);
+    eglTerminate(e->dpy);
+    eglReleaseThread();
+}
+
 #endif

@@ -227,12 +227,7 @@ done:
             glDeleteFramebuffers(1, &fbo);
         if (rb[0])
             glDeleteRenderbuffers(2, rb);
-        eglMakeCurrent(e.dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
-        if (e.surf != EGL_NO_SURFACE)
-            eglDestroySurface(e.dpy, e.surf);
-        eglDestroyContext(e.dpy, e.ctx);
-        eglTerminate(e.dpy);
-        eglReleaseThread();
+        close_context(&e);
     }
     wxsky_gl_free(gl);
     free(pixels);

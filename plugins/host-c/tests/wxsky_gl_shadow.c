@@ -401,12 +401,7 @@ done:
     if (e.ctx) {
         wxsky_gl_free(gl);
         gl = NULL;
-        eglMakeCurrent(e.dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
-        if (e.surf != EGL_NO_SURFACE)
-            eglDestroySurface(e.dpy, e.surf);
-        eglDestroyContext(e.dpy, e.ctx);
-        eglTerminate(e.dpy);
-        eglReleaseThread();
+        close_context(&e);
     }
     wxsky_gl_free(gl);
     for (int i = 0; i < WXSKY_MAX_LAYERS; ++i)
