@@ -45,6 +45,10 @@ def _moments(preset: str) -> dict[str, tuple[datetime, float]]:
 
 # up into the clouds, and down below the horizon (the ground colour and the cloud bases)
 VIEWS = {"up": 20.0, "below": -6.0}
+# At noon also from 3.3 km north and 1.5 km east of the site, by --lat/--lon: the daemon's
+# set_camera and the one-shot path place that camera alike, under the same sky.
+MOVED_DEG = (0.03, 0.02)
+MOVED_PITCH_DEG = 12.0
 
 
 @pytest.fixture(scope="module", params=PRESETS)
@@ -56,8 +60,12 @@ def daemon(
         yield preset, d
 
 
-def _args(when: datetime, heading_deg: float, pitch_deg: float) -> list[str]:
+def _args(
+    when: datetime, heading_deg: float, pitch_deg: float, at_deg: tuple[float, float] | None = None
+) -> list[str]:
+    where = [] if at_deg is None else ["--lat", f"{at_deg[0]:.6f}", "--lon", f"{at_deg[1]:.6f}"]
     return [
+        *where,
         "--time",
         when.strftime("%Y-%m-%dT%H:%M:%SZ"),
         "--alt-m",
@@ -88,8 +96,17 @@ def test_the_c_hosts_snapshot_is_the_one_shot_snapshot(
     tool = gl_program(host_kit, TOOL)
     when, heading_deg = _moments(preset)[moment]
     pictures: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for view, pitch_deg in VIEWS.items():
-        args = _args(when, heading_deg, pitch_deg)
+    views: dict[str, tuple[float, tuple[float, float] | None]] = {
+        view: (pitch_deg, None) for view, pitch_deg in VIEWS.items()
+    }
+    if moment == "noon":
+        site = WeatherState().apply(load_preset(preset)).observer
+        views["moved"] = (
+            MOVED_PITCH_DEG,
+            (site.lat_deg + MOVED_DEG[0], site.lon_deg + MOVED_DEG[1]),
+        )
+    for view, (pitch_deg, at_deg) in views.items():
+        args = _args(when, heading_deg, pitch_deg, at_deg)
         c_png, py_png = tmp_path / f"c-{view}.png", tmp_path / f"py-{view}.png"
         proc = subprocess.run(
             [str(tool), "--control", d.address, "--shm", d.shm_name, *args, "--out", str(c_png)],
