@@ -96,11 +96,13 @@ def test_the_c_hosts_snapshot_is_the_one_shot_snapshot(
     tool = gl_program(host_kit, TOOL)
     when, heading_deg = _moments(preset)[moment]
     pictures: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    # Every camera placed by --lat/--lon: without them the tool keeps the daemon's camera
+    # where the last one left it, and `wxsky snapshot` puts it over the site.
+    site = WeatherState().apply(load_preset(preset)).observer
     views: dict[str, tuple[float, tuple[float, float] | None]] = {
-        view: (pitch_deg, None) for view, pitch_deg in VIEWS.items()
+        view: (pitch_deg, (site.lat_deg, site.lon_deg)) for view, pitch_deg in VIEWS.items()
     }
     if moment == "noon":
-        site = WeatherState().apply(load_preset(preset)).observer
         views["moved"] = (
             MOVED_PITCH_DEG,
             (site.lat_deg + MOVED_DEG[0], site.lon_deg + MOVED_DEG[1]),
