@@ -131,6 +131,21 @@ def test_save_refuses_to_overwrite_without_force(
     assert (info.description, patch.layers, patch.qnh_hpa) == ("Hot", (), 1020.0)
 
 
+@pytest.mark.parametrize(("length", "saved"), [(64, True), (65, False), (300, False)])
+def test_a_preset_name_is_at_most_64_characters(
+    capsys: pytest.CaptureFixture[str], user_dir: Path, length: int, saved: bool
+) -> None:
+    # 300 characters used to reach the file system ("File name too long" from the write).
+    name = "a" * length
+    if saved:
+        assert wxsky(capsys, "preset", "save", name, "--from-metar", METAR)[0] == 0
+        assert (user_dir / f"{name}.toml").is_file()
+        return
+    error = one_line_error(capsys, "preset", "save", name, "--from-metar", METAR)
+    assert "1 to 64 lowercase letters" in error and len(error) < 160, error
+    assert not user_dir.exists() or not list(user_dir.iterdir())
+
+
 def test_save_over_a_builtin_name_says_it_overrides(
     capsys: pytest.CaptureFixture[str], user_dir: Path
 ) -> None:

@@ -198,7 +198,7 @@ def test_wrong_type(tmp_path: Path) -> None:
         ('[daemon]\nlog_level = "LOUD"\n', "daemon.log_level: must be one of DEBUG, INFO"),
         (
             "[daemon]\npreset = 3\n",
-            "daemon.preset: must be lowercase letters, digits and '-', got 3",
+            "daemon.preset: must be 1 to 64 lowercase letters, digits and '-', got 3",
         ),
         ('[presets]\ndirs = "x"\n', "presets.dirs: must be a list"),
         ("[presets]\ndirs = [1]\n", "presets.dirs: must be a list"),
@@ -226,7 +226,7 @@ def test_wrong_types(tmp_path: Path, text: str, fragment: str) -> None:
         ("[camera]\npitch_deg = -91\n", "camera.pitch_deg"),
         ("[clock]\nrate = -1\n", "clock.rate: must be a number in 0..10000, got -1"),
         ("[output]\nmax_width = 8\n", "output.max_width: must be an integer in 16..8192"),
-        ('[daemon]\npreset = "../etc"\n', "daemon.preset: must be lowercase letters"),
+        ('[daemon]\npreset = "../etc"\n', "daemon.preset: must be 1 to 64 lowercase letters"),
         ('[output]\nshm_name = "a/b"\n', "output.shm_name: must be"),
         ("[camera]\nwidth = 2000\n", "camera.width: 2000 exceeds output.max_width 1920"),
         ('[[serial]]\nurl = "x"\nbaud = 10\n', "serial[0].baud: must be an integer in 50..4000000"),

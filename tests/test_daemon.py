@@ -122,6 +122,15 @@ def test_bad_control_input_is_answered_and_the_daemon_keeps_publishing(tmp_path:
             c.call("set_camera", {"fov_deg": 500})
         with pytest.raises(RemoteError, match="set_time"):
             c.call("set_time", {"time_utc": "yesterday"})
+        # Positions beyond the flat local frame, and params a command does not take.
+        with pytest.raises(RemoteError, match=r"set_camera: position_m.*-1000000"):
+            c.call("set_camera", {"position_m": [1e308, 0.0, 500.0]})
+        with pytest.raises(RemoteError, match=r"set_camera: position_m"):
+            c.call("set_camera", {"position_m": [0.0, 0.0, 2e5]})
+        for command in ("status", "scene", "export_textures"):
+            with pytest.raises(RemoteError, match=rf"{command}: verbose: unknown key"):
+                c.call(command, {"verbose": True})
+        assert c.call("scene")["camera"]["position_m"][0] != 1e308
         # Raw garbage on a second connection: answered, that connection closed, others fine.
         with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as raw:
             raw.connect(str(d.socket_path))

@@ -352,7 +352,7 @@ def test_a_daemon_without_exports_says_why_and_the_c_host_falls_back(
         assert msg[2] is None
         assert msg[3] == {"supported": False, "reason": probed["reason"], "fallback": "shm"}
         assert "EGL_MESA_image_dma_buf_export" in msg[3]["reason"]
-        assert bad[2] == "export_textures: takes no params (got slots)"
+        assert bad[2] == "export_textures: slots: unknown key"
         with d.client() as c:
             assert c.call("status")["zero_copy"] == {
                 "supported": False,

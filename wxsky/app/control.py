@@ -16,7 +16,6 @@ from wxsky.schema import (
     Custom,
     Field,
     Invalid,
-    Items,
     Nullable,
     Number,
     Table,
@@ -34,21 +33,18 @@ class ControlError(ProtocolError):
 # Each command's params, checked by the same kinds as the config and the weather state; the
 # camera's width and height are further capped by the output frame (`camera_from_params`).
 _ANY = Number()
-_POSITION = Items(_ANY, length=3, what="[east_m, north_m, alt_m]")
-_AIRCRAFT_EN = Number(-1e6, 1e6, unit="m")  # within 1000 km of the observer
-SET_AIRCRAFT = Table(
-    {
-        "position_m": Field(
-            Nullable(
-                Tuple(
-                    (_AIRCRAFT_EN, _AIRCRAFT_EN, Number(-1000.0, 100_000.0, unit="m")),
-                    "[east_m, north_m, alt_m]",
-                )
-            ),
-            REQUIRED,
-        )
-    }
-)
+# A camera or aircraft position: within 1000 km of the observer (the flat local frame is no
+# good beyond), from below the Dead Sea shore to the edge of space.
+_EN_M = Number(-1e6, 1e6, unit="m")
+_POSITION = Tuple((_EN_M, _EN_M, Number(-1000.0, 100_000.0, unit="m")), "[east_m, north_m, alt_m]")
+SET_AIRCRAFT = Table({"position_m": Field(Nullable(_POSITION), REQUIRED)})
+# Commands that take no params still refuse any they are given (§5: unknown params are errors).
+NO_PARAMS = Table({})
+
+
+def no_params(command: str, params: dict[str, Any]) -> dict[str, Any]:
+    """{} for no params; ControlError naming each one given."""
+    return checked_params(command, NO_PARAMS, params)
 
 
 def _iso_time(value: Any) -> Any:

@@ -24,12 +24,12 @@ from typing import Any
 
 from wxsky import __version__
 from wxsky.app.control import (
-    ControlError,
     apply_metar,
     apply_preset,
     camera_from_params,
     camera_to_dict,
     dispatch_table,
+    no_params,
     release,
     set_aircraft,
     set_time,
@@ -175,8 +175,8 @@ class Daemon:
         self._preview_task: asyncio.Future[None] | None = None
         self._dispatch = dispatch_table(
             {
-                "status": lambda p: self.status(),
-                "scene": lambda p: self.scene_info(),
+                "status": lambda p: no_params("status", p) or self.status(),
+                "scene": lambda p: no_params("scene", p) or self.scene_info(),
                 "set_camera": self._set_camera,
                 "set_aircraft": lambda p: set_aircraft(self.engine, p),
                 "set_time": lambda p: set_time(self.engine, p),
@@ -386,10 +386,7 @@ class Daemon:
     async def _export_textures(self, params: dict[str, Any]) -> Any:
         """`export_textures` (protocol §6): the layer textures of both segment slots as
         dma-bufs, the fds sent with the answer, or why not (the host then uses the segment)."""
-        if params:
-            raise ControlError(
-                f"export_textures: takes no params (got {', '.join(sorted(params))})"
-            )
+        no_params("export_textures", params)
         probe = self._export_probe
         reason = self._export_failed or (probe.reason if probe is not None else "no renderer yet")
         if reason is not None:

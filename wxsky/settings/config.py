@@ -46,8 +46,11 @@ from wxsky.weather.cockpit import ALL_GROUPS
 from wxsky.weather.transition import TransitionRates
 
 # Shared with wxsky.settings.presets; it lives here because presets import this module.
-PRESET_NAME_PATTERN = r"[a-z0-9-]+"
-PRESET_NAME = Text(pattern=PRESET_NAME_PATTERN, pattern_desc="lowercase letters, digits and '-'")
+# At most 64 characters: a name is a file name (and a longer one is no name a person types).
+PRESET_NAME_PATTERN = r"[a-z0-9-]{1,64}"
+PRESET_NAME = Text(
+    pattern=PRESET_NAME_PATTERN, pattern_desc="1 to 64 lowercase letters, digits and '-'"
+)
 
 # How many nearby METAR stations may be blended (also the bound of `metar fetch --blend`).
 BLEND_STATIONS = Number(1, 10, integer=True)

@@ -199,8 +199,9 @@ def write_user_preset(name: str, text: str, force: bool = False) -> Path:
 
 def _check_name(name: str) -> None:
     if not isinstance(name, str) or not re.fullmatch(PRESET_NAME_PATTERN, name):
+        shown = name if not isinstance(name, str) or len(name) <= 40 else name[:40] + "…"
         raise PresetError(
-            f"invalid preset name {name!r}: names are lowercase letters, digits and '-'"
+            f"invalid preset name {shown!r}: names are 1 to 64 lowercase letters, digits and '-'"
         )
 
 
