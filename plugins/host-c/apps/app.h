@@ -49,6 +49,10 @@ int app_parse_size(const char *prog, const char *flag, const char *text, uint32_
 int app_parse_number(const char *prog, const char *flag, const char *text, double lo, double hi,
                      double *out);
 
+/* One line of timing figures for the benchmarks: {"n", "median_ms", "p95_ms" (nearest rank),
+ * "mean_ms", "max_ms"} on stdout, no newline; sorts v (n >= 1). */
+void app_print_stats(double *v, int n);
+
 /* Milliseconds on the monotonic clock; a sleep. */
 double app_now_ms(void);
 void app_sleep_ms(double ms);

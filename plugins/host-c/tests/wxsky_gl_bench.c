@@ -40,48 +40,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "app.h"
 #include "gl_context.h"
-
-static double now_ms(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static void sleep_ms(double ms) {
-    struct timespec ts;
-    ts.tv_sec = (time_t)(ms / 1e3);
-    ts.tv_nsec = (long)((ms - (double)ts.tv_sec * 1e3) * 1e6);
-    nanosleep(&ts, NULL);
-}
-
-static int cmp_double(const void *a, const void *b) {
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-/* {"n":..,"median_ms":..,"p95_ms":..,"mean_ms":..,"max_ms":..}; sorts v */
-static void print_stats(double *v, int n) {
-    double sum = 0.0, median, p95;
-    int k;
-    qsort(v, (size_t)n, sizeof *v, cmp_double);
-    for (int i = 0; i < n; ++i)
-        sum += v[i];
-    median = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-    k = (int)ceil(0.95 * n) - 1; /* nearest rank */
-    p95 = v[k < 0 ? 0 : k];
-    printf("{\"n\":%d,\"median_ms\":%.4f,\"p95_ms\":%.4f,\"mean_ms\":%.4f,\"max_ms\":%.4f}", n,
-           median, p95, sum / n, v[n - 1]);
-}
-
-static int same_camera(const wxsky_record *r, const wxsky_camera *c) {
-    for (int k = 0; k < 3; ++k)
-        if (fabs(r->position_m[k] - c->position_m[k]) > 1e-6)
-            return 0;
-    return fabs(r->heading_deg - c->heading_deg) < 1e-9 &&
-           fabs(r->pitch_deg - c->pitch_deg) < 1e-9 && fabs(r->roll_deg - c->roll_deg) < 1e-9 &&
-           fabs(r->fov_deg - c->fov_deg) < 1e-9;
-}
 
 typedef struct bench {
     wxsky_segment *seg;
@@ -123,7 +83,7 @@ static int upload(bench *b, int which) {
 
 /* *background_ms (may be NULL): the clear and draw_background alone (a glFinish after it) */
 static int composite(bench *b, int which, double *background_ms) {
-    double view[16], proj[16], t0 = now_ms();
+    double view[16], proj[16], t0 = app_now_ms();
     int st;
     wxsky_gl_camera_matrices(&b->rec, 1, view, proj);
     glDepthMask(GL_TRUE);
@@ -132,7 +92,7 @@ static int composite(bench *b, int which, double *background_ms) {
     glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
     if ((st = wxsky_gl_draw_background(b->gl[which], view, proj)) == WXSKY_OK && background_ms) {
         glFinish();
-        *background_ms = now_ms() - t0;
+        *background_ms = app_now_ms() - t0;
     }
     if (st != WXSKY_OK || (st = wxsky_gl_draw_near(b->gl[which])) != WXSKY_OK ||
         (st = wxsky_gl_draw_near_front(b->gl[which])) != WXSKY_OK) {
@@ -150,6 +110,7 @@ static const char *const STAGE_NAMES[S_COUNT] = {
     "background_plain"};
 
 int main(int argc, char **argv) {
+    char why[APP_ERR];
     const char *name, *control = NULL;
     int frames = 20, warmup = 2, latency_n = 0, st, code = 1, ring_uploads = 0, matched = 0;
     double *samples[S_COUNT] = {NULL}, *lat = NULL, *lat_wait = NULL, *waited = NULL;
@@ -193,28 +154,16 @@ int main(int argc, char **argv) {
         printf("error alloc: out of memory\n");
         goto done;
     }
-    for (int tries = 0; (st = wxsky_segment_open(b.seg, name)) == WXSKY_STARTING && tries < 200;
-         ++tries)
-        sleep_ms(5.0);
-    if (st != WXSKY_OK) {
-        printf("error open %s: %s\n", wxsky_status_name(st), wxsky_segment_error(b.seg));
+    if ((st = app_segment_open(b.seg, name, 1000, why)) != WXSKY_OK) {
+        printf("error open %s\n", why);
         goto done;
     }
-    for (uint32_t i = 0; i < wxsky_segment_layer_count(b.seg); ++i) {
-        wxsky_layer_info info;
-        wxsky_segment_layer(b.seg, i, &info);
-        b.copy.pixels[i] = malloc(info.capacity ? info.capacity : 1);
-        b.copy.pixels_size[i] = info.capacity;
-        if (!b.copy.pixels[i]) {
-            printf("error alloc: layer %u\n", i);
-            goto done;
-        }
-        memset(b.copy.pixels[i], 0, info.capacity); /* touch the pages before timing */
-    }
-    b.copy.meta_size = wxsky_segment_meta_capacity(b.seg);
-    b.copy.meta = malloc(b.copy.meta_size ? b.copy.meta_size : 1);
-    if (!b.copy.meta)
+    if (app_copy_alloc(b.seg, &b.copy) != 0) {
+        printf("error alloc: frame buffers\n");
         goto done;
+    }
+    for (uint32_t i = 0; i < wxsky_segment_layer_count(b.seg); ++i) /* touch the pages before timing */
+        memset(b.copy.pixels[i], 0, b.copy.pixels_size[i]);
     /* the framebuffer takes the first frame's size; every frame timed must have it */
     {
         char err[WXSKY_ERROR_MAX];
@@ -266,27 +215,27 @@ int main(int argc, char **argv) {
     for (int i = -warmup; i < frames; ++i) {
         double t0, t1, t2, t3, t4, t5, t6, bg = 0.0;
         glFinish();
-        t0 = now_ms();
+        t0 = app_now_ms();
         if (!read_frame(&b))
             goto done;
-        t1 = now_ms();
+        t1 = app_now_ms();
         if (!upload(&b, 0))
             goto done;
-        t2 = now_ms();
+        t2 = app_now_ms();
         if (!composite(&b, 0, &bg))
             goto done;
-        t3 = now_ms();
+        t3 = app_now_ms();
         if (!upload(&b, 1))
             goto done;
-        t4 = now_ms();
+        t4 = app_now_ms();
         if (!composite(&b, 1, NULL))
             goto done;
-        t5 = now_ms();
+        t5 = app_now_ms();
         /* once more with every ring layer, as after a ring rebuild (ring_version changed) */
         wxsky_gl_invalidate(b.gl[0]);
         if (!upload(&b, 0))
             goto done;
-        t6 = now_ms();
+        t6 = app_now_ms();
         if (i >= 0) {
             samples[S_READ][i] = t1 - t0;
             samples[S_UP0][i] = t2 - t1;
@@ -328,7 +277,7 @@ int main(int argc, char **argv) {
         cam.pitch_deg = b.rec.pitch_deg;
         cam.roll_deg = b.rec.roll_deg;
         cam.fov_deg = b.rec.fov_deg;
-        t0 = now_ms();
+        t0 = app_now_ms();
         deadline = t0 + 30000.0;
         if ((st = wxsky_set_camera(client, &cam, NULL)) != WXSKY_OK) {
             printf("error set_camera %s: %s\n", wxsky_status_name(st),
@@ -354,16 +303,16 @@ int main(int argc, char **argv) {
                 char err[WXSKY_ERROR_MAX];
                 if (wxsky_frame_begin(b.seg, &fv) == WXSKY_OK) {
                     int ok = wxsky_record_decode(fv.meta, fv.meta_length, &r, err, sizeof err) ==
-                                 WXSKY_OK && same_camera(&r, &cam);
+                                 WXSKY_OK && app_same_camera(&r, &cam);
                     if (wxsky_frame_end(b.seg, &fv) == WXSKY_OK) {
                         seen = fv.frame_number;
                         if (ok) {
-                            lat_wait[i] = now_ms() - t0;
-                            if (!read_frame(&b) || !same_camera(&b.rec, &cam))
+                            lat_wait[i] = app_now_ms() - t0;
+                            if (!read_frame(&b) || !app_same_camera(&b.rec, &cam))
                                 goto done;
                             if (!upload(&b, 0) || !composite(&b, 0, NULL))
                                 goto done;
-                            lat[i] = now_ms() - t0;
+                            lat[i] = app_now_ms() - t0;
                             waited[i] = (double)(b.copy.frame_number - first);
                             got = 1;
                             ++matched;
@@ -372,11 +321,11 @@ int main(int argc, char **argv) {
                 }
             }
             if (!got) {
-                if (now_ms() > deadline) {
+                if (app_now_ms() > deadline) {
                     printf("error latency: no frame for the camera sent within 30 s\n");
                     goto done;
                 }
-                sleep_ms(0.2);
+                app_sleep_ms(0.2);
             }
         }
     }
@@ -386,7 +335,7 @@ int main(int argc, char **argv) {
            (const char *)glGetString(GL_RENDERER), b.w, b.h, frames, ring_uploads);
     for (int s = 0; s < S_COUNT; ++s) {
         printf("%s\"%s\":", s ? "," : "", STAGE_NAMES[s]);
-        print_stats(samples[s], frames);
+        app_print_stats(samples[s], frames);
     }
     printf("}");
     if (latency_n > 0) {
@@ -394,9 +343,9 @@ int main(int argc, char **argv) {
         for (int i = 0; i < latency_n; ++i)
             wsum += waited[i];
         printf(",\"latency\":");
-        print_stats(lat, latency_n);
+        app_print_stats(lat, latency_n);
         printf(",\"latency_wait\":");
-        print_stats(lat_wait, latency_n);
+        app_print_stats(lat_wait, latency_n);
         printf(",\"latency_camera_matched\":%s,\"latency_frames_waited_mean\":%.3f",
                matched == latency_n ? "true" : "false", wsum / latency_n);
     }

@@ -21,6 +21,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "app.h"
 #include "gl_context.h"
 
 #ifdef WXSKY_GL_ES
@@ -305,6 +306,7 @@ done:
 }
 
 int main(int argc, char **argv) {
+    char why[APP_ERR];
     const char *name, *out_path, *points = NULL;
     double ground_m = NAN, ambient = 0.35;
     float rgb[3] = {0.30f, 0.38f, 0.20f};
@@ -344,27 +346,14 @@ int main(int argc, char **argv) {
     gl = wxsky_gl_new();
     if (!seg || !gl)
         return die(1, "alloc", "out of memory");
-    for (int tries = 0; (st = wxsky_segment_open(seg, name)) == WXSKY_STARTING && tries < 200;
-         ++tries) {
-        struct timespec ts = {0, 5000000};
-        nanosleep(&ts, NULL);
-    }
-    if (st != WXSKY_OK) {
-        printf("error open %s: %s\n", wxsky_status_name(st), wxsky_segment_error(seg));
+    if ((st = app_segment_open(seg, name, 1000, why)) != WXSKY_OK) {
+        printf("error open %s\n", why);
         goto done;
     }
-    for (uint32_t i = 0; i < wxsky_segment_layer_count(seg); ++i) {
-        wxsky_layer_info info;
-        wxsky_segment_layer(seg, i, &info);
-        copy.pixels[i] = malloc(info.capacity ? info.capacity : 1);
-        copy.pixels_size[i] = info.capacity;
-        if (!copy.pixels[i])
-            goto done;
-    }
-    copy.meta_size = wxsky_segment_meta_capacity(seg);
-    copy.meta = malloc(copy.meta_size ? copy.meta_size : 1);
-    if (!copy.meta)
+    if (app_copy_alloc(seg, &copy) != 0) {
+        printf("error alloc: frame buffers\n");
         goto done;
+    }
     if ((st = wxsky_frame_read(seg, &copy, 2000)) != WXSKY_OK) {
         printf("error read %s: %s\n", wxsky_status_name(st), wxsky_segment_error(seg));
         goto done;

@@ -23,30 +23,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "app.h"
 #include "gl_context.h"
-
-static double now_ms(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b) {
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static void print_stats(double *v, int n) {
-    double sum = 0.0;
-    int k;
-    qsort(v, (size_t)n, sizeof *v, cmp_double);
-    for (int i = 0; i < n; ++i)
-        sum += v[i];
-    k = (int)ceil(0.95 * n) - 1;
-    printf("{\"n\":%d,\"median_ms\":%.4f,\"p95_ms\":%.4f,\"mean_ms\":%.4f,\"max_ms\":%.4f}", n,
-           n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]), v[k < 0 ? 0 : k], sum / n,
-           v[n - 1]);
-}
 
 /* One frame into the compositor: zero-copy or from the view, retried while torn. */
 static int take_frame(wxsky_segment *seg, wxsky_gl_compositor *gl, int zero_copy,
@@ -97,19 +75,19 @@ static int bench(wxsky_segment *seg, wxsky_gl_compositor *gl, int zero_copy, int
     }
     memset(&rec, 0, sizeof rec);
     for (int i = -2; i < frames && st == WXSKY_OK; ++i) {
-        double t0 = now_ms();
+        double t0 = app_now_ms();
         wxsky_gl_invalidate(gl); /* every layer, the ring's too: the full cost of a frame */
         st = take_frame(seg, gl, 0, &rec, &frame);
         glFinish();
         if (i >= 0)
-            shm[i] = now_ms() - t0;
+            shm[i] = app_now_ms() - t0;
         if (st == WXSKY_OK && zero_copy) {
-            t0 = now_ms();
+            t0 = app_now_ms();
             wxsky_gl_invalidate(gl);
             st = take_frame(seg, gl, 1, &rec, &frame);
             glFinish();
             if (i >= 0)
-                zc[i] = now_ms() - t0;
+                zc[i] = app_now_ms() - t0;
         }
     }
     if (st == WXSKY_OK) {
@@ -120,10 +98,10 @@ static int bench(wxsky_segment *seg, wxsky_gl_compositor *gl, int zero_copy, int
         printf("\",\"renderer\":\"%s\",\"width\":%u,\"height\":%u,\"stages\":{"
                "\"shm_view_upload\":",
                (const char *)glGetString(GL_RENDERER), rec.width_px, rec.height_px);
-        print_stats(shm, frames);
+        app_print_stats(shm, frames);
         if (zero_copy) {
             printf(",\"zero_copy_import\":");
-            print_stats(zc, frames);
+            app_print_stats(zc, frames);
         }
         printf("}}\n");
     }
@@ -133,6 +111,7 @@ static int bench(wxsky_segment *seg, wxsky_gl_compositor *gl, int zero_copy, int
 }
 
 int main(int argc, char **argv) {
+    char open_err[APP_ERR];
     const char *address, *name, *out_path = NULL;
     int require = 0, wait_stdin = 0, frames = 0, st, code = 1, zero_copy = 0;
     wxsky_client *client = NULL;
@@ -204,13 +183,8 @@ int main(int argc, char **argv) {
     }
 
     /* 2. the segment and the GL context */
-    for (int tries = 0; (st = wxsky_segment_open(seg, name)) == WXSKY_STARTING && tries < 200;
-         ++tries) {
-        struct timespec ts = {0, 5000000};
-        nanosleep(&ts, NULL);
-    }
-    if (st != WXSKY_OK) {
-        printf("error open %s: %s\n", wxsky_status_name(st), wxsky_segment_error(seg));
+    if ((st = app_segment_open(seg, name, 1000, open_err)) != WXSKY_OK) {
+        printf("error open %s\n", open_err);
         goto done;
     }
     if (!make_context(&e)) {
