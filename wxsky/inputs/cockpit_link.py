@@ -18,7 +18,8 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
-from wxsky.inputs.stats import InputStats, RateLimitedLog
+from wxsky.inputs.stats import InputStats
+from wxsky.logs import RateLimitedLog
 from wxsky.protocols.result import Decoded
 from wxsky.weather.cockpit import ALL_GROUPS, CockpitUpdate
 

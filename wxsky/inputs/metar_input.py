@@ -30,7 +30,8 @@ from typing import TYPE_CHECKING
 from wxsky.errors import FeedError
 from wxsky.inputs.feed_sources import FeedSource, Fetched, StreamSource
 from wxsky.inputs.station_table import StationPosition, station_table
-from wxsky.inputs.stats import InputStats, RateLimitedLog
+from wxsky.inputs.stats import InputStats
+from wxsky.logs import RateLimitedLog
 from wxsky.weather.feeds import Feed, parse_feed
 from wxsky.weather.metar import MetarInternalError, decode
 from wxsky.weather.metar_clouds import metar_to_patch

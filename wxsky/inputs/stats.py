@@ -1,8 +1,7 @@
-"""What every input reports in `wxsky status`, and rate-limited warnings for bad input."""
+"""What every input reports in `wxsky status`."""
 
 from __future__ import annotations
 
-import logging
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -41,25 +40,3 @@ class InputStats:
             "last_message_s": since,
             **self.detail,
         }
-
-
-class RateLimitedLog:
-    """Logs each kind of warning at most once per interval, then says how many it held back,
-    so a feed full of junk rows cannot flood the log."""
-
-    def __init__(self, logger: logging.Logger, interval_s: float = 60.0) -> None:
-        self._log = logger
-        self._interval_s = interval_s
-        self._last: dict[str, float] = {}
-        self._held: dict[str, int] = {}
-
-    def warning(self, kind: str, message: str) -> None:
-        now = time.monotonic()
-        last = self._last.get(kind)
-        if last is not None and now - last < self._interval_s:
-            self._held[kind] = self._held.get(kind, 0) + 1
-            return
-        held = self._held.pop(kind, 0)
-        suffix = f" (and {held} more like it since the last report)" if held else ""
-        self._last[kind] = now
-        self._log.warning("%s%s", message, suffix)
