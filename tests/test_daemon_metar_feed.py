@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 from daemon_harness import RunningDaemon, running_daemon
+from metar_helpers import gzip_bomb
 
 # Every test runs a daemon, which draws every frame.
 pytestmark = pytest.mark.gl
@@ -156,4 +157,47 @@ def test_stale_and_broken_feeds_keep_the_last_weather(tmp_path: Path) -> None:
         )
         assert not _metar_input(status)["ok"]
         assert status["target"]["layers"] == good["target"]["layers"]
+    assert "Traceback" not in daemon.log()
+
+
+def _write_bytes(path: Path, data: bytes) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def test_bombed_and_half_written_feeds_fail_until_fixed(tmp_path: Path) -> None:
+    feed = tmp_path / "metar.txt"
+    _write(feed, _report("SCT040"))
+    with running_daemon(
+        tmp_path, CONFIG, args=("--metar-feed", str(feed), "--preset", "clear")
+    ) as daemon:
+        good = _wait(daemon, lambda s: s["target"]["sources"]["layers"] == "metar", "report")
+        bad: list[dict[str, Any]] = []  # every status seen once the bad file was read
+
+        def after_three_more_polls(check: Callable[[dict[str, Any]], bool], what: str) -> None:
+            first = _wait(daemon, check, what)
+            bad.append(first)
+            polls = _metar_input(first)["fetches"]
+            _wait(
+                daemon,
+                lambda s: bad.append(s) is None and _metar_input(s)["fetches"] >= polls + 3,
+                "three more polls",
+            )
+
+        # 300 kB of gzip that unpacks to 64 MiB, twice the limit.
+        _write_bytes(feed, gzip_bomb(64 * 1024 * 1024))
+        after_three_more_polls(lambda s: _metar_input(s)["oversize"] == 1, "the refusal")
+        assert "byte limit" in _metar_input(bad[-1])["last_error"]
+        assert _metar_input(bad[-1])["oversize"] == 1  # refused once, not unpacked again
+        # Caught half-written: the station and time, nothing more.
+        _write(feed, _report("")[: len("LSZH 011731Z")] + "\n")
+        after_three_more_polls(
+            lambda s: "nothing after the time group" in _metar_input(s)["last_error"], "the cut"
+        )
+        assert [s for s in bad if _metar_input(s)["ok"]] == []
+        assert all(s["target"]["layers"] == good["target"]["layers"] for s in bad)
+        _write(feed, _report("BKN040 OVC080"))
+        fixed = _wait(daemon, lambda s: len(s["target"]["layers"]) == 2, "the good report")
+        assert _metar_input(fixed)["ok"] and _metar_input(fixed)["state"] == "running"
     assert "Traceback" not in daemon.log()

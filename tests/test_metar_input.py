@@ -2,21 +2,27 @@
 
 from __future__ import annotations
 
+import asyncio
+import gzip
 import json
 import logging
+import os
+import time
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import pytest
+from metar_helpers import gzip_bomb
 
 from wxsky.cli import main
-from wxsky.inputs.feed_sources import Fetched
+from wxsky.inputs.feed_sources import MAX_FEED_BYTES, SETTLE_S, Fetched, FileSource
 from wxsky.inputs.metar_input import Ingested, MetarFeedInput, MetarSettings, ingest, select
 from wxsky.inputs.station_table import StationPosition, station_table
 from wxsky.inputs.stats import InputStats
 from wxsky.weather import metar as metar_module
 from wxsky.weather.feeds import parse_feed, read_feed
-from wxsky.weather.state import CloudType
+from wxsky.weather.state import CloudType, WeatherPatch
 
 DATA = Path(__file__).parent / "data" / "metar"
 CYCLE = DATA / "noaa_cycle_2025-07-26_okay_weather_HEAD1500.txt.gz"
@@ -307,3 +313,264 @@ def test_cli_fetch_shows_a_decoder_defect_apart_from_the_problems(
     summary = json.loads(out)
     assert summary["internal_errors"] and not any("defect" in p for p in summary["problems"])
     assert err.count("wxsky: internal error: ") == len(summary["internal_errors"])
+
+
+# --- reports that say nothing, ok that follows the content, a task that cannot die ----------
+
+
+def test_a_report_with_nothing_after_its_time_is_a_problem_not_weather() -> None:
+    good = _ingest("LSZH 261520Z 24008KT 9999 FEW040 18/09 Q1016\n")
+    for cut in ("LSZH 261731Z", "LSZH 261731Z AUTO", "LSZH 261731Z COR=", "LSZH 261731Z NOSIG"):
+        later = _ingest(f"{cut}\n", known=good)
+        # Counted, not applied: the station keeps its last good report.
+        assert later.stations["LSZH"] == good.stations["LSZH"] and later.accepted == 0, cut
+        assert later.problems == (
+            "<feed>:1: LSZH: nothing after the time group (cut off?); not used",
+        ), cut
+    garbled = _ingest("LSZH 261731Z 24008K\n", known=good)
+    assert garbled.stations["LSZH"] == good.stations["LSZH"] and garbled.accepted == 0
+    assert garbled.problems[-1].startswith("<feed>:1: LSZH: no weather after the time group (")
+    # One group of weather is a report.
+    assert _ingest("LSZH 261731Z 24008KT\n", known=good).stations["LSZH"] != good.stations["LSZH"]
+
+
+GOOD = b"LSZH 261550Z 24008KT 9999 FEW040 18/09 Q1016\n"
+T0 = 1_700_000_000  # feed files dated long ago: nothing is held back as being written
+
+
+def _put(path: Path, data: bytes, mtime_s: int) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_bytes(data)
+    os.utime(tmp, (mtime_s, mtime_s))
+    os.replace(tmp, path)
+
+
+def _file_input(path: Path, applied: list[WeatherPatch], **settings: Any) -> MetarFeedInput:
+    # Ages against the feed's own newest report: the 2025 reports stay fresh.
+    return MetarFeedInput(
+        FileSource(path),
+        MetarSettings(age_reference="feed", **settings),
+        InputStats(f"metar:{path}", "metar"),
+        applied.append,
+        lambda: (47.4, 8.5),
+        ZURICH,
+    )
+
+
+def _poll(feed_input: MetarFeedInput) -> float:
+    wait = asyncio.run(feed_input.poll_once())
+    feed_input.reselect()
+    return wait
+
+
+@pytest.mark.parametrize(
+    ("bad", "why"),
+    [
+        (b"<!DOCTYPE html><html><body>502 Bad Gateway</body></html>\n", "HTML page"),
+        (b"LSZH 261731Z\n", "LSZH: nothing after the time group"),
+        (b"LSZH 261731Z AUTO\n", "LSZH: nothing after the time group"),
+        (b"LSZH 261550Z NIL\n", "no usable report in the feed"),
+        (gzip.compress(GOOD)[:20], "broken gzip data"),
+        (gzip_bomb(MAX_FEED_BYTES + 1), f"{MAX_FEED_BYTES}-byte limit"),
+    ],
+    ids=["html", "cut-after-time", "auto-only", "nil-only", "broken-gzip", "gzip-bomb"],
+)
+def test_ok_stays_false_while_the_file_stays_bad(tmp_path: Path, bad: bytes, why: str) -> None:
+    path = tmp_path / "metar.txt"
+    applied: list[WeatherPatch] = []
+    feed_input = _file_input(path, applied)
+    stats = feed_input.stats
+    _put(path, GOOD, T0)
+    _poll(feed_input)
+    assert stats.ok and len(applied) == 1
+    _put(path, bad, T0 + 60)
+    for poll in range(3):  # the first poll reads the bad file, the others find it unchanged
+        _poll(feed_input)
+        assert not stats.ok, poll
+        assert why in stats.last_error and str(path) in stats.last_error
+    assert stats.detail["fetches"] == 4
+    assert stats.detail["oversize"] == (1 if why.endswith("limit") else 0)
+    assert len(applied) == 1 and stats.detail["using"][0]["station"] == "LSZH"  # weather kept
+    _put(path, GOOD.replace(b"261550Z", b"261620Z").replace(b"FEW040", b"BKN040"), T0 + 120)
+    _poll(feed_input)
+    assert stats.ok
+    layers = applied[-1].layers
+    assert layers is not None and layers[0].cover_oktas == 6
+
+
+def test_a_missing_file_that_comes_back_unchanged_is_read_again(tmp_path: Path) -> None:
+    path = tmp_path / "metar.txt"
+    applied: list[WeatherPatch] = []
+    feed_input = _file_input(path, applied)
+    _put(path, GOOD, T0)
+    _poll(feed_input)
+    moved = tmp_path / "away.txt"
+    path.rename(moved)
+    _poll(feed_input)
+    assert not feed_input.stats.ok and "no such file" in feed_input.stats.last_error
+    moved.rename(path)  # the same inode, size and mtime as before
+    _poll(feed_input)
+    assert feed_input.stats.ok
+
+
+def test_a_file_being_written_is_read_again_shortly_not_taken_half(tmp_path: Path) -> None:
+    path = tmp_path / "metar.txt"
+    applied: list[WeatherPatch] = []
+    feed_input = _file_input(path, applied, poll_interval_s=60.0)
+    _put(path, GOOD, T0)
+    _poll(feed_input)
+    # The writer has written the station and time when the poll comes.
+    with open(path, "wb") as writer:
+        writer.write(b"LSZH 261620Z")
+        writer.flush()
+        os.utime(path)  # now, in case the file system's clock lags this one
+        wait = _poll(feed_input)
+        assert wait == SETTLE_S  # soon, not a whole poll interval later
+        assert feed_input.stats.detail["held_back"] == 1 and feed_input.stats.ok
+        assert feed_input.stats.errors == 0 and len(applied) == 1
+        writer.write(b" 24008KT 9999 OVC010 18/09 Q1016\n")
+    while len(applied) == 1:  # held back until it stands still, then read whole
+        assert feed_input.stats.detail["fetches"] < 100
+        wait = _poll(feed_input)
+        if len(applied) == 1:
+            time.sleep(wait)
+    layers = applied[-1].layers
+    assert layers is not None and layers[0].cover_oktas == 8 and feed_input.stats.ok
+    assert feed_input.stats.errors == 0
+
+
+class _FailsFirst:
+    """A real file source whose first fetches fail as if memory had run out."""
+
+    def __init__(self, path: Path, failures: int) -> None:
+        self.inner = FileSource(path)
+        self.name = self.inner.name
+        self.failures = failures
+
+    async def fetch(self) -> Fetched | None:
+        if self.failures:
+            self.failures -= 1
+            raise MemoryError
+        return await self.inner.fetch()
+
+    def forget(self) -> None:
+        self.inner.forget()
+
+    def close(self) -> None:
+        pass
+
+
+def _supervise(feed_input: MetarFeedInput, applied: list[WeatherPatch]) -> list[tuple]:
+    """Runs the input supervised until it has applied weather; returns what its status said
+    at each restart, seen at every step of the loop, so that no restart goes unseen."""
+    seen: list[tuple] = []
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        task = asyncio.create_task(feed_input.run_supervised(stop, first_backoff_s=0.01))
+        while not applied:
+            d, stats = feed_input.stats.detail, feed_input.stats
+            if d["state"] == "restarting" and (not seen or seen[-1][0] != d["restarts"]):
+                seen.append((d["restarts"], stats.ok, d["restart_in_s"], stats.last_error))
+            assert not task.done()
+            await asyncio.sleep(0)
+        stop.set()
+        await task
+
+    asyncio.run(asyncio.wait_for(main(), timeout=30.0))  # a guard against hanging only
+    return seen
+
+
+def test_a_failing_feed_task_is_restarted_with_back_off(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "metar.txt"
+    _put(path, GOOD, T0)
+    applied: list[WeatherPatch] = []
+    stats = InputStats("metar:test", "metar")
+    feed_input = MetarFeedInput(
+        _FailsFirst(path, failures=3),
+        MetarSettings(age_reference="feed", max_backoff_s=0.02),
+        stats,
+        applied.append,
+        lambda: (47.4, 8.5),
+        ZURICH,
+    )
+    with caplog.at_level(logging.DEBUG, logger="wxsky.inputs.metar"):
+        seen = _supervise(feed_input, applied)
+    failed = f"{path}: the METAR feed task failed (MemoryError); restarting in"
+    assert [(n, ok, wait) for n, ok, wait, _ in seen] == [
+        (1, False, 0.01),
+        (2, False, 0.02),
+        (3, False, 0.02),  # doubled, up to max_backoff_s
+    ]
+    assert all(error.startswith(failed) for *_, error in seen)
+    # The good report read after the restarts, and the status back to normal.
+    layers = applied[0].layers
+    assert layers is not None and layers[0].cover_oktas == 2
+    assert stats.ok and stats.detail["state"] == "running" and stats.detail["restarts"] == 3
+    assert "restart_in_s" not in stats.detail
+    # One line said so (the rest held back by the rate limit), the traceback only at debug.
+    errors = [r for r in caplog.records if r.levelno == logging.ERROR]
+    assert [r.getMessage() for r in errors] == [f"{failed} 0.01 s"]
+    assert any(r.exc_info and r.levelno == logging.DEBUG for r in caplog.records)
+
+
+def test_weather_whose_apply_failed_is_applied_after_the_restart(tmp_path: Path) -> None:
+    path = tmp_path / "metar.txt"
+    _put(path, GOOD, T0)
+    applied: list[WeatherPatch] = []
+    calls = []
+
+    def apply(patch: WeatherPatch) -> None:
+        calls.append(patch)
+        if len(calls) == 1:
+            raise RuntimeError("engine refused it")
+        applied.append(patch)
+
+    stats = InputStats("metar:test", "metar")
+    feed_input = MetarFeedInput(
+        FileSource(path),
+        MetarSettings(age_reference="feed"),
+        stats,
+        apply,
+        lambda: (47.4, 8.5),
+        ZURICH,
+    )
+    seen = _supervise(feed_input, applied)
+    assert [(n, ok) for n, ok, *_ in seen] == [(1, False)]
+    assert "RuntimeError: engine refused it" in seen[0][3]
+    # The same report, read again after the restart although the file did not change.
+    assert calls[0] == applied[0] and stats.ok
+
+
+class _TableFailingOnce(dict[str, StationPosition]):
+    """The station table, whose first look-up fails as if memory had run out."""
+
+    failed = False
+
+    def get(self, key: str, default: Any = None) -> Any:
+        if not self.failed:
+            self.failed = True
+            raise MemoryError
+        return super().get(key, default)
+
+
+def test_a_file_whose_ingest_failed_is_read_again_after_the_restart(tmp_path: Path) -> None:
+    path = tmp_path / "metar.txt"
+    _put(path, GOOD, T0)
+    applied: list[WeatherPatch] = []
+    stats = InputStats("metar:test", "metar")
+    feed_input = MetarFeedInput(
+        FileSource(path),
+        MetarSettings(age_reference="feed"),
+        stats,
+        applied.append,
+        lambda: (47.4, 8.5),
+        _TableFailingOnce(ZURICH),
+    )
+    seen = _supervise(feed_input, applied)
+    # The source had marked the file seen when the ingest failed; unchanged, it is read again.
+    assert [(n, ok) for n, ok, *_ in seen] == [(1, False)] and stats.ok
+    layers = applied[0].layers
+    assert layers is not None and layers[0].cover_oktas == 2

@@ -41,3 +41,15 @@ class FeedError(WxskyError):
 
 class FeedUnavailable(FeedError, RuntimeFailure):
     """A feed that cannot be read now: no such file, an I/O, HTTP or network failure."""
+
+
+class FeedTooLarge(FeedError):
+    """Feed data over the size limit, as sent or unpacked (a gzip bomb): refused unread."""
+
+
+class FeedChanging(FeedUnavailable):
+    """A feed file caught while it is being written: not read now, read again shortly."""
+
+    def __init__(self, message: str, retry_in_s: float) -> None:
+        super().__init__(message)
+        self.retry_in_s = retry_in_s

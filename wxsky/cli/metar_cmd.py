@@ -132,7 +132,8 @@ def _decode_file(path: Path, fmt: str) -> int:
 
 
 def _cmd_fetch(args: argparse.Namespace) -> int:
-    from wxsky.inputs.feed_sources import Fetched, gunzip_if_needed, open_source
+    from wxsky.errors import FeedTooLarge
+    from wxsky.inputs.feed_sources import MAX_FEED_BYTES, Fetched, gunzip_if_needed, open_source
     from wxsky.inputs.metar_input import MetarSettings, ingest, select
     from wxsky.settings.config import load_config
     from wxsky.settings.presets import load_preset
@@ -154,13 +155,16 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
     lat = observer.observer.lat_deg if args.lat is None else args.lat
     lon = observer.observer.lon_deg if args.lon is None else args.lon
     if args.source == "-":
-        fetched: Fetched | None = Fetched(
-            gunzip_if_needed(sys.stdin.buffer.read(), "stdin"), datetime.now(UTC)
-        )
+        data = sys.stdin.buffer.read(MAX_FEED_BYTES + 1)
+        if len(data) > MAX_FEED_BYTES:
+            raise FeedTooLarge(f"stdin: over the {MAX_FEED_BYTES}-byte limit for a METAR feed")
+        fetched: Fetched | None = Fetched(gunzip_if_needed(data, "stdin"), datetime.now(UTC))
     else:
         import asyncio
 
-        fetched = asyncio.run(open_source(args.source, timeout_s=m.http_timeout_s).fetch())
+        # A one-shot read: the file is read as it is now, however recently it was written.
+        source = open_source(args.source, timeout_s=m.http_timeout_s, settle_s=0.0)
+        fetched = asyncio.run(source.fetch())
     assert fetched is not None  # a first fetch always returns data or raises
     feed = parse_feed(
         fetched.data,

@@ -2,6 +2,11 @@
 stdin (one report per line, as it arrives), or an HTTP(S) URL polled with conditional
 requests and exponential back-off. A source only fetches bytes; parsing is the feeds
 module's job.
+
+Nothing is read past `MAX_FEED_BYTES`, as sent or as unpacked: gzip data (a `.gz` file, an
+HTTP body with `Content-Encoding: gzip` or gzip magic) goes through the one bounded gunzip of
+`weather.feeds`, and data over the limit is refused with `FeedTooLarge`. A file caught while
+it is being written is not read but held back for `SETTLE_S` (`FeedChanging`).
 """
 
 from __future__ import annotations
@@ -9,9 +14,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import email.utils
-import gzip
 import os
 import threading
+import time
 import urllib.error
 import urllib.request
 from dataclasses import dataclass
@@ -20,10 +25,27 @@ from pathlib import Path
 from typing import BinaryIO, Protocol
 
 from wxsky import __version__
-from wxsky.errors import FeedError, FeedUnavailable
+from wxsky.errors import FeedChanging, FeedError, FeedTooLarge, FeedUnavailable
+from wxsky.logs import clip
+from wxsky.weather.feeds import GZIP_MAGIC, MAX_FEED_BYTES, gunzip
 
-MAX_FEED_BYTES = 64 * 1024 * 1024  # a whole-world AWC cache is ~1 MB; more is not a feed
-GZIP_MAGIC = b"\x1f\x8b"
+__all__ = [
+    "GZIP_MAGIC",
+    "MAX_FEED_BYTES",
+    "FeedSource",
+    "Fetched",
+    "FileSource",
+    "HttpSource",
+    "StreamSource",
+    "gunzip_if_needed",
+    "open_source",
+]
+
+# A file modified less than this long ago may be half-written (rewritten in place, a writer
+# that paused between two writes): it is read once it has stood unchanged this long.
+SETTLE_S = 0.5
+# A file that never stands still (appended to all the time) is read anyway after this.
+MAX_SETTLE_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -40,27 +62,35 @@ class FeedSource(Protocol):
         """New data, or None when nothing changed. Raises FeedError on failure."""
         ...
 
+    def forget(self) -> None:
+        """Forget what was fetched, so the next fetch returns the data even if unchanged
+        (after the input failed while handling it)."""
+        ...
+
     def close(self) -> None: ...
 
 
 def gunzip_if_needed(data: bytes, name: str) -> bytes:
+    """`data` unpacked if it is gzip, bounded by MAX_FEED_BYTES (FeedTooLarge past it); a
+    damaged or cut-off stream is refused whole, so a half-downloaded feed is never taken."""
     if not data.startswith(GZIP_MAGIC):
         return data
-    try:
-        return gzip.decompress(data)
-    except (OSError, EOFError) as exc:
-        raise FeedError(f"{name}: broken gzip data ({exc})") from None
+    out, trouble = gunzip(data, name=name)
+    if trouble is not None:
+        raise FeedError(f"{name}: broken gzip data ({trouble})")
+    return out
 
 
-def open_source(spec: str, *, timeout_s: float = 10.0) -> FeedSource:
-    """A source for a config/CLI feed spec: "-" (stdin), an http(s):// URL, or a path."""
+def open_source(spec: str, *, timeout_s: float = 10.0, settle_s: float = SETTLE_S) -> FeedSource:
+    """A source for a config/CLI feed spec: "-" (stdin), an http(s):// URL, or a path.
+    `settle_s` 0 reads a file at once however recently it was written (a one-shot command)."""
     if spec == "-":
         return StreamSource("stdin", _stdin())
     if spec.startswith(("http://", "https://")):
         return HttpSource(spec, timeout_s=timeout_s)
     if "://" in spec:
         raise FeedError(f"feed {spec!r}: only files, '-' (stdin) and http(s) URLs are supported")
-    return FileSource(Path(spec))
+    return FileSource(Path(spec), settle_s=settle_s)
 
 
 def _stdin() -> BinaryIO:
@@ -71,12 +101,24 @@ def _stdin() -> BinaryIO:
 
 class FileSource:
     """A file, read again whenever its size, mtime or inode changes (tools usually replace
-    feed files by renaming a new one over the old, which changes the inode)."""
+    feed files by renaming a new one over the old, which changes the inode).
 
-    def __init__(self, path: Path) -> None:
+    Content it refuses (too large, a gzip bomb, broken gzip) counts as seen: it is not read
+    again until it changes, and the input keeps saying it is bad. A file modified within
+    `settle_s`, or that changes while it is read, is not marked seen but held back
+    (`FeedChanging`), so half a file is never taken for the feed.
+    """
+
+    def __init__(
+        self, path: Path, settle_s: float = SETTLE_S, max_settle_s: float = MAX_SETTLE_S
+    ) -> None:
         self.path = path
         self.name = str(path)
+        self.settle_s = settle_s
+        self.max_settle_s = max_settle_s
         self._seen: tuple[int, int, int] | None = None
+        self._held: tuple[int, int, int] | None = None  # the change last held back
+        self._held_since: float | None = None  # monotonic time of the first hold
 
     async def fetch(self) -> Fetched | None:
         return await asyncio.to_thread(self.fetch_now)
@@ -85,21 +127,64 @@ class FileSource:
         try:
             st = os.stat(self.path)
         except FileNotFoundError:
+            self._seen = None  # the same file back again is news
             raise FeedUnavailable(f"{self.name}: no such file") from None
         except OSError as exc:
+            self._seen = None
             raise FeedUnavailable(f"{self.name}: cannot stat: {exc.strerror or exc}") from None
         key = (st.st_mtime_ns, st.st_size, st.st_ino)
         if key == self._seen:
             return None
         if st.st_size > MAX_FEED_BYTES:
-            raise FeedError(f"{self.name}: {st.st_size} bytes is too large for a METAR feed")
-        try:
-            data = self.path.read_bytes()
-        except OSError as exc:
-            raise FeedUnavailable(f"{self.name}: cannot read: {exc.strerror or exc}") from None
+            self._seen = key
+            raise FeedTooLarge(
+                f"{self.name}: {st.st_size} bytes, over the {MAX_FEED_BYTES}-byte limit "
+                "for a METAR feed"
+            )
+        self._hold_if_recent(st.st_mtime_ns, key)
+        data = self._read(key)
         self._seen = key
+        self._held = self._held_since = None
         mtime = datetime.fromtimestamp(st.st_mtime, tz=UTC)
         return Fetched(gunzip_if_needed(data, self.name), mtime)
+
+    def _hold_if_recent(self, mtime_ns: int, key: tuple[int, int, int]) -> None:
+        age_s = (time.time_ns() - mtime_ns) / 1e9
+        # A change already held back once and unchanged since has stood still long enough,
+        # even where the clock and the file system disagree about how recent it is.
+        if not 0.0 <= age_s < self.settle_s or key == self._held:
+            return
+        now = time.monotonic()
+        if self._held_since is None:
+            self._held_since = now
+        elif now - self._held_since >= self.max_settle_s:
+            return
+        self._held = key
+        raise FeedChanging(
+            f"{self.name}: written {age_s:.2f} s ago, maybe not finished; reading it shortly",
+            self.settle_s,
+        )
+
+    def _read(self, key: tuple[int, int, int]) -> bytes:
+        try:
+            with open(self.path, "rb") as f:
+                data = f.read(MAX_FEED_BYTES + 1)
+                after = os.fstat(f.fileno())
+        except FileNotFoundError:
+            self._seen = None
+            raise FeedUnavailable(f"{self.name}: no such file") from None
+        except OSError as exc:
+            self._seen = None
+            raise FeedUnavailable(f"{self.name}: cannot read: {exc.strerror or exc}") from None
+        if (after.st_mtime_ns, after.st_size, after.st_ino) != key or len(data) != key[1]:
+            raise FeedChanging(
+                f"{self.name}: changed while it was read; reading it again shortly",
+                max(self.settle_s, 0.05),
+            )
+        return data
+
+    def forget(self) -> None:
+        self._seen = self._held = self._held_since = None
 
     def close(self) -> None:
         pass
@@ -114,7 +199,8 @@ class StreamSource:
         self._stream = stream
         self._max_line = max_line_bytes
         self._lines: list[bytes] = []
-        self._lock = threading.Lock()
+        self._pending_bytes = 0
+        self._drained = threading.Condition()
         self._eof = False
         self._thread = threading.Thread(target=self._read, name=f"wxsky-{name}", daemon=True)
         self._thread.start()
@@ -130,19 +216,29 @@ class StreamSource:
                 ended = chunk.endswith(b"\n")
                 if not skipping:
                     line = chunk if ended else chunk[: self._max_line] + b"\n"
-                    with self._lock:
+                    with self._drained:
+                        # A writer far ahead of the polls (a whole file piped in, gzip data)
+                        # waits in the pipe rather than in our memory.
+                        while self._pending_bytes >= MAX_FEED_BYTES:
+                            self._drained.wait()
                         self._lines.append(line)
+                        self._pending_bytes += len(line)
                 skipping = not ended
         self._eof = True
 
     async def fetch(self) -> Fetched | None:
-        with self._lock:
+        with self._drained:
             lines, self._lines = self._lines, []
+            self._pending_bytes = 0
+            self._drained.notify()
         if not lines:
             if self._eof:
                 raise FeedUnavailable(f"{self.name}: end of input; keeping the last weather")
             return None
         return Fetched(b"".join(lines), datetime.now(UTC), format="lines")
+
+    def forget(self) -> None:
+        pass  # lines once fetched are gone; the next ones still come
 
     def close(self) -> None:
         pass  # the reader thread is a daemon thread blocked in readline; it dies with us
@@ -171,7 +267,11 @@ class HttpSource:
         request = urllib.request.Request(self.url, headers=headers)
         try:
             with urllib.request.urlopen(request, timeout=self.timeout_s) as response:
+                length = (response.headers.get("Content-Length") or "").strip()
+                if length.isdigit() and int(length) > MAX_FEED_BYTES:
+                    raise self._too_large(f"Content-Length {length}")
                 data = response.read(MAX_FEED_BYTES + 1)
+                encoding = (response.headers.get("Content-Encoding") or "identity").strip()
                 etag = response.headers.get("ETag")
                 modified = response.headers.get("Last-Modified")
                 date = response.headers.get("Date")
@@ -184,9 +284,28 @@ class HttpSource:
         except (TimeoutError, OSError) as exc:
             raise FeedUnavailable(f"{self.url}: {exc or type(exc).__name__}") from None
         if len(data) > MAX_FEED_BYTES:
-            raise FeedError(f"{self.url}: more than {MAX_FEED_BYTES} bytes; not a METAR feed")
+            raise self._too_large("the body")
+        encoding = encoding.lower()
+        if encoding in ("gzip", "x-gzip"):
+            if not data.startswith(GZIP_MAGIC):
+                raise FeedError(f"{self.url}: Content-Encoding gzip, but the body is not gzip")
+        elif encoding != "identity":
+            raise FeedError(
+                f"{self.url}: Content-Encoding {clip(encoding, 40)!r} is not supported "
+                "(wxsky asks for gzip only)"
+            )
+        # Unpacked before the validators are kept, so refused content is fetched whole again.
+        unpacked = gunzip_if_needed(data, self.url)
         self._etag, self._last_modified = etag, modified
-        return Fetched(gunzip_if_needed(data, self.url), _http_date(date) or datetime.now(UTC))
+        return Fetched(unpacked, _http_date(date) or datetime.now(UTC))
+
+    def _too_large(self, what: str) -> FeedTooLarge:
+        return FeedTooLarge(
+            f"{self.url}: {what} over the {MAX_FEED_BYTES}-byte limit; not a METAR feed"
+        )
+
+    def forget(self) -> None:
+        self._etag = self._last_modified = None
 
     def close(self) -> None:
         pass
@@ -197,5 +316,5 @@ def _http_date(text: str | None) -> datetime | None:
         return None
     try:
         return email.utils.parsedate_to_datetime(text).astimezone(UTC)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: year 1 east of UTC
         return None

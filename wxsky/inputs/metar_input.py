@@ -13,7 +13,16 @@ Text without a time group at all is no report (`PART 1 OF 2`) and is only named 
 
 A defect of the decoder (`MetarInternalError`) is not bad input: it is kept apart from the
 feed's problems (`Ingested.internal_errors`) and logged as an error, and the other reports of
-the feed are still used.
+the feed are still used. A report that says nothing after its time (`LSZH 011731Z`, a file
+caught half-written) is a problem and never replaces its station's last good report.
+
+Status (`InputStats`): `ok` says whether the feed's current content is usable: false from a
+failed fetch, a refused feed (not a METAR feed, over the size limit, a gzip bomb) or a file or
+HTTP feed with no usable report, until good data arrives; an unchanged source keeps what its
+content gave. The detail adds `state` ("running", "restarting" while waiting to restart the
+task after a failure, "ended" once a stream ends), `restarts` (task restarts), `restart_in_s`
+(while restarting: the back-off), `fetches` (fetch attempts), `oversize` (feeds refused as over
+the size limit) and `held_back` (reads put off because the file was being written).
 """
 
 from __future__ import annotations
@@ -27,11 +36,11 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING
 
-from wxsky.errors import FeedError
+from wxsky.errors import FeedChanging, FeedError, FeedTooLarge, FeedUnavailable
 from wxsky.inputs.feed_sources import FeedSource, Fetched, StreamSource
 from wxsky.inputs.station_table import StationPosition, station_table
 from wxsky.inputs.stats import InputStats
-from wxsky.logs import RateLimitedLog
+from wxsky.logs import RateLimitedLog, clip
 from wxsky.weather.feeds import Feed, parse_feed
 from wxsky.weather.metar import MetarInternalError, decode
 from wxsky.weather.metar_clouds import metar_to_patch
@@ -45,6 +54,8 @@ log = logging.getLogger("wxsky.inputs.metar")
 
 RESELECT_S = 5.0  # how often the station choice follows the observer between fetches
 STREAM_POLL_S = 0.25
+# The first wait before restarting a failed feed task; it doubles up to max_backoff_s.
+RESTART_FIRST_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -121,6 +132,13 @@ def ingest(
             continue
         if metar.nil:
             nil += 1
+            continue
+        if metar.observes_nothing:
+            # Usually a file caught half-written: applied, it would clear the station's sky.
+            if metar.errors:
+                problems.append(f"{where}: no weather after the time group ({metar.errors[0]})")
+            else:
+                problems.append(f"{where}: nothing after the time group (cut off?); not used")
             continue
         partial += metar.partial
         observed = metar.time_utc
@@ -242,7 +260,60 @@ class MetarFeedInput:
         self._last_patch: WeatherPatch | None = None
         self._warn = RateLimitedLog(log)
         self._failures = 0
-        stats.detail.update(stale=False, stations=0, using=[], partial=0, format=None)
+        self._content_ok = True  # what the source's current content gave (module docstring)
+        self._had_good_poll = False  # since the task last (re)started
+        stats.detail.update(
+            stale=False,
+            stations=0,
+            using=[],
+            partial=0,
+            format=None,
+            state="running",
+            restarts=0,
+            fetches=0,
+            oversize=0,
+            held_back=0,
+        )
+
+    async def run_supervised(
+        self, stop: asyncio.Event, *, first_backoff_s: float = RESTART_FIRST_S
+    ) -> None:
+        """`run`, restarted after any failure escaping it (a wxsky defect, MemoryError), so
+        the feed never dies silently: one log line, `ok` false with `state` "restarting" and
+        `restarts` counted, then a restart after a back-off that doubles from
+        `first_backoff_s` to `max_backoff_s` (back to the first after a run that got good
+        data). Returns when `stop` is set or a stream ends."""
+        d = self.stats.detail
+        backoff = first_backoff_s
+        while not stop.is_set():
+            d["state"] = "running"
+            self._had_good_poll = False
+            try:
+                await self.run(stop)
+                return
+            except Exception as exc:  # whatever it was, the feed must come back
+                if self._had_good_poll:
+                    backoff = first_backoff_s
+                what = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+                message = (
+                    f"{self.source.name}: the METAR feed task failed ({clip(what)}); "
+                    f"restarting in {backoff:g} s"
+                )
+                log.debug("%s", message, exc_info=True)
+            d["restarts"] += 1
+            d["state"] = "restarting"
+            d["restart_in_s"] = backoff
+            self.stats.ok = False
+            self.stats.error(message)
+            # Until a poll after the restart says otherwise, the content is what failed.
+            self._content_ok = False
+            self._warn.log(logging.ERROR, "task", message)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), timeout=backoff)
+            backoff = min(self.settings.max_backoff_s, backoff * 2.0)
+            d.pop("restart_in_s", None)
+            # What failed may have been marked seen: read it again, it may now go through.
+            self.source.forget()
 
     async def run(self, stop: asyncio.Event) -> None:
         loop = asyncio.get_running_loop()
@@ -252,7 +323,7 @@ class MetarFeedInput:
                 next_fetch = loop.time() + await self.poll_once()
                 if isinstance(self.source, StreamSource) and self.source.eof:
                     log.info("%s: end of input; keeping the last weather", self.source.name)
-                    self.stats.detail["eof"] = True
+                    self.stats.detail.update(eof=True, state="ended")
                     return
             self.reselect()
             wait = min(RESELECT_S, max(0.0, next_fetch - loop.time()))
@@ -264,21 +335,34 @@ class MetarFeedInput:
         interval = self.settings.poll_interval_s
         if isinstance(self.source, StreamSource):
             interval = min(interval, STREAM_POLL_S)
+        self.stats.detail["fetches"] += 1
         try:
             fetched = await self.source.fetch()
             if fetched is not None:
-                await asyncio.to_thread(self._ingest, fetched)
+                self._content_ok = await asyncio.to_thread(self._ingest, fetched)
+        except FeedChanging as exc:
+            # No failure: the writer is not done. `ok` stays what the last content gave.
+            self.stats.detail["held_back"] += 1
+            log.debug("METAR feed %s", exc)
+            return min(interval, exc.retry_in_s)
         except FeedError as exc:
             self._failures += 1
+            if not isinstance(exc, FeedUnavailable):
+                # The content itself was refused: an unchanged source stays refused.
+                self._content_ok = False
+            if isinstance(exc, FeedTooLarge):
+                self.stats.detail["oversize"] += 1
             self.stats.ok = False
             self.stats.error(str(exc))
             self._warn.warning("fetch", f"METAR feed {exc}")
             return float(min(self.settings.max_backoff_s, interval * 2.0**self._failures))
         self._failures = 0
-        self.stats.ok = True
+        self.stats.ok = self._content_ok
+        self._had_good_poll |= self._content_ok
         return interval
 
-    def _ingest(self, fetched: Fetched) -> None:
+    def _ingest(self, fetched: Fetched) -> bool:
+        """Ingests one fetch; returns whether the feed's content is usable now."""
         fmt = self.settings.format if fetched.format == "auto" else fetched.format
         feed = parse_feed(
             fetched.data, format=fmt, name=self.source.name, reference_utc=fetched.reference_utc
@@ -307,6 +391,14 @@ class MetarFeedInput:
         d["duplicates"] = d.get("duplicates", 0) + result.duplicates
         if result.internal_errors:
             d["internal_errors"] = d.get("internal_errors", 0) + len(result.internal_errors)
+        if result.accepted:
+            return True
+        if isinstance(self.source, StreamSource):
+            # Lines are messages: one without a usable report leaves the input as it was.
+            return self._content_ok
+        if not result.problems:
+            self.stats.error(f"{self.source.name}: no usable report in the feed")
+        return False
 
     def reselect(self) -> None:
         lat, lon = self._position()
@@ -321,8 +413,9 @@ class MetarFeedInput:
         d.pop("reason", None)
         d["using"] = [{"station": s, "distance_km": round(m / 1000.0, 1)} for s, m in choice.used]
         if choice.patch != self._last_patch:
-            self._last_patch = choice.patch
+            # Remembered only once applied: after a failure here the restarted task applies it.
             self._apply(choice.patch)
+            self._last_patch = choice.patch
 
     def close(self) -> None:
         self.source.close()

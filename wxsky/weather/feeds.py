@@ -3,7 +3,9 @@
 `parse_feed` turns the bytes of a feed into `Report`s (raw text plus the year and month the
 decoder needs, taken from the feed) and `FeedProblem`s (rows it could not fully use, each with
 `<name>:<line>`). Only content that is not a METAR feed at all (an HTML page, JSON, binary or
-nothing) raises `FeedError`; everything else, however broken, comes back as problems.
+nothing) raises `FeedError`, and data over `MAX_FEED_BYTES`, as given or unpacked, raises
+`FeedTooLarge`; everything else, however broken, comes back as problems. `gunzip` is the one
+bounded gunzip of every feed, here and in the daemon's sources.
 
 The per-format parsers live in `feed_formats`; the formats and their vintages are described in
 `shared/reference/metar-feeds.md` §1.
@@ -18,7 +20,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-from wxsky.errors import FeedError, FeedUnavailable
+from wxsky.errors import FeedError, FeedTooLarge, FeedUnavailable
 from wxsky.weather.feed_formats import (
     FeedProblem,
     Problems,
@@ -35,10 +37,13 @@ from wxsky.weather.feed_formats import (
 
 __all__ = [
     "FORMATS",
+    "GZIP_MAGIC",
+    "MAX_FEED_BYTES",
     "Feed",
     "FeedProblem",
     "Report",
     "detect_format",
+    "gunzip",
     "parse_feed",
     "read_feed",
     "read_reports",
@@ -47,8 +52,12 @@ __all__ = [
 FORMATS = ("awc-csv", "awc-xml", "tgftp", "lines")
 
 GZIP_MAGIC = b"\x1f\x8b"
-# A whole-world AWC cache is about 1 MB; anything near this is not a feed (or a gzip bomb).
-MAX_FEED_BYTES = 256 * 1024 * 1024
+# The most feed data read, as sent and as unpacked. A whole-world AWC cache is about 1 MB as
+# CSV and a few MB as XML; 32 MiB leaves room for years of growth and for archives of a few
+# days, while a gzip bomb costs the daemon at most this much memory, for a moment.
+MAX_FEED_BYTES = 32 * 1024 * 1024
+# The most one zlib call hands back: no single piece of output is larger than this.
+_GUNZIP_STEP_BYTES = 1024 * 1024
 # How far into a file detection looks: the AWC preamble is 5 lines, then the header.
 _DETECT_LINES = 20
 _BINARY_FRACTION = 0.1
@@ -99,27 +108,46 @@ def detect_format(text: str, *, name: str = "<feed>") -> str:
     raise FeedError(f"{name}: not a METAR feed (starts with {_shorten(head[0])})")
 
 
-def _gunzip(data: bytes) -> tuple[bytes, str | None]:
-    """Decompressed data and, for a damaged stream, why it stops early (what came out is kept)."""
-    out = bytearray()
+def gunzip(
+    data: bytes, *, name: str = "<feed>", limit: int = MAX_FEED_BYTES
+) -> tuple[bytes, str | None]:
+    """gzip data unpacked a step at a time, never past `limit` bytes: FeedTooLarge (naming
+    `name` and the limit) once the output would pass it. Also returns, for a damaged stream,
+    why it stops early (what came out before is kept). The one gunzip every feed goes through.
+    """
+    # Pieces joined once at the end: a growing buffer would need twice its size to grow.
+    pieces: list[bytes] = []
+    size = 0
     while data[:2] == GZIP_MAGIC:  # concatenated members are one file to gzip(1)
         stream = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
-        try:
-            out += stream.decompress(data, MAX_FEED_BYTES + 1 - len(out))
-        except zlib.error as exc:
-            return bytes(out), f"gzip data is corrupt ({exc}); read what came before"
-        if len(out) > MAX_FEED_BYTES:
-            raise FeedError(f"decompresses to more than {MAX_FEED_BYTES} bytes, not a METAR feed")
+        pending = data
+        while True:
+            step = min(_GUNZIP_STEP_BYTES, limit + 1 - size)
+            try:
+                piece = stream.decompress(pending, step)
+            except zlib.error as exc:
+                return b"".join(pieces), f"gzip data is corrupt ({exc}); read what came before"
+            pieces.append(piece)
+            size += len(piece)
+            if size > limit:
+                raise FeedTooLarge(
+                    f"{name}: gzip data unpacks to more than the {limit}-byte limit "
+                    "(a gzip bomb?); not a METAR feed"
+                )
+            pending = stream.unconsumed_tail
+            if stream.eof or (not pending and len(piece) < step):
+                break
         if not stream.eof:
-            return bytes(out), "gzip data ends early (a cut-off download?); read what was there"
+            trouble = "gzip data ends early (a cut-off download?); read what was there"
+            return b"".join(pieces), trouble
         data = stream.unused_data
-    return bytes(out), None
+    return b"".join(pieces), None
 
 
-def _decode(data: bytes, problems: Problems) -> str:
+def _decode(data: bytes, problems: Problems, name: str) -> str:
     gzip_trouble = None
     if data[:2] == GZIP_MAGIC:
-        data, gzip_trouble = _gunzip(data)
+        data, gzip_trouble = gunzip(data, name=name)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -154,12 +182,9 @@ def parse_feed(
     if format != "auto" and format not in FORMATS:
         raise FeedError(f"{name}: unknown feed format {format!r} (expected one of {FORMATS})")
     if isinstance(data, bytes) and len(data) > MAX_FEED_BYTES:
-        raise FeedError(f"{name}: more than {MAX_FEED_BYTES} bytes, not a METAR feed")
+        raise FeedTooLarge(f"{name}: more than the {MAX_FEED_BYTES}-byte limit, not a METAR feed")
     problems = Problems(name)
-    try:
-        text = _decode(data, problems) if isinstance(data, bytes) else data
-    except FeedError as exc:
-        raise FeedError(f"{name}: {exc}") from None
+    text = _decode(data, problems, name) if isinstance(data, bytes) else data
     text = text.removeprefix("\ufeff")
     if format == "auto":
         format = detect_format(text, name=name)
@@ -185,7 +210,8 @@ def read_feed(path: str | os.PathLike[str], *, format: str = "auto") -> Feed:
     file = Path(path)
     try:
         mtime_s = file.stat().st_mtime
-        data = file.read_bytes()
+        with file.open("rb") as f:
+            data = f.read(MAX_FEED_BYTES + 1)  # parse_feed refuses what is over the limit
     except OSError as exc:
         raise FeedUnavailable(f"{file}: cannot read ({exc.strerror or exc})") from None
     mtime = datetime.fromtimestamp(mtime_s, UTC)

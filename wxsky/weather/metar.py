@@ -118,6 +118,25 @@ class Metar:
         """True when some group could not be decoded; `errors` says which."""
         return bool(self.errors)
 
+    @property
+    def observes_nothing(self) -> bool:
+        """True when no group after the header gave a value: a report cut off after its time
+        (`LSZH 011731Z` from a file caught half-written) or only `AUTO`, `COR`, a trend or
+        remarks. Applied, it would say "no clouds, no wind", which the station never said."""
+        return not (
+            self.wind
+            or self.visibility_m is not None
+            or self.min_visibility_m is not None
+            or self.cavok
+            or self.rvr
+            or self.weather
+            or self.sky
+            or self.sky_clear
+            or self.temperature_c is not None
+            or self.dewpoint_c is not None
+            or self.altimeter_hpa is not None
+        )
+
     def require_usable(self) -> Metar:
         """This report, or MetarError (one line) when it names no station or time, or is NIL."""
         where = f"METAR {self.station}" if self.station else "METAR report"
