@@ -29,7 +29,7 @@ from wxsky.output.transport import (
     default_address,
     parse_address,
 )
-from wxsky.output.wire import MessageDecoder, Notification, Response
+from wxsky.output.wire import MessageDecoder, Notification, Request, Response, encode
 
 T = TypeVar("T")
 
@@ -282,6 +282,76 @@ def test_server_close_disconnects_clients_and_removes_socket(sock_path: Path) ->
             ControlClient.connect(f"unix:{sock_path}", timeout_s=1)
     finally:
         server.stop()
+
+
+def test_only_the_socket_file_this_server_bound_is_removed(sock_path: Path) -> None:
+    server = ServerThread(f"unix:{sock_path}")
+    successor = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        # Another daemon took the path over (this one's file was removed under it).
+        os.unlink(sock_path)
+        successor.bind(str(sock_path))
+        theirs = os.lstat(sock_path)
+        assert server.server.remove_socket_file() is False  # as on a forced exit
+        server.stop()
+        now = os.lstat(sock_path)
+        assert (now.st_dev, now.st_ino) == (theirs.st_dev, theirs.st_ino)
+    finally:
+        server.stop()
+        successor.close()
+
+
+def test_a_client_that_sends_nothing_and_subscribes_to_nothing_is_closed(sock_path: Path) -> None:
+    server = ServerThread(f"unix:{sock_path}", idle_timeout_s=0.3)
+    try:
+        with ControlClient.connect(f"unix:{sock_path}") as listener:
+            listener.subscribe(["frame"])
+            messages, hung_up = raw_exchange(UnixAddress(sock_path), b"")
+            assert hung_up
+            assert messages == [
+                Response(
+                    None,
+                    "control: nothing sent and nothing subscribed for 0.3 s (the daemon's "
+                    "[output] client_idle_timeout_s): closing this connection",
+                    None,
+                )
+            ]
+            # The subscriber has sent nothing for longer than that, and is still served.
+            assert server.broadcast("frame", {"n": 1}) == 1
+            note = listener.next_notification(timeout_s=5)
+            assert note is not None and note.params == {"n": 1}
+            assert listener.call("echo", {"still": "here"}) == {"still": "here"}
+    finally:
+        server.stop()
+
+
+def test_subscribe_params_are_checked_and_bounded(unix_server: ServerThread) -> None:
+    with ControlClient.connect(unix_server.server.address) as client:
+        with pytest.raises(RemoteError, match=r"^subscribe: x: unknown key"):
+            client.call("subscribe", {"topics": ["frame"], "x": 1})
+        with pytest.raises(RemoteError, match=r"^subscribe: topics: must have at most 32 items"):
+            client.subscribe([f"t{i}" for i in range(33)])
+        with pytest.raises(RemoteError, match=r"^subscribe: topics\[0\]: must be 1 to 64 char"):
+            client.subscribe(["x" * 65])
+        assert len(client.subscribe([f"t{i}" for i in range(32)])) == 32
+        with pytest.raises(RemoteError, match="at most 32 topics, this would make 33"):
+            client.subscribe(["one-more"])
+        assert len(client.call("unsubscribe", {"topics": ["t0"]})["topics"]) == 31
+
+
+def test_a_flood_of_failing_notifications_logs_a_line_and_one_traceback(
+    unix_server: ServerThread, caplog: pytest.LogCaptureFixture
+) -> None:
+    flood = [encode(Notification("crash", {}))] * 1000 + [encode(Notification("fail", {}))] * 1000
+    with caplog.at_level(logging.DEBUG):
+        # The echo is answered after every notification before it was handled.
+        messages, _ = raw_exchange(
+            unix_server.server.address, b"".join([*flood, encode(Request(1, "echo", {}))])
+        )
+    assert messages == [Response(1, None, {})]
+    lines = [r.getMessage() for r in caplog.records if "notification" in r.getMessage()]
+    assert len(lines) == 2, lines  # one crash, one rejection: not 2000
+    assert caplog.text.count("Traceback") == 1
 
 
 def test_stale_socket_file_is_replaced(sock_path: Path) -> None:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gc
 import struct
+import tracemalloc
 from typing import Any
 
 import numpy as np
@@ -10,6 +12,7 @@ import pytest
 
 from wxsky.errors import ProtocolError, WxskyError
 from wxsky.output.wire import (
+    MAX_REQUEST_SIZE,
     MSGID_MAX,
     MessageDecoder,
     Notification,
@@ -107,6 +110,20 @@ def test_byte_at_a_time() -> None:
     got = [m for i in range(len(stream)) for m in decoder.feed(stream[i : i + 1])]
     assert got == MESSAGES
     assert decoder.messages_decoded == len(MESSAGES)
+
+
+def test_a_long_stream_in_small_pieces_keeps_its_place() -> None:
+    # Beyond the decoder's first 16 KiB piece, with messages straddling every piece: a
+    # decoder that swapped its msgpack buffer while a message was half parsed lost its place
+    # ("expected an array [type, ...], got int") at 100- and 1000-byte reads.
+    sent = [Response(i, None, {"s": "a" * 700, "n": list(range(i))}) for i in range(100)]
+    stream = b"".join(encode(m) for m in sent)
+    for step in (1, 100, 1000, 4096, 20_000):
+        decoder = MessageDecoder()
+        got = [
+            m for pos in range(0, len(stream), step) for m in decoder.feed(stream[pos : pos + step])
+        ]
+        assert got == sent, step
 
 
 def test_truncated_input_yields_nothing_until_complete() -> None:
@@ -213,6 +230,74 @@ def test_oversized_message_is_refused_naming_the_decoders_own_limit() -> None:
         decoder.feed(encode(Notification("big", {"b": b"x" * 2000})))
     assert not info.value.recoverable
     assert str(info.value) == "control message 1: larger than 1024 bytes"
+
+
+def test_message_limit_is_exact_however_the_bytes_are_split() -> None:
+    # msgpack's own buffer limit counts buffered bytes, not messages: the decoder checks each
+    # message's size as it completes, so the limit is the same in one read or many.
+    limit = 40_000
+    at_limit = _request_of_size(limit)
+    over = _request_of_size(limit + 1)
+    for split in (1, 1000, 16_384, 65_536, len(over)):
+        decoder = MessageDecoder(max_message_size=limit)
+        got = [
+            m for i in range(0, len(at_limit), split) for m in decoder.feed(at_limit[i : i + split])
+        ]
+        assert len(got) == 1, split
+        decoder = MessageDecoder(max_message_size=limit)
+        with pytest.raises(WireError, match=f"^control message 1: larger than {limit} bytes$"):
+            for i in range(0, len(over), split):
+                decoder.feed(over[i : i + split])
+
+
+def test_many_small_messages_in_one_read_are_not_too_large() -> None:
+    stream = encode(Request(1, "status", {})) * 20_000  # 220 kB: far over the request limit
+    got = MessageDecoder(max_message_size=MAX_REQUEST_SIZE).feed(stream)
+    assert len(got) == 20_000
+
+
+def test_a_message_announced_larger_than_the_limit_is_refused_long_before_it_is_all_in() -> None:
+    decoder = MessageDecoder(max_message_size=MAX_REQUEST_SIZE)
+    header = b"\x94\x00\x01\xa6status\x81\xa1r\xdb" + struct.pack(">I", 8 * 1024 * 1024)
+    assert decoder.feed(header) == []
+    with pytest.raises(WireError, match=f"larger than {MAX_REQUEST_SIZE} bytes"):
+        for _ in range(4):  # 64 KiB of the 8 MiB announced
+            decoder.feed(b"x" * 16_384)
+
+
+def test_the_buffer_of_a_large_message_is_given_back() -> None:
+    decoder = MessageDecoder()  # the 8 MiB protocol limit
+    data = _request_of_size(4_000_000)
+    tracemalloc.start()
+    try:
+        held_before = tracemalloc.get_traced_memory()[0]
+        for i in range(0, len(data), 65_536):
+            decoder.feed(data[i : i + 65_536])
+        gc.collect()
+        held = tracemalloc.get_traced_memory()[0] - held_before
+    finally:
+        tracemalloc.stop()
+    assert held < 200_000, f"the decoder still holds {held} bytes after a 4 MB message"
+    assert decoder.feed(encode(Request(2, "status", {}))) == [Request(2, "status", {})]
+
+
+def test_a_wrong_shaped_message_in_a_long_read_loses_nothing_after_it() -> None:
+    after = [Request(i, "status", {}) for i in range(5000)]  # 55 kB after the bad one
+    decoder = MessageDecoder()
+    with pytest.raises(WireError) as info:
+        decoder.feed(pack([0, 3, 5, {}]) + b"".join(encode(m) for m in after))
+    assert info.value.recoverable
+    assert decoder.feed(b"") == after
+
+
+def _request_of_size(size: int) -> bytes:
+    """An encoded request exactly `size` bytes long."""
+    base = len(encode(Request(1, "apply_metar", {"report": ""})))
+    for pad in range(size - base, size - base - 6, -1):
+        data = encode(Request(1, "apply_metar", {"report": "x" * pad}))
+        if len(data) == size:
+            return data
+    raise AssertionError(f"no request of {size} bytes")
 
 
 class Custom:

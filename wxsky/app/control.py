@@ -1,5 +1,9 @@
 """Control-channel commands: each turns a request's params into a change of the engine's
-inputs. Bad params raise ControlError with one line that names the command and the field."""
+inputs. Bad params raise ControlError with one line that names the command and the field.
+
+Every command refuses params it does not take, and every param is bounded, in size as well as
+value: the largest legal request is an `apply_metar` with a `METAR_MAX_CHARS` report, which
+is what `wire.MAX_REQUEST_SIZE` is sized for (docs/protocol.md §2.2, §5)."""
 
 from __future__ import annotations
 
@@ -10,7 +14,8 @@ from typing import Any
 
 from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.errors import ProtocolError, WxskyError
-from wxsky.scene.camera import FOV_DEG, PITCH_DEG, VIEWPORT_PX, Camera
+from wxsky.logs import clip
+from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX, Camera
 from wxsky.schema import (
     REQUIRED,
     Custom,
@@ -22,7 +27,7 @@ from wxsky.schema import (
     Text,
     Tuple,
 )
-from wxsky.settings.config import CLOCK_RATE
+from wxsky.settings.config import CLOCK_RATE, PRESET_NAME
 from wxsky.weather.state import ALT_M, LAT_DEG, LON_DEG, Source, parse_time_utc
 
 
@@ -32,7 +37,14 @@ class ControlError(ProtocolError):
 
 # Each command's params, checked by the same kinds as the config and the weather state; the
 # camera's width and height are further capped by the output frame (`camera_from_params`).
-_ANY = Number()
+# A heading is wrapped to 0..360; two turns either way allows a host's unwrapped heading.
+_HEADING_DEG = Number(-720.0, 720.0, unit="deg")
+# The longest METAR report `apply_metar` takes. A real one is under 300 characters, with
+# remarks rarely over 1000; longer text is no report, and decoding it would hold up the loop.
+METAR_MAX_CHARS = 4096
+# ISO 8601 with fractions and an offset fits in 40 characters.
+_TIME_MAX_CHARS = 64
+ERROR_MAX_CHARS = 1000  # a command's error, one line: a long value in it is clipped
 # A camera or aircraft position: within 1000 km of the observer (the flat local frame is no
 # good beyond), from below the Dead Sea shore to the edge of space.
 _EN_M = Number(-1e6, 1e6, unit="m")
@@ -50,6 +62,11 @@ def no_params(command: str, params: dict[str, Any]) -> dict[str, Any]:
 def _iso_time(value: Any) -> Any:
     if not isinstance(value, str):
         raise ValueError("must be an ISO 8601 string")
+    if len(value) > _TIME_MAX_CHARS:
+        raise ValueError(
+            f"must be an ISO 8601 string of at most {_TIME_MAX_CHARS} characters, "
+            f"got {len(value)} characters"
+        )
     return parse_time_utc(value)
 
 
@@ -60,9 +77,9 @@ def _camera_table(max_size: tuple[int, int]) -> Table:
             "lat_deg": Field(LAT_DEG),
             "lon_deg": Field(LON_DEG),
             "alt_m": Field(ALT_M),
-            "heading_deg": Field(_ANY),
+            "heading_deg": Field(_HEADING_DEG),
             "pitch_deg": Field(PITCH_DEG),
-            "roll_deg": Field(_ANY),
+            "roll_deg": Field(ROLL_DEG),
             "fov_deg": Field(FOV_DEG),
             "width": Field(VIEWPORT_PX.clamp_hi(max_size[0])),
             "height": Field(VIEWPORT_PX.clamp_hi(max_size[1])),
@@ -73,11 +90,11 @@ def _camera_table(max_size: tuple[int, int]) -> Table:
 SET_TIME = Table(
     {"time_utc": Field(Custom(_iso_time, "an ISO 8601 time")), "rate": Field(CLOCK_RATE)}
 )
-APPLY_PRESET = Table({"name": Field(Text())})
+APPLY_PRESET = Table({"name": Field(PRESET_NAME)})
 RELEASE = Table({"source": Field(Text(choices=("control", "cockpit")), "control")})
 APPLY_METAR = Table(
     {
-        "report": Field(Text()),
+        "report": Field(Text(max_len=METAR_MAX_CHARS)),
         # A report's field elevation: any airport on Earth.
         "field_elevation_m": Field(Number(-500.0, 9000.0, unit="m")),
         "year": Field(Number(1, 9999, integer=True)),
@@ -91,7 +108,7 @@ def checked_params(command: str, table: Table, params: dict[str, Any]) -> dict[s
     try:
         return table.values(params)
     except Invalid as exc:
-        raise ControlError(f"{command}: {exc}") from None
+        raise ControlError(clip(f"{command}: {exc}", ERROR_MAX_CHARS)) from None
 
 
 def camera_from_params(
@@ -202,12 +219,14 @@ def dispatch_table(
     def dispatch(method: str, params: dict[str, Any]) -> Any:
         handler = handlers.get(method)
         if handler is None:
-            raise ControlError(f"unknown command {method!r} (known: {', '.join(sorted(handlers))})")
+            raise ControlError(
+                f"unknown command {clip(method, 64)!r} (known: {', '.join(sorted(handlers))})"
+            )
         try:
             return handler(params)
         except WxskyError:
             raise
         except ValueError as exc:
-            raise ControlError(f"{method}: {exc}") from None
+            raise ControlError(clip(f"{method}: {exc}", ERROR_MAX_CHARS)) from None
 
     return dispatch

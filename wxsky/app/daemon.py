@@ -17,7 +17,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -43,6 +43,7 @@ from wxsky.inputs.drivers import open_link
 from wxsky.inputs.feed_sources import open_source
 from wxsky.inputs.metar_input import MetarFeedInput, MetarSettings
 from wxsky.inputs.stats import InputStats
+from wxsky.logs import RateLimitedLog, clip
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, WithFds, default_address
@@ -173,19 +174,19 @@ class Daemon:
         self._export_failed: str | None = None
         self._slot_textures: Any = None
         self._preview_task: asyncio.Future[None] | None = None
-        self._dispatch = dispatch_table(
-            {
-                "status": lambda p: no_params("status", p) or self.status(),
-                "scene": lambda p: no_params("scene", p) or self.scene_info(),
-                "set_camera": self._set_camera,
-                "set_aircraft": lambda p: set_aircraft(self.engine, p),
-                "set_time": lambda p: set_time(self.engine, p),
-                "apply_preset": lambda p: apply_preset(self.engine, p, config.presets.dirs),
-                "release": lambda p: release(self.engine, p),
-                "apply_metar": lambda p: apply_metar(self.engine, p),
-                "export_textures": self._export_textures,
-            }
-        )
+        self._control_log = RateLimitedLog(log)
+        self._commands: dict[str, Callable[[dict[str, Any]], Any]] = {
+            "status": lambda p: no_params("status", p) or self.status(),
+            "scene": lambda p: no_params("scene", p) or self.scene_info(),
+            "set_camera": self._set_camera,
+            "set_aircraft": lambda p: set_aircraft(self.engine, p),
+            "set_time": lambda p: set_time(self.engine, p),
+            "apply_preset": lambda p: apply_preset(self.engine, p, config.presets.dirs),
+            "release": lambda p: release(self.engine, p),
+            "apply_metar": lambda p: apply_metar(self.engine, p),
+            "export_textures": self._export_textures,
+        }
+        self._dispatch = dispatch_table(self._commands)
 
     # -- the three phases -------------------------------------------------------------
 
@@ -212,7 +213,13 @@ class Daemon:
             self._trace = TraceWriter(self._trace_path)
             log.info("trace: %s", self._trace_path)
         self._writer = FrameWriter.create(self.config.output.shm_name, layer_specs(self.config))
-        self._server = ControlServer(self.address, self._handle)
+        out = self.config.output
+        self._server = ControlServer(
+            self.address,
+            self._handle,
+            max_clients=out.max_clients,
+            idle_timeout_s=out.client_idle_timeout_s,
+        )
         await self._server.start()
         log.info(
             "wxsky %s serving on %s, frames in shm '%s', %s",
@@ -224,7 +231,7 @@ class Daemon:
         if self.preview_dir is not None:
             log.info("preview: %s", (self.preview_dir / "preview.png").resolve())
         for feed in self._feeds:
-            self._feed_tasks.append(asyncio.create_task(feed.run(self._stop)))
+            self._feed_tasks.append(asyncio.create_task(feed.run_supervised(self._stop)))
             log.info("METAR feed %s", feed.source.name)
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
@@ -274,6 +281,8 @@ class Daemon:
         timeout = self.config.daemon.shutdown_timeout_s
         deadline = time.monotonic() + timeout
         self._stop.set()
+        # First, so a ring build in flight gives up while the rest shuts down.
+        self.engine.cancel_scene_work()
         if self._feed_tasks:
             _, pending = await asyncio.wait(self._feed_tasks, timeout=max(0.05, timeout / 4))
             for task in pending:
@@ -310,7 +319,9 @@ class Daemon:
         if self._writer is not None:
             self._writer.close()
             self._writer = None
-        self.engine.close()
+        cut = self.engine.close(wait_s=max(0.0, deadline - time.monotonic()))
+        if cut is not None:
+            log.warning("shutdown: abandoned %s", cut)
         if self._trace is not None:
             self._trace.close()
         log.info("stopped after %d frames", self.frames_published)
@@ -369,8 +380,13 @@ class Daemon:
                 result = await result
             return result
         except WxskyError as exc:
-            stats.error(str(exc))
-            log.warning("control %s rejected: %s", method, exc)
+            # Per message, so rate-limited by command (any unknown one is one kind) and
+            # clipped: a flood of bad requests is a few lines, a huge param a short quote.
+            stats.error(clip(exc))
+            kind = method if method in self._commands else "unknown command"
+            self._control_log.warning(
+                f"rejected:{kind}", f"control {clip(method, 64)} rejected: {exc}"
+            )
             raise
 
     def _set_camera(self, params: dict[str, Any]) -> dict[str, Any]:
@@ -611,10 +627,10 @@ class Daemon:
         with contextlib.suppress(Exception):
             if self._writer is not None:
                 self._writer.close()
-        path = getattr(self.address, "path", None)
-        if path is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(path)
+        # Only the socket this daemon bound: one that failed to start (another daemon holds
+        # the address) must not remove that daemon's socket.
+        if self._server is not None:
+            self._server.remove_socket_file()
 
 
 def _unsupported(reason: str) -> dict[str, Any]:

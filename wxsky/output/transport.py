@@ -8,7 +8,15 @@ permissions are the access control).
 clients that subscribed to them. It is built so a misbehaving client cannot hurt the daemon: a
 client that stops reading loses its oldest queued notifications instead of growing memory or
 blocking `broadcast`, and a client that sends bytes that are not MessagePack-RPC is answered and
-disconnected without disturbing the others.
+disconnected without disturbing the others. Clients are counted (one over `max_clients` is
+answered with a one-line error and closed), a client that neither sends nor subscribes for
+`idle_timeout_s` is closed, no message over `wire.MAX_REQUEST_SIZE` is read, and every log line
+a client can cause is rate-limited and clipped (`wxsky.logs`). The server accepts connections
+itself, so running out of file descriptors is one log line when it starts and one when it ends.
+
+Only the socket file this server bound is ever removed (its device and inode are kept): a
+second daemon that failed to start, or a stale-socket check racing a new daemon, never removes
+the socket of a daemon that is running.
 
 A handler may return `WithFds`: the response then carries open file descriptors (SCM_RIGHTS,
 sent with the response's first byte) on a unix connection, and the handler's alternative
@@ -19,11 +27,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import ipaddress
 import logging
 import os
 import socket
 import stat
+import traceback
 from array import array
 from collections import deque
 from collections.abc import Awaitable, Callable
@@ -32,7 +42,9 @@ from pathlib import Path
 from typing import Any
 
 from wxsky.errors import ProtocolError, RuntimeFailure, WxskyError
+from wxsky.logs import RateLimitedLog, clip
 from wxsky.output.wire import (
+    MAX_REQUEST_SIZE,
     Message,
     MessageDecoder,
     Notification,
@@ -41,6 +53,7 @@ from wxsky.output.wire import (
     WireError,
     encode,
 )
+from wxsky.schema import REQUIRED, Field, Invalid, Items, Table, Text
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +64,31 @@ raises WxskyError with a one-line message for the client."""
 SUBSCRIBE = "subscribe"
 UNSUBSCRIBE = "unsubscribe"
 DEFAULT_MAX_QUEUED = 256
+# Connections served at once. Each holds a file descriptor and up to about 300 KB (a read
+# buffer, a decoder and 256 queued notifications); 64 hosts is far more than a simulator runs,
+# and far fewer descriptors than the daemon's 1024 (its feeds and links need some too).
+DEFAULT_MAX_CLIENTS = 64
+# A client that sends nothing and subscribes to nothing for this long is closed: a host either
+# calls commands or listens to a topic; a connection doing neither only holds a slot.
+DEFAULT_IDLE_TIMEOUT_S = 300.0  # a cockpit tool calling every few minutes keeps its link
+ERROR_MAX_CHARS = 1000  # an error string sent to a client: one line, at most this long
+MAX_TOPICS = 32  # topics a connection may subscribe to (the daemon sends 4)
+# subscribe/unsubscribe params: topic names are free strings, but bounded.
+TOPICS = Table(
+    {
+        "topics": Field(
+            Items(
+                Text(pattern=r"(?s).{1,64}", pattern_desc="1 to 64 characters"),
+                max_len=MAX_TOPICS,
+                what="a list of topic names",
+            ),
+            REQUIRED,
+        )
+    }
+)
 _READ_SIZE = 65536
+_BACKLOG = 128
+_ACCEPT_RETRY_S = 0.5  # after accept fails (out of descriptors): try again this often
 _SUN_PATH_MAX = 107  # Linux sockaddr_un.sun_path is 108 bytes including the NUL
 SCM_MAX_FD = 253  # Linux: the most descriptors one sendmsg may carry
 
@@ -170,7 +207,7 @@ def default_address() -> UnixAddress:
 
 def _one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
-    return text or type(exc).__name__
+    return clip(text, ERROR_MAX_CHARS) if text else type(exc).__name__
 
 
 class _Client:
@@ -190,15 +227,32 @@ class _Client:
 
 
 class ControlServer:
-    """MessagePack-RPC server for one handler. Use from a single event loop."""
+    """MessagePack-RPC server for one handler. Use from a single event loop.
+
+    `max_clients` connections are served at once; `idle_timeout_s` closes a client that sends
+    nothing and subscribes to nothing for that long (0: never); per-client log lines are
+    rate-limited to one of a kind per `log_interval_s`."""
 
     def __init__(
-        self, address: Address | str, handler: Handler, *, max_queued: int = DEFAULT_MAX_QUEUED
+        self,
+        address: Address | str,
+        handler: Handler,
+        *,
+        max_queued: int = DEFAULT_MAX_QUEUED,
+        max_clients: int = DEFAULT_MAX_CLIENTS,
+        idle_timeout_s: float = DEFAULT_IDLE_TIMEOUT_S,
+        log_interval_s: float = 60.0,
     ) -> None:
         self._address = parse_address(address) if isinstance(address, str) else address
         self._handler = handler
         self._max_queued = max(1, max_queued)
-        self._server: asyncio.Server | None = None
+        self._max_clients = max(1, max_clients)
+        self._idle_timeout_s = max(0.0, idle_timeout_s)
+        self._log = RateLimitedLog(logger, log_interval_s)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._listeners: list[socket.socket] = []
+        self._retry: asyncio.TimerHandle | None = None
+        self._accept_failing = 0  # failed accepts since accepting last worked
         self._socket_id: tuple[int, int] | None = None
         self._clients: set[_Client] = set()
         self._tasks: set[asyncio.Task[None]] = set()
@@ -220,29 +274,50 @@ class ControlServer:
         return self._dropped
 
     async def start(self) -> None:
-        if self._server is not None or self._closed:
+        if self._listeners or self._closed:
             raise WxskyError(f"control server on {self._address} was already started")
+        self._loop = asyncio.get_running_loop()
         address = self._address
         try:
             if isinstance(address, UnixAddress):
                 await self._clear_stale_socket(address.path)
-                self._server = await asyncio.start_unix_server(
-                    self._serve_client, path=str(address.path), limit=_READ_SIZE
-                )
-                # The socket is unauthenticated: only this user may connect.
-                os.chmod(address.path, 0o600)
-                info = os.stat(address.path)
-                self._socket_id = (info.st_dev, info.st_ino)
+                listener = self._bind_unix(address.path)
             else:
-                self._server = await asyncio.start_server(
-                    self._serve_client, address.host, address.port, limit=_READ_SIZE
-                )
-                if address.port == 0 and self._server.sockets:
-                    port = int(self._server.sockets[0].getsockname()[1])
-                    self._address = TcpAddress(address.host, port)
+                listener = _bind_tcp(address)
+                if address.port == 0:
+                    self._address = TcpAddress(address.host, int(listener.getsockname()[1]))
         except OSError as exc:
             raise RuntimeFailure(f"cannot listen on {address}: {exc.strerror or exc}") from exc
+        listener.setblocking(False)
+        self._listeners.append(listener)
+        self._loop.add_reader(listener.fileno(), self._accept, listener)
         logger.info("control server listening on %s", self._address)
+
+    def _bind_unix(self, path: Path) -> socket.socket:
+        """A listening socket bound at `path`, which must not exist (asyncio's own unix server
+        would remove whatever socket file is there first: perhaps a daemon's that has just
+        started). Keeps the file's identity, so only this file is ever removed."""
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            try:
+                sock.bind(str(path))
+            except OSError as exc:
+                if exc.errno == errno.EADDRINUSE:
+                    raise RuntimeFailure(
+                        f"another wxsky daemon is starting on unix:{path} (the socket file "
+                        "appeared while this one was checking it)"
+                    ) from exc
+                raise
+            info = os.stat(path)
+            self._socket_id = (info.st_dev, info.st_ino)
+            # The socket is unauthenticated: only this user may connect.
+            os.chmod(path, 0o600)
+            sock.listen(_BACKLOG)
+        except BaseException:
+            sock.close()
+            self.remove_socket_file()
+            raise
+        return sock
 
     @staticmethod
     async def _clear_stale_socket(path: Path) -> None:
@@ -255,9 +330,14 @@ class ControlServer:
         try:
             _, writer = await asyncio.wait_for(asyncio.open_unix_connection(str(path)), 1.0)
         except (ConnectionRefusedError, FileNotFoundError):
-            logger.info("removing stale control socket %s (nothing is listening on it)", path)
             with contextlib.suppress(FileNotFoundError):
-                os.unlink(path)
+                now = os.lstat(path)
+                # Only the file found dead: a daemon starting meanwhile may have replaced it.
+                if (now.st_dev, now.st_ino) == (info.st_dev, info.st_ino):
+                    logger.info(
+                        "removing stale control socket %s (nothing is listening on it)", path
+                    )
+                    os.unlink(path)
             return
         except (OSError, TimeoutError) as exc:
             raise RuntimeFailure(f"cannot tell whether {path} is in use: {_one_line(exc)}") from exc
@@ -266,27 +346,131 @@ class ControlServer:
             await writer.wait_closed()
         raise RuntimeFailure(f"another wxsky daemon is listening on unix:{path}")
 
+    def remove_socket_file(self) -> bool:
+        """Remove the socket file this server bound, if its path still names that file (a
+        successor daemon may have replaced it); True if removed. Safe to call at any time,
+        also from a forced exit; it never touches a file this server did not create."""
+        if not isinstance(self._address, UnixAddress) or self._socket_id is None:
+            return False
+        path = self._address.path
+        try:
+            info = os.lstat(path)
+            if (info.st_dev, info.st_ino) != self._socket_id:
+                return False
+            os.unlink(path)
+        except OSError:
+            return False
+        self._socket_id = None
+        return True
+
     async def close(self) -> None:
         """Stop listening, disconnect every client and remove the socket file. Idempotent."""
         if self._closed:
             return
         self._closed = True
-        if self._server is not None:
-            self._server.close()
+        self._stop_listening()
+        # Now, not after the clients: a caller that stops waiting for them (the daemon's
+        # shutdown budget) must not leave the file behind.
+        self.remove_socket_file()
         tasks = list(self._tasks)
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
-        if self._server is not None:
-            await self._server.wait_closed()
-        if isinstance(self._address, UnixAddress) and self._socket_id is not None:
-            path = self._address.path
-            with contextlib.suppress(FileNotFoundError):
-                info = os.lstat(path)
-                # Only our own socket: a successor daemon may already have replaced it.
-                if (info.st_dev, info.st_ino) == self._socket_id:
-                    os.unlink(path)
         logger.info("control server on %s closed", self._address)
+
+    def _stop_listening(self) -> None:
+        if self._retry is not None:
+            self._retry.cancel()
+            self._retry = None
+        for listener in self._listeners:
+            if self._loop is not None and not self._loop.is_closed():
+                self._loop.remove_reader(listener.fileno())
+            listener.close()
+        self._listeners = []
+
+    # -- accepting --------------------------------------------------------------------
+
+    def _accept(self, listener: socket.socket) -> None:
+        """The listening socket is readable: take what is waiting (a bounded batch)."""
+        for _ in range(_BACKLOG):
+            try:
+                conn, _ = listener.accept()
+            except (BlockingIOError, InterruptedError):
+                if self._accept_failing:
+                    # Every client that waited is in: accepting works again (not before, so a
+                    # daemon at its descriptor limit, taking one client now and then, does not
+                    # log every one).
+                    logger.warning(
+                        "control: accepting again on %s (after %d failed attempts)",
+                        self._address,
+                        self._accept_failing,
+                    )
+                    self._accept_failing = 0
+                return
+            except ConnectionAbortedError:
+                continue
+            except OSError as exc:  # EMFILE, ENFILE, ENOBUFS, ENOMEM: out of something
+                self._accept_failed(listener, exc)
+                return
+            self._admit(conn)
+
+    def _accept_failed(self, listener: socket.socket, exc: OSError) -> None:
+        # One line when accepting starts to fail, one when it works again: not one per try.
+        if not self._accept_failing:
+            logger.warning(
+                "control: accept failing on %s: %s; new clients wait, retrying every %g s",
+                self._address,
+                exc.strerror or _one_line(exc),
+                _ACCEPT_RETRY_S,
+            )
+        self._accept_failing += 1
+        loop = self._loop
+        assert loop is not None
+        loop.remove_reader(listener.fileno())
+
+        def resume() -> None:
+            self._retry = None
+            if not self._closed:
+                loop.add_reader(listener.fileno(), self._accept, listener)
+
+        self._retry = loop.call_later(_ACCEPT_RETRY_S, resume)
+
+    def _admit(self, conn: socket.socket) -> None:
+        conn.setblocking(False)
+        if self._closed or len(self._tasks) >= self._max_clients:
+            self._refuse(conn)
+            return
+        assert self._loop is not None
+        task = self._loop.create_task(self._serve(conn))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def _refuse(self, conn: socket.socket) -> None:
+        """Over the limit: one line saying so, then the connection is closed."""
+        if self._closed:
+            message = "the wxsky daemon is shutting down"
+        else:
+            message = (
+                f"too many control clients (at most {self._max_clients}, the daemon's "
+                "[output] max_clients): closing this connection; try again later"
+            )
+        with contextlib.suppress(OSError):
+            conn.send(encode(Response(None, message, None)))  # a fresh socket takes 140 bytes
+            conn.shutdown(socket.SHUT_WR)
+        conn.close()
+        self._log.warning("too-many", f"control: {message}")
+
+    async def _serve(self, conn: socket.socket) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            reader = asyncio.StreamReader(limit=_READ_SIZE, loop=loop)
+            protocol = asyncio.StreamReaderProtocol(reader, loop=loop)
+            transport, _ = await loop.connect_accepted_socket(lambda: protocol, conn)
+        except (OSError, asyncio.CancelledError):
+            conn.close()
+            return
+        writer = asyncio.StreamWriter(transport, protocol, reader, loop)
+        await self._serve_client(reader, writer)
 
     def broadcast(self, method: str, params: dict[str, Any] | None = None) -> int:
         """Queue a notification for every client subscribed to topic `method`; never blocks.
@@ -304,49 +488,66 @@ class ControlServer:
                 client.dropped += 1
                 self._dropped += 1
                 if client.dropped == 1:
-                    logger.warning(
-                        "control client %s is not reading; dropping its oldest notifications",
-                        client.peer,
+                    self._log.warning(
+                        "not-reading",
+                        f"control client {client.peer} is not reading; dropping its oldest "
+                        "notifications",
                     )
             client.queue.append(data)
             client.wakeup.set()
         return len(targets)
 
+    # -- one client -------------------------------------------------------------------
+
     async def _serve_client(
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
     ) -> None:
-        task = asyncio.current_task()
         peer = _peer_name(writer)
-        if self._closed or task is None:
-            writer.close()
-            return
-        self._tasks.add(task)
         client = _Client(reader, writer, peer)
         self._clients.add(client)
         sender = asyncio.create_task(self._send_notifications(client))
         logger.debug("control client %s connected", peer)
         try:
             await self._read_requests(client)
+        except asyncio.CancelledError:
+            pass  # the server is closing: this client's end, not an error
         except ConnectionError as exc:
             logger.debug("control client %s: %s", peer, exc)
-        except Exception:
-            logger.exception("control client %s: unexpected error; disconnecting it", peer)
+        except Exception as exc:
+            self._log_bug(
+                "client", f"control client {peer}: unexpected error; disconnecting it", exc
+            )
         finally:
             self._clients.discard(client)
             sender.cancel()
-            await asyncio.gather(sender, return_exceptions=True)
+            with contextlib.suppress(asyncio.CancelledError):
+                await asyncio.gather(sender, return_exceptions=True)
             writer.close()
-            with contextlib.suppress(OSError, asyncio.CancelledError):
-                await writer.wait_closed()
-            self._tasks.discard(task)
+            with contextlib.suppress(OSError, asyncio.CancelledError, TimeoutError):
+                await asyncio.wait_for(writer.wait_closed(), 1.0)
             if client.dropped:
-                logger.info("control client %s: %d notifications dropped", peer, client.dropped)
+                self._log.log(
+                    logging.INFO,
+                    "dropped",
+                    f"control client {peer}: {client.dropped} notifications dropped",
+                )
             logger.debug("control client %s disconnected", peer)
 
     async def _read_requests(self, client: _Client) -> None:
-        decoder = MessageDecoder()
+        decoder = MessageDecoder(MAX_REQUEST_SIZE)
         while True:
-            data = await client.reader.read(_READ_SIZE)
+            # A client that subscribed may only listen; one that did not must send something.
+            idle_s = self._idle_timeout_s if self._idle_timeout_s and not client.topics else None
+            try:
+                data = await asyncio.wait_for(client.reader.read(_READ_SIZE), idle_s)
+            except TimeoutError:
+                await self._hang_up(
+                    client,
+                    "idle",
+                    f"control: nothing sent and nothing subscribed for {idle_s:g} s (the "
+                    "daemon's [output] client_idle_timeout_s): closing this connection",
+                )
+                return
             if not data:
                 return
             while True:
@@ -360,15 +561,20 @@ class ControlServer:
                     break
                 if not (error.recoverable and error.msgid is not None):
                     # Not a request we can name: the peer is not speaking our protocol (or the
-                    # stream is out of step), so answer once and hang up.
-                    logger.warning("control client %s: %s; disconnecting it", client.peer, error)
-                    client.writer.write(encode(Response(None, str(error), None)))
-                    with contextlib.suppress(ConnectionError, TimeoutError):
-                        await asyncio.wait_for(client.writer.drain(), 1.0)
+                    # stream is out of step, or the message is too large), so answer once and
+                    # hang up.
+                    await self._hang_up(client, "garbage", _one_line(error))
                     return
-                logger.info("control client %s: %s", client.peer, error)
-                await self._send(client, encode(Response(error.msgid, str(error), None)))
+                self._log.log(logging.INFO, "wrong-shape", f"control client {client.peer}: {error}")
+                await self._send(client, encode(Response(error.msgid, _one_line(error), None)))
                 data = b""  # the rest of the buffered stream is still in step
+
+    async def _hang_up(self, client: _Client, kind: str, message: str) -> None:
+        """Say why in one line (a response with no msgid), then the caller closes."""
+        self._log.warning(kind, f"control client {client.peer}: {message}; disconnecting it")
+        client.writer.write(encode(Response(None, message, None)))
+        with contextlib.suppress(ConnectionError, TimeoutError):
+            await asyncio.wait_for(client.writer.drain(), 1.0)
 
     async def _dispatch(self, client: _Client, message: Message) -> None:
         if isinstance(message, Request):
@@ -380,12 +586,27 @@ class ControlServer:
         elif isinstance(message, Notification):
             try:
                 await self._handler(message.method, message.params)
-            except Exception:
-                logger.exception(
-                    "control client %s: notification %r failed", client.peer, message.method
+            except WxskyError as exc:
+                # As for a request, the handler logs what it rejects; nobody is answered.
+                self._log.log(
+                    logging.DEBUG,
+                    "notification-rejected",
+                    f"control client {client.peer}: notification {clip(message.method, 64)!r} "
+                    f"rejected: {exc}",
+                )
+            except Exception as exc:
+                self._log_bug(
+                    "notification",
+                    f"control client {client.peer}: notification {clip(message.method, 64)!r} "
+                    f"failed: {type(exc).__name__}: {exc}",
+                    exc,
                 )
         else:
-            logger.info("control client %s sent an unexpected response; ignored", client.peer)
+            self._log.log(
+                logging.INFO,
+                "response",
+                f"control client {client.peer} sent an unexpected response; ignored",
+            )
 
     async def _answer(self, client: _Client, request: Request) -> tuple[bytes, tuple[int, ...]]:
         """The encoded response, and the file descriptors to send with it (none mostly)."""
@@ -398,16 +619,30 @@ class ControlServer:
         except WxskyError as exc:
             return encode(Response(request.msgid, _one_line(exc), None)), ()
         except Exception as exc:
-            logger.exception("control request %r failed", request.method)
             message = f"internal error: {type(exc).__name__}: {_one_line(exc)}"
-            return encode(Response(request.msgid, message, None)), ()
+            self._log_bug(
+                "request", f"control request {clip(request.method, 64)!r} failed: {message}", exc
+            )
+            return encode(Response(request.msgid, clip(message, ERROR_MAX_CHARS), None)), ()
         if isinstance(result, WithFds):
             fds, result = (result.fds, result.result) if client.unix else ((), result.without_fds)
         try:
             return encode(Response(request.msgid, None, result)), fds
         except ProtocolError as exc:
-            logger.error("result of control request %r cannot be sent: %s", request.method, exc)
+            self._log.log(
+                logging.ERROR,
+                "unsendable",
+                f"result of control request {clip(request.method, 64)!r} cannot be sent: {exc}",
+            )
             return encode(Response(request.msgid, f"internal error: {_one_line(exc)}", None)), ()
+
+    def _log_bug(self, kind: str, message: str, exc: BaseException) -> None:
+        """A bug a client's message ran into: one line of a kind per interval, then its
+        traceback (with the exception's text clipped as the line's is)."""
+        if self._log.log(logging.ERROR, f"bug:{kind}", message):
+            stack = "".join(traceback.format_tb(exc.__traceback__))
+            last = f"{type(exc).__name__}: {clip(exc)}"
+            logger.error("Traceback (most recent call last):\n%s%s", stack, last)
 
     @staticmethod
     async def _send(client: _Client, data: bytes) -> None:
@@ -467,11 +702,29 @@ def _update_topics(client: _Client, method: str, params: dict[str, Any]) -> dict
     topics = params.get("topics")
     if not isinstance(topics, list) or not all(isinstance(t, str) for t in topics):
         raise ProtocolError(f'{method}: params must be {{"topics": [str, ...]}}')
+    try:
+        checked = TOPICS.values(params)
+    except Invalid as exc:
+        raise ProtocolError(f"{method}: {exc}") from None
     if method == SUBSCRIBE:
-        client.topics.update(topics)
+        topics = client.topics | set(checked["topics"])
+        if len(topics) > MAX_TOPICS:
+            raise ProtocolError(
+                f"{method}: a connection may subscribe to at most {MAX_TOPICS} topics, "
+                f"this would make {len(topics)}"
+            )
+        client.topics = topics
     else:
-        client.topics.difference_update(topics)
+        client.topics.difference_update(checked["topics"])
     return {"topics": sorted(client.topics)}
+
+
+def _bind_tcp(address: TcpAddress) -> socket.socket:
+    """A listening socket on the loopback address (`localhost` is 127.0.0.1: a host tries
+    that first, and nothing asks a resolver)."""
+    host = "127.0.0.1" if address.host.lower() == "localhost" else address.host
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    return socket.create_server((host, address.port), family=family, backlog=_BACKLOG)
 
 
 def _peer_name(writer: asyncio.StreamWriter) -> str:

@@ -29,6 +29,15 @@ NOTIFICATION = 2
 MAX_MESSAGE_SIZE = 8 * 1024 * 1024
 """Largest encoded message a decoder accepts; bigger ones are a protocol error."""
 
+MAX_REQUEST_SIZE = 32 * 1024
+"""Largest message the daemon reads from a host (docs/protocol.md §2.2). The largest legal
+request is an `apply_metar` with the longest report accepted (4096 characters: 16,456 bytes
+with every other param, if each character took 4 bytes of UTF-8), or a `subscribe` with the
+most topics (32 of up to 64 characters: 8,092 bytes); about as much again is left for params
+added later. Anything bigger
+is refused before it is buffered: one connection cannot make the daemon hold megabytes, nor
+hold up the other clients while they are decoded."""
+
 MSGID_MAX = 0xFFFF_FFFF
 _INT_MIN = -(2**63)
 _INT_MAX = 2**64 - 1
@@ -175,19 +184,42 @@ def _refuse(value: object) -> object:
     raise ProtocolError(f"cannot encode type {_type_name(value)}")
 
 
+_FEED_CHUNK = 16 * 1024  # bytes handed to msgpack at a time (its buffer's starting size)
+
+
 class MessageDecoder:
-    """Turns a byte stream into messages, however the bytes are split. One per connection."""
+    """Turns a byte stream into messages, however the bytes are split. One per connection.
+
+    It holds at most `max_message_size` plus 16 KiB however the stream is split (bytes go to
+    msgpack 16 KiB at a time, each complete message taken out before the next piece), and
+    gives memory back after a large message: msgpack's buffer only ever grows, so once nothing
+    is pending a grown buffer is dropped for a fresh one."""
 
     def __init__(self, max_message_size: int = MAX_MESSAGE_SIZE) -> None:
         self.max_message_size = max_message_size
-        self._unpacker = msgpack.Unpacker(
-            max_buffer_size=max_message_size,
+        self._unpacker = self._new_unpacker()
+        self._fed = 0  # bytes fed to this unpacker
+        self._start = 0  # where the message being decoded begins, in those bytes
+        self._rest = b""  # bytes of a feed that a wrong-shaped message interrupted
+        self._count = 0
+        self._broken: str | None = None
+
+    def _new_unpacker(self) -> msgpack.Unpacker:
+        limit = self.max_message_size
+        return msgpack.Unpacker(
+            # A partial message over the limit plus one piece does not fit: BufferFull says
+            # the message is too large, never earlier (each message's exact size is checked
+            # as it completes). Headers announcing more than the limit are refused at once.
+            max_buffer_size=limit + _FEED_CHUNK,
+            max_str_len=limit,
+            max_bin_len=limit,
+            max_array_len=limit,
+            max_map_len=limit // 2,
+            read_size=min(_FEED_CHUNK, limit + _FEED_CHUNK),
             raw=False,
             strict_map_key=True,
             use_list=True,
         )
-        self._count = 0
-        self._broken: str | None = None
 
     @property
     def messages_decoded(self) -> int:
@@ -205,25 +237,54 @@ class MessageDecoder:
                 recoverable=False,
             )
         decoded: list[Message] = []
+        if self._rest:  # what followed a wrong-shaped message, not yet decoded
+            data, self._rest = self._rest + bytes(data), b""
+        view = memoryview(data)
+        offset = 0
         try:
-            self._unpacker.feed(data)
-        except msgpack.BufferFull:
-            raise self._fail(
-                f"control message {self._count + 1}: larger than {self.max_message_size} bytes",
-                decoded,
-            ) from None
+            self._drain(decoded)  # messages still buffered after a wrong-shaped one
+            while offset < len(view):
+                piece = view[offset : offset + _FEED_CHUNK]
+                offset += len(piece)
+                try:
+                    self._unpacker.feed(piece)
+                except msgpack.BufferFull:
+                    raise self._fail(self._too_large(), decoded) from None
+                self._fed += len(piece)
+                self._drain(decoded)
+        except WireError as exc:
+            if exc.recoverable:
+                self._rest = bytes(view[offset:])
+            raise
+        if self._fed > _FEED_CHUNK and self._start == self._fed:
+            # Nothing pending: let a buffer grown by a large message go. Only the end of the
+            # last complete message tells that: msgpack's tell() also counts the bytes of a
+            # container it has half parsed, and a fresh unpacker would lose its place.
+            self._unpacker, self._fed, self._start = self._new_unpacker(), 0, 0
+        return decoded
+
+    def _too_large(self) -> str:
+        return f"control message {self._count + 1}: larger than {self.max_message_size} bytes"
+
+    def _drain(self, decoded: list[Message]) -> None:
         while True:
             try:
                 obj = next(self._unpacker)
             except StopIteration:
-                return decoded
+                return
             except (ValueError, TypeError, msgpack.UnpackException) as exc:
                 reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                if "exceeds max_" in reason:  # a header announcing more than the limit
+                    raise self._fail(self._too_large(), decoded) from None
                 if "map key" in reason:
                     reason = f"map keys must be strings: {reason}"
                 raise self._fail(
                     f"control message {self._count + 1}: not valid msgpack ({reason})", decoded
                 ) from None
+            end = self._unpacker.tell()
+            size, self._start = end - self._start, end
+            if size > self.max_message_size:
+                raise self._fail(self._too_large(), decoded)
             self._count += 1
             try:
                 decoded.append(self._to_message(obj))
@@ -245,7 +306,8 @@ class MessageDecoder:
                 recoverable=True,
             )
         kind = obj[0] if obj else None
-        if isinstance(kind, bool) or kind not in _SHAPES:
+        # An int check first: `in` hashes the value, and a list or map type is unhashable.
+        if isinstance(kind, bool) or not isinstance(kind, int) or kind not in _SHAPES:
             raise WireError(
                 f"control message {n}: unknown message type {kind!r} "
                 "(0 request, 1 response, 2 notification)",

@@ -145,12 +145,14 @@ class Bool(Kind):
 @dataclass(frozen=True)
 class Text(Kind):
     """A string: one of `choices` (matched case-insensitively, stored as spelled there), or
-    matching `pattern` as a whole (described in words by `pattern_desc`), or any string."""
+    matching `pattern` as a whole (described in words by `pattern_desc`), or any string; of at
+    most `max_len` characters when given (a longer one is refused by its length, unquoted)."""
 
     choices: tuple[str, ...] = ()
     pattern: str | None = None
     pattern_desc: str = ""
     non_empty: bool = False
+    max_len: int | None = None
 
     def describe(self) -> str:
         if self.choices:
@@ -167,6 +169,10 @@ class Text(Kind):
             raise ValueError(f"must be {self.describe()}, got {value!r}")
         if not isinstance(value, str) or (self.non_empty and not value.strip()):
             raise ValueError(f"must be {self.describe()}, got {value!r}")
+        if self.max_len is not None and len(value) > self.max_len:
+            raise ValueError(
+                f"must be at most {self.max_len} characters, got {len(value)} characters"
+            )
         if self.pattern is not None and not re.fullmatch(self.pattern, value):
             raise ValueError(f"must be {self.describe()}, got {value!r}")
         return value

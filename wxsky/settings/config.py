@@ -23,6 +23,7 @@ from wxsky.protocols.nmea import HEADING_SOURCES
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX
 from wxsky.scene.clouds import BLOCK_SIZE_M
+from wxsky.scene.gather import MAX_NEAR_BLOCKS, MAX_RING_BLOCKS, largest_range, scene_blocks
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
 from wxsky.schema import (
@@ -219,6 +220,12 @@ class OutputSection(_Section):
     )
     max_width: int = _opt(1920, VIEWPORT_PX)
     max_height: int = _opt(1080, VIEWPORT_PX)
+    # Control clients served at once (output/transport.py DEFAULT_MAX_CLIENTS); one more is
+    # answered "too many control clients" and closed. Each holds a file descriptor.
+    max_clients: int = _opt(64, _int(1, 1000))
+    # A control client that sends nothing and subscribes to nothing for this long is closed
+    # (DEFAULT_IDLE_TIMEOUT_S there); 0: never.
+    client_idle_timeout_s: float = _opt(300.0, _num(0.0, 86_400.0, "s"))
 
 
 @dataclass(frozen=True)
@@ -376,8 +383,39 @@ class DaemonConfig:
                     f"{fmt_number(scene.ring_radius_m)}",
                 )
             )
+        else:
+            problems.extend(_scene_block_problems(scene))
         if problems:
             raise Invalid(problems)
+
+
+def _scene_block_problems(scene: SceneSection) -> list[Problem]:
+    """The work ring_radius_m and max_range_m imply, in blocks of one cloud layer, against
+    the scene's bounds (`gather.MAX_NEAR_BLOCKS`, `gather.MAX_RING_BLOCKS`)."""
+    radius, reach = scene.ring_radius_m, scene.max_range_m
+    blocks = scene_blocks(radius, reach)
+    size = f"{fmt_number(BLOCK_SIZE_M / 1000.0)} km"
+    out = []
+    if blocks.near > MAX_NEAR_BLOCKS:
+        out.append(
+            Problem(
+                ("scene", "ring_radius_m"),
+                f"{fmt_number(radius)} puts {blocks.near} blocks of {size} per cloud layer into "
+                f"every frame's near sprites, at most {MAX_NEAR_BLOCKS} "
+                f"(ring_radius_m up to {fmt_number(largest_range(0.0, MAX_NEAR_BLOCKS))})",
+            )
+        )
+    if blocks.ring > MAX_RING_BLOCKS:
+        out.append(
+            Problem(
+                ("scene", "max_range_m"),
+                f"{fmt_number(reach)} with scene.ring_radius_m {fmt_number(radius)} puts "
+                f"{blocks.ring} blocks of {size} per cloud layer into every ring build, at most "
+                f"{MAX_RING_BLOCKS} (max_range_m up to "
+                f"{fmt_number(largest_range(radius, MAX_RING_BLOCKS))} at this radius)",
+            )
+        )
+    return out
 
 
 def _config_table() -> Table:
