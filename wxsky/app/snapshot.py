@@ -14,6 +14,7 @@ import numpy.typing as npt
 
 from wxsky.engine.stages import DEFAULT_TRANSITION_STEP_S, FramePlan, SkyEngine
 from wxsky.host.compositor import composite, layers_from_images
+from wxsky.output import memory
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_shadow import CloudShadow
@@ -28,6 +29,16 @@ from wxsky.weather.transition import TransitionRates
 LAYER_NAMES: tuple[str, ...] = ("sky", "near", *(f"ring_{i}" for i in range(RING_SIZE)))
 
 U8 = npt.NDArray[np.uint8]
+
+# What a snapshot takes at its peak, calibrated from the peak resident memory of
+# `/usr/bin/time -v wxsky snapshot --preset clear --size WxH` on llvmpipe: 145 MiB at 16x16,
+# then 261 to 267 bytes more a pixel from 960x540 to 3840x2160 (the renderer's layers and
+# their readback, the compositor's float64 RGBA arrays, the PNG's rows), and 12 bytes more a
+# texel of the eight impostors (ring_texture_px 256 -> 2048). The base also covers a default
+# range's cloud work (a thunderstorm's three layers: 212 MiB at 16x16).
+SNAPSHOT_BASE_BYTES = 224 * memory.MIB
+SNAPSHOT_BYTES_PER_PX = 280
+SNAPSHOT_BYTES_PER_RING_TEXEL = 13
 
 
 @dataclass(frozen=True)
@@ -66,7 +77,10 @@ def take_snapshot(
     later than its preset's time shows them moved on, the same in every process). `mode`:
     "ring" (far clouds in impostors, as the daemon draws them) or "direct" (every cloud as a
     sprite, to compare). `position_deg`: (lat, lon) of the camera, placed as the daemon's
-    `set_camera` places it (near the site: under the same sky; far: a new site)."""
+    `set_camera` places it (near the site: under the same sky; far: a new site).
+    Raises RuntimeFailure, before anything is built, if the picture would not fit in the
+    memory available (`snapshot_bytes`)."""
+    check_snapshot_memory(camera.width_px, camera.height_px, settings)
     engine = SkyEngine(state, camera, settings, clock_rate=0.0, render_mode=mode)
     if drift_s:
         engine.drift_for(drift_s)
@@ -90,6 +104,26 @@ def take_snapshot(
     finally:
         if own:
             r.close()
+
+
+def snapshot_bytes(width: int, height: int, settings: SceneSettings) -> int:
+    """About the most memory a snapshot of width x height takes (see SNAPSHOT_BASE_BYTES)."""
+    texels = RING_SIZE * settings.ring_texture_px**2
+    return (
+        SNAPSHOT_BASE_BYTES
+        + SNAPSHOT_BYTES_PER_PX * width * height
+        + SNAPSHOT_BYTES_PER_RING_TEXEL * texels
+    )
+
+
+def check_snapshot_memory(width: int, height: int, settings: SceneSettings) -> None:
+    """RuntimeFailure, one line with the estimate and what is available, if a snapshot of
+    width x height would not fit in memory."""
+    memory.require(
+        snapshot_bytes(width, height, settings),
+        f"snapshot {width}x{height}",
+        memory.memory_headroom(),
+    )
 
 
 def picture(renderer: Renderer, plan: FramePlan, draw_ring: bool = True) -> Snapshot:

@@ -5,8 +5,8 @@ Every line has `frame` (the published frame number), `event` and `camera_m` ([x,
 ring's world frame: east, north, up metres around the observer); the ring schedule's events
 (`ring_rebuild_start` with `reason` and `centre_m`, `impostor_rendered` with `index`,
 `ring_rebuild_done`, `crossfade_start` with `fade_s`, `crossfade_done`, `ring_rebuild_failed`
-with `error`) add their own fields. Lines are flushed per frame, so a
-reader sees them while the daemon runs.
+with `error`, `ring_rebuild_cancelled` at shutdown) add their own fields. Lines are flushed per
+frame, so a reader sees them while the daemon runs.
 """
 
 from __future__ import annotations

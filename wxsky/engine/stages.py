@@ -199,7 +199,7 @@ class SkyEngine:
         sky: SkyParams,
     ) -> RingScene:
         t0 = time.perf_counter()
-        ring = build_ring(state, drift, centre_m, sky, self.settings)
+        ring = build_ring(state, drift, centre_m, sky, self.settings, self._schedule.cancel_event)
         if self._build_times is not None:
             self._build_times.append(time.perf_counter() - t0)
         return ring
@@ -209,9 +209,15 @@ class SkyEngine:
         """A ring rebuild is under way (building, rendering or fading in)."""
         return self._schedule.busy
 
-    def close(self) -> None:
-        """Stop the ring builder; idempotent."""
-        self._schedule.close()
+    def cancel_scene_work(self) -> None:
+        """Make a ring build in flight give up at its next block and start no more (safe
+        from any thread: the daemon calls it first thing at shutdown)."""
+        self._schedule.cancel()
+
+    def close(self, wait_s: float = 0.0) -> str | None:
+        """Stop the ring builder, waiting up to wait_s for a build in flight to give up;
+        idempotent. Returns what was abandoned (`RingSchedule.close`), or None."""
+        return self._schedule.close(wait_s)
 
     def __enter__(self) -> SkyEngine:
         return self

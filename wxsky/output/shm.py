@@ -64,7 +64,11 @@ drops it when the process dies, however it dies). `FrameWriter.create` on an exi
 that lock: if another process holds it the name is in use and creation fails; if not, the old
 writer is gone and the segment is unlinked and recreated. Readers still mapping the old segment
 see no new frames; `FrameReader.is_current()` tells them to reopen. The segment is created with
-mode 0600: only processes of the daemon's user can attach.
+mode 0600: only processes of the daemon's user can attach. A writer only ever unlinks the file
+it made (the name must still refer to its file's device and inode): if the name was removed
+and made again by another writer, closing leaves that one alone. Before anything is made, the
+segment's size is checked against the free space of /dev/shm and the memory available
+(`output.memory`), and refused with both figures if it does not fit.
 """
 
 from __future__ import annotations
@@ -88,6 +92,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.errors import RuntimeFailure, WxskyError
+from wxsky.output import memory
 
 if sys.byteorder != "little":  # pragma: no cover - every supported host is little-endian
     raise ImportError("wxsky.output.shm needs a little-endian CPU (the segment layout is LE)")
@@ -176,6 +181,43 @@ def _shm_open(name: str, flags: int, mode: int = 0o600) -> int:
 
 def _shm_unlink(name: str) -> None:
     _posixshmem.shm_unlink("/" + name)
+
+
+def _names_file(name: str, fd: int) -> bool:
+    """Whether segment `name` is still the very file open as `fd` (same device and inode):
+    the name may have been removed and made again by another writer since."""
+    try:
+        other = _shm_open(name, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        mine, theirs = os.fstat(fd), os.fstat(other)
+    finally:
+        os.close(other)
+    return (mine.st_dev, mine.st_ino) == (theirs.st_dev, theirs.st_ino)
+
+
+def _other_writer(name: str) -> int | None:
+    """For a name no longer this writer's: None if nothing has it, else the pid in its header
+    (0 when unreadable)."""
+    try:
+        fd = _shm_open(name, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        return _writer_pid(fd) or 0
+    finally:
+        os.close(fd)
+
+
+def _unlink_own(name: str, fd: int) -> bool:
+    """Unlink segment `name` only if it is the file open as `fd`, so that a writer never
+    removes a segment another process made under the same name; True if it did."""
+    if not _names_file(name, fd):
+        return False
+    with contextlib.suppress(FileNotFoundError):
+        _shm_unlink(name)
+    return True
 
 
 @dataclass(frozen=True)
@@ -311,7 +353,8 @@ def _replace_stale(name: str) -> None:
             name,
             _writer_pid(fd),
         )
-        _shm_unlink(name)
+        # Only the stale file we locked: another writer may have replaced it meanwhile.
+        _unlink_own(name, fd)
     finally:
         os.close(fd)  # also drops the lock we may hold on the old segment
 
@@ -336,14 +379,22 @@ def _create_segment(name: str, size: int) -> int:
     try:
         # Taken before the segment has a magic, so a concurrent create sees it as in use.
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        if not _names_file(name, fd):
+            # Another writer took the empty file for a dead one's before we locked it, and
+            # replaced it: the name is theirs now.
+            os.close(fd)
+            raise RuntimeFailure(
+                f"shared-memory segment {name!r} was replaced by another writer while this one "
+                "was starting"
+            )
         os.ftruncate(fd, size)
         if hasattr(os, "posix_fallocate"):
             # Reserve the pages now: on a full tmpfs (Docker's /dev/shm is 64 MiB) a late page
             # fault would kill the daemon with SIGBUS instead of raising here.
             os.posix_fallocate(fd, 0, size)
     except OSError as exc:
+        _unlink_own(name, fd)
         os.close(fd)
-        _shm_unlink(name)
         raise RuntimeFailure(
             f"cannot allocate {size} bytes of shared memory for segment {name!r}: "
             f"{exc.strerror} (is /dev/shm large enough?)"
@@ -384,12 +435,20 @@ class FrameWriter:
         if not 0 <= meta_capacity <= U32_MAX:
             raise ValueError(f"meta_capacity {meta_capacity} is outside 0..{U32_MAX}")
         layout = _Layout.compute(specs, meta_capacity)
+        # Before anything is made: /dev/shm and memory must hold it (the mapping is memory).
+        memory.require(
+            layout.total_size,
+            f"shared-memory segment {bare!r} ({len(specs)} layers up to "
+            f"{max(s.max_width for s in specs)}x{max(s.max_height for s in specs)}, "
+            f"{SLOT_COUNT} slots)",
+            [*memory.shm_headroom(), *memory.memory_headroom(private=False)],
+        )
         fd = _create_segment(bare, layout.total_size)
         try:
             mm = mmap.mmap(fd, layout.total_size)
         except OSError as exc:
+            _unlink_own(bare, fd)
             os.close(fd)
-            _shm_unlink(bare)
             raise RuntimeFailure(f"cannot map shared-memory segment {bare!r}: {exc}") from exc
         writer = cls(bare, fd, mm, layout)
         writer._init_header()
@@ -520,15 +579,22 @@ class FrameWriter:
         self._handed_out.clear()
 
     def close(self) -> None:
-        """Mark the segment closed for attached readers and unlink it. Idempotent."""
+        """Mark the segment closed for attached readers and unlink it, if the name still
+        refers to this writer's segment (another process may have made a new one under it).
+        Idempotent."""
         if self._closed:
             return
         self._closed = True
         try:
             self._put32(HDR_STATE, STATE_CLOSED)
-            _shm_unlink(self._name)
-        except FileNotFoundError:
-            pass
+            if not _unlink_own(self._name, self._fd):
+                other = _other_writer(self._name)
+                if other is not None:
+                    logger.warning(
+                        "frame segment %r: the name now belongs to another segment%s; left it",
+                        self._name,
+                        f" (writer pid {other})" if other else "",
+                    )
         finally:
             self._release_handed_out()
             for view in (self._u32, self._u64, self._view):

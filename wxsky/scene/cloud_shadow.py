@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 from dataclasses import dataclass, field
 from datetime import datetime
 
@@ -53,6 +54,7 @@ from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModel
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
+from wxsky.scene.gather import check_cancel
 from wxsky.scene.scattering import pass_on
 from wxsky.scene.shading_harris import SHADOW_REACH, tau_of
 from wxsky.weather.state import CloudLayer, WeatherState
@@ -291,6 +293,7 @@ def shadow_casters(
     size_m: float,
     sun_direction_enu: tuple[float, float, float],
     max_range_m: float,
+    cancel: threading.Event | None = None,
 ) -> list[tuple[int, SpriteBatch]]:
     """(layer index, sprites) of every block, among those the scene draws (nearest point
     within max_range_m of the map's centre), whose clouds may shade the map: the blocks
@@ -329,6 +332,7 @@ def shadow_casters(
                 near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
                 if math.hypot(near_x - qx, near_y - qy) >= max_range_m:
                     continue
+                check_cancel(cancel)
                 block = layer_block(bx, by, key, layer, state.seed, (dx, dy))
                 if len(block):
                     parts.append(block)
@@ -371,12 +375,15 @@ def cloud_shadow(
     size_m: float,
     px: int,
     max_range_m: float,
+    cancel: threading.Event | None = None,
 ) -> CloudShadow:
     """The shadow map of the clouds `state` and `drift` place, centred over centre_m (its up
-    is ignored: the map lies on the observer's ground altitude), for this sun."""
+    is ignored: the map lies on the observer's ground altitude), for this sun. Raises
+    BuildCancelled between blocks once `cancel` is set (`gather.check_cancel`)."""
     sun = map_sun(sun_direction_enu)
     plane = (float(centre_m[0]), float(centre_m[1]), float(state.observer.alt_m))
-    casters = shadow_casters(state, drift, plane, size_m, sun, max_range_m)
+    casters = shadow_casters(state, drift, plane, size_m, sun, max_range_m, cancel)
+    check_cancel(cancel)
     velocity = (0.0, 0.0)
     if casters:
         sprites = SpriteBatch.concat([batch for _, batch in casters])

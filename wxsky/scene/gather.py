@@ -10,6 +10,8 @@ integrated wind (`Drift`), so the clouds travel but never change shape.
 from __future__ import annotations
 
 import math
+import threading
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -96,6 +98,87 @@ def gather_near(
     return _gather(state, drift, rings, 0.0, radius_m, ranges)
 
 
+def blocks_within(qx_m: float, qy_m: float, lo_m: float, hi_m: float) -> Iterator[tuple[int, int]]:
+    """(bx, by) of every block whose nearest point to (qx_m, qy_m) lies in [lo_m, hi_m),
+    row by row."""
+    bx0, bx1 = math.floor((qx_m - hi_m) / BLOCK_SIZE_M), math.floor((qx_m + hi_m) / BLOCK_SIZE_M)
+    by0, by1 = math.floor((qy_m - hi_m) / BLOCK_SIZE_M), math.floor((qy_m + hi_m) / BLOCK_SIZE_M)
+    for by in range(by0, by1 + 1):
+        for bx in range(bx0, bx1 + 1):
+            near_x = min(max(qx_m, bx * BLOCK_SIZE_M), (bx + 1) * BLOCK_SIZE_M)
+            near_y = min(max(qy_m, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
+            if lo_m <= math.hypot(near_x - qx_m, near_y - qy_m) < hi_m:
+                yield bx, by
+
+
+def count_blocks(lo_m: float, hi_m: float) -> int:
+    """The most blocks of one layer whose nearest point lies in [lo_m, hi_m) of a centre,
+    wherever in its block the centre stands (counted, vectorised, for centres on a grid of
+    1/16 of a block over the eighth of a block that by symmetry stands for all of it)."""
+    if hi_m <= lo_m:
+        return 0
+    n = math.ceil(hi_m / BLOCK_SIZE_M) + 1
+    edges = np.arange(-n, n + 1, dtype=np.float64) * BLOCK_SIZE_M  # block corners
+    most = 0
+    steps = [i / 16.0 for i in range(9)]  # 0 .. 0.5
+    for fx, fy in ((fx, fy) for fx in steps for fy in steps if fy <= fx):
+        qx, qy = fx * BLOCK_SIZE_M, fy * BLOCK_SIZE_M
+        dx = np.clip(qx, edges[:-1], edges[1:]) - qx
+        dy = np.clip(qy, edges[:-1], edges[1:]) - qy
+        d = np.hypot(dx[None, :], dy[:, None])
+        most = max(most, int(np.count_nonzero((d >= lo_m) & (d < hi_m))))
+    return most
+
+
+# The most blocks of one layer the scene may hold (`[scene]` ring_radius_m and max_range_m
+# are checked against them at load). A ring build gathers, shades and bins every sprite of
+# its blocks (about 600 bytes and 20 us of one core per sprite, some 100 to 400 sprites a
+# block and layer): 1024 blocks, three times the default's 337 (max_range_m about 69 km at a
+# small radius), is a build of some 8 s and 300 MB for a three-layer storm; 256 near blocks,
+# eleven times the default's 23 (ring_radius_m about 33 km), some 0.2 s a frame. Three layers'
+# 3 x (1024 + 256) blocks also fit the block cache (`clouds.block_clouds`, 4096), so a
+# rebuild reads its blocks rather than generating them again.
+MAX_RING_BLOCKS = 1024
+MAX_NEAR_BLOCKS = 256
+
+
+def largest_range(lo_m: float, max_blocks: int, step_m: float = 1000.0) -> float:
+    """The largest multiple of step_m, above lo_m, out to which [lo_m, range) holds at most
+    max_blocks blocks (lo_m itself when no such range exists)."""
+    good, bad = lo_m, lo_m + step_m
+    while count_blocks(lo_m, bad) <= max_blocks:
+        good, bad = bad, 2.0 * bad
+    while bad - good > step_m:
+        mid = 0.5 * (good + bad)
+        if count_blocks(lo_m, mid) <= max_blocks:
+            good = mid
+        else:
+            bad = mid
+    return max(lo_m, math.floor(good / step_m) * step_m)
+
+
+class SceneBlocks(NamedTuple):
+    """How many blocks of one layer a scene with this ring radius and range holds at most."""
+
+    near: int  # within the ring radius: gathered for every frame
+    ring: int  # from the ring radius to the maximum range: gathered for every ring build
+
+
+def scene_blocks(ring_radius_m: float, max_range_m: float) -> SceneBlocks:
+    return SceneBlocks(count_blocks(0.0, ring_radius_m), count_blocks(ring_radius_m, max_range_m))
+
+
+class BuildCancelled(Exception):
+    """Scene work given up because its `cancel` Event was set (the daemon is stopping)."""
+
+
+def check_cancel(cancel: threading.Event | None) -> None:
+    """Raise BuildCancelled once `cancel` is set: scene work that can take seconds calls this
+    between blocks, so that a shutdown never waits for a ring to finish."""
+    if cancel is not None and cancel.is_set():
+        raise BuildCancelled("scene work cancelled")
+
+
 def _gather(
     state: WeatherState,
     drift: Drift,
@@ -103,9 +186,10 @@ def _gather(
     min_range_m: float,
     max_range_m: float,
     layer_ranges: list[tuple[float, float]] | None = None,
+    cancel: threading.Event | None = None,
 ) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
     """`layer_ranges`: per layer, (min, max) in place of (min_range_m, max_range_m); a layer
-    with max <= min is skipped."""
+    with max <= min is skipped. `cancel`: see `check_cancel`."""
     if len(drift) != len(state.layers):
         drift = zero_drift(state)
     rings = tuple(
@@ -122,21 +206,12 @@ def _gather(
         weights: dict[tuple[int, int], float] = {}
         for ring in rings:
             sx, sy = ring.select_drift[li]
-            qx, qy = ring.centre_m[0] - sx, ring.centre_m[1] - sy
-            bx0 = math.floor((qx - hi_m) / BLOCK_SIZE_M)
-            bx1 = math.floor((qx + hi_m) / BLOCK_SIZE_M)
-            by0 = math.floor((qy - hi_m) / BLOCK_SIZE_M)
-            by1 = math.floor((qy + hi_m) / BLOCK_SIZE_M)
-            for by in range(by0, by1 + 1):
-                for bx in range(bx0, bx1 + 1):
-                    near_x = min(max(qx, bx * BLOCK_SIZE_M), (bx + 1) * BLOCK_SIZE_M)
-                    near_y = min(max(qy, by * BLOCK_SIZE_M), (by + 1) * BLOCK_SIZE_M)
-                    d = math.hypot(near_x - qx, near_y - qy)
-                    if lo_m <= d < hi_m:
-                        weights[(bx, by)] = weights.get((bx, by), 0.0) + ring.weight
+            for xy in blocks_within(ring.centre_m[0] - sx, ring.centre_m[1] - sy, lo_m, hi_m):
+                weights[xy] = weights.get(xy, 0.0) + ring.weight
         for (bx, by), weight in sorted(weights.items(), key=lambda kv: (kv[0][1], kv[0][0])):
             if weight <= 0.0:
                 continue
+            check_cancel(cancel)
             # Cover only fades whole clouds in and out, so the cached generation of the
             # block is reused while the weather forms or dissipates it.
             block = layer_block(bx, by, key, layer, state.seed, (dx, dy))
@@ -154,12 +229,14 @@ def gather_far(
     centre_m: tuple[float, float, float],
     radius_m: float,
     max_range_m: float,
+    cancel: threading.Event | None = None,
 ) -> SpriteBatch:
     """The ring's sprites: blocks from radius_m to max_range_m of the centre, of the layers
-    close enough in altitude to go into impostors (`ring.in_impostors`)."""
+    close enough in altitude to go into impostors (`ring.in_impostors`). Raises
+    BuildCancelled once `cancel` is set."""
     ring = NearRing(centre_m, drift, 1.0)
     ranges = [
         (radius_m, max_range_m) if in_impostors(lay.base_m, lay.top_m, centre_m[2]) else (0.0, 0.0)
         for lay in state.layers
     ]
-    return _gather(state, drift, (ring,), radius_m, max_range_m, ranges)[0]
+    return _gather(state, drift, (ring,), radius_m, max_range_m, ranges, cancel)[0]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import threading
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -22,7 +23,7 @@ from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import SpriteBatch
-from wxsky.scene.gather import Drift, NearRing, gather_far, gather_near
+from wxsky.scene.gather import Drift, NearRing, check_cancel, gather_far, gather_near
 from wxsky.scene.in_cloud import (
     NO_LOCKS,
     NO_VEIL,
@@ -208,12 +209,18 @@ def build_ring(
     centre_m: tuple[float, float, float],
     sky: SkyParams,
     settings: SceneSettings,
+    cancel: threading.Event | None = None,
 ) -> RingScene:
-    far = gather_far(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m)
+    """The ring's impostors and shadow map. Raises BuildCancelled (`gather.check_cancel`)
+    between blocks and between stages once `cancel` is set."""
+    far = gather_far(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m, cancel)
     # Every impostor is seen from the ring's centre: light and shade the far clouds once,
     # whole, before the bins cut those that straddle two impostors.
+    check_cancel(cancel)
     light = prepare_lighting(far, sky, settings.shading)
+    check_cancel(cancel)
     shaded = shade_for_eye(far, centre_m, sky, settings.max_range_m, settings.shading, light)
+    check_cancel(cancel)
     if settings.impostor_lod_m > 0.0:
         # A cloud this far is a few texels of an impostor: one sprite draws it as well.
         collapsed = collapse_far_clouds(
@@ -225,6 +232,7 @@ def build_ring(
     geometry, index = bin_indices(shaded.sprites, centre_m, settings.ring_radius_m)
     impostors = tuple(oriented(shaded.take(idx), centre_m)[0] for idx in index)
     shadow = None
+    check_cancel(cancel)
     if settings.shadow_map_px > 0:
         # With the ring, on its worker thread: a map costs tens of milliseconds, too much
         # for a frame, and it must match the ring's clouds (the same drift and sun).
@@ -236,6 +244,7 @@ def build_ring(
             2.0 * settings.ring_radius_m,
             settings.shadow_map_px,
             settings.max_range_m,
+            cancel,
         )
     return RingScene(geometry=geometry, impostors=impostors, drift=drift, shadow=shadow)
 
