@@ -17,7 +17,7 @@ from wxsky.scene.gather import Drift, NearRing, gather_near, zero_drift
 from wxsky.scene.layout import RingScene, empty_ring
 from wxsky.scene.ring import RING_SIZE
 from wxsky.scene.sky import SkyParams, sky_params
-from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState, WindLayer
 
 R = 8000.0
 DT = 1.0 / 30.0
@@ -121,6 +121,26 @@ def test_weather_and_sun_changes_rebuild_with_their_reason() -> None:
         s.step(later, DRIFT, cam(), sky_params(later), DT)
     soon = dataclasses.replace(later, time_utc=later.time_utc + timedelta(seconds=20))
     assert not s.step(soon, DRIFT, cam(), sky_params(soon), DT).events
+
+
+def test_what_the_ring_does_not_show_rebuilds_nothing() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.0)
+    for _ in range(12):
+        s.step(STATE, DRIFT, cam(), SKY, DT)
+    assert not s.busy
+    # A cockpit stepping temperature, pressure and wind (its effect is the drift test's).
+    knobs = dataclasses.replace(
+        STATE,
+        temperature_c=-5.0,
+        dewpoint_c=-9.0,
+        qnh_hpa=990.0,
+        present_weather=("-RA",),
+        wind=(WindLayer(0.0, 270.0, 12.0),),
+    )
+    assert not s.step(knobs, DRIFT, cam(), sky_params(knobs), DT).events
+    hazier = dataclasses.replace(knobs, visibility_m=3000.0)
+    f = s.step(hazier, DRIFT, cam(), sky_params(hazier), DT)
+    assert f.events[0].fields["reason"] == "weather"
 
 
 def test_async_builds_off_the_frame_and_renders_when_ready() -> None:

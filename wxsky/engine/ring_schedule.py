@@ -27,13 +27,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import threading
+import time
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import CancelledError, Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
 from wxsky.scene.camera import Camera
-from wxsky.scene.gather import Drift, NearRing
+from wxsky.scene.gather import BuildCancelled, Drift, NearRing
 from wxsky.scene.layout import RingScene
 from wxsky.scene.ring import MOVE_HORIZONTAL_FRAC, MOVE_VERTICAL_FRAC, RING_SIZE, moved_reason
 from wxsky.scene.sky import SkyParams
@@ -142,10 +144,19 @@ class RingSchedule:
         self._retry_in_s = 0.0  # after a failed build, wait this long before the next
         self._forced: str | None = None  # a reason to rebuild given from outside (invalidate)
         self._closed = False
+        # Set by `cancel`/`close`: the builder passes it to the scene work, which gives up at
+        # its next block (`gather.check_cancel`), and no build starts after it.
+        self._cancel = threading.Event()
+        self._building: tuple[str, float] | None = None  # reason, monotonic start
 
     @property
     def current(self) -> RingScene | None:
         return self._current
+
+    @property
+    def cancel_event(self) -> threading.Event:
+        """Set once the schedule is cancelled: what the builder hands the scene work."""
+        return self._cancel
 
     def invalidate(self, reason: str) -> None:
         """Rebuild at the next chance whatever the thresholds say (`reason` goes in the
@@ -192,11 +203,12 @@ class RingSchedule:
                 self._fade = 0.0
                 events.append(RingEvent("crossfade_done", {}))
         self._retry_in_s = max(0.0, self._retry_in_s - dt_wall_s)
-        if not self.busy and self._retry_in_s <= 0.0:
+        if not self.busy and self._retry_in_s <= 0.0 and not self._cancel.is_set():
             reason = self._reason(state, drift, camera, sky)
             if reason is not None:
                 fields = {"reason": reason, "centre_m": list(camera.position_m)}
                 events.append(RingEvent("ring_rebuild_start", fields))
+                self._building = (reason, time.monotonic())
                 if self.mode == "sync":
                     # Built inline: the first impostor renders in this very frame.
                     self._pending = Future()
@@ -208,9 +220,12 @@ class RingSchedule:
                     self._pending = self._submit(state, drift, camera, sky)
         if self._pending is not None and self._pending.done():
             future, self._pending = self._pending, None
+            self._building = None
             try:
                 self._incoming = future.result()
                 self._next_index = 0
+            except BuildCancelled:
+                events.append(RingEvent("ring_rebuild_cancelled", {}))
             except Exception as exc:  # a failed build keeps the old ring and tries again later
                 log.error("ring build failed: %s; retrying in %g s", exc, RETRY_AFTER_S)
                 self._newest = None
@@ -226,14 +241,36 @@ class RingSchedule:
                 events.append(RingEvent("ring_rebuild_done", {}))
         return self._frame(render, render_ring, render_set, events)
 
-    def close(self) -> None:
-        """Stop the worker (a build in flight is abandoned); idempotent."""
+    def cancel(self) -> None:
+        """Start no more builds, and make a build in flight give up at its next block (the
+        scene work checks `cancel_event`). Safe from any thread; `close` still stops the
+        worker."""
+        self._cancel.set()
+
+    def close(self, wait_s: float = 0.0) -> str | None:
+        """Cancel and stop the worker, waiting up to wait_s for a build in flight to give
+        up; idempotent. Returns what was abandoned, for the log ("the ring build (initial)
+        2.1 s in"), or None when no build was under way."""
         if self._closed:
-            return
+            return None
         self._closed = True
+        self._cancel.set()
+        cut = None
+        pending, building = self._pending, self._building
+        if pending is not None and _given_up(pending):
+            # (`cancel` may already have made it give up: it is still what was cut.)
+            reason, started = building if building is not None else ("?", time.monotonic())
+            cut = f"the ring build ({reason}) {time.monotonic() - started:.1f} s in"
+            try:
+                pending.exception(timeout=max(0.0, wait_s))
+            except TimeoutError:
+                cut += ", its worker still finishing a stage"
+            except CancelledError:
+                pass
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
             self._executor = None
+        return cut
 
     # -- helpers ----------------------------------------------------------------------
 
@@ -305,6 +342,22 @@ class RingSchedule:
         return None
 
 
+def _given_up(future: Future[RingScene]) -> bool:
+    """A build still running, not started, or ended by its cancel flag."""
+    if not future.done() or future.cancelled():
+        return True
+    return isinstance(future.exception(), BuildCancelled)
+
+
 def _weather_differs(a: WeatherState, b: WeatherState) -> bool:
-    """True when anything but the clock differs (time alone is covered by the sun test)."""
-    return dataclasses.replace(a, time_utc=b.time_utc, sources=b.sources) != b
+    """True when the weather differs in what the ring's impostors show: the layers and their
+    seed, where the observer is, and the visibility (the impostors' haze). The clock is the
+    sun test's; the wind is the drift test's (its effect is where the clouds have moved);
+    temperature, dewpoint, pressure and the weather groups draw nothing in the ring, so a
+    cockpit turning a temperature knob does not rebuild it with every step."""
+    return (
+        a.layers != b.layers
+        or a.seed != b.seed
+        or a.observer != b.observer
+        or a.visibility_m != b.visibility_m
+    )
