@@ -16,6 +16,7 @@ from typing import Any
 
 from wxsky.errors import ConfigError
 from wxsky.scene.cloud_models import BoxTemplate, CloudModel, CloudModels
+from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.texture_slots import CATEGORIES
 from wxsky.schema import (
     REQUIRED,
@@ -37,6 +38,10 @@ from wxsky.weather.state import LAYER_THICKNESS_M, CloudType
 MAX_SPRITES_PER_BOX = 100  # Wang: "between 1 to 100, depending on the density"
 MAX_GRID_SIDE = 16
 MAX_SHADING_GROUP = 31
+# A block's clouds are generated all at once, so a tiny cell_m (2 m: four million clouds)
+# would take the daemon's memory: clouds per block times sprites per cloud stays under this,
+# 13 times the densest shipped model (cumulus humilis, 16 clouds of 48 sprites).
+MAX_SPRITES_PER_BLOCK = 10_000
 # Wang's categories, plus the two halves of the wispy one as the sheet paints them: fine
 # streaks (cirrus) and ragged blobs (scud, fringes). Derived, so they follow the slots.
 TEXTURE_NAMES: dict[str, tuple[int, ...]] = {
@@ -92,6 +97,20 @@ def _lattices_keep_their_sprites(v: dict[str, Any], path: KeyPath, problems: lis
             )
 
 
+def _bounded_block(v: dict[str, Any], path: KeyPath, problems: list[Problem]) -> None:
+    clouds = max(1, round(BLOCK_SIZE_M / v["cell_m"])) ** 2  # as clouds.block_clouds cuts it
+    per_cloud = sum(box["sprites"] + box["grid"][0] * box["grid"][1] for box in v["box"])
+    if clouds * per_cloud > MAX_SPRITES_PER_BLOCK:
+        problems.append(
+            Problem(
+                (*path, "cell_m"),
+                f"{clouds} clouds of {per_cloud} sprites make {clouds * per_cloud} sprites a "
+                f"{BLOCK_SIZE_M / 1000:g} km block, more than {MAX_SPRITES_PER_BLOCK}: "
+                "a larger cell_m or fewer sprites",
+            )
+        )
+
+
 BOX_TABLE = Table(
     {
         "centre": Field(
@@ -133,7 +152,10 @@ MODEL_TABLE = Table(
         "formation_spread_oktas": Field(Number(0.1, 4.0, unit="oktas"), 1.5),
         "box": Field(Tables(BOX_TABLE, "box"), REQUIRED),
     },
-    rules=(Rule(("box", "cull_frac"), _lattices_keep_their_sprites),),
+    rules=(
+        Rule(("box", "cull_frac"), _lattices_keep_their_sprites),
+        Rule(("box", "cell_m"), _bounded_block),
+    ),
 )
 
 

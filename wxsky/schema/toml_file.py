@@ -7,7 +7,6 @@ point at the nearest enclosing table.
 
 from __future__ import annotations
 
-import json
 import re
 import tomllib
 from dataclasses import dataclass
@@ -191,12 +190,20 @@ def _segments(dotted: str) -> list[str]:
     out = []
     for seg in _SEGMENT_RE.findall(dotted):
         if seg.startswith('"'):
-            out.append(json.loads(seg))
+            out.append(_basic_string(seg))
         elif seg.startswith("'"):
             out.append(seg[1:-1])
         else:
             out.append(seg)
     return out
+
+
+def _basic_string(segment: str) -> str:
+    """A double-quoted key as TOML reads it: not JSON, which refuses a tab or a `\\U` escape."""
+    try:
+        return str(tomllib.loads(f"k = {segment}")["k"])
+    except tomllib.TOMLDecodeError:  # the line is not valid TOML; tomllib has said so
+        return segment[1:-1]
 
 
 def _concrete(segments: list[str], counters: dict[KeyPath, int], new_entry: bool) -> KeyPath:

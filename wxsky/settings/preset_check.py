@@ -82,7 +82,12 @@ _WEATHER_GROUP = r"(?:[+-]|VC)?[A-Z]{2,12}"
 def _time_utc(value: Any) -> datetime:
     # TOML has a native date-time type; accept it as well as a quoted ISO 8601 string.
     if isinstance(value, datetime):
-        return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+        if value.tzinfo is None:
+            return value.replace(tzinfo=UTC)
+        try:
+            return value.astimezone(UTC)
+        except OverflowError:  # 0001-01-01T00:00+01:00 is in year 0 in UTC
+            raise ValueError(f"{value.isoformat()} is outside the years 1..9999 in UTC") from None
     if isinstance(value, str):
         return parse_time_utc(value)
     kind = "a date without a time" if isinstance(value, date) else repr(value)

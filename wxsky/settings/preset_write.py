@@ -190,7 +190,8 @@ def _toml_string(text: str) -> str:
 
 def _time_text(t: datetime) -> str:
     t = t.astimezone(UTC)
-    text = t.strftime("%Y-%m-%dT%H:%M:%S")
+    # The year padded by hand: strftime writes year 857 as `857`, which TOML does not read.
+    text = f"{t.year:04d}-{t:%m-%dT%H:%M:%S}"
     if t.microsecond:
         text += f".{t.microsecond:06d}"
     return text + "Z"

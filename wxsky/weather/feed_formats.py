@@ -251,7 +251,10 @@ def _iso_utc(text: str | None) -> datetime | None:
         time = datetime.fromisoformat(text.strip())
     except ValueError:
         return None
-    return time.replace(tzinfo=UTC) if time.tzinfo is None else time.astimezone(UTC)
+    try:
+        return time.replace(tzinfo=UTC) if time.tzinfo is None else time.astimezone(UTC)
+    except OverflowError:  # 0001-01-01T00:00+01:00 is in year 0 in UTC
+        return None
 
 
 def awc_csv_records(lines: Sequence[str], problems: Problems) -> list[AwcRecord]:

@@ -178,7 +178,8 @@ def cloud_layer(
     if group.base_m is None:
         return None
     if group.cover == "VV":
-        top_m = field_elevation_m + max(group.base_m, VV_MIN_DEPTH_M)
+        # VV999 (99,900 ft) would reach above the state's ceiling: the layer stops there.
+        top_m = min(field_elevation_m + max(group.base_m, VV_MIN_DEPTH_M), MAX_CLOUD_TOP_M)
         return CloudLayer(COVER_OKTAS["VV"], field_elevation_m, top_m, VV_CLOUD_TYPE)
     row = cloud_row(group, espy_m)
     if row is None:

@@ -278,7 +278,9 @@ def weather_to_dict(state: WeatherState) -> dict[str, Any]:
 
 def format_time_utc(t: datetime) -> str:
     """ISO 8601 with a Z suffix, seconds precision."""
-    return t.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    t = t.astimezone(UTC)
+    # The year padded by hand: strftime writes year 857 as `857`, which is not ISO 8601.
+    return f"{t.year:04d}-{t:%m-%dT%H:%M:%S}Z"
 
 
 def parse_time_utc(text: str) -> datetime:
@@ -289,4 +291,7 @@ def parse_time_utc(text: str) -> datetime:
         raise ValueError(f"not an ISO 8601 time: {text!r}") from None
     if t.tzinfo is None:
         t = t.replace(tzinfo=UTC)
-    return t.astimezone(UTC)
+    try:
+        return t.astimezone(UTC)
+    except OverflowError:  # 0001-01-01T00:00+01:00 is in year 0 in UTC
+        raise ValueError(f"{text!r} is outside the years 1..9999 in UTC") from None
