@@ -19,7 +19,6 @@ bytes, a bad checksum, truncation, a 10 kB line without a newline, wind 999 m/s,
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import random
 import statistics
@@ -31,11 +30,21 @@ from typing import Any
 import can
 
 from wxsky.host.client import ControlClient
-from wxsky.protocols.canaerospace import encode_float, encode_raw, encode_time
-from wxsky.protocols.nmea import NmeaDecoder, sentence
+from wxsky.protocols.nmea import NmeaDecoder
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cockpit_daemon import cockpit_daemon
+from cockpit_faults import (
+    FOREIGN_CAN_ID,
+    bad_can_frames,
+    bad_nmea,
+    can_frame,
+    look,
+    temperature_frame,
+    valid_temperature_c,
+    valid_wind,
+    wind_sentence,
+)
 
 
 def main() -> int:
@@ -87,26 +96,27 @@ def _soak(
     while time.monotonic() < end:
         i += 1
         # Serial: the bad input, then one valid wind never sent before.
-        chunk = _bad_nmea(rng)
-        wind = (float(i % 360), round(0.1 * (i % 1400) + 0.05, 2))
-        chunk += sentence(f"WIMWV,{wind[0]:05.1f},T,{wind[1]:.2f},M,A")
+        wind = valid_wind(i)
+        chunk = bad_nmea(rng) + wind_sentence(wind)
         sent_serial.append(wind)
         os.write(master, chunk)
         local.feed(chunk, time.monotonic())
         if bus is not None:
-            can_bad += _send_bad_can(bus)
+            for frame in bad_can_frames():
+                bus.send(frame)
+                can_bad += 1
             can_ignored += 1
-            bus.send(_msg(0x123, bytes(8)))  # someone else's id
+            bus.send(can_frame(FOREIGN_CAN_ID, bytes(8)))
             # The CAN input sets the temperature, the serial one the wind: two inputs setting
             # one field would overwrite each other, and this checks that nothing is lost.
-            temperature_c = round(-40.0 + 0.01 * (i % 9000), 2)
-            bus.send(_msg(335, encode_float(335, temperature_c + 273.15)))
+            temperature_c = valid_temperature_c(i)
+            bus.send(temperature_frame(temperature_c))
             sent_can.append(temperature_c)
         deadline = time.monotonic() + period_s
         while (left := deadline - time.monotonic()) > 0:
             note = client.next_notification(timeout_s=left)
             if note is not None and note.method == "target":
-                _look(note.params, seen, invalid_seen)
+                look(note.params, seen, invalid_seen)
         if time.monotonic() >= next_fps:
             next_fps += 1.0
             fps.append(client.call("status")["fps"])
@@ -115,7 +125,7 @@ def _soak(
     while (left := settle_end - time.monotonic()) > 0:
         note = client.next_notification(timeout_s=left)
         if note is not None and note.method == "target":
-            _look(note.params, seen, invalid_seen)
+            look(note.params, seen, invalid_seen)
     counts = local.stats
     return {
         "serial_sent": sent_serial,
@@ -127,56 +137,6 @@ def _soak(
         "can_ignored": can_ignored,
         "fps": fps,
     }
-
-
-def _bad_nmea(rng: random.Random) -> bytes:
-    junk = bytes(rng.getrandbits(8) for _ in range(200))
-    return (
-        junk
-        + b"\r\n"
-        + b"$WIMWV,270.0,T,12.5,M,A*00\r\n"  # bad checksum
-        + b"$WIMWV,27"  # truncated ...
-        + b"\r\n"
-        + b"Q" * 10_000  # a 10 kB line without a newline ...
-        + b"\r\n"
-        + sentence("WIMWV,090.0,T,999,M,A")  # wind 999 m/s
-        + sentence("GPZDA,250000.00,12,06,1987,00,00")  # hour 25
-        + sentence("PWXCL,1,9,3000,1000")  # 9 oktas
-        + sentence("PWXCL,7,4,3000,1000")  # layer 7
-    )
-
-
-def _send_bad_can(bus: can.BusABC) -> int:
-    frames = [
-        _msg(333, encode_float(333, 999.0)),
-        _msg(333, encode_raw(333, 2, bytes.fromhex("7fc00000"))),  # NaN
-        _msg(334, b"\x01\x02\x03"),  # wrong DLC
-        _msg(1500, encode_float(1500, 9.0, service_code=1)),  # 9 oktas
-        _msg(1500, encode_float(1500, 4.0, service_code=7)),  # layer 7
-        _msg(1200, encode_time(25, 0, 0)),  # hour 25
-    ]
-    for frame in frames:
-        bus.send(frame)
-    return len(frames)
-
-
-def _msg(can_id: int, data: bytes) -> can.Message:
-    return can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
-
-
-def _look(target: dict[str, Any], seen: set[Any], invalid: list[str]) -> None:
-    if target["temperature_c"] is not None:
-        seen.add(round(target["temperature_c"], 2))
-    if target["wind"]:
-        w = target["wind"][0]
-        seen.add((round(w["dir_deg"], 3), round(w["speed_mps"], 2)))
-        if w["speed_mps"] > 150.0 or not math.isfinite(w["speed_mps"]):
-            invalid.append(f"wind {w['speed_mps']}")
-    if target["time_utc"].startswith("1987"):
-        invalid.append(f"time {target['time_utc']}")
-    for lay in target["layers"]:
-        if lay["cover_oktas"] > 8.0:
-            invalid.append(f"layer {lay}")
 
 
 def _print(
