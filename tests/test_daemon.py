@@ -251,3 +251,14 @@ def test_frame_notifications_say_whether_the_camera_is_in_cloud(tmp_path: Path) 
         # On the ground under fair cumulus: out of cloud, so no in-cloud visibility.
         assert note.params["in_cloud"] is False
         assert note.params["in_cloud_visibility_m"] is None
+
+
+def test_frame_notification_times_are_iso_8601_in_every_year() -> None:
+    from datetime import UTC, datetime
+
+    from wxsky.app.daemon import _frame_time
+    from wxsky.weather.state import parse_time_utc
+
+    for t in (datetime(857, 1, 2, 3, 4, 5, 6, tzinfo=UTC), datetime(2026, 6, 21, 12, tzinfo=UTC)):
+        text = _frame_time(t)
+        assert text.endswith("Z") and parse_time_utc(text) == t, text

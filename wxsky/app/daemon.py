@@ -18,6 +18,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
+from datetime import datetime
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -535,7 +536,7 @@ class Daemon:
             "frame",
             {
                 "frame_number": meta.frame_number,
-                "time_utc": plan.state.time_utc.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+                "time_utc": _frame_time(plan.state.time_utc),
                 "ring_version": meta.ring_version,
                 "ring_set": meta.ring_set,
                 "ring_fade": meta.ring_fade,
@@ -631,6 +632,11 @@ class Daemon:
         # the address) must not remove that daemon's socket.
         if self._server is not None:
             self._server.remove_socket_file()
+
+
+def _frame_time(t: datetime) -> str:
+    """ISO 8601 with microseconds; the year padded by hand (strftime writes 857, not 0857)."""
+    return f"{t.year:04d}-{t:%m-%dT%H:%M:%S.%f}Z"
 
 
 def _unsupported(reason: str) -> dict[str, Any]:
