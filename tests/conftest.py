@@ -91,3 +91,17 @@ def renderer(gl_renderer: Renderer) -> Iterator[Renderer]:
     yield gl_renderer
     after = ctx.error
     assert after == "GL_NO_ERROR", f"GL error after the test: {after}"
+
+
+@pytest.fixture
+def shm_name() -> Iterator[str]:
+    """A segment name no other test uses; the segment, if the test left one, is removed."""
+    import contextlib
+    import uuid
+
+    from wxsky.output import shm
+
+    segment = f"wxsky-test-{uuid.uuid4().hex[:12]}"
+    yield segment
+    with contextlib.suppress(FileNotFoundError):
+        shm._shm_unlink(segment)

@@ -4,21 +4,18 @@ the process that made a segment removes it."""
 
 from __future__ import annotations
 
-import contextlib
 import os
 import resource
 import subprocess
 import sys
 import textwrap
-import uuid
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from wxsky.app.snapshot import snapshot_bytes
 from wxsky.errors import RuntimeFailure
-from wxsky.output import memory, shm
+from wxsky.output import memory
 from wxsky.output.memory import Headroom
 from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.scene.layout import SceneSettings
@@ -27,11 +24,8 @@ GIB = 1 << 30
 
 
 @pytest.fixture
-def name() -> Iterator[str]:
-    segment = f"wxsky-test-{uuid.uuid4().hex[:12]}"
-    yield segment
-    with contextlib.suppress(FileNotFoundError):
-        shm._shm_unlink(segment)
+def name(shm_name: str) -> str:
+    return shm_name
 
 
 def test_headroom_reads_memavailable_and_require_refuses_past_the_margin() -> None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import mmap
 import os
@@ -12,8 +11,6 @@ import subprocess
 import sys
 import textwrap
 import time
-import uuid
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -26,11 +23,8 @@ LAYERS = [LayerSpec("clouds", 64, 32), LayerSpec("haze", 16, 16), LayerSpec("rai
 
 
 @pytest.fixture
-def name() -> Iterator[str]:
-    segment = f"wxsky-test-{uuid.uuid4().hex[:12]}"
-    yield segment
-    with contextlib.suppress(FileNotFoundError):
-        shm._shm_unlink(segment)
+def name(shm_name: str) -> str:
+    return shm_name
 
 
 def exists(segment: str) -> bool:

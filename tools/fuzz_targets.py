@@ -77,7 +77,7 @@ from wxsky.settings.config import (  # noqa: E402
     load_config,
 )
 from wxsky.settings.preset_check import PRESET_TABLE, check_preset_bytes  # noqa: E402
-from wxsky.settings.preset_write import preset_to_toml  # noqa: E402
+from wxsky.settings.preset_write import preset_to_toml, toml_string, toml_value  # noqa: E402
 from wxsky.weather.cockpit import (  # noqa: E402
     LAYER_TYPE,
     RANGES,
@@ -175,22 +175,8 @@ def cleanup() -> None:
 
 def checked_batch(t: Target) -> None:
     """`t.batch_check`, its failures as FuzzFailure (see run_check)."""
-    if t.batch_check is None:
-        return
-    try:
-        t.batch_check()
-    except FuzzFailure:
-        raise
-    except AssertionError as exc:
-        message = str(exc).splitlines()[0] if str(exc) else "assertion failed"
-        raise FuzzFailure(
-            f"{t.name}, between inputs: {message}", f"{t.name}: {_signature_text(message)}"
-        ) from exc
-    except Exception as exc:
-        raise FuzzFailure(
-            f"{t.name}, between inputs: {type(exc).__name__} escaped: {_one_line(exc)}",
-            f"{t.name}: {type(exc).__name__} at {_where(exc)}",
-        ) from exc
+    if t.batch_check is not None:
+        _guarded(t, t.batch_check, ", between inputs", "")
 
 
 def run_check(t: Target, data: bytes) -> None:
@@ -211,18 +197,24 @@ def run_check(t: Target, data: bytes) -> None:
 
 
 def _checked(t: Target, data: bytes) -> None:
+    _guarded(t, lambda: t.check(data), "", f" on {_show(data)}")
+
+
+def _guarded(t: Target, call: Callable[[], None], where: str, on: str) -> None:
+    """`call()`, whatever it raises but FuzzFailure turned into one: `where` follows the
+    target's name and `on` (the input) ends the message; the signature names the cause."""
     try:
-        t.check(data)
+        call()
     except FuzzFailure:
         raise
     except AssertionError as exc:
         message = str(exc).splitlines()[0] if str(exc) else "assertion failed"
         raise FuzzFailure(
-            f"{t.name}: {message} on {_show(data)}", f"{t.name}: {_signature_text(message)}"
+            f"{t.name}{where}: {message}{on}", f"{t.name}: {_signature_text(message)}"
         ) from exc
     except Exception as exc:
         raise FuzzFailure(
-            f"{t.name}: {type(exc).__name__} escaped: {_one_line(exc)} on {_show(data)}",
+            f"{t.name}{where}: {type(exc).__name__} escaped: {_one_line(exc)}{on}",
             f"{t.name}: {type(exc).__name__} at {_where(exc)}",
         ) from exc
 
@@ -873,9 +865,9 @@ def _toml_tokens(kind: Kind) -> tuple[bytes, ...]:
 def toml_text(data: Mapping[str, Any]) -> str:
     """Plain data (`config_to_toml_dict`'s shape: tables of scalars and lists, arrays of such
     tables) as TOML: the stdlib reads TOML but writes none."""
-    top = [f"{k} = {_toml_value(v)}" for k, v in data.items() if not isinstance(v, dict | list)]
+    top = [f"{k} = {toml_value(v)}" for k, v in data.items() if not isinstance(v, dict | list)]
     top += [
-        f"{k} = {_toml_value(v)}"
+        f"{k} = {toml_value(v)}"
         for k, v in data.items()
         if isinstance(v, list) and not (v and isinstance(v[0], dict))
     ]
@@ -885,38 +877,17 @@ def toml_text(data: Mapping[str, Any]) -> str:
             out += [
                 "",
                 f"[{_toml_key(key)}]",
-                *(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()),
+                *(f"{_toml_key(k)} = {toml_value(v)}" for k, v in value.items()),
             ]
         elif isinstance(value, list) and value and isinstance(value[0], dict):
             for table in value:
                 out += ["", f"[[{_toml_key(key)}]]"]
-                out += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]
+                out += [f"{_toml_key(k)} = {toml_value(v)}" for k, v in table.items()]
     return "\n".join(out) + "\n"
 
 
 def _toml_key(key: str) -> str:
-    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_string(key)
-
-
-def _toml_string(text: str) -> str:
-    escaped = "".join(
-        f"\\u{ord(c):04x}" if c in '"\\' or ord(c) < 0x20 or ord(c) == 0x7F else c for c in text
-    )
-    return f'"{escaped}"'
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, str | Path):
-        return _toml_string(str(value))
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise TypeError(f"no TOML for {type(value).__name__}")
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_string(key)
 
 
 class _Scratch:

@@ -11,6 +11,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from pathlib import PurePath
 from typing import Any
 
 from wxsky.settings.preset_check import TOP_KEYS, KeyPath, format_key
@@ -86,7 +87,7 @@ def preset_to_toml(
         raise ValueError("a preset needs a non-empty description")
     data = preset_dict(weather)
     lines = [f"# {line}".rstrip() for line in comment.splitlines()]
-    lines.append(f"description = {_toml_value(description.strip())}")
+    lines.append(f"description = {toml_value(description.strip())}")
     tables: list[str] = []
     for key, value in data.items():
         if key == "observer":
@@ -97,7 +98,7 @@ def preset_to_toml(
         else:
             # Scalars, lists of strings and empty arrays (`layers = []`: "no clouds") all go
             # before the first table header, where TOML puts top-level keys.
-            lines.append(f"{key} = {_toml_value(value)}")
+            lines.append(f"{key} = {toml_value(value)}")
     return "\n".join(lines + tables) + "\n"
 
 
@@ -121,7 +122,7 @@ def format_value(value: Any) -> str:
         return "(unset)"
     if isinstance(value, str):
         return value
-    return _toml_value(value)
+    return toml_value(value)
 
 
 def _flatten(data: dict[str, Any]) -> dict[KeyPath, Any]:
@@ -154,10 +155,10 @@ def _rank(path: KeyPath) -> tuple[int, int, int]:
 
 
 def _table_lines(table: dict[str, Any]) -> list[str]:
-    return [f"{key} = {_toml_value(value)}" for key, value in table.items()]
+    return [f"{key} = {toml_value(value)}" for key, value in table.items()]
 
 
-def _toml_value(value: Any) -> str:
+def toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -166,14 +167,14 @@ def _toml_value(value: Any) -> str:
         if not math.isfinite(value):
             raise ValueError(f"a preset cannot hold {value!r}")
         return repr(value)  # shortest text that reads back as the same float
-    if isinstance(value, str):
-        return _toml_string(value)
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, str | PurePath):
+        return toml_string(str(value))
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     raise TypeError(f"no TOML form for {value!r}")
 
 
-def _toml_string(text: str) -> str:
+def toml_string(text: str) -> str:
     """A TOML basic string: quote, backslash and control characters escaped."""
     escapes = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f"}
     escapes["\r"] = "\\r"
