@@ -266,7 +266,9 @@ class ControlServer:
 
     @property
     def client_count(self) -> int:
-        return len(self._clients)
+        """Connections being served, closing ones included: the number `max_clients` limits
+        (a client that hung up holds its place until its connection is closed here)."""
+        return len(self._tasks)
 
     @property
     def dropped_notifications(self) -> int:
