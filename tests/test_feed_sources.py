@@ -333,3 +333,47 @@ def test_a_file_that_never_stops_changing_is_read_all_the_same(tmp_path: Path) -
     path.write_bytes(REPORT + REPORT)
     got = src.fetch_now()
     assert got is not None and got.data == REPORT + REPORT
+
+
+def test_a_file_whose_writer_pauses_past_the_settling_time_is_not_read_half_written(
+    tmp_path: Path,
+) -> None:
+    """The soak's writer stops 1.5 s mid-file, longer than the 0.5 s settling time: what is
+    there by then ('KXYZ 261555Z 27010KT 9999', no newline) reads as a shorter report."""
+    path = tmp_path / "metar.txt"
+    src = FileSource(path, settle_s=0.05, max_settle_s=600.0)
+    half = REPORT[:25]
+    path.write_bytes(half)
+    os.utime(path, ns=(time.time_ns() - 10**10,) * 2)  # written 10 s ago: long settled
+    for _ in range(3):  # the input looks again every retry_in_s, for up to max_settle_s
+        with pytest.raises(FeedChanging, match=r"metar\.txt: its last line has no end") as held:
+            src.fetch_now()
+        assert held.value.retry_in_s == 0.05
+    with open(path, "ab") as writer:
+        writer.write(REPORT[25:])
+    os.utime(path, ns=(time.time_ns() - 10**10,) * 2)
+    got = src.fetch_now()
+    assert got is not None and got.data == REPORT
+    assert src.fetch_now() is None
+
+
+def test_a_whole_file_without_a_final_newline_is_read_after_the_longest_hold(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "metar.txt"
+    src = FileSource(path, settle_s=0.05, max_settle_s=0.2)
+    path.write_bytes(REPORT.rstrip(b"\n"))
+    os.utime(path, ns=(time.time_ns() - 10**10,) * 2)
+    with pytest.raises(FeedChanging):
+        src.fetch_now()
+    time.sleep(0.25)
+    got = src.fetch_now()
+    assert got is not None and got.data == REPORT.rstrip(b"\n")
+    # An empty file (truncated at the start of a rewrite in place) is held the same way;
+    # settle_s 0 (a one-shot command) reads at once.
+    path.write_bytes(b"")
+    os.utime(path, ns=(time.time_ns() - 10**10,) * 2)
+    with pytest.raises(FeedChanging, match="empty"):
+        src.fetch_now()
+    once = FileSource(path, settle_s=0.0).fetch_now()
+    assert once is not None and once.data == b""

@@ -9,7 +9,8 @@ the weather. The kinds, in turn:
 * `lines` (one report per line), `awc-csv` (an AWC cache CSV), `gzip` (the lines gzipped):
   renamed over the old file; must be applied;
 * `half-written`: written in place, a random part, a pause longer than the poll, the rest;
-  must be applied (what the part decodes to may show first: it is a report cut short);
+  must be applied, and what the part decodes to must not show (the reader holds back a
+  last line with no end);
 * `truncated`: a valid report cut at a random byte and left so; what it decodes to may show;
 * `garbage`: random bytes;
 * `gzip-truncated`: a gzipped report with its second half cut off; its values must not show;
