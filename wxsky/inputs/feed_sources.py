@@ -143,31 +143,21 @@ class FileSource:
             )
         self._hold_if_recent(st.st_mtime_ns, key)
         data = self._read(key)
-        try:
-            text = self._unpack(data, key)
-        except FeedChanging:
-            raise
-        except FeedError:
-            self._seen = key  # refused content is not read again until it changes
-            self._held = self._held_since = None
-            raise
+        self._hold_if_unfinished(data, key)
         self._seen = key
         self._held = self._held_since = None
         mtime = datetime.fromtimestamp(st.st_mtime, tz=UTC)
-        return Fetched(text, mtime)
+        return Fetched(gunzip_if_needed(data, self.name), mtime)
 
-    def _unpack(self, data: bytes, key: tuple[int, int, int]) -> bytes:
-        """`data` unpacked if it is gzip. Text whose last line has no end is held back for up
-        to `max_settle_s` (a writer pausing longer than `settle_s` mid-file), then taken as it
-        is: every feed format ends its lines with a newline, and half a line can read as a
-        shorter report. A cut-off gzip stream needs no wait: it is refused, never misread,
-        and read again once the writer changes the file."""
-        if data.startswith(GZIP_MAGIC):
-            return gunzip_if_needed(data, self.name)
-        if self.settle_s > 0 and not data.endswith(b"\n"):
-            why = "empty" if not data else "its last line has no end"
-            self._hold(key, f"{self.name}: {why}, maybe not finished; reading it again shortly")
-        return data
+    def _hold_if_unfinished(self, data: bytes, key: tuple[int, int, int]) -> None:
+        """Text whose last line has no end is held back for up to `max_settle_s` (a writer
+        pausing longer than `settle_s` mid-file), then taken as it is: every feed format ends
+        its lines with a newline, and half a line can read as a shorter report. A cut-off gzip
+        stream needs no wait: it is refused, never misread, and read again once it changes."""
+        if self.settle_s <= 0 or data.startswith(GZIP_MAGIC) or data.endswith(b"\n"):
+            return
+        why = "empty" if not data else "its last line has no end"
+        self._hold(key, f"{self.name}: {why}, maybe not finished; reading it again shortly")
 
     def _hold(self, key: tuple[int, int, int], message: str) -> None:
         """Hold this change back (FeedChanging), unless it has been held `max_settle_s`."""

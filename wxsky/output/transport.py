@@ -439,7 +439,7 @@ class ControlServer:
 
     def _admit(self, conn: socket.socket) -> None:
         conn.setblocking(False)
-        if self._closed or len(self._tasks) >= self._max_clients:
+        if self._closed or self.client_count >= self._max_clients:
             self._refuse(conn)
             return
         assert self._loop is not None
