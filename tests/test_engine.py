@@ -423,3 +423,8 @@ def test_geodetic_round_trip() -> None:
     east, north, _ = enu_from_geodetic(47.0, 8.0, 47.1, 8.2, 500.0)
     lat, lon = geodetic_from_enu(47.0, 8.0, east, north)
     assert lat == pytest.approx(47.1, abs=1e-9) and lon == pytest.approx(8.2, abs=1e-9)
+
+
+def test_the_state_summary_writes_early_years_with_four_digits() -> None:
+    state = WeatherState(time_utc=datetime(857, 3, 4, 5, 6, tzinfo=UTC), layers=(CU,))
+    assert state.summary().startswith("0857-03-04T05:06Z wind calm vis ")

@@ -750,3 +750,11 @@ def test_cavok_after_a_visibility_group_still_means_no_significant_cloud() -> No
     assert m.cavok and m.visibility_m == 10_000.0 and not m.partial
     odd = decode("EIME 262100Z 18006KT 4000 CAVOK 08/06 Q1025", year=2014, month=9)
     assert odd.cavok and odd.visibility_m == 4000.0 and odd.partial
+
+
+def test_times_before_year_1000_are_written_with_four_digit_years() -> None:
+    # strftime's %Y writes year 857 as "857": not ISO 8601, and not what reads back.
+    r = dec("METAR LSZH 261550Z 24012KT 9999 FEW045 12/M01 Q1013", year=857)
+    assert r.to_dict()["time_utc"] == "0857-07-26T15:50:00Z"
+    assert "0857-07-26 15:50Z" in r.describe()
+    assert datetime.fromisoformat(r.to_dict()["time_utc"]) == r.time_utc

@@ -258,6 +258,8 @@ class LinkStats:
     reopened: int = 0  # the daemon reported it open again, with one more reopen
     reopen_s: list[float] = field(default_factory=list)
     sent: list[tuple[float, Any]] = field(default_factory=list)  # valid values, when sent
+    unplugged_at: list[float] = field(default_factory=list)
+    unplugged_unseen: int = 0  # unplugs with the last value sent not yet seen 1 s later
     stalled: int = 0  # writes the device did not take in time (not counted as sent)
 
 
@@ -289,6 +291,7 @@ class Soak:
         self.cockpit_seen: dict[Any, list[float]] = {}
         self.cockpit_invalid: list[str] = []
         self.watcher_reconnects = 0
+        self.watcher_lost_at: list[float] = []  # when the target watcher lost its connection
         self.links = {"serial": LinkStats(SERIAL_NAME), "can": LinkStats(CAN_NAME)}
         self.ready = {"serial": False, "can": False}  # the cockpit loop may send on it
         self.sending = {"serial": threading.Lock(), "can": threading.Lock()}
@@ -537,6 +540,7 @@ name = "{SERIAL_NAME}"
                 if self.quit.is_set():
                     return
                 self.watcher_reconnects += 1
+                self.watcher_lost_at.append(self.now())
                 log.debug("target watcher: %s; reconnecting", exc)
                 time.sleep(0.2)
 
@@ -620,10 +624,12 @@ name = "{SERIAL_NAME}"
                     self.ready[kind] = False
                 # The cable is pulled between values, not with one on the wire: a value the
                 # daemon could not have read is not one it lost.
-                _until(lambda: self._last_value_seen(kind), 1.0)
+                if not _until(lambda: self._last_value_seen(kind), 1.0):
+                    stats.unplugged_unseen += 1  # a value may be lost with the cable; it counts
                 reopens = probe().get("reopens", 0)
                 device.unplug()
                 stats.unplugs += 1
+                stats.unplugged_at.append(self.now())
                 if device.observable and _until(lambda: probe().get("state") != "open", UNPLUG_S):
                     stats.noticed += 1
                 time.sleep(UNPLUG_S)  # and not a moment less, even at the end
@@ -813,6 +819,7 @@ name = "{SERIAL_NAME}"
                     "reopened": v.reopened,
                     "reopen_s_max": max(v.reopen_s, default=None),
                     "stalled_writes": v.stalled,
+                    "unplugged_unseen": v.unplugged_unseen,
                 }
                 for k, v in self.links.items()
             },
@@ -831,9 +838,15 @@ name = "{SERIAL_NAME}"
         for kind, stats in self.links.items():
             if kind == "can" and self.can is None:
                 continue
-            missed = [v for t, v in stats.sent if not _seen_after(self.cockpit_seen.get(v), t)]
+            missed = [(t, v) for t, v in stats.sent if not _seen_after(self.cockpit_seen.get(v), t)]
             out[kind] = {"sent": len(stats.sent), "applied": len(stats.sent) - len(missed)}
-            out[kind]["missed"] = [repr(v) for v in missed[:10]]
+            # When each was sent, and how far the nearest unplug and watcher reconnect were:
+            # what tells a value lost by the daemon from one the harness could not have seen.
+            out[kind]["missed"] = [
+                f"{v!r} sent at {t:.1f} s (unplug {_nearest(stats.unplugged_at, t)}, "
+                f"watcher lost {_nearest(self.watcher_lost_at, t)})"
+                for t, v in missed[:10]
+            ]
         metar_seen = {r.visibility_m for r in self.targets if r.visibility_src == "metar"}
         expected = [w for w in self.feed.writes if w.expected is not None]
         missed_w = [w for w in expected if w.expected and w.expected[0] not in metar_seen]
@@ -925,6 +938,14 @@ def _until(predicate: Callable[[], bool], timeout_s: float) -> bool:
             return True
         time.sleep(0.1)
     return predicate()
+
+
+def _nearest(times: list[float], t: float) -> str:
+    """The signed distance from `t` to the nearest of `times`, as text."""
+    if not times:
+        return "never"
+    d = min((x - t for x in times), key=abs)
+    return f"{d:+.1f} s"
 
 
 def _seen_after(times: list[float] | None, t: float) -> bool:

@@ -165,7 +165,9 @@ class Metar:
         return {
             "raw": self.raw,
             "station": self.station,
-            "time_utc": None if self.time_utc is None else f"{self.time_utc:%Y-%m-%dT%H:%M:00Z}",
+            "time_utc": None
+            if self.time_utc is None
+            else f"{_day(self.time_utc)}T{self.time_utc:%H:%M}:00Z",
             "time_group": self.time_group,
             "type": self.type,
             "auto": self.auto,
@@ -199,7 +201,9 @@ class Metar:
     def describe(self) -> str:
         """A few human-readable lines for the CLI."""
         flags = " ".join(f for f, on in (("AUTO", self.auto), ("COR", self.cor)) if on)
-        when = "time n/a" if self.time_utc is None else f"{self.time_utc:%Y-%m-%d %H:%MZ}"
+        when = (
+            "time n/a" if self.time_utc is None else f"{_day(self.time_utc)} {self.time_utc:%H:%MZ}"
+        )
         head = f"{self.type} {self.station or '(no station)'} {when}"
         lines = [f"{head} {flags}".rstrip()]
         if self.nil:
@@ -271,6 +275,11 @@ def _describe_sky_group(s: MetarSkyGroup) -> str:
 
 
 # --- decoding ---------------------------------------------------------------------------------
+
+
+def _day(t: datetime) -> str:
+    # The year padded by hand: strftime writes year 857 as `857`, which is not ISO 8601.
+    return f"{t.year:04d}-{t:%m-%d}"
 
 
 def decode(

@@ -231,7 +231,7 @@ class WeatherState:
         wind = self.wind[0] if self.wind else None
         wind_txt = f"{wind.dir_from_deg:03.0f}/{wind.speed_mps:.1f}mps" if wind else "calm"
         return (
-            f"{self.time_utc:%Y-%m-%dT%H:%MZ} wind {wind_txt} vis {self.visibility_m:.0f}m "
+            f"{format_time_utc(self.time_utc)[:-4]}Z wind {wind_txt} vis {self.visibility_m:.0f}m "
             f"clouds {clouds or 'none'}"
         )
 
