@@ -13,13 +13,19 @@ import numpy as np
 import pytest
 
 from wxsky.scene.cloud_model_files import default_models
-from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds
+from wxsky.scene.clouds import (
+    BLOCK_CACHE,
+    BLOCK_SIZE_M,
+    SpriteBatch,
+    block_clouds,
+    generate_block_clouds,
+)
 from wxsky.scene.formation import layer_block
 from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM
 from wxsky.weather.state import CloudLayer, CloudType
 
 # The undecorated generator, so determinism is not just the lru_cache handing back one object.
-_generate = block_clouds.__wrapped__  # type: ignore[attr-defined]
+_generate = generate_block_clouds
 
 FIELDS = tuple(f.name for f in dataclasses.fields(SpriteBatch))
 
@@ -134,17 +140,17 @@ def test_different_block_layer_or_seed_gives_different_clouds(changed: tuple) ->
 
 
 def test_cover_and_base_changes_reuse_the_cached_generation() -> None:
-    block_clouds.cache_clear()
+    BLOCK_CACHE.clear()
     layer = _layer("cumulus-mediocris", 2.0)
     first = layer_block(4, -1, 0, layer, 31)
-    misses = block_clouds.cache_info().misses
+    misses = BLOCK_CACHE.info().misses
     model, thickness = _model_args("cumulus-mediocris")
     generated = block_clouds(4, -1, 0, model, thickness, 31)
     for cover in np.linspace(0.1, 8.0, 40):
         layer_block(4, -1, 0, dataclasses.replace(layer, cover_oktas=float(cover)), 31)
     moved = CloudLayer(5.0, layer.base_m + 300.0, layer.top_m + 300.0, layer.type)
     shifted = layer_block(4, -1, 0, moved, 31)
-    info = block_clouds.cache_info()
+    info = BLOCK_CACHE.info()
     assert info.misses == misses  # 41 more calls, not one generation
     assert info.hits >= 42
     assert block_clouds(4, -1, 0, model, thickness, 31) is generated

@@ -11,7 +11,7 @@ import pytest
 
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModel
-from wxsky.scene.clouds import BLOCK_SIZE_M, BlockClouds, block_clouds
+from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M, BlockClouds, block_clouds
 from wxsky.scene.formation import cloud_progress, layer_block, sprite_alpha, visible_sprites
 from wxsky.scene.gather import advance_drift, gather_blocks, zero_drift
 from wxsky.scene.layout import fade_by_range
@@ -131,16 +131,16 @@ def test_a_cover_change_forms_whole_clouds_a_few_at_a_time() -> None:
 
 
 def test_layers_at_any_cover_share_one_generation_through_gather_blocks() -> None:
-    block_clouds.cache_clear()
+    BLOCK_CACHE.clear()
     layer = CloudLayer(3.0, 1930.0, 2700.0, CloudType.CUMULUS)
     state = WeatherState(layers=(layer,), seed=7)
     gather_blocks(state, zero_drift(state), (0.0, 0.0, 500.0), 0.0, 12_000.0)
-    generated = block_clouds.cache_info().misses
+    generated = BLOCK_CACHE.info().misses
     for cover in (3.2, 3.4, 5.0, 7.5):
         moved = dataclasses.replace(layer, cover_oktas=cover)
         later = dataclasses.replace(state, layers=(moved,))
         gather_blocks(later, zero_drift(later), (0.0, 0.0, 500.0), 0.0, 12_000.0)
-    assert block_clouds.cache_info().misses == generated
+    assert BLOCK_CACHE.info().misses == generated
 
 
 # -- wind drift --------------------------------------------------------------------------

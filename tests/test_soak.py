@@ -81,6 +81,7 @@ def test_a_short_soak_reports_every_metric(tmp_path: Path) -> None:
     assert r["fps"]["baseline"] > 0 and r["fps"]["soak"] > 0
     assert 0.0 < r["fps"]["ratio"] < 10.0
     assert 50_000 < r["rss_kib"]["warm"] <= r["rss_kib"]["peak"] < 8_000_000
+    assert 0 < r["rss_kib"]["block_cache_end"] < r["rss_kib"]["peak"]
     assert 3 < r["fds"]["start"] <= r["fds"]["max"] and r["fds"]["end"] > 3
     assert r["threads"]["start"] > 1
     assert r["log"]["bytes"] > 0 and r["log"]["lines"] > 0

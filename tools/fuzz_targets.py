@@ -67,7 +67,7 @@ from wxsky.protocols.canaerospace import CanasDecoder  # noqa: E402
 from wxsky.protocols.nmea import NmeaDecoder, NmeaSettings  # noqa: E402
 from wxsky.protocols.result import Decoded  # noqa: E402
 from wxsky.scene.cloud_model_files import MODEL_TABLE, model_from_values  # noqa: E402
-from wxsky.scene.clouds import block_clouds  # noqa: E402
+from wxsky.scene.clouds import generate_block_clouds  # noqa: E402
 from wxsky.schema import Kind, Number, Table, Tables  # noqa: E402
 from wxsky.schema.toml_file import check_toml_bytes  # noqa: E402
 from wxsky.settings.config import (  # noqa: E402
@@ -1005,8 +1005,8 @@ def check_cloud_model(data: bytes) -> None:
     except ConfigError:
         return
     thickness_m = max(model.min_thickness_m, _MODEL_LAYER_THICKNESS_M)
-    clouds = block_clouds(0, 0, 0, model, thickness_m, 1)
-    block_clouds.cache_clear()  # no fuzz model may stay in the process-wide cache
+    # Uncached: no fuzz model may stay in the process-wide block cache.
+    clouds = generate_block_clouds(0, 0, 0, model, thickness_m, 1)
     pos = clouds.sprites.centre_m
     assert pos.size == 0 or bool(((pos[:, 2] >= 0.0) & (pos[:, 2] <= thickness_m)).all()), (
         "sprites outside the layer"

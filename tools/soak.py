@@ -239,6 +239,7 @@ class Sample:
     log_bytes: int
     status_fps: float | None
     clients: int | None
+    block_cache_kib: int | None  # the daemon's generated cloud blocks (status block_cache)
 
 
 @dataclass
@@ -578,18 +579,19 @@ name = "{SERIAL_NAME}"
                 frame = reader.frame_number
             except WxskyError:
                 reader, frame = None, -1
-            fps = clients = None
+            fps = clients = cache_kib = None
             try:
                 client = client or self._client()
                 status = client.call("status", timeout_s=2.0)
                 fps, clients = status["fps"], status["clients"]
+                cache_kib = status["block_cache"]["bytes"] // 1024
             except (WxskyError, OSError):
                 if client is not None:
                     client.close()
                 client = None
             log_bytes = self.log_path.stat().st_size
             self.samples.append(
-                Sample(self.now(), rss, fds, threads, frame, log_bytes, fps, clients)
+                Sample(self.now(), rss, fds, threads, frame, log_bytes, fps, clients, cache_kib)
             )
             time.sleep(max(0.0, next_t - time.monotonic()))
         if reader is not None:
@@ -799,6 +801,10 @@ name = "{SERIAL_NAME}"
                 "end": rss_end,
                 "peak": max(s.rss_kib for s in self.samples),
                 "growth": (rss_end / rss_warm - 1.0) if rss_warm else None,
+                # Bounded by bytes (status block_cache limit_bytes): growth that is the cache
+                # filling, not a leak.
+                "block_cache_warm": _median_of(warm, "block_cache_kib"),
+                "block_cache_end": _median_of(end_samples, "block_cache_kib"),
             },
             "fds": {
                 "start": quiet_start.fds,
@@ -938,6 +944,11 @@ def _until(predicate: Callable[[], bool], timeout_s: float) -> bool:
             return True
         time.sleep(0.1)
     return predicate()
+
+
+def _median_of(samples: list[Sample], name: str) -> float | None:
+    values = [v for s in samples if (v := getattr(s, name)) is not None]
+    return statistics.median(values) if values else None
 
 
 def _nearest(times: list[float], t: float) -> str:
@@ -1093,6 +1104,11 @@ def _print_summary(r: dict[str, Any]) -> bool:
         f"  rss: after warm-up {rss['warm'] / 1024:.1f} MiB, end {rss['end'] / 1024:.1f} MiB, "
         f"peak {rss['peak'] / 1024:.1f} MiB; fds {r['fds']}; threads {r['threads']}"
     )
+    if rss.get("block_cache_end") is not None:
+        print(
+            f"  block cache: after warm-up {_fmt_kib(rss['block_cache_warm'])}, "
+            f"end {_fmt_kib(rss['block_cache_end'])}"
+        )
     lg = r["log"]
     print(
         f"  log: {lg['bytes']} bytes, {lg['lines']} lines ({lg['soak_lines']} in the soak), "
@@ -1116,6 +1132,10 @@ def _print_summary(r: dict[str, Any]) -> bool:
     ok = all(t["ok"] for t in r["targets"].values())
     print(f"verdict: {'PASS' if ok else 'FAIL'}")
     return ok
+
+
+def _fmt_kib(kib: float | None) -> str:
+    return "n/a" if kib is None else f"{kib / 1024:.1f} MiB"
 
 
 def _fmt(value: Any) -> str:
@@ -1143,8 +1163,17 @@ def _chart(r: dict[str, Any], path: Path) -> None:
     ]
     m = r["marks"]
     fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
-    axes[0].plot(t, [row["rss_kib"] / 1024 for row in rows], color="tab:blue")
-    axes[0].set_ylabel("RSS, MiB")
+    axes[0].plot(t, [row["rss_kib"] / 1024 for row in rows], color="tab:blue", label="RSS")
+    cache = [row.get("block_cache_kib") for row in rows]
+    if any(c is not None for c in cache):
+        axes[0].plot(
+            t,
+            [float("nan") if c is None else c / 1024 for c in cache],
+            color="tab:purple",
+            label="block cache",
+        )
+    axes[0].set_ylabel("MiB")
+    axes[0].legend(loc="center right")
     axes[1].plot(t, [row["fds"] for row in rows], label="open fds", color="tab:orange")
     axes[1].plot(t, [row["threads"] for row in rows], label="threads", color="tab:green")
     axes[1].set_ylabel("count")

@@ -50,7 +50,7 @@ from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
 from wxsky.output.transport import Address, ControlServer, WithFds, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
-from wxsky.scene.clouds import BLOCK_SIZE_M
+from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M
 from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
@@ -509,6 +509,7 @@ class Daemon:
             "shm_name": self.config.output.shm_name,
             "camera": camera_to_dict(self.engine.camera),
             "clock_rate": self.engine.clock_rate,
+            "block_cache": BLOCK_CACHE.info().to_dict(),
             "zero_copy": {
                 "supported": self._export_probe is not None and self._export_probe.supported,
                 "reason": self._export_failed

@@ -10,13 +10,13 @@ every second never regenerates a block and a cloud keeps its shape while it form
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
+from wxsky.scene.block_cache import BlockCache
 from wxsky.scene.cloud_models import BoxTemplate, CloudModel
 from wxsky.scene.sprite_cull import cull_mask
 from wxsky.scene.sprites import F32, F64, I32, I64, SpriteBatch
@@ -24,11 +24,13 @@ from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM
 from wxsky.weather.state import CloudLayer, CloudType
 
 __all__ = [
+    "BLOCK_CACHE",
     "BLOCK_SIZE_M",
     "BlockClouds",
     "SpriteBatch",
     "block_clouds",
     "block_seed",
+    "generate_block_clouds",
     "layer_keys",
 ]
 
@@ -71,12 +73,32 @@ def block_seed(seed: int, layer_key: int, block_x: int, block_y: int) -> np.rand
     )
 
 
-@functools.lru_cache(maxsize=4096)
+def _block_bytes(block: BlockClouds) -> int:
+    arrays = [getattr(block.sprites, f.name) for f in dataclasses.fields(block.sprites)]
+    return block.cloud_rank.nbytes + sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
+
+
+# Every block made in this process, for the next ring build (`block_cache.py`: bounded by
+# bytes, sized to the scene); `status` reports it.
+BLOCK_CACHE: BlockCache[BlockClouds] = BlockCache(_block_bytes)
+
+
 def block_clouds(
     block_x: int, block_y: int, layer_key: int, model: CloudModel, thickness_m: float, seed: int
 ) -> BlockClouds:
-    """All clouds of one block; layer_key comes from `layer_keys`, the model from
-    `CloudModels.for_layer`. Not the cover nor the base: the cache stays hot while they move."""
+    """All clouds of one block (made once, then read from `BLOCK_CACHE`); layer_key comes
+    from `layer_keys`, the model from `CloudModels.for_layer`. Not the cover nor the base:
+    the cache stays hot while they move."""
+    key = (block_x, block_y, layer_key, model, thickness_m, seed)
+    return BLOCK_CACHE.get(
+        key, lambda: generate_block_clouds(block_x, block_y, layer_key, model, thickness_m, seed)
+    )
+
+
+def generate_block_clouds(
+    block_x: int, block_y: int, layer_key: int, model: CloudModel, thickness_m: float, seed: int
+) -> BlockClouds:
+    """`block_clouds` without the cache."""
     rng = np.random.default_rng(block_seed(seed, layer_key, block_x, block_y))
     per_side = max(1, round(BLOCK_SIZE_M / model.cell_m))
     cell_m = BLOCK_SIZE_M / per_side

@@ -136,7 +136,7 @@ def count_blocks(lo_m: float, hi_m: float) -> int:
 # block and layer): 1024 blocks, three times the default's 337 (max_range_m about 69 km at a
 # small radius), is a build of some 8 s and 300 MB for a three-layer storm; 256 near blocks,
 # eleven times the default's 23 (ring_radius_m about 33 km), some 0.2 s a frame. Three layers'
-# 3 x (1024 + 256) blocks also fit the block cache (`clouds.block_clouds`, 4096), so a
+# The block cache (`clouds.BLOCK_CACHE`) sizes itself to the blocks the last build used, so a
 # rebuild reads its blocks rather than generating them again.
 MAX_RING_BLOCKS = 1024
 MAX_NEAR_BLOCKS = 256

@@ -22,7 +22,7 @@ import numpy.typing as npt
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
-from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
 from wxsky.scene.gather import Drift, NearRing, check_cancel, gather_far, gather_near
 from wxsky.scene.in_cloud import (
     NO_LOCKS,
@@ -213,6 +213,7 @@ def build_ring(
 ) -> RingScene:
     """The ring's impostors and shadow map. Raises BuildCancelled (`gather.check_cancel`)
     between blocks and between stages once `cancel` is set."""
+    BLOCK_CACHE.start_build()  # the cache makes room for what the last build used
     far = gather_far(state, drift, centre_m, settings.ring_radius_m, settings.max_range_m, cancel)
     # Every impostor is seen from the ring's centre: light and shade the far clouds once,
     # whole, before the bins cut those that straddle two impostors.
