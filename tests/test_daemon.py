@@ -127,6 +127,12 @@ def test_bad_control_input_is_answered_and_the_daemon_keeps_publishing(tmp_path:
             c.call("set_camera", {"position_m": [1e308, 0.0, 500.0]})
         with pytest.raises(RemoteError, match=r"set_camera: position_m"):
             c.call("set_camera", {"position_m": [0.0, 0.0, 2e5]})
+        # Found by the control fuzzer: a position and half a geodetic one was an internal error.
+        for both in ({"lat_deg": 0.0}, {"lat_deg": 1.0, "lon_deg": 2.0}, {"alt_m": 900.0}):
+            with pytest.raises(RemoteError, match=r"^set_camera: give position_m or lat_deg"):
+                c.call("set_camera", {"position_m": [0.0, 0.0, 500.0], **both})
+        with pytest.raises(RemoteError, match=r"^set_camera: lat_deg and lon_deg go together"):
+            c.call("set_camera", {"lon_deg": 2.0})
         for command in ("status", "scene", "export_textures"):
             with pytest.raises(RemoteError, match=rf"{command}: verbose: unknown key"):
                 c.call(command, {"verbose": True})
