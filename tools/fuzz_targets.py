@@ -1323,8 +1323,13 @@ def _control_batch_check() -> None:
     now = time.monotonic()
     frames = status["frames_published"]
     if daemon.frames_checked_at and now - daemon.frames_checked_at > 5.0:
+        # What the daemon was doing, for telling a stall from a starved machine.
+        cam = status["camera"]
         assert frames > daemon.frames_seen, (
-            f"no frame published in {now - daemon.frames_checked_at:.0f} s"
+            f"no frame published in {now - daemon.frames_checked_at:.0f} s "
+            f"(fps {status['fps']:.1f}, camera at {cam['position_m']} {cam['width']}x"
+            f"{cam['height']}, clock rate {status['clock_rate']}, load "
+            f"{os.getloadavg()[0]:.1f})"
         )
     if frames > daemon.frames_seen or not daemon.frames_checked_at:
         daemon.frames_seen, daemon.frames_checked_at = frames, now
