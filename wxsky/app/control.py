@@ -119,11 +119,11 @@ def camera_from_params(
     v = checked_params("set_camera", _camera_table(max_size), params)
     position = cam.position_m
     geodetic = {"lat_deg", "lon_deg"} & set(v)
-    if geodetic and len(geodetic) < 2:
-        raise ControlError("set_camera: lat_deg and lon_deg go together")
     if "position_m" in v and (geodetic or "alt_m" in v):
         # Two places in one request: neither would be the one the host meant.
         raise ControlError("set_camera: give position_m or lat_deg + lon_deg (+ alt_m), not both")
+    if geodetic and len(geodetic) < 2:
+        raise ControlError("set_camera: lat_deg and lon_deg go together")
     if "position_m" in v:
         position = v["position_m"]
     elif geodetic:
