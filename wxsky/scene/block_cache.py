@@ -14,6 +14,7 @@ blocks; one lock guards the table, never held while a block is generated.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
@@ -39,14 +40,7 @@ class CacheInfo:
     limit_bytes: int
 
     def to_dict(self) -> dict[str, int]:
-        return {
-            "hits": self.hits,
-            "misses": self.misses,
-            "evictions": self.evictions,
-            "entries": self.entries,
-            "bytes": self.bytes,
-            "limit_bytes": self.limit_bytes,
-        }
+        return dataclasses.asdict(self)
 
 
 class BlockCache(Generic[V]):
