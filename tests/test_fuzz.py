@@ -71,7 +71,7 @@ def test_smoke_against_a_daemon(name: str) -> None:
 def test_the_targets_cover_every_parser() -> None:
     from wxsky.weather.feeds import FORMATS
 
-    expected = {"metar", "nmea", "canaerospace", "control", "wire", "config", "preset"}
+    expected = {"metar", "nmea", "canaerospace", "cigi", "control", "wire", "config", "preset"}
     expected |= {"cloud-model", "feed-auto", *(f"feed-{f}" for f in FORMATS)}
     assert expected <= set(TARGETS)
 

@@ -5,7 +5,8 @@
     .venv/bin/python tools/fuzz.py TARGET --replay FILE...
 
 The targets are in `tools/fuzz_targets.py` (METAR, each feed format and detection, NMEA,
-CANaerospace, the control channel against a real daemon, config, preset and cloud-model TOML).
+CANaerospace, CIGI 3.3 datagrams, the control channel against a real daemon, config, preset
+and cloud-model TOML).
 Each runs for `--runs` inputs (default 1,000,000) or `--minutes`, whichever ends first when
 both are given.
 
