@@ -11,7 +11,7 @@ from datetime import timedelta
 import numpy as np
 import pytest
 
-from wxsky.engine.ring_schedule import RETRY_AFTER_S, RingSchedule
+from wxsky.engine.ring_schedule import RETRY_AFTER_S, RING_WEATHER_GAP_S, RingPolicy, RingSchedule
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift, NearRing, gather_near, zero_drift
 from wxsky.scene.layout import RingScene, empty_ring
@@ -141,6 +141,84 @@ def test_what_the_ring_does_not_show_rebuilds_nothing() -> None:
     hazier = dataclasses.replace(knobs, visibility_m=3000.0)
     f = s.step(hazier, DRIFT, cam(), sky_params(hazier), DT)
     assert f.events[0].fields["reason"] == "weather"
+
+
+NO_GAP = RingPolicy(weather_gap_s=0.0)  # the allowances alone
+
+
+def test_a_visibility_transition_rebuilds_once_per_five_percent_not_every_step() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.0, policy=NO_GAP)
+    for _ in range(12):
+        s.step(STATE, DRIFT, cam(), SKY, DT)
+    reasons = []
+    # 10 km closing in at 100 m a step, as a transition does at its default rate over 1 s.
+    for k in range(1, 21):
+        hazier = dataclasses.replace(STATE, visibility_m=10_000.0 - 100.0 * k)
+        for _ in range(RING_SIZE + 1):  # let each rebuild finish before the next step
+            f = s.step(hazier, DRIFT, cam(), sky_params(hazier), DT)
+            reasons += [
+                (k, e.fields["reason"]) for e in f.events if e.event == "ring_rebuild_start"
+            ]
+    # Built at 10,000 m: 9,500 is 5.3 % below it (rebuilt), then 9,000 is 5.6 % below 9,500;
+    # 8,500 and 8,000 follow: each the first step more than 5 % from the ring's visibility.
+    assert reasons == [(5, "weather"), (10, "weather"), (15, "weather"), (20, "weather")]
+
+
+def _rebuilds(s: RingSchedule, state: WeatherState, frames: int) -> list[str]:
+    out = []
+    for _ in range(frames):
+        f = s.step(state, DRIFT, cam(), sky_params(state), DT)
+        out += [e.fields["reason"] for e in f.events if e.event == "ring_rebuild_start"]
+    return out
+
+
+def test_clouds_forming_rebuild_past_an_allowance_and_exactly_once_they_hold_still() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.0, policy=NO_GAP)
+    _rebuilds(s, STATE, 12)
+    (layer,) = STATE.layers
+
+    def with_layer(**change: float) -> WeatherState:
+        return dataclasses.replace(STATE, layers=(dataclasses.replace(layer, **change),))
+
+    # Changing every frame, within 0.25 okta and 50 m of the ring's: nothing.
+    creeping = [with_layer(cover_oktas=4.0 + 0.01 * k, base_m=1500.0 + 2.0 * k) for k in range(20)]
+    assert [r for st in creeping for r in _rebuilds(s, st, 1)] == []
+    # Past 0.25 okta (or 50 m of base or top, or another type): at once.
+    assert _rebuilds(s, with_layer(cover_oktas=4.3), 1) == ["weather"]
+    _rebuilds(s, with_layer(cover_oktas=4.3), RING_SIZE)
+    assert _rebuilds(s, with_layer(cover_oktas=4.3, top_m=2260.0), 1) == ["weather"]
+    _rebuilds(s, with_layer(cover_oktas=4.3, top_m=2260.0), RING_SIZE)
+    cirrus = with_layer(cover_oktas=4.3, top_m=2260.0, type=CloudType.CIRRUS)
+    assert _rebuilds(s, cirrus, 1) == ["weather"]
+    _rebuilds(s, cirrus, RING_SIZE)
+    # A small difference that then holds still for 1 s: rebuilt exactly, once.
+    held = dataclasses.replace(
+        cirrus, layers=(dataclasses.replace(cirrus.layers[0], base_m=1510.0),)
+    )
+    assert _rebuilds(s, held, 29) == []
+    assert _rebuilds(s, held, 4) == ["weather"]  # 1 s in: 30 frames, give or take rounding
+    assert _rebuilds(s, held, 60) == []
+
+
+def test_weather_rebuilds_back_to_back_wait_a_gap_but_other_reasons_do_not() -> None:
+    s = RingSchedule(quick_build, R, mode="sync", fade_s=0.0)
+    _rebuilds(s, STATE, 12)
+    hazy = [dataclasses.replace(STATE, visibility_m=v) for v in (8000.0, 6000.0, 4000.0)]
+    # After a quiet spell: at once. Built and shown in 8 frames (no fade).
+    assert _rebuilds(s, hazy[0], RING_SIZE + 1) == ["weather"]
+    gap_frames = round(RING_WEATHER_GAP_S / DT)
+    # The next weather change waits until the gap after that ring was shown ...
+    assert _rebuilds(s, hazy[1], gap_frames - 2) == []
+    assert _rebuilds(s, hazy[1], 3) == ["weather"]
+    _rebuilds(s, hazy[1], RING_SIZE)
+    # ... but a camera move does not, and builds the newest weather with it: once that ring
+    # is shown, nothing is left to rebuild for the weather, gap or not.
+    far = Camera(position_m=(0.2 * R, 0.0, 1500.0))
+    reasons = []
+    for _ in range(round(2 * RING_WEATHER_GAP_S / DT)):
+        f = s.step(hazy[2], DRIFT, far, sky_params(hazy[2]), DT)
+        reasons += [e.fields["reason"] for e in f.events if e.event == "ring_rebuild_start"]
+    assert reasons == ["moved_horizontal"]
 
 
 def test_async_builds_off_the_frame_and_renders_when_ready() -> None:

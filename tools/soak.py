@@ -272,6 +272,7 @@ class Soak:
         self.tmp = Path(tempfile.mkdtemp(prefix="wxsky-soak-"))
         self.sock = self.tmp / "wx.sock"
         self.log_path = self.tmp / "daemon.log"
+        self.trace_path = self.tmp / "trace.jsonl"
         self.shm_name = f"wxsky-soak-{uuid.uuid4().hex[:8]}"
         self.feed = FeedWriter(self.tmp / "metar.txt", random.Random(args.seed + 1), args.bomb_mib)
         self.serial = PtyDevice(self.tmp / "ttyPANEL")
@@ -419,7 +420,7 @@ name = "{SERIAL_NAME}"
         cfg = self.tmp / "wxsky.toml"
         cfg.write_text(self._config())
         cmd = [sys.executable, "-m", "wxsky", "run", "--config", str(cfg)]
-        cmd += ["--control", f"unix:{self.sock}"]
+        cmd += ["--control", f"unix:{self.sock}", "--trace", str(self.trace_path)]
         with open(self.log_path, "wb") as out:
             self.proc = subprocess.Popen(
                 cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
@@ -818,6 +819,9 @@ name = "{SERIAL_NAME}"
             },
             "clients": {"start": quiet_start.clients, "end": quiet_end.clients},
             "log": logs,
+            # What the frame rate pays for: each rebuild is a sprite build beside the render
+            # thread and 8 impostors drawn.
+            "ring_rebuilds": _ring_rebuilds(self.trace_path, self.samples, m),
             "links": {
                 k: {
                     "unplugs": v.unplugs,
@@ -994,6 +998,36 @@ def _fps_quantile(samples: list[Sample], start: float, end: float, q: float) -> 
 _NUMBERS = re.compile(r"\d+(\.\d+)?")
 
 
+def _ring_rebuilds(path: Path, samples: list[Sample], marks: dict[str, float]) -> dict[str, Any]:
+    """Ring rebuilds started in the baseline and in the soak, by reason, from the trace (its
+    lines carry frame numbers; the samples say when each frame was published)."""
+    frames = [s.frame for s in samples]
+    times = [s.t for s in samples]
+
+    def when(frame: int) -> float:
+        i = bisect.bisect_left(frames, frame)
+        return times[min(i, len(times) - 1)] if times else 0.0
+
+    out: dict[str, Counter[str]] = {"baseline": Counter(), "soak": Counter()}
+    with contextlib.suppress(OSError), path.open(encoding="utf-8", errors="replace") as f:
+        for line in f:
+            if '"ring_rebuild_start"' not in line:
+                continue
+            with contextlib.suppress(ValueError):
+                event = json.loads(line)
+                t = when(int(event["frame"]))
+                if marks["baseline_start"] <= t < marks["soak_start"]:
+                    out["baseline"][event.get("reason", "?")] += 1
+                elif marks["soak_start"] <= t <= marks["soak_end"]:
+                    out["soak"][event.get("reason", "?")] += 1
+    soak_min = max(1e-9, (marks["soak_end"] - marks["soak_start"]) / 60.0)
+    return {
+        "baseline": dict(out["baseline"]),
+        "soak": dict(out["soak"]),
+        "soak_per_min": sum(out["soak"].values()) / soak_min,
+    }
+
+
 def _log_figures(path: Path, soak: list[Sample], soak_min: float) -> dict[str, Any]:
     data = path.read_bytes() if path.exists() else b""
     lines = data.decode(errors="replace").splitlines()
@@ -1108,6 +1142,12 @@ def _print_summary(r: dict[str, Any]) -> bool:
         print(
             f"  block cache: after warm-up {_fmt_kib(rss['block_cache_warm'])}, "
             f"end {_fmt_kib(rss['block_cache_end'])}"
+        )
+    rb = r.get("ring_rebuilds")
+    if rb:
+        print(
+            f"  ring rebuilds: baseline {rb['baseline']}, soak {rb['soak']} "
+            f"({rb['soak_per_min']:.1f}/min)"
         )
     lg = r["log"]
     print(

@@ -2,8 +2,9 @@
 
 Wang's schedule: the ring is rebuilt once the camera has moved 15 % of the ring radius
 horizontally or 2 % vertically from where it was built (`RingPolicy`), and also here when the
-sun has moved, the weather has changed the clouds, or the clouds have drifted. A rebuild
-never stalls a frame:
+sun has moved, the weather has changed the clouds or the haze (by more than small
+allowances while it is changing, by anything once it holds still), or the clouds have
+drifted. A rebuild never stalls a frame:
 
     idle -> building (the sprite work, on a worker thread) -> rendering (one impostor per
     frame, 8 frames, into the second set) -> fading (the host cross-fades from the old set
@@ -50,6 +51,23 @@ RETRY_AFTER_S = 2.0  # a failed build is tried again after this long, not every 
 # has moved this far: past these, the seam between near sprites and impostors shows.
 RING_DRIFT_FRAC = 0.03
 RING_SUN_DEG = 1.0
+# ... or the weather the ring shows has changed by more than these. A transition moves the
+# weather a little every frame (cover 2 oktas/min, bases 300 m/min, visibility 100 m/s by
+# default); rebuilding at each step would rebuild back to back for minutes, at a third of the
+# frame rate on a CPU. 0.25 okta is 3 % of the sky; 50 m of base or top is a third of the
+# camera's own vertical allowance (2 % of 8 km); 5 % of the visibility moves any cloud's haze
+# (1 - exp(-d / haze_m), haze_m proportional to it) by at most 1.8 % of the way to the horizon
+# colour (x e^-x <= 1/e). Once the weather has held still for RING_SETTLE_S, the ring is
+# rebuilt for any difference, so a finished transition is shown exactly.
+RING_VISIBILITY_FRAC = 0.05
+RING_COVER_OKTAS = 0.25
+RING_LAYER_M = 50.0
+RING_SETTLE_S = 1.0
+# And a weather rebuild that follows a weather rebuild waits this long after that one was
+# shown: a preset or report applied every few seconds (a restless instructor, a flapping feed)
+# would otherwise keep a build beside every frame. The near sprites show the change at once
+# meanwhile; the first change after a quiet spell rebuilds at once.
+RING_WEATHER_GAP_S = 3.0
 
 Builder = Callable[[WeatherState, Drift, tuple[float, float, float], SkyParams], RingScene]
 
@@ -60,6 +78,11 @@ class RingPolicy:
     vertical_frac: float = MOVE_VERTICAL_FRAC
     sun_deg: float = RING_SUN_DEG
     drift_frac: float = RING_DRIFT_FRAC
+    visibility_frac: float = RING_VISIBILITY_FRAC
+    cover_oktas: float = RING_COVER_OKTAS
+    layer_m: float = RING_LAYER_M
+    settle_s: float = RING_SETTLE_S
+    weather_gap_s: float = RING_WEATHER_GAP_S
 
 
 @dataclass(frozen=True)
@@ -148,6 +171,10 @@ class RingSchedule:
         # its next block (`gather.check_cancel`), and no build starts after it.
         self._cancel = threading.Event()
         self._building: tuple[str, float] | None = None  # reason, monotonic start
+        self._shown: WeatherState | None = None  # the latest state passed to `step`
+        self._steady_s = 0.0  # how long what the ring shows of it has not changed
+        self._shown_for_s = math.inf  # since the newest ring finished fading in
+        self._weather_built = False  # the newest ring was built for a weather change
 
     @property
     def current(self) -> RingScene | None:
@@ -177,6 +204,12 @@ class RingSchedule:
         render: tuple[int, ...] = ()
         render_ring: RingScene | None = None
         render_set = 1 - self._current_set
+        if self._shown is None or _ring_weather_differs(self._shown, state, None):
+            self._steady_s = 0.0
+        else:
+            self._steady_s += dt_wall_s
+        self._shown = state
+        self._shown_for_s += dt_wall_s
         if self.mode == "immediate":
             reason = self._reason(state, drift, camera, sky)
             if reason is not None:
@@ -201,6 +234,7 @@ class RingSchedule:
                 self._current, self._incoming = self._incoming, None
                 self._current_set = 1 - self._current_set
                 self._fade = 0.0
+                self._shown_for_s = 0.0
                 events.append(RingEvent("crossfade_done", {}))
         self._retry_in_s = max(0.0, self._retry_in_s - dt_wall_s)
         if not self.busy and self._retry_in_s <= 0.0 and not self._cancel.is_set():
@@ -209,6 +243,7 @@ class RingSchedule:
                 fields = {"reason": reason, "centre_m": list(camera.position_m)}
                 events.append(RingEvent("ring_rebuild_start", fields))
                 self._building = (reason, time.monotonic())
+                self._weather_built = reason == "weather"
                 if self.mode == "sync":
                     # Built inline: the first impostor renders in this very frame.
                     self._pending = Future()
@@ -322,9 +357,12 @@ class RingSchedule:
         if self._forced is not None:
             reason, self._forced = self._forced, None
             return reason
-        if _weather_differs(built.state, state):
-            return "weather"
         p = self.policy
+        if not self._weather_built or self._shown_for_s >= p.weather_gap_s:
+            if _ring_weather_differs(built.state, state, p):
+                return "weather"
+            if self._steady_s >= p.settle_s and _ring_weather_differs(built.state, state, None):
+                return "weather"
         moved = moved_reason(
             built.centre_m, camera.position_m, self.radius_m, p.horizontal_frac, p.vertical_frac
         )
@@ -349,15 +387,24 @@ def _given_up(future: Future[RingScene]) -> bool:
     return isinstance(future.exception(), BuildCancelled)
 
 
-def _weather_differs(a: WeatherState, b: WeatherState) -> bool:
-    """True when the weather differs in what the ring's impostors show: the layers and their
-    seed, where the observer is, and the visibility (the impostors' haze). The clock is the
-    sun test's; the wind is the drift test's (its effect is where the clouds have moved);
-    temperature, dewpoint, pressure and the weather groups draw nothing in the ring, so a
-    cockpit turning a temperature knob does not rebuild it with every step."""
-    return (
-        a.layers != b.layers
-        or a.seed != b.seed
-        or a.observer != b.observer
-        or a.visibility_m != b.visibility_m
+def _ring_weather_differs(a: WeatherState, b: WeatherState, policy: RingPolicy | None) -> bool:
+    """True when the weather differs in what the ring's impostors show, by more than the
+    policy's allowances (None: by anything): the layers and their seed, where the observer is,
+    and the visibility (the impostors' haze). The clock is the sun test's; the wind is the
+    drift test's (its effect is where the clouds have moved); temperature, dewpoint, pressure
+    and the weather groups draw nothing in the ring, so a cockpit turning a temperature knob
+    does not rebuild it with every step."""
+    if a.seed != b.seed or a.observer != b.observer or len(a.layers) != len(b.layers):
+        return True
+    if policy is None:
+        return a.layers != b.layers or a.visibility_m != b.visibility_m
+    low = min(a.visibility_m, b.visibility_m)
+    if abs(a.visibility_m - b.visibility_m) > policy.visibility_frac * low:
+        return True
+    return any(
+        la.type != lb.type
+        or abs(la.cover_oktas - lb.cover_oktas) > policy.cover_oktas
+        or abs(la.base_m - lb.base_m) > policy.layer_m
+        or abs(la.top_m - lb.top_m) > policy.layer_m
+        for la, lb in zip(a.layers, b.layers, strict=True)
     )
