@@ -24,6 +24,7 @@ from types import FrameType
 from typing import Any
 
 from wxsky import __version__
+from wxsky.app.cigi_part import CigiPart
 from wxsky.app.control import (
     apply_metar,
     apply_preset,
@@ -101,6 +102,8 @@ class Daemon:
         serial: Sequence[SerialInputSection] = (),
         can: Sequence[CanInputSection] = (),
         trace_path: Path | None = None,
+        cigi: Sequence[str] = (),
+        cigi_send: Sequence[str] = (),
     ) -> None:
         self.config = config
         self._trace_path = trace_path
@@ -137,6 +140,7 @@ class Daemon:
             rates=config.transition.rates(),
             transition_step_s=config.transition.step_s,
             cockpit_hold_s=config.transition.cockpit_hold_s,
+            cigi_hold_s=config.cigi.hold_s,
             ring_build="async",
             ring_fade_s=config.scene.ring_fade_s,
         )
@@ -158,6 +162,19 @@ class Daemon:
             if link.name in self.inputs:
                 raise ConfigError(f"two inputs are named {link.name!r}; give one a 'name'")
             self.inputs[link.name] = link.stats
+        self._cigi = CigiPart(
+            self.engine,
+            config.cigi,
+            publish_target=self._publish_target,
+            set_camera=self._set_camera,
+            clock_rate=config.clock.rate,
+            listen=cigi,
+            send_to=cigi_send,
+        )
+        for name, stats in self._cigi.stats():
+            if name in self.inputs:
+                raise ConfigError(f"two inputs are named {name!r}")
+            self.inputs[name] = stats
         self._target_version = -1
         self._had_feed_weather = False
         self.frames_published = 0
@@ -234,6 +251,7 @@ class Daemon:
         for feed in self._feeds:
             self._feed_tasks.append(asyncio.create_task(feed.run_supervised(self._stop)))
             log.info("METAR feed %s", feed.source.name)
+        await self._cigi.start()
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
             link.start(mailbox.post)
@@ -250,6 +268,7 @@ class Daemon:
         shown_ring = None
         while not self._stop.is_set():
             now = loop.time()
+            host_frames = self._cigi.host_frames()  # what this frame has applied
             # The scene is built on the render thread too: a ring build takes long enough on a
             # CPU to hold up cockpit input if it ran here.
             plan, meta = await loop.run_in_executor(
@@ -259,6 +278,7 @@ class Daemon:
             self._publish_target()
             self._count_frame()
             self._broadcast_frame(plan, meta)
+            self._cigi.frame_published(meta.frame_number, host_frames, plan.state)
             if self.engine.ring is not shown_ring:
                 shown_ring = self.engine.ring
                 self._server_broadcast("scene", self.scene_info())
@@ -293,6 +313,7 @@ class Daemon:
             self._feed_tasks = []
         for feed in self._feeds:
             feed.close()
+        self._cigi.close()
         if self._links:
             await self._close_links(max(0.05, timeout / 4))
         if self._server is not None:
@@ -495,6 +516,7 @@ class Daemon:
         return geodetic_from_enu(obs.lat_deg, obs.lon_deg, east, north)
 
     def status(self) -> dict[str, Any]:
+        self._cigi.refresh()
         return {
             "version": __version__,
             "uptime_s": time.monotonic() - self._started,

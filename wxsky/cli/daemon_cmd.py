@@ -72,6 +72,24 @@ def add_commands(sub: Subparsers) -> None:
         help="read CANaerospace from a python-can bus, e.g. socketcan:can0, "
         "udp_multicast:239.74.163.2 (repeatable; adds to [[can]] in the config)",
     )
+    run.add_argument(
+        "--cigi",
+        action="append",
+        default=[],
+        type=Checked("--cigi", _udp_spec),
+        metavar="udp:HOST:PORT",
+        help="listen there for a CIGI 3.3 host, e.g. udp:127.0.0.1:8001 (repeatable; adds to "
+        "[cigi] listen in the config)",
+    )
+    run.add_argument(
+        "--cigi-send",
+        action="append",
+        default=[],
+        type=Checked("--cigi-send", _udp_spec),
+        metavar="udp:HOST:PORT",
+        help="send the applied weather to a CIGI image generator there each frame "
+        "(repeatable; adds to [cigi] send_to in the config)",
+    )
     add_control_option(run)
     run.add_argument(
         "--preview",
@@ -205,6 +223,13 @@ def _serial_spec(spec: str) -> Any:
     return SerialInputSection.from_spec(spec)
 
 
+def _udp_spec(spec: str) -> str:
+    from wxsky.inputs.cigi_link import parse_udp
+
+    parse_udp(spec)
+    return spec
+
+
 def _can_spec(spec: str) -> Any:
     from wxsky.settings.config import CanInputSection
 
@@ -230,6 +255,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         feeds=args.metar_feed,
         serial=args.serial,
         can=args.can,
+        cigi=args.cigi,
+        cigi_send=args.cigi_send,
         trace_path=args.trace,
     )
     return asyncio.run(daemon.run())

@@ -41,13 +41,14 @@ from wxsky.scene.layout import (
 )
 from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
-from wxsky.weather.precedence import DEFAULT_COCKPIT_HOLD_S, SourceStack
+from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
+from wxsky.weather.precedence import DEFAULT_CIGI_HOLD_S, DEFAULT_COCKPIT_HOLD_S, SourceStack
 from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
 from wxsky.weather.transition import INSTANT, TransitionRates, settled, step_toward
 
+__all__ = ["FramePlan", "SkyEngine", "enu_from_geodetic", "geodetic_from_enu"]
+
 RENDER_MODES = ("ring", "direct")  # far clouds as impostors, or every cloud as sprites
-METRES_PER_DEG_LAT = 110_540.0
-METRES_PER_DEG_LON_EQUATOR = 111_320.0
 DEFAULT_TRANSITION_STEP_S = 1.0
 # A cockpit position within this distance of the observer moves the camera; farther, the flat
 # local frame is no longer good and the position becomes the new observer (a new site).
@@ -91,6 +92,7 @@ class SkyEngine:
         transition_step_s: float = DEFAULT_TRANSITION_STEP_S,
         cockpit_hold_s: float = DEFAULT_COCKPIT_HOLD_S,
         render_mode: str = "ring",
+        cigi_hold_s: float = DEFAULT_CIGI_HOLD_S,
         ring_build: str = "immediate",
         ring_fade_s: float = DEFAULT_FADE_S,
     ) -> None:
@@ -102,7 +104,9 @@ class SkyEngine:
         if render_mode not in RENDER_MODES:
             raise ValueError(f"render mode must be one of {', '.join(RENDER_MODES)}")
         self._lock = threading.RLock()
-        self._stack = SourceStack(base=state, cockpit_hold_s=cockpit_hold_s)
+        self._stack = SourceStack(
+            base=state, cockpit_hold_s=cockpit_hold_s, cigi_hold_s=cigi_hold_s
+        )
         self._state = state  # applied
         self._target = state
         self._settled = True
@@ -235,6 +239,11 @@ class SkyEngine:
             self._retarget()
             return self._target
 
+    def heard_cigi(self) -> None:
+        """A CIGI host sent a message: the weather it gave stands on (see `SourceStack`)."""
+        with self._lock:
+            self._stack = self._stack.heard_cigi(self._wall_s)
+
     def apply_cockpit(self, update: CockpitUpdate) -> WeatherState:
         """Lay a cockpit link's values over the weather (each held while it keeps coming),
         set the clock from its time and move the camera to its position; returns the target."""
@@ -270,7 +279,7 @@ class SkyEngine:
             self._camera = dataclasses.replace(self._camera, position_m=(east_m, north_m, up_m))
 
     def release(self, source: Source) -> tuple[str, ...]:
-        """Hand the fields a control or cockpit source holds back to the sources below it."""
+        """Hand the fields a control, cockpit or CIGI source holds back to the sources below."""
         with self._lock:
             self._stack, fields = self._stack.released(source)
             self._retarget()
@@ -439,27 +448,3 @@ class SkyEngine:
         """Where the applied weather's layers stand at `time_utc` (earlier: back upwind)."""
         since_s = (time_utc - self._anchor_utc).total_seconds()
         return advance_drift(self._state, self._anchor_drift, since_s)
-
-
-def enu_from_geodetic(
-    observer_lat_deg: float, observer_lon_deg: float, lat_deg: float, lon_deg: float, alt_m: float
-) -> tuple[float, float, float]:
-    """Local flat-earth position of a point around the observer (good to ~0.1 % within 100 km)."""
-    east = (
-        (lon_deg - observer_lon_deg)
-        * METRES_PER_DEG_LON_EQUATOR
-        * math.cos(math.radians(observer_lat_deg))
-    )
-    north = (lat_deg - observer_lat_deg) * METRES_PER_DEG_LAT
-    return (east, north, alt_m)
-
-
-def geodetic_from_enu(
-    observer_lat_deg: float, observer_lon_deg: float, east_m: float, north_m: float
-) -> tuple[float, float]:
-    """(lat, lon) of a local point; the inverse of `enu_from_geodetic`."""
-    lat = observer_lat_deg + north_m / METRES_PER_DEG_LAT
-    per_deg_lon = METRES_PER_DEG_LON_EQUATOR * max(1e-6, math.cos(math.radians(observer_lat_deg)))
-    lon = observer_lon_deg + east_m / per_deg_lon
-    lon = (lon + 180.0) % 360.0 - 180.0
-    return (max(-90.0, min(90.0, lat)), lon)

@@ -104,7 +104,7 @@ def in_cloud(
     """Whether the eye is inside a cloud's dense part, and the visibility there."""
     if len(batch) == 0:
         return OUTSIDE
-    deepest = float(_depths(batch, eye_m).max())
+    deepest = float(sprite_depths(batch, eye_m).max())
     if deepest <= 0.0:
         return OUTSIDE
     depth_frac = min(1.0, deepest)
@@ -131,7 +131,7 @@ def in_cloud_fog(
     strength = t * t * (3.0 - 2.0 * t)
     if strength <= 0.0:
         return rgba, NO_VEIL
-    fog_rgb = rgba[int(np.argmax(_depths(batch, eye_m))), :3].astype(np.float64)
+    fog_rgb = rgba[int(np.argmax(sprite_depths(batch, eye_m))), :3].astype(np.float64)
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
     f = strength * (1.0 - np.exp(-KOSCHMIEDER * dist / cloud.visibility_m))  # (N,)
     out = rgba.copy()
@@ -140,7 +140,7 @@ def in_cloud_fog(
     return out, (r, g, b, strength)
 
 
-def _depths(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDArray[np.float64]:
+def sprite_depths(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDArray[np.float64]:
     """(N,) how deep the eye is in each sprite's dense part: > 0 inside, 1 at its centre."""
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
     reach = INSIDE_FRAC * batch.size_m.astype(np.float64)

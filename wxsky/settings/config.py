@@ -64,6 +64,10 @@ CLOCK_RATE = Number(0.0, 10_000.0)
 FIELD_GROUPS = Items(Text(choices=ALL_GROUPS), what=f"a list of {', '.join(ALL_GROUPS)}")
 
 _T = TypeVar("_T")
+_UDP = r"udp:(\[[0-9A-Fa-f:.]+\]|[^:\[\]]+):[0-9]{1,5}"
+CIGI_ADDRESSES = Items(
+    Text(pattern=_UDP, pattern_desc="udp:HOST:PORT"), what="a list of udp:HOST:PORT"
+)
 
 
 def _opt(default: _T, kind: Kind | None = None) -> _T:
@@ -347,6 +351,27 @@ class CanInputSection(_Section):
 
 
 @dataclass(frozen=True)
+class CigiSection(_Section):
+    """`[cigi]`: wxsky as a CIGI 3.3 image generator, and as a CIGI weather source."""
+
+    SECTION: ClassVar[str] = "cigi"
+
+    # udp:HOST:PORT addresses to listen on for a CIGI host (also `wxsky run --cigi`).
+    listen: tuple[str, ...] = _opt((), CIGI_ADDRESSES)
+    # Where replies go; empty: the source address of the host's datagrams.
+    host_address: str = _opt("", Text(pattern=rf"({_UDP})?", pattern_desc="empty or udp:HOST:PORT"))
+    # Host addresses (or networks) accepted; anything else is dropped and counted.
+    allow_from: tuple[str, ...] = _opt(("127.0.0.0/8", "::1"))
+    view_id: int = _opt(0, _int(0, 65_535))  # the View Control/Definition wxsky renders
+    # The host's weather is handed back to the sources below after this long without a word.
+    hold_s: float = _opt(10.0, _num(0.1, 86_400.0, "s"))
+    # CIGI source: IGs to send the applied weather to (also `wxsky run --cigi-send`).
+    send_to: tuple[str, ...] = _opt((), CIGI_ADDRESSES)
+    send_rate_hz: float = _opt(0.0, _num(0.0, 240.0, "Hz"))  # 0: with every published frame
+    send_byte_order: str = _opt("big", Text(choices=("big", "little")))
+
+
+@dataclass(frozen=True)
 class DaemonConfig:
     daemon: DaemonSection = field(default_factory=DaemonSection)
     camera: CameraSection = field(default_factory=CameraSection)
@@ -359,6 +384,7 @@ class DaemonConfig:
     transition: TransitionSection = field(default_factory=TransitionSection)
     serial: tuple[SerialInputSection, ...] = ()  # [[serial]] tables
     can: tuple[CanInputSection, ...] = ()  # [[can]] tables
+    cigi: CigiSection = field(default_factory=CigiSection)
 
     def __post_init__(self) -> None:
         cam, out, scene = self.camera, self.output, self.scene

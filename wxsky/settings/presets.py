@@ -156,12 +156,13 @@ def patch_from_metar_text(report: str) -> WeatherPatch:
 
 def patch_from_weather_dict(weather: Mapping[str, Any]) -> WeatherPatch:
     """A preset patch from the `weather` map of the daemon's `status` (`weather_to_dict`'s
-    shape). `sources` is dropped, an unknown temperature left unset, and a fractional cloud
-    cover (the weather in the middle of a transition) rounded to whole oktas. Raises
-    PresetError naming the key if the map is not weather."""
+    shape). `sources` and `precipitation` (presets do not hold it yet) are dropped, an unknown
+    temperature left unset, and a fractional cloud cover (the weather in the middle of a
+    transition) rounded to whole oktas. Raises PresetError naming the key if the map is not
+    weather."""
     data: dict[str, Any] = {"description": "from the daemon"}
     for key, value in weather.items():
-        if key != "sources" and value is not None:
+        if key not in ("sources", "precipitation") and value is not None:
             data[key] = value
     layers = data.get("layers")
     if isinstance(layers, list):

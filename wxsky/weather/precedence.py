@@ -1,13 +1,17 @@
 """Which source each weather field is taken from, highest first:
 
-    cockpit (while held) > control channel / preset applied at run time > METAR feed > base
+    cockpit (while held) > control channel / preset applied at run time
+        > CIGI host (while it keeps sending) > METAR feed > base
 
 The base is the config's defaults with the preset the daemon started on. Every slot keeps the
 fields its source last gave; a field falls through to the next slot down when a slot has no
 value for it. Cockpit values are held only while they keep coming: a field the cockpit has not
 updated for `cockpit_hold_s` expires, so a knob left alone hands the field back. Control-channel
-overrides stay until released. The simulation clock is not a weather field here: `time_utc` in a
-patch sets the clock directly (see `SkyEngine`).
+overrides stay until released. A CIGI host's weather stands while the host keeps sending: each
+new picture of the host's weather replaces the whole slot, which is handed back when the host
+has been silent for `cigi_hold_s` (docs/cigi.md says why CIGI ranks there). The simulation
+clock is not a weather field here: `time_utc` in a patch sets the clock directly (see
+`SkyEngine`).
 
 The cockpit slot also holds finely keyed values (`wind.speed_mps`, `layer2.base_m`; see
 `wxsky.weather.cockpit`): hardware sets one knob at a time, and each knob expires on its own.
@@ -30,6 +34,7 @@ FIELDS: tuple[str, ...] = tuple(
     f.name for f in dataclasses.fields(Provenance) if f.name != "time_utc"
 )
 DEFAULT_COCKPIT_HOLD_S = 30.0
+DEFAULT_CIGI_HOLD_S = 10.0
 
 Slot = Mapping[str, "Held"]
 _EMPTY: Slot = MappingProxyType({})
@@ -47,13 +52,17 @@ class Held:
 class SourceStack:
     base: WeatherState
     metar: Slot = field(default_factory=lambda: _EMPTY)
+    cigi: Slot = field(default_factory=lambda: _EMPTY)
     control: Slot = field(default_factory=lambda: _EMPTY)
     cockpit: Slot = field(default_factory=lambda: _EMPTY)
     cockpit_hold_s: float = DEFAULT_COCKPIT_HOLD_S
+    cigi_hold_s: float = DEFAULT_CIGI_HOLD_S
+    cigi_heard_s: float = 0.0  # when the CIGI host was last heard from
 
     def with_patch(self, patch: WeatherPatch, now_s: float) -> SourceStack:
-        """The stack with a source's new values. METAR replaces the whole slot (the newest
-        report stands alone); control and cockpit patches update only the fields they give."""
+        """The stack with a source's new values. METAR and CIGI replace the whole slot (the
+        newest report, the host's whole weather, stands alone); control and cockpit patches
+        update only the fields they give."""
         values = {
             name: Held(getattr(patch, name), now_s)
             for name in FIELDS
@@ -64,6 +73,8 @@ class SourceStack:
                 return dataclasses.replace(self, base=self.base.apply(_without_time(patch)))
             case Source.METAR:
                 return dataclasses.replace(self, metar=MappingProxyType(values))
+            case Source.CIGI:
+                return dataclasses.replace(self, cigi=MappingProxyType(values), cigi_heard_s=now_s)
             case Source.CONTROL:
                 return dataclasses.replace(self, control=_merged(self.control, values))
             case Source.COCKPIT:
@@ -77,30 +88,47 @@ class SourceStack:
         held = {key: Held(value, now_s) for key, value in values.items()}
         return dataclasses.replace(self, cockpit=_merged(self.cockpit, held))
 
+    def heard_cigi(self, now_s: float) -> SourceStack:
+        """The CIGI host is still there (it sent a message): its weather stands on."""
+        return dataclasses.replace(self, cigi_heard_s=now_s) if self.cigi else self
+
     def released(self, source: Source) -> tuple[SourceStack, tuple[str, ...]]:
-        """Drop every value a control or cockpit source holds; returns the fields it held."""
+        """Drop every value a control, cockpit, CIGI or METAR source holds; returns the fields
+        it held."""
         if source is Source.CONTROL:
             return dataclasses.replace(self, control=_EMPTY), tuple(sorted(self.control))
         if source is Source.COCKPIT:
             return dataclasses.replace(self, cockpit=_EMPTY), tuple(sorted(self.cockpit))
         if source is Source.METAR:
             return dataclasses.replace(self, metar=_EMPTY), tuple(sorted(self.metar))
-        raise ValueError(f"only control, cockpit and metar values can be released, not {source}")
+        if source is Source.CIGI:
+            return dataclasses.replace(self, cigi=_EMPTY), tuple(sorted(self.cigi))
+        raise ValueError(
+            f"only control, cockpit, cigi and metar values can be released, not {source}"
+        )
 
     def expired(self, now_s: float) -> tuple[SourceStack, tuple[str, ...]]:
-        """Drop cockpit fields not updated within the hold time; returns the dropped fields."""
+        """Drop cockpit fields not updated within the hold time, and the CIGI host's weather
+        when the host has been silent for its hold time; returns the dropped fields."""
+        stack = self
+        dropped: list[str] = []
+        if self.cigi and self.cigi_heard_s < now_s - self.cigi_hold_s:
+            stack, gone_cigi = stack.released(Source.CIGI)
+            dropped += gone_cigi
         limit = now_s - self.cockpit_hold_s
         gone = tuple(sorted(n for n, h in self.cockpit.items() if h.updated_s < limit))
-        if not gone:
-            return self, ()
-        kept = {n: h for n, h in self.cockpit.items() if n not in gone}
-        return dataclasses.replace(self, cockpit=MappingProxyType(kept)), gone
+        if gone:
+            kept = {n: h for n, h in self.cockpit.items() if n not in gone}
+            stack = dataclasses.replace(stack, cockpit=MappingProxyType(kept))
+            dropped += gone
+        return stack, tuple(dropped)
 
     def target(self) -> WeatherState:
         """The weather every field's highest-ranked source asks for, with its provenance."""
         state = self.base
         for source, slot in (
             (Source.METAR, self.metar),
+            (Source.CIGI, self.cigi),
             (Source.CONTROL, self.control),
             (Source.COCKPIT, self.cockpit),
         ):
@@ -111,13 +139,20 @@ class SourceStack:
         return overlay(state, fine)
 
     def holds(self, now_s: float) -> dict[str, dict[str, Any]]:
-        """Control and cockpit overrides for status: field -> source and age."""
+        """CIGI, control and cockpit overrides for status: field -> source and age (the
+        highest source holding a field wins, as in `target`)."""
         out: dict[str, dict[str, Any]] = {}
-        for source, slot in ((Source.CONTROL, self.control), (Source.COCKPIT, self.cockpit)):
+        for source, slot in (
+            (Source.CIGI, self.cigi),
+            (Source.CONTROL, self.control),
+            (Source.COCKPIT, self.cockpit),
+        ):
             for name, held in slot.items():
                 entry: dict[str, Any] = {"source": source.value, "age_s": now_s - held.updated_s}
                 if source is Source.COCKPIT:
                     entry["expires_in_s"] = held.updated_s + self.cockpit_hold_s - now_s
+                elif source is Source.CIGI:
+                    entry["expires_in_s"] = self.cigi_heard_s + self.cigi_hold_s - now_s
                 out[name] = entry
         return out
 

@@ -34,6 +34,9 @@ VISIBILITY_M = Number(0.0, 1_000_000.0, unit="m")
 TEMPERATURE_C = Number(-90.0, 60.0, unit="degC")  # also the dew point
 QNH_HPA = Number(850.0, 1100.0, unit="hPa")
 SEED = Number(0, 2**63 - 1, integer=True)
+COVERAGE_PCT = Number(0.0, 100.0, unit="%")
+SEVERITY = Number(0, 5, integer=True)
+MAX_PRECIPITATION = 4  # one of each kind
 
 
 class CloudType(enum.IntEnum):
@@ -72,6 +75,7 @@ class Source(enum.StrEnum):
     METAR = "metar"
     COCKPIT = "cockpit"
     CONTROL = "control"
+    CIGI = "cigi"
 
 
 @dataclass(frozen=True)
@@ -107,6 +111,51 @@ class CloudLayer:
         return self.top_m - self.base_m
 
 
+class PrecipKind(enum.IntEnum):
+    """Kinds of precipitation layer, numbered as CIGI's Weather Control layer ids."""
+
+    RAIN = 4
+    SNOW = 5
+    SLEET = 6
+    HAIL = 7
+
+    @property
+    def wire_name(self) -> str:
+        return self.name.lower()
+
+    @property
+    def metar_code(self) -> str:
+        """The METAR present-weather code (ice pellets for sleet, as ICAO names it)."""
+        return {4: "RA", 5: "SN", 6: "PL", 7: "GR"}[self.value]
+
+
+@dataclass(frozen=True)
+class PrecipLayer:
+    """A layer of falling precipitation (kept in the state for the renderers to come; the
+    sky does not draw it yet). `severity` is CIGI's 0 (lightest) to 5 (heaviest)."""
+
+    kind: PrecipKind
+    base_m: float  # MSL
+    top_m: float  # MSL
+    coverage_pct: float
+    severity: int
+    visibility_m: float  # inside the precipitation
+
+    def __post_init__(self) -> None:
+        LAYER_HEIGHT_M.validate("precipitation base_m", self.base_m)
+        LAYER_HEIGHT_M.validate("precipitation top_m", self.top_m)
+        if self.top_m <= self.base_m:
+            raise ValueError(f"precipitation top_m {self.top_m} must be above base_m {self.base_m}")
+        COVERAGE_PCT.validate("precipitation coverage_pct", self.coverage_pct)
+        SEVERITY.validate("precipitation severity", self.severity)
+        VISIBILITY_M.validate("precipitation visibility_m", self.visibility_m)
+
+    @property
+    def metar_code(self) -> str:
+        """As a METAR group: `-RA` (severity 0-1), `RA` (2-3), `+RA` (4-5)."""
+        return ("-", "-", "", "", "+", "+")[self.severity] + self.kind.metar_code
+
+
 @dataclass(frozen=True)
 class WindLayer:
     alt_m: float  # MSL
@@ -140,6 +189,7 @@ class Provenance:
     dewpoint_c: Source = Source.DEFAULT
     qnh_hpa: Source = Source.DEFAULT
     present_weather: Source = Source.DEFAULT
+    precipitation: Source = Source.DEFAULT
     seed: Source = Source.DEFAULT
 
 
@@ -157,6 +207,7 @@ class WeatherPatch:
     dewpoint_c: float | None = None
     qnh_hpa: float | None = None
     present_weather: tuple[str, ...] | None = None
+    precipitation: tuple[PrecipLayer, ...] | None = None
     seed: int | None = None
 
 
@@ -171,6 +222,7 @@ class WeatherState:
     dewpoint_c: float | None = 5.0
     qnh_hpa: float = 1013.25
     present_weather: tuple[str, ...] = ()  # METAR weather groups, e.g. ("-RA", "BR")
+    precipitation: tuple[PrecipLayer, ...] = ()  # sorted by base_m; not drawn yet
     seed: int = 1
     sources: Provenance = field(default_factory=Provenance)
 
@@ -179,6 +231,10 @@ class WeatherState:
             raise ValueError("time_utc must be timezone-aware UTC")
         if len(self.layers) > MAX_LAYERS:
             raise ValueError(f"at most {MAX_LAYERS} cloud layers, got {len(self.layers)}")
+        if len(self.precipitation) > MAX_PRECIPITATION:
+            raise ValueError(
+                f"at most {MAX_PRECIPITATION} precipitation layers, got {len(self.precipitation)}"
+            )
         VISIBILITY_M.validate("visibility_m", self.visibility_m)
         QNH_HPA.validate("qnh_hpa", self.qnh_hpa)
         if self.temperature_c is not None:
@@ -188,6 +244,9 @@ class WeatherState:
         SEED.validate("seed", self.seed)
         object.__setattr__(self, "layers", tuple(sorted(self.layers, key=lambda lay: lay.base_m)))
         object.__setattr__(self, "wind", tuple(sorted(self.wind, key=lambda w: w.alt_m)))
+        object.__setattr__(
+            self, "precipitation", tuple(sorted(self.precipitation, key=lambda p: p.base_m))
+        )
 
     def apply(self, patch: WeatherPatch) -> WeatherState:
         """A new state with every field the patch sets taken from it, provenance updated."""
@@ -268,6 +327,17 @@ def weather_to_dict(state: WeatherState) -> dict[str, Any]:
                 "type": lay.type.wire_name,
             }
             for lay in state.layers
+        ],
+        "precipitation": [
+            {
+                "kind": p.kind.wire_name,
+                "base_m": p.base_m,
+                "top_m": p.top_m,
+                "coverage_pct": p.coverage_pct,
+                "severity": p.severity,
+                "visibility_m": p.visibility_m,
+            }
+            for p in state.precipitation
         ],
         "seed": state.seed,
         "sources": {

@@ -1,0 +1,219 @@
+"""The daemon's CIGI side: its image-generator listeners (`[cigi] listen`, `--cigi`) turned into
+engine changes, and its CIGI weather source (`[cigi] send_to`, `--cigi-send`) fed from each
+published frame. Everything runs on the event loop.
+
+What a host sets lands where the other inputs' changes land: the weather in the `cigi` slot
+of the precedence stack (`engine.apply`), the camera as `set_camera` places it (a far place
+becomes a new site), the clock as `set_time` sets it. The answers to Environmental Conditions
+Requests come from the applied weather and the very clouds on show (`scene.conditions`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable, Sequence
+from datetime import datetime
+from typing import Any
+
+from wxsky.engine.stages import SkyEngine, enu_from_geodetic
+from wxsky.errors import WxskyError
+from wxsky.inputs.cigi_link import (
+    CigiHostSocket,
+    CigiIg,
+    IgSettings,
+    parse_networks,
+    parse_udp,
+)
+from wxsky.inputs.stats import InputStats
+from wxsky.logs import RateLimitedLog
+from wxsky.protocols.cigi import Packet
+from wxsky.protocols.cigi_session import Eye, responses
+from wxsky.protocols.cigi_source import SourceFrame, host_message
+from wxsky.scene.conditions import conditions_at
+from wxsky.settings.config import CigiSection
+from wxsky.weather.state import Source, WeatherPatch, WeatherState
+
+log = logging.getLogger("wxsky.app.cigi")
+
+
+class CigiPart:
+    def __init__(
+        self,
+        engine: SkyEngine,
+        section: CigiSection,
+        *,
+        publish_target: Callable[[], None],
+        set_camera: Callable[[dict[str, Any]], Any],
+        clock_rate: float,
+        listen: Sequence[str] = (),
+        send_to: Sequence[str] = (),
+    ) -> None:
+        self._engine = engine
+        self._publish_target = publish_target
+        self._set_camera = set_camera
+        self._clock_rate = clock_rate
+        self._warn = RateLimitedLog(log)
+        host = (
+            parse_udp(section.host_address, "cigi.host_address") if section.host_address else None
+        )
+        allow = parse_networks(section.allow_from)
+        self.igs = [
+            CigiIg(
+                IgSettings(parse_udp(spec), host, allow, section.view_id),
+                self,
+            )
+            for spec in dict.fromkeys((*section.listen, *listen))
+        ]
+        self._byte_order = "little" if section.send_byte_order == "little" else "big"
+        self._send_period_s = 1.0 / section.send_rate_hz if section.send_rate_hz > 0 else 0.0
+        self._senders = [
+            _Sender(CigiHostSocket(parse_udp(spec, "--cigi-send")), spec)
+            for spec in dict.fromkeys((*section.send_to, *send_to))
+        ]
+        self._started = False
+
+    def stats(self) -> list[tuple[str, InputStats]]:
+        return [(ig.name, ig.stats) for ig in self.igs] + [(s.name, s.stats) for s in self._senders]
+
+    async def start(self) -> None:
+        for ig in self.igs:
+            await ig.start()
+        loop = asyncio.get_running_loop()
+        for sender in self._senders:
+            loop.add_reader(sender.sock.fileno(), sender.read)
+            log.info("CIGI source sending to %s", sender.name)
+        self._started = True
+
+    def close(self) -> None:
+        for ig in self.igs:
+            ig.close()
+        if self._started:
+            loop = asyncio.get_running_loop()
+            for sender in self._senders:
+                loop.remove_reader(sender.sock.fileno())
+        for sender in self._senders:
+            sender.sock.close()
+        self._started = False
+
+    def host_frames(self) -> list[int | None]:
+        """Each listener's last host frame, taken before a frame is drawn: the frame applies
+        what had arrived by then."""
+        return [ig.last_host_frame for ig in self.igs]
+
+    def frame_published(
+        self, frame_number: int, host_frames: Sequence[int | None], state: WeatherState
+    ) -> None:
+        for ig, host_frame in zip(self.igs, host_frames, strict=True):
+            ig.start_of_frame(frame_number, host_frame)
+        now = time.monotonic()
+        for sender in self._senders:
+            if now - sender.sent_at >= self._send_period_s:
+                sender.send(state, self._byte_order, now)
+
+    def refresh(self) -> None:
+        for ig in self.igs:
+            ig.refresh_detail()
+        for sender in self._senders:
+            sender.refresh_detail()
+
+    # -- CigiHandler: what a host's datagram changes -------------------------------------
+
+    def cigi_heard(self) -> None:
+        self._engine.heard_cigi()
+
+    def cigi_weather(self, patch: WeatherPatch) -> None:
+        self._engine.apply(patch)
+        self._publish_target()
+
+    def cigi_camera(self, eye: Eye) -> None:
+        params: dict[str, Any] = {
+            "lat_deg": eye.lat_deg,
+            "lon_deg": eye.lon_deg,
+            "alt_m": eye.alt_m,
+            "heading_deg": eye.heading_deg,
+            "pitch_deg": eye.pitch_deg,
+            "roll_deg": eye.roll_deg,
+        }
+        if eye.fov_deg is not None:
+            params["fov_deg"] = eye.fov_deg
+        try:
+            self._set_camera(params)
+        except WxskyError as exc:
+            self._warn.warning("camera", f"CIGI ownship not placed: {exc}")
+            return
+        obs = self._engine.state.observer
+        self._engine.set_aircraft(
+            enu_from_geodetic(obs.lat_deg, obs.lon_deg, eye.lat_deg, eye.lon_deg, eye.alt_m)
+        )
+
+    def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None:
+        if time_utc is not None:
+            self._engine.set_time(time_utc, source=Source.CIGI)
+        if running is not None:
+            self._engine.clock_rate = self._clock_rate if running else 0.0
+        self._publish_target()
+
+    def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]:
+        engine = self._engine
+        state, drift = engine.state, engine.drift
+        obs = state.observer
+        out: list[Packet] = []
+        for request in requests:
+            point = enu_from_geodetic(
+                obs.lat_deg,
+                obs.lon_deg,
+                float(request["lat_deg"]),
+                float(request["lon_deg"]),
+                float(request["alt_m"]),
+            )
+            out += responses(request, conditions_at(state, drift, point))
+        return out
+
+
+class _Sender:
+    """One IG the daemon sends its weather to, and what that IG answers."""
+
+    def __init__(self, sock: CigiHostSocket, spec: str) -> None:
+        self.sock = sock
+        self.name = f"cigi-send:{spec}"
+        self.stats = InputStats(self.name, "cigi-send")
+        self.frame = SourceFrame()
+        self.sent_at = -1e9
+        self.sent = 0
+        self.send_errors = 0
+        self.refresh_detail()
+
+    def send(self, state: WeatherState, byte_order: str, now: float) -> None:
+        self.frame = self.frame.next()
+        try:
+            self.sock.send(
+                host_message(state, self.frame), "little" if byte_order == "little" else "big"
+            )
+        except OSError as exc:
+            self.send_errors += 1
+            self.stats.error(f"send to {self.sock.to}: {exc}")
+        self.sent += 1
+        self.sent_at = now
+
+    def read(self) -> None:
+        got = self.sock.receive(0.0)
+        if got is None:
+            return
+        decoded, _ = got
+        if decoded.refused or decoded.direction != "ig_to_host":
+            self.stats.error("a datagram that is no IG→host CIGI message", 1)
+            return
+        self.stats.message()
+        self.frame = self.frame.heard(decoded)
+
+    def refresh_detail(self) -> None:
+        f = self.frame
+        self.stats.detail = {
+            "to": f"{self.sock.to[0]}:{self.sock.to[1]}",
+            "sent": self.sent,
+            "send_errors": self.send_errors,
+            "last_ig_frame": f.last_ig_frame,
+            "last_response": f.last_response,
+        }

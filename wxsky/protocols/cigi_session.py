@@ -1,0 +1,702 @@
+"""What a CIGI host has told wxsky, remembered between messages as an image generator
+remembers it, and the weather, camera and clock that makes.
+
+CIGI is stateful: a host sends a layer's Weather Control or a region once and the IG keeps it
+until the host changes or removes it; only IG Control leads every message. `absorb` folds one
+decoded datagram into a `HostState` (immutable) and says what changed; `weather_patch` gives
+the weather the host's packets make at a place (regional weather blended in across a region's
+transition perimeter); `eye` gives the camera of the view wxsky renders.
+
+Packets are checked twice: the decoder holds each to the CIGI table's ranges, and here to
+what the weather can hold (a cloud layer needs a thickness, a temperature must be weather on
+Earth). A packet failing either is dropped whole and counted; nothing out of range reaches
+the weather. Pure: the socket lives in `wxsky.inputs.cigi_link`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, date, datetime
+from types import MappingProxyType
+
+from wxsky.protocols.cigi import CigiDatagram, Packet, make
+from wxsky.weather.atmosphere import PointWeather, dewpoint_from_humidity
+from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
+from wxsky.weather.state import (
+    LAYER_HEIGHT_M,
+    MAX_LAYERS,
+    QNH_HPA,
+    TEMPERATURE_C,
+    VISIBILITY_M,
+    WIND_SPEED_MPS,
+    CloudLayer,
+    CloudType,
+    PrecipKind,
+    PrecipLayer,
+    Source,
+    WeatherPatch,
+    WindLayer,
+)
+
+FOG_LAYER = 0
+CLOUD_LAYERS = (1, 2, 3)
+PRECIP_LAYERS = tuple(int(k) for k in PrecipKind)  # 4 rain, 5 snow, 6 sleet, 7 hail
+OKTAS_PER_PCT = 8.0 / 100.0
+# CIGI gives visibility as a float with no upper bound (hosts send 1e6 or more for
+# "unlimited"); the weather keeps at most VISIBILITY_M's limit, and clamps to it.
+MAX_VISIBILITY_M = float(VISIBILITY_M.hi or 1e6)
+TOP_LIMIT_M = float(LAYER_HEIGHT_M.hi or 25_000.0)
+# The fog veils a place within its layer and fades out across the layer's transition band.
+FOG_CODE_BELOW_M = 1000.0  # a fog layer thinner in visibility than this is FG, else BR
+
+# Things a host may send that wxsky does not use; counted in status, never errors.
+IGNORED: Mapping[str, str] = MappingProxyType(
+    {
+        "other_entity": "Entity Control for an entity other than the ownship (0)",
+        "attached_ownship": "the ownship's Entity Control with attach_state 1 (no parent here)",
+        "other_view": "View Control or View Definition for a view wxsky does not render",
+        "entity_scope": "Weather Control with entity scope (weather carried by an entity)",
+        "layer_not_drawn": "Weather Control for sand, dust or an IG-defined layer (id ≥ 8)",
+        "cloud_type_other": "a cloud layer of type 11-15 (IG-defined): no clouds drawn for it",
+        "surface_request": "a maritime or terrestrial surface conditions request",
+    }
+)
+
+
+@dataclass(frozen=True)
+class Ownship:
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+
+
+@dataclass(frozen=True)
+class ViewOffset:
+    """View Control for the rendered view: offsets in the entity's body frame (x forward,
+    y right, z down) and angles relative to it, each only where its enable bit is set."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.0
+    roll_deg: float = 0.0
+    pitch_deg: float = 0.0
+    yaw_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Region:
+    region_id: int
+    active: bool
+    lat_deg: float
+    lon_deg: float
+    size_x_m: float  # along the region's x axis: north before rotation
+    size_y_m: float
+    corner_radius_m: float
+    rotation_deg: float  # clockwise from north
+    transition_perimeter_m: float
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One Weather Control layer as the host last set it (only enabled layers are kept)."""
+
+    layer_id: int
+    cloud_type: int
+    coverage_pct: float
+    base_m: float
+    thickness_m: float
+    transition_band_m: float
+    visibility_m: float
+    wind_speed_mps: float
+    wind_dir_deg: float
+    severity: int
+
+
+@dataclass(frozen=True)
+class Atmosphere:
+    humidity_pct: int
+    temperature_c: float
+    visibility_m: float
+    wind_speed_mps: float
+    wind_dir_deg: float
+    pressure_hpa: float
+
+
+@dataclass(frozen=True)
+class HostState:
+    """Everything the host has set so far. `layers` maps (region id, layer id) to a layer,
+    region id None for global scope."""
+
+    host_frame: int | None = None
+    ig_mode: int = 0
+    database_number: int = 0
+    ownship: Ownship | None = None
+    view: ViewOffset = ViewOffset()
+    fov_deg: float | None = None  # horizontal, from View Definition's left and right
+    clock_utc: datetime | None = None  # the host's last date and time (date_time_valid)
+    clock_running: bool | None = None  # ephemeris_enable: the IG advances its own clock
+    atmosphere: Atmosphere | None = None
+    layers: Mapping[tuple[int | None, int], Layer] = field(
+        default_factory=lambda: MappingProxyType({})
+    )
+    regions: Mapping[int, Region] = field(default_factory=lambda: MappingProxyType({}))
+
+    @property
+    def has_weather(self) -> bool:
+        return self.atmosphere is not None or bool(self.layers)
+
+
+@dataclass(frozen=True)
+class Absorbed:
+    """What one datagram did: the new state, what changed, the requests to answer, and the
+    packets dropped (reason, message) or not used (IGNORED key -> count)."""
+
+    state: HostState
+    weather_changed: bool = False
+    camera_changed: bool = False
+    clock_utc: datetime | None = None  # set the clock to this (the host changed its time)
+    clock_running: bool | None = None  # start or stop the clock (the host changed it)
+    requests: tuple[Packet, ...] = ()
+    dropped: tuple[tuple[str, str], ...] = ()
+    ignored: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
+
+
+def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorbed:
+    """Fold a decoded host→IG datagram into the host's state. A refused datagram (or one
+    from an IG) changes nothing."""
+    if datagram.refused or datagram.direction != "host_to_ig":
+        return Absorbed(state)
+    s = state
+    weather = camera = False
+    clock_utc: datetime | None = None
+    clock_running: bool | None = None
+    requests: list[Packet] = []
+    dropped: list[tuple[str, str]] = []
+    ignored: Counter[str] = Counter()
+    layers = dict(s.layers)
+    regions = dict(s.regions)
+    for p in datagram.packets:
+        key = p.key
+        if key == "ig_control":
+            if p["ig_mode"] == 0 and s.ig_mode != 0 and s.host_frame is not None:
+                # Reset/standby after operating: the IG forgets the host's world, as the
+                # host will send it again (ICD: the host re-initialises the IG after a reset).
+                weather = weather or s.has_weather or bool(regions)
+                layers, regions = {}, {}
+                s = HostState(clock_running=s.clock_running)
+            s = dataclasses.replace(
+                s,
+                host_frame=int(p["host_frame_number"]),
+                ig_mode=int(p["ig_mode"]),
+                database_number=int(p["database_number"]),
+            )
+        elif key == "entity_control":
+            if p["entity_id"] != 0:
+                ignored["other_entity"] += 1
+            elif p["attach_state"] == 1:
+                ignored["attached_ownship"] += 1
+            else:
+                own = Ownship(
+                    float(p["lat_deg"]),
+                    float(p["lon_deg"]),
+                    float(p["alt_m"]),
+                    float(p["roll_deg"]),
+                    float(p["pitch_deg"]),
+                    float(p["yaw_deg"]),
+                )
+                camera = camera or own != s.ownship
+                # The ownship's place decides the regional and fog weather.
+                weather = weather or bool(regions) or (None, FOG_LAYER) in layers
+                s = dataclasses.replace(s, ownship=own)
+        elif key == "view_control":
+            if p["view_id"] != view_id or p["entity_id"] != 0:
+                ignored["other_view"] += 1
+            else:
+                view = _view_offset(p)
+                camera = camera or view != s.view
+                s = dataclasses.replace(s, view=view)
+        elif key == "view_definition":
+            if p["view_id"] != view_id:
+                ignored["other_view"] += 1
+            elif p["left_enable"] and p["right_enable"]:
+                fov = float(p["right_deg"]) - float(p["left_deg"])
+                if not 1.0 <= fov <= 170.0:
+                    dropped.append(
+                        (
+                            "out_of_range",
+                            f"View Definition: right_deg - left_deg = {fov:g}, "
+                            "wxsky renders 1..170 degrees",
+                        )
+                    )
+                else:
+                    camera = camera or fov != s.fov_deg
+                    s = dataclasses.replace(s, fov_deg=fov)
+        elif key == "celestial_sphere_control":
+            running = bool(p["ephemeris_enable"])
+            if running != s.clock_running:
+                clock_running = running
+            when = s.clock_utc
+            if p["date_time_valid"]:
+                when = _celestial_time(p)
+                if when != s.clock_utc:
+                    clock_utc = when
+            s = dataclasses.replace(s, clock_running=running, clock_utc=when)
+        elif key == "atmosphere_control":
+            why = _atmosphere_problem(p)
+            if why:
+                dropped.append(("out_of_range", f"Atmosphere Control: {why}"))
+                continue
+            atm = Atmosphere(
+                int(p["humidity_pct"]),
+                float(p["temperature_c"]),
+                min(float(p["visibility_m"]), MAX_VISIBILITY_M),
+                float(p["wind_speed_mps"]),
+                float(p["wind_dir_deg"]),
+                float(p["pressure_hpa"]),
+            )
+            weather = weather or atm != s.atmosphere
+            s = dataclasses.replace(s, atmosphere=atm)
+        elif key == "environmental_region_control":
+            rid = int(p["region_id"])
+            if p["region_state"] == 2:  # destroyed: the region and its weather go
+                weather = weather or rid in regions
+                regions.pop(rid, None)
+                layers = {k: v for k, v in layers.items() if k[0] != rid}
+            else:
+                region = _region(p)
+                weather = weather or regions.get(rid) != region
+                regions[rid] = region
+        elif key == "weather_control":
+            scope = int(p["scope"])
+            layer_id = int(p["layer_id"])
+            if scope == 2:
+                ignored["entity_scope"] += 1
+                continue
+            if layer_id >= 8:
+                ignored["layer_not_drawn"] += 1
+                continue
+            slot = (None if scope == 0 else int(p["entity_or_region_id"]), layer_id)
+            if not p["weather_enable"]:
+                weather = weather or slot in layers
+                layers.pop(slot, None)
+                continue
+            if layer_id in CLOUD_LAYERS and p["cloud_type"] > 10:
+                ignored["cloud_type_other"] += 1
+                weather = weather or slot in layers
+                layers.pop(slot, None)
+                continue
+            why = _layer_problem(p)
+            if why:
+                dropped.append(("out_of_range", f"Weather Control layer {layer_id}: {why}"))
+                continue
+            layer = _layer(p)
+            weather = weather or layers.get(slot) != layer
+            layers[slot] = layer
+        elif key == "environmental_conditions_request":
+            if p["request_weather"] or p["request_aerosol"]:
+                requests.append(p)
+            if p["request_maritime"] or p["request_terrestrial"]:
+                ignored["surface_request"] += 1
+    s = dataclasses.replace(s, layers=MappingProxyType(layers), regions=MappingProxyType(regions))
+    return Absorbed(
+        s,
+        weather,
+        camera,
+        clock_utc,
+        clock_running,
+        tuple(requests),
+        tuple(dropped),
+        MappingProxyType(dict(ignored)),
+    )
+
+
+# --- checks: what the weather can hold --------------------------------------------------------
+
+
+def _outside(name: str, value: float, lo: float | None, hi: float | None) -> str:
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        return f"{name} {value:g} is outside {lo:g}..{hi:g} (wxsky's weather)"
+    return ""
+
+
+def _atmosphere_problem(p: Packet) -> str:
+    return (
+        _outside("temperature_c", float(p["temperature_c"]), TEMPERATURE_C.lo, TEMPERATURE_C.hi)
+        or _outside("wind_speed_mps", float(p["wind_speed_mps"]), 0.0, WIND_SPEED_MPS.hi)
+        or _outside("pressure_hpa", float(p["pressure_hpa"]), QNH_HPA.lo, QNH_HPA.hi)
+    )
+
+
+def _layer_problem(p: Packet) -> str:
+    layer_id = int(p["layer_id"])
+    base, thick = float(p["base_elevation_m"]), float(p["thickness_m"])
+    why = _outside("base_elevation_m", base, LAYER_HEIGHT_M.lo, TOP_LIMIT_M - 10.0) or _outside(
+        "wind_speed_mps", float(p["wind_speed_mps"]), 0.0, WIND_SPEED_MPS.hi
+    )
+    if why:
+        return why
+    if layer_id in CLOUD_LAYERS and p["cloud_type"] != 0 and thick <= 0.0:
+        return f"thickness_m {thick:g}: a cloud layer needs a thickness above 0"
+    if layer_id in (FOG_LAYER, *PRECIP_LAYERS) and thick <= 0.0:
+        return f"thickness_m {thick:g}: a fog or precipitation layer needs a thickness above 0"
+    return ""
+
+
+def _celestial_time(p: Packet) -> datetime:
+    value = int(p["date_mmddyyyy"])  # a calendar date: the table's rule checked it
+    day = date(value % 10_000, value // 1_000_000, value // 10_000 % 100)
+    return datetime(day.year, day.month, day.day, int(p["hour"]), int(p["minute"]), tzinfo=UTC)
+
+
+def _view_offset(p: Packet) -> ViewOffset:
+    def on(name: str, value: str) -> float:
+        return float(p[value]) if p[name] else 0.0
+
+    return ViewOffset(
+        on("x_enable", "x_offset_m"),
+        on("y_enable", "y_offset_m"),
+        on("z_enable", "z_offset_m"),
+        on("roll_enable", "roll_deg"),
+        on("pitch_enable", "pitch_deg"),
+        on("yaw_enable", "yaw_deg"),
+    )
+
+
+def _region(p: Packet) -> Region:
+    return Region(
+        int(p["region_id"]),
+        p["region_state"] == 1,
+        float(p["lat_deg"]),
+        float(p["lon_deg"]),
+        float(p["size_x_m"]),
+        float(p["size_y_m"]),
+        float(p["corner_radius_m"]),
+        float(p["rotation_deg"]),
+        float(p["transition_perimeter_m"]),
+    )
+
+
+def _layer(p: Packet) -> Layer:
+    base = float(p["base_elevation_m"])
+    return Layer(
+        int(p["layer_id"]),
+        int(p["cloud_type"]),
+        float(p["coverage_pct"]),
+        base,
+        min(float(p["thickness_m"]), TOP_LIMIT_M - base),
+        float(p["transition_band_m"]),
+        min(float(p["visibility_m"]), MAX_VISIBILITY_M),
+        float(p["wind_speed_mps"]),
+        float(p["wind_dir_deg"]),
+        int(p["severity"]),
+    )
+
+
+# --- the weather at a place -------------------------------------------------------------------
+
+
+def region_weight(region: Region, lat_deg: float, lon_deg: float) -> float:
+    """How much of a region's weather holds at a place: 1 inside its rounded rectangle,
+    falling smoothly to 0 across the transition perimeter outside it, 0 beyond (and for an
+    inactive region)."""
+    if not region.active:
+        return 0.0
+    east, north, _ = enu_from_geodetic(region.lat_deg, region.lon_deg, lat_deg, lon_deg, 0.0)
+    rot = math.radians(region.rotation_deg)
+    along = east * math.sin(rot) + north * math.cos(rot)  # the region's x axis
+    across = east * math.cos(rot) - north * math.sin(rot)  # its y axis, to the right
+    hx, hy = region.size_x_m / 2.0, region.size_y_m / 2.0
+    rc = min(region.corner_radius_m, hx, hy)
+    qx, qy = abs(along) - (hx - rc), abs(across) - (hy - rc)
+    outside_m = math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0) - rc
+    if outside_m <= 0.0:
+        return 1.0
+    if region.transition_perimeter_m <= 0.0 or outside_m >= region.transition_perimeter_m:
+        return 0.0
+    t = outside_m / region.transition_perimeter_m
+    return 1.0 - t * t * (3.0 - 2.0 * t)
+
+
+def _region_at(host: HostState, lat_deg: float, lon_deg: float) -> tuple[int | None, float]:
+    """The region whose weather holds at a place and how much (None, 0 for none): the one
+    weighing most; of equal ones the higher id (CIGI's "use last" of overlapping regions)."""
+    best: tuple[float, int] | None = None
+    for rid, region in host.regions.items():
+        w = region_weight(region, lat_deg, lon_deg)
+        if w > 0.0 and (best is None or (w, rid) > best):
+            best = (w, rid)
+    return (None, 0.0) if best is None else (best[1], best[0])
+
+
+def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float) -> WeatherPatch:
+    """The weather the host's packets make at a place (the ownship's): global layers with a
+    region's blended in by its weight there, the fog layer's visibility where the place is in
+    it. Only what the host set: a host that sent no Atmosphere Control leaves visibility,
+    temperature and pressure to the sources below it."""
+    rid, weight = _region_at(host, lat_deg, lon_deg)
+    ids = sorted({lid for (r, lid) in host.layers if r is None or r == rid})
+    clouds: list[CloudLayer] = []
+    winds: list[WindLayer] = []
+    precip: list[PrecipLayer] = []
+    fog: Layer | None = None
+    for lid in ids:
+        g = host.layers.get((None, lid))
+        r = host.layers.get((rid, lid)) if rid is not None else None
+        # A region that leaves a layer id unset leaves the global layer there.
+        w = weight if r is not None else 0.0
+        if lid in CLOUD_LAYERS:
+            clouds += _blend_clouds(g, r, w)
+            if (wind := _blend_wind(g, r, w)) is not None:
+                winds.append(wind)
+        else:
+            # Fog and precipitation are there or not: the region's where it mostly holds.
+            chosen = r if r is not None and w >= 0.5 else g
+            if chosen is None:
+                continue
+            if lid == FOG_LAYER:
+                fog = chosen
+            elif chosen.coverage_pct > 0.0:
+                precip.append(_precip(chosen))
+    atm = host.atmosphere
+    fields: dict[str, object] = {}
+    if host.layers or host.regions:
+        fields["layers"] = tuple(sorted(clouds, key=lambda c: -c.cover_oktas)[:MAX_LAYERS])
+        fields["precipitation"] = tuple(precip)
+        codes = [p.metar_code for p in precip]
+        if fog is not None:
+            codes.append("FG" if fog.visibility_m < FOG_CODE_BELOW_M else "BR")
+        fields["present_weather"] = tuple(codes)
+    if atm is not None:
+        winds.append(_wind(0.0, atm.wind_speed_mps, atm.wind_dir_deg))
+        fields["temperature_c"] = atm.temperature_c
+        fields["dewpoint_c"] = dewpoint_from_humidity(atm.temperature_c, atm.humidity_pct)
+        fields["qnh_hpa"] = atm.pressure_hpa
+    if atm is not None or fog is not None:
+        vis = atm.visibility_m if atm is not None else MAX_VISIBILITY_M
+        if fog is not None:
+            vis = _fogged(vis, fog, alt_m)
+        fields["visibility_m"] = vis
+    if winds or host.layers:
+        fields["wind"] = tuple(winds)
+    return WeatherPatch(source=Source.CIGI, **fields)  # type: ignore[arg-type]
+
+
+def _cloud(layer: Layer, cover_pct: float, base_m: float, thickness_m: float) -> CloudLayer:
+    return CloudLayer(
+        min(8.0, cover_pct * OKTAS_PER_PCT),
+        base_m,
+        min(TOP_LIMIT_M, base_m + thickness_m),
+        CloudType(layer.cloud_type),
+    )
+
+
+def _blend_clouds(g: Layer | None, r: Layer | None, w: float) -> list[CloudLayer]:
+    """One cloud layer id's clouds at a place `w` into a region: a layer of one type on both
+    sides is one layer between the two; different types are both there, each with its
+    share of the cover (one thins out as the other thickens across the perimeter)."""
+    g = g if g is not None and g.cloud_type != 0 else None
+    r = r if r is not None and r.cloud_type != 0 and w > 0.0 else None
+    if g is not None and r is not None and g.cloud_type == r.cloud_type:
+        mix = _lerp(g.coverage_pct, r.coverage_pct, w)
+        return [
+            _cloud(
+                g,
+                mix,
+                _lerp(g.base_m, r.base_m, w),
+                _lerp(g.thickness_m, r.thickness_m, w),
+            )
+        ]
+    out = []
+    if g is not None and g.coverage_pct * (1.0 - w) > 0.0:
+        out.append(_cloud(g, g.coverage_pct * (1.0 - w), g.base_m, g.thickness_m))
+    if r is not None and r.coverage_pct * w > 0.0:
+        out.append(_cloud(r, r.coverage_pct * w, r.base_m, r.thickness_m))
+    return out
+
+
+def _blend_wind(g: Layer | None, r: Layer | None, w: float) -> WindLayer | None:
+    """A cloud layer's wind at its middle, blended as a vector; a layer sending no wind
+    (speed 0) leaves its height to the winds above and below it."""
+    sides = [(layer, weight) for layer, weight in ((g, 1.0 - w), (r, w)) if layer is not None]
+    sides = [(layer, wt) for layer, wt in sides if layer.wind_speed_mps > 0.0 and wt > 0.0]
+    if not sides:
+        return None
+    total = sum(weight for _, weight in sides) or 1.0
+    east = north = alt = 0.0
+    for layer, weight in sides:
+        to_rad = math.radians(layer.wind_dir_deg + 180.0)
+        east += weight / total * layer.wind_speed_mps * math.sin(to_rad)
+        north += weight / total * layer.wind_speed_mps * math.cos(to_rad)
+        alt += weight / total * (layer.base_m + layer.thickness_m / 2.0)
+    speed = math.hypot(east, north)
+    direction = (math.degrees(math.atan2(east, north)) + 180.0) % 360.0
+    return _wind(alt, speed, direction)
+
+
+def _wind(alt_m: float, speed_mps: float, dir_deg: float) -> WindLayer:
+    return WindLayer(alt_m, dir_deg % 360.0, min(speed_mps, float(WIND_SPEED_MPS.hi or 150.0)))
+
+
+def _precip(layer: Layer) -> PrecipLayer:
+    return PrecipLayer(
+        PrecipKind(layer.layer_id),
+        layer.base_m,
+        layer.base_m + layer.thickness_m,
+        layer.coverage_pct,
+        layer.severity,
+        layer.visibility_m,
+    )
+
+
+def _fogged(clear_m: float, fog: Layer, alt_m: float) -> float:
+    """The visibility at alt_m: the fog's inside its layer, the clear air's beyond its
+    transition band, between the two (geometrically) across the band."""
+    top = fog.base_m + fog.thickness_m
+    out_m = max(fog.base_m - alt_m, alt_m - top, 0.0)
+    inside = min(clear_m, fog.visibility_m)
+    if out_m <= 0.0:
+        return inside
+    if fog.transition_band_m <= 0.0 or out_m >= fog.transition_band_m:
+        return clear_m
+    t = out_m / fog.transition_band_m
+    return float(math.exp(_lerp(math.log(max(inside, 1.0)), math.log(max(clear_m, 1.0)), t)))
+
+
+def _lerp(a: float, b: float, t: float) -> float:
+    return a + (b - a) * t
+
+
+# --- the camera -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Eye:
+    """Where the rendered view looks from: the ownship with the view's offset and angles."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    heading_deg: float
+    pitch_deg: float
+    roll_deg: float
+    fov_deg: float | None
+
+
+def eye(host: HostState) -> Eye | None:
+    """The rendered view's eye, or None before the host has placed the ownship."""
+    own = host.ownship
+    if own is None:
+        return None
+    body = _rotation(own.yaw_deg, own.pitch_deg, own.roll_deg)
+    v = host.view
+    # Body axes x forward, y right, z down; the local frame east, north, up.
+    fwd, right, down = (v.x_m, v.y_m, v.z_m)
+    east = body[0][0] * fwd + body[0][1] * right + body[0][2] * down
+    north = body[1][0] * fwd + body[1][1] * right + body[1][2] * down
+    up = body[2][0] * fwd + body[2][1] * right + body[2][2] * down
+    lat, lon = geodetic_from_enu(own.lat_deg, own.lon_deg, east, north)
+    view = _rotation(v.yaw_deg, v.pitch_deg, v.roll_deg)
+    # The view's axes in the body frame (x forward = north, y right = east, z down = -up at
+    # zero angles), then turned with the body.
+    in_body = (view[1], view[0], (-view[2][0], -view[2][1], -view[2][2]))
+    combined = _matmul(body, in_body)
+    heading, pitch, roll = _angles(combined)
+    return Eye(lat, lon, own.alt_m + up, heading, pitch, roll, host.fov_deg)
+
+
+Mat3 = tuple[tuple[float, float, float], ...]
+
+
+def _rotation(yaw_deg: float, pitch_deg: float, roll_deg: float) -> Mat3:
+    """Columns: the body's forward, right and down axes in (east, north, up)."""
+    y, p, r = (math.radians(a) for a in (yaw_deg, pitch_deg, roll_deg))
+    cy, sy, cp, sp, cr, sr = (
+        math.cos(y),
+        math.sin(y),
+        math.cos(p),
+        math.sin(p),
+        math.cos(r),
+        math.sin(r),
+    )
+    fwd = (sy * cp, cy * cp, sp)
+    # Right and down of a level body, then rolled about forward.
+    right0 = (cy, -sy, 0.0)
+    down0 = (sy * sp, cy * sp, -cp)
+    # Roll, right wing down: the right axis turns toward down.
+    right = tuple(cr * a + sr * b for a, b in zip(right0, down0, strict=True))
+    down = tuple(cr * b - sr * a for a, b in zip(right0, down0, strict=True))
+    return tuple((fwd[i], right[i], down[i]) for i in range(3))
+
+
+def _matmul(a: Mat3, b: Mat3) -> Mat3:
+    def cell(i: int, j: int) -> float:
+        return a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j]
+
+    return tuple((cell(i, 0), cell(i, 1), cell(i, 2)) for i in range(3))
+
+
+def _angles(m: Mat3) -> tuple[float, float, float]:
+    """Heading (0..360), pitch and roll of a body whose axes are the columns of m."""
+    fwd = (m[0][0], m[1][0], m[2][0])
+    right = (m[0][1], m[1][1], m[2][1])
+    pitch = math.degrees(math.asin(max(-1.0, min(1.0, fwd[2]))))
+    if abs(fwd[2]) > 0.999999:  # straight up or down: heading from the right axis
+        heading = math.degrees(math.atan2(-right[1], right[0])) % 360.0
+        return heading, pitch, 0.0
+    heading = math.degrees(math.atan2(fwd[0], fwd[1])) % 360.0
+    # Roll: how far the right axis has dipped below the horizontal.
+    level_right = (math.cos(math.radians(heading)), -math.sin(math.radians(heading)), 0.0)
+    up_axis = _cross(level_right, fwd)
+    roll = math.degrees(math.atan2(-_dot(right, up_axis), _dot(right, level_right)))
+    return heading, pitch, roll
+
+
+def _cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    return sum(x * y for x, y in zip(a, b, strict=True))
+
+
+# --- answers ----------------------------------------------------------------------------------
+
+
+def responses(request: Packet, weather: PointWeather) -> list[Packet]:
+    """The answers to an Environmental Conditions Request: a Weather Conditions Response
+    for the weather bit, an Aerosol Concentration Response per cloud layer for the aerosol
+    bit. Values are clamped into the packets' ranges (a response is never refused)."""
+    rid = int(request["request_id"])
+    out: list[Packet] = []
+    if request["request_weather"]:
+        out.append(
+            make(
+                "weather_conditions_response",
+                request_id=rid,
+                humidity_pct=round(max(0.0, min(100.0, weather.humidity_pct))),
+                temperature_c=weather.temperature_c,
+                visibility_m=weather.visibility_m,
+                wind_speed_mps=weather.wind_speed_mps,
+                vertical_wind_speed_mps=0.0,
+                wind_dir_deg=weather.wind_dir_deg % 360.0,
+                pressure_hpa=weather.pressure_hpa,
+            )
+        )
+    if request["request_aerosol"]:
+        for layer_id, water in enumerate(weather.cloud_water_gpm3[:255], 1):
+            out.append(
+                make(
+                    "aerosol_concentration_response",
+                    request_id=rid,
+                    layer_id=layer_id,
+                    aerosol_concentration_gpm3=water,
+                )
+            )
+    return out

@@ -1,0 +1,89 @@
+"""The weather at a point of the scene, as a host's flight model asks for it (CIGI's
+Environmental Conditions Request): the air there from the applied weather, and whether the
+point is inside one of the clouds the sky draws, from the very sprites of that cloud, placed
+where the wind has drifted them. So the wind, the visibility and the cloud water a host's
+aircraft feels are the ones its pilot sees. Pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import numpy as np
+
+from wxsky.scene.clouds import SpriteBatch, layer_keys
+from wxsky.scene.formation import layer_block
+from wxsky.scene.gather import Drift, blocks_within
+from wxsky.scene.in_cloud import in_cloud, sprite_depths
+from wxsky.weather.atmosphere import PointWeather, air_at
+from wxsky.weather.state import CloudType, WeatherState
+
+# Liquid (or ice) water in the dense part of each kind of cloud, g/m³: typical figures of
+# the cloud-physics literature (cumulus 0.3-1, cumulonimbus up to 2-3, stratiform 0.1-0.5,
+# cirrus 0.01-0.1). The point's share of it follows its depth into the nearest sprite.
+CLOUD_WATER_GPM3: Mapping[CloudType, float] = MappingProxyType(
+    {
+        CloudType.NONE: 0.0,
+        CloudType.ALTOCUMULUS: 0.2,
+        CloudType.ALTOSTRATUS: 0.2,
+        CloudType.CIRROCUMULUS: 0.05,
+        CloudType.CIRROSTRATUS: 0.02,
+        CloudType.CIRRUS: 0.03,
+        CloudType.CUMULONIMBUS: 1.5,
+        CloudType.CUMULUS: 0.5,
+        CloudType.NIMBOSTRATUS: 0.4,
+        CloudType.STRATOCUMULUS: 0.3,
+        CloudType.STRATUS: 0.25,
+    }
+)
+# A sprite reaches at most this far from the block it belongs to (the largest cloud models'
+# sprites are under 1.5 km across), so the blocks within it of the point hold every sprite
+# the point can be in.
+SPRITE_REACH_M = 1500.0
+# Clear air is not saturated: the lapse rates alone would bring the dew point to the
+# temperature a few kilometres up. Out of cloud and out of fog the humidity stays below this.
+CLEAR_AIR_MAX_HUMIDITY_PCT = 95.0
+FOG_VISIBILITY_M = 1000.0
+
+
+def conditions_at(
+    state: WeatherState, drift: Drift, point_m: tuple[float, float, float]
+) -> PointWeather:
+    """The weather at `point_m` (east, north, alt MSL in the scene frame) with the clouds
+    of `state` drifted by `drift`."""
+    east, north, alt = point_m
+    temperature, humidity, pressure = air_at(state, alt)
+    keys = layer_keys(state.layers)
+    water: list[float] = []
+    batches: list[SpriteBatch] = []
+    for i, (layer, key) in enumerate(zip(state.layers, keys, strict=True)):
+        dx, dy = drift[i] if i < len(drift) else (0.0, 0.0)
+        if not layer.base_m - SPRITE_REACH_M <= alt <= layer.top_m + SPRITE_REACH_M:
+            water.append(0.0)
+            continue
+        qx, qy = east - dx, north - dy
+        parts = [
+            layer_block(bx, by, key, layer, state.seed, (dx, dy))
+            for bx, by in blocks_within(qx, qy, 0.0, SPRITE_REACH_M)
+        ]
+        batch = SpriteBatch.concat(parts)
+        depth = float(sprite_depths(batch, point_m).max()) if len(batch) else 0.0
+        water.append(CLOUD_WATER_GPM3[layer.type] * min(1.0, max(0.0, depth)))
+        batches.append(batch)
+    inside = in_cloud(SpriteBatch.concat(batches), point_m, state.visibility_m)
+    ve, vn = state.wind_at(alt)
+    speed = float(np.hypot(ve, vn))
+    direction = float(np.degrees(np.arctan2(-ve, -vn)) % 360.0) if speed > 0.0 else 0.0
+    return PointWeather(
+        temperature_c=temperature,
+        humidity_pct=100.0
+        if inside.inside or state.visibility_m < FOG_VISIBILITY_M
+        else min(humidity, CLEAR_AIR_MAX_HUMIDITY_PCT),
+        visibility_m=inside.visibility_m if inside.visibility_m is not None else state.visibility_m,
+        wind_speed_mps=speed,
+        wind_dir_deg=direction,
+        pressure_hpa=pressure,
+        in_cloud=inside.inside,
+        cloud_water_gpm3=tuple(water),
+    )
