@@ -7,7 +7,7 @@ exception that is not a WxskyError), one line or with -v its traceback; 130 on C
 
 Each command group lives in its own module and adds its subparsers through `add_commands`:
 `daemon_cmd` (run, status, snapshot), `metar_cmd` (metar ...), `preset_cmd` (preset ...),
-`sun_cmd` (sun), `bench_cmd` (bench).
+`sun_cmd` (sun), `bench_cmd` (bench), `cigi_cmd` (cigi ...).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import traceback
 from collections.abc import Sequence
 
 from wxsky import __version__
-from wxsky.cli import bench_cmd, daemon_cmd, metar_cmd, preset_cmd, sun_cmd
+from wxsky.cli import bench_cmd, cigi_cmd, daemon_cmd, metar_cmd, preset_cmd, sun_cmd
 from wxsky.cli.common import (
     DEFAULT_LOG_LEVEL,
     EXIT_FAILURE,
@@ -132,4 +132,5 @@ def build_parser() -> argparse.ArgumentParser:
     metar_cmd.add_commands(sub)
     sun_cmd.add_commands(sub)
     bench_cmd.add_commands(sub)
+    cigi_cmd.add_commands(sub)
     return p

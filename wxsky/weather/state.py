@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
@@ -344,6 +345,60 @@ def weather_to_dict(state: WeatherState) -> dict[str, Any]:
             f.name: getattr(state.sources, f.name).value for f in dataclasses.fields(Provenance)
         },
     }
+
+
+def weather_from_dict(data: Mapping[str, Any]) -> WeatherState:
+    """`weather_to_dict`'s map (the status `weather`, a `weather` notification) back as the
+    state, fractional cover and precipitation included; `sources` may be left out. Raises
+    KeyError, TypeError or ValueError when the map is not weather."""
+    obs = data["observer"]
+    return WeatherState(
+        observer=Observer(float(obs["lat_deg"]), float(obs["lon_deg"]), float(obs["alt_m"])),
+        time_utc=parse_time_utc(str(data["time_utc"])),
+        layers=tuple(
+            CloudLayer(
+                float(lay["cover_oktas"]),
+                float(lay["base_m"]),
+                float(lay["top_m"]),
+                CloudType.from_name(str(lay["type"])),
+            )
+            for lay in data["layers"]
+        ),
+        wind=tuple(
+            WindLayer(
+                float(w["alt_m"]),
+                float(w["dir_deg"]),
+                float(w["speed_mps"]),
+                float(w["gust_mps"]),
+                bool(w["variable"]),
+            )
+            for w in data["wind"]
+        ),
+        visibility_m=float(data["visibility_m"]),
+        temperature_c=_float_or_none(data["temperature_c"]),
+        dewpoint_c=_float_or_none(data["dewpoint_c"]),
+        qnh_hpa=float(data["qnh_hpa"]),
+        present_weather=tuple(str(group) for group in data["present_weather"]),
+        precipitation=tuple(
+            PrecipLayer(
+                PrecipKind[str(p["kind"]).upper()],
+                float(p["base_m"]),
+                float(p["top_m"]),
+                float(p["coverage_pct"]),
+                int(p["severity"]),
+                float(p["visibility_m"]),
+            )
+            for p in data["precipitation"]
+        ),
+        seed=int(data["seed"]),
+        sources=Provenance(
+            **{name: Source(value) for name, value in dict(data.get("sources") or {}).items()}
+        ),
+    )
+
+
+def _float_or_none(value: Any) -> float | None:
+    return None if value is None else float(value)
 
 
 def format_time_utc(t: datetime) -> str:
