@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from wxsky.weather.precedence import SourceStack
@@ -84,3 +86,27 @@ def test_base_patches_change_the_base_but_not_the_clock() -> None:
 def test_only_overrides_can_be_released() -> None:
     with pytest.raises(ValueError, match="default"):
         _stack().released(Source.DEFAULT)
+
+
+def test_a_cigi_host_ranks_between_control_and_metar_while_it_keeps_sending() -> None:
+    stack = _stack().with_patch(
+        WeatherPatch(source=Source.METAR, layers=SCT, visibility_m=5000.0), 0.0
+    )
+    stack = dataclasses.replace(stack, cigi_hold_s=10.0)
+    stack = stack.with_patch(WeatherPatch(source=Source.CIGI, layers=OVC), 1.0)
+    target = stack.target()
+    assert target.layers == OVC and target.sources.layers is Source.CIGI
+    # The host's picture stands alone, as a METAR's: visibility it did not give is METAR's.
+    assert target.visibility_m == 5000.0 and target.sources.visibility_m is Source.METAR
+    stack = stack.with_patch(WeatherPatch(source=Source.CONTROL, layers=FEW), 2.0)
+    assert stack.target().sources.layers is Source.CONTROL
+    stack, _ = stack.released(Source.CONTROL)
+    assert stack.target().layers == OVC
+    # Any message from the host keeps its weather; silence for the hold time hands it back.
+    stack = stack.heard_cigi(9.0)
+    stack, gone = stack.expired(18.5)
+    assert gone == () and stack.target().sources.layers is Source.CIGI
+    assert stack.holds(18.5)["layers"]["source"] == "cigi"
+    stack, gone = stack.expired(19.5)
+    assert gone == ("layers",)
+    assert stack.target().layers == SCT and stack.target().sources.layers is Source.METAR

@@ -325,6 +325,14 @@ def _chunks(first: Packet, rest: list[Packet]) -> list[list[Packet]]:
     return out
 
 
+def _default_bind(to: Address, family: int) -> Address:
+    """Loopback for an IG on loopback (nothing else can then reach the socket); any address
+    otherwise, so the datagrams leave with a source the IG's network routes back."""
+    if ipaddress.ip_address(to[0]).is_loopback:
+        return ("::1" if family == socket.AF_INET6 else "127.0.0.1", 0)
+    return ("::" if family == socket.AF_INET6 else "0.0.0.0", 0)
+
+
 class CigiHostSocket:
     """A CIGI host's UDP socket: sends messages to an IG and reads its answers (blocking,
     with a timeout). A context manager; `close` is idempotent."""
@@ -334,7 +342,7 @@ class CigiHostSocket:
         self.to = to
         self._sock: socket.socket | None = socket.socket(family, socket.SOCK_DGRAM)
         try:
-            self._sock.bind(bind or (("::1" if family == socket.AF_INET6 else "127.0.0.1"), 0))
+            self._sock.bind(bind or _default_bind(to, family))
         except OSError as exc:
             self._sock.close()
             self._sock = None

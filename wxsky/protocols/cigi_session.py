@@ -147,10 +147,13 @@ class HostState:
         default_factory=lambda: MappingProxyType({})
     )
     regions: Mapping[int, Region] = field(default_factory=lambda: MappingProxyType({}))
+    # The host has sent Weather Control: from then on its clouds are what it says, none
+    # included, rather than left to the sources below.
+    sent_layers: bool = False
 
     @property
     def has_weather(self) -> bool:
-        return self.atmosphere is not None or bool(self.layers)
+        return self.atmosphere is not None or self.sent_layers
 
 
 @dataclass(frozen=True)
@@ -283,6 +286,9 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
                 ignored["layer_not_drawn"] += 1
                 continue
             slot = (None if scope == 0 else int(p["entity_or_region_id"]), layer_id)
+            if not s.sent_layers:
+                s = dataclasses.replace(s, sent_layers=True)
+                weather = True
             if not p["weather_enable"]:
                 weather = weather or slot in layers
                 layers.pop(slot, None)
@@ -466,7 +472,7 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
                 precip.append(_precip(chosen))
     atm = host.atmosphere
     fields: dict[str, object] = {}
-    if host.layers or host.regions:
+    if host.sent_layers:
         fields["layers"] = tuple(sorted(clouds, key=lambda c: -c.cover_oktas)[:MAX_LAYERS])
         fields["precipitation"] = tuple(precip)
         codes = [p.metar_code for p in precip]
@@ -483,7 +489,7 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
         if fog is not None:
             vis = _fogged(vis, fog, alt_m)
         fields["visibility_m"] = vis
-    if winds or host.layers:
+    if winds:  # a host that gives no wind leaves it to the sources below
         fields["wind"] = tuple(winds)
     return WeatherPatch(source=Source.CIGI, **fields)  # type: ignore[arg-type]
 

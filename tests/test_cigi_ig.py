@@ -1,0 +1,302 @@
+"""wxsky as a CIGI 3.3 image generator, across processes: a real `wxsky run --cigi` and a
+host on a real UDP socket, big- and little-endian; and the listener's address filter on a
+real socket in this process."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import struct
+import time
+from collections.abc import Iterator, Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import pytest
+from daemon_harness import RunningDaemon, running_daemon
+
+from wxsky.inputs.cigi_link import CigiHostSocket, CigiIg, IgSettings, parse_networks
+from wxsky.protocols.cigi import CigiDatagram, Packet, encode_datagram, encode_packet, make
+from wxsky.protocols.cigi_session import Eye
+from wxsky.weather.state import WeatherPatch
+
+LSZH = (47.4647, 8.5492)
+CONFIG = """
+[camera]
+width = 320
+height = 180
+[transition]
+cover_oktas_per_min = 0.0
+base_m_per_min = 0.0
+wind_mps_per_s = 0.0
+visibility_m_per_s = 0.0
+temperature_c_per_min = 0.0
+qnh_hpa_per_min = 0.0
+[cigi]
+hold_s = 1.5
+"""
+
+
+@pytest.fixture(scope="module")
+def daemon(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningDaemon]:
+    tmp = tmp_path_factory.mktemp("cigi")
+    with running_daemon(tmp, CONFIG, ("--preset", "clear", "--cigi", "udp:127.0.0.1:0")) as d:
+        yield d
+
+
+def status(d: RunningDaemon) -> dict[str, Any]:
+    with d.client() as c:
+        result: dict[str, Any] = c.call("status")
+    return result
+
+
+def cigi_input(st: dict[str, Any]) -> dict[str, Any]:
+    found: list[dict[str, Any]] = [i for i in st["inputs"] if i["kind"] == "cigi"]
+    assert len(found) == 1
+    return found[0]
+
+
+def ig_address(d: RunningDaemon) -> tuple[str, int]:
+    host, port = cigi_input(status(d))["listen"].rsplit(":", 1)
+    return host, int(port)
+
+
+def frame(number: int, *body: Packet) -> list[Packet]:
+    return [make("ig_control", ig_mode=1, host_frame_number=number), *body]
+
+
+STRATUS = make(
+    "weather_control",
+    layer_id=1,
+    weather_enable=1,
+    cloud_type=10,
+    coverage_pct=100.0,
+    base_elevation_m=1000.0,
+    thickness_m=600.0,
+)
+
+
+def session_body(heading: float) -> list[Packet]:
+    return [
+        make(
+            "entity_control",
+            entity_id=0,
+            entity_state=1,
+            lat_deg=LSZH[0] + 0.01,
+            lon_deg=LSZH[1],
+            alt_m=700.0,
+            yaw_deg=heading,
+            pitch_deg=4.0,
+        ),
+        make(
+            "celestial_sphere_control",
+            hour=16,
+            minute=20,
+            date_time_valid=1,
+            ephemeris_enable=1,
+            date_mmddyyyy=3_15_2026,
+        ),
+        make(
+            "atmosphere_control",
+            humidity_pct=60,
+            temperature_c=12.0,
+            visibility_m=25_000.0,
+            wind_speed_mps=4.0,
+            wind_dir_deg=200.0,
+            pressure_hpa=1008.0,
+        ),
+        STRATUS,
+    ]
+
+
+def drive(
+    host: CigiHostSocket, seconds: float, order: str, body: Sequence[Packet] = (), start: int = 1
+) -> tuple[int, list[CigiDatagram]]:
+    """Send a message every 1/30 s for `seconds`, collecting what the IG answers; returns
+    the last host frame number sent and the answers."""
+    answers: list[CigiDatagram] = []
+    number = start
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        host.send(frame(number, *body), "little" if order == "little" else "big")
+        tick = time.monotonic() + 1.0 / 30.0
+        while (got := host.receive(max(0.0, tick - time.monotonic()))) is not None:
+            answers.append(got[0])
+        number += 1
+    # The IG answers every frame it publishes, host or not: take what answers the last message.
+    drain = time.monotonic() + 0.5
+    while (got := host.receive(max(0.0, drain - time.monotonic()))) is not None:
+        answers.append(got[0])
+        if time.monotonic() >= drain:
+            break
+    return number - 1, answers
+
+
+@pytest.mark.parametrize("order", ["big", "little"])
+def test_a_host_at_30_hz_gets_a_start_of_frame_for_every_frame(
+    daemon: RunningDaemon, order: str
+) -> None:
+    with CigiHostSocket(ig_address(daemon)) as host:
+        heading = 40.0 if order == "big" else 250.0
+        # Host frame numbers above the other order's run: each run's must only grow.
+        start = 1 if order == "big" else 100_000
+        last, answers = drive(host, 3.0, order, session_body(heading), start)
+        me = host.address
+    sofs = [d.packets[0] for d in answers if d.packets and d.packets[0].key == "start_of_frame"]
+    assert len(sofs) == len(answers) >= 8
+    assert all(d.byte_order == order for d in answers), "the IG answers in the host's order"
+    numbers = [int(p["ig_frame_number"]) for p in sofs]
+    # One for every published frame: consecutive IG frame numbers, none skipped.
+    assert numbers == list(range(numbers[0], numbers[0] + len(numbers)))
+    # What each frame had applied: the host's frames as they arrived (the first answer may
+    # still name an earlier host's last frame: that frame had applied it).
+    applied = [int(p["last_host_frame_number"]) for p in sofs[1:]]
+    assert applied == sorted(applied) and start <= applied[-1] <= last
+    assert all(int(p["ig_mode"]) == 1 for p in sofs)
+    st = status(daemon)
+    entry = cigi_input(st)
+    assert entry["byte_order"] == order and entry["last_host_frame"] == last
+    assert entry["host_address"] == f"{me[0]}:{me[1]}"
+    target = st["target"]
+    assert target["layers"] == [
+        {"cover_oktas": 8.0, "base_m": 1000.0, "top_m": 1600.0, "type": "stratus"}
+    ]
+    assert target["sources"]["layers"] == "cigi" and target["sources"]["time_utc"] == "cigi"
+    assert target["visibility_m"] == 25_000.0 and target["qnh_hpa"] == pytest.approx(1008.0)
+    clock = datetime.fromisoformat(st["weather"]["time_utc"].replace("Z", "+00:00"))
+    assert (clock.year, clock.month, clock.day, clock.hour, clock.minute) == (2026, 3, 15, 16, 20)
+    cam = st["camera"]
+    assert cam["heading_deg"] == pytest.approx(heading, abs=1e-3)
+    assert cam["pitch_deg"] == pytest.approx(4.0, abs=1e-3)
+    assert cam["position_m"][2] == pytest.approx(700.0, abs=0.01)
+    assert cam["position_m"][1] == pytest.approx(1105.4, abs=1.0)  # 0.01° north
+
+
+def test_nan_and_truncated_packets_change_nothing(daemon: RunningDaemon) -> None:
+    with CigiHostSocket(ig_address(daemon)) as host:
+        drive(host, 0.5, "big", session_body(10.0))
+        before = status(daemon)
+        bad = bytearray(
+            encode_packet(
+                make(
+                    "weather_control",
+                    layer_id=1,
+                    weather_enable=1,
+                    cloud_type=7,
+                    coverage_pct=40.0,
+                    base_elevation_m=2000.0,
+                    thickness_m=800.0,
+                )
+            )
+        )
+        bad[20:24] = struct.pack(">f", math.nan)  # coverage_pct
+        nan = encode_datagram(frame(5000)) + bytes(bad)
+        truncated = encode_datagram(frame(5001, STRATUS))[:-9]
+        host.send_bytes(nan)
+        host.send_bytes(truncated)
+        host.send_bytes(b"\x01\x18garbage")
+        _, answers = drive(host, 0.7, "big", start=5002)
+    after = status(daemon)
+    assert answers, "the daemon keeps answering"
+    assert after["target"]["layers"] == before["target"]["layers"]
+    dropped = cigi_input(after)["dropped"]
+    old = cigi_input(before)["dropped"]
+    assert dropped.get("not_finite", 0) == old.get("not_finite", 0) + 1
+    assert dropped.get("truncated", 0) == old.get("truncated", 0) + 1
+    assert dropped.get("wrong_version", 0) >= old.get("wrong_version", 0) + 1
+
+
+def answers_to(host: CigiHostSocket, alt_m: float, request_id: int) -> dict[str, Any]:
+    request = make(
+        "environmental_conditions_request",
+        request_weather=1,
+        request_aerosol=1,
+        request_id=request_id,
+        lat_deg=LSZH[0] + 0.01,
+        lon_deg=LSZH[1],
+        alt_m=alt_m,
+    )
+    host.send(frame(9000 + request_id, request))
+    found: dict[str, Any] = {"aerosol": {}}
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline and "weather" not in found:
+        got = host.receive(0.5)
+        for p in got[0].packets if got else ():
+            if p.key == "weather_conditions_response" and p["request_id"] == request_id:
+                found["weather"] = p.as_dict()
+            elif p.key == "aerosol_concentration_response" and p["request_id"] == request_id:
+                found["aerosol"][int(p["layer_id"])] = float(p["aerosol_concentration_gpm3"])
+    return found
+
+
+def test_conditions_are_answered_in_cloud_and_out_of_it(daemon: RunningDaemon) -> None:
+    with CigiHostSocket(ig_address(daemon)) as host:
+        drive(host, 0.5, "little", session_body(90.0))
+        inside = answers_to(host, 1300.0, 1)
+        above = answers_to(host, 3000.0, 2)
+    w_in, w_out = inside["weather"], above["weather"]
+    assert w_in["visibility_m"] < 600.0 and w_in["humidity_pct"] == 100
+    assert inside["aerosol"][1] > 0.0
+    assert w_out["visibility_m"] == 25_000.0 and above["aerosol"] == {1: 0.0}
+    # Standard atmosphere from the host's 12 °C at the observer (432 m) and 1008 hPa QNH.
+    assert w_out["temperature_c"] == pytest.approx(12.0 - 0.0065 * (3000.0 - 432.0), abs=0.01)
+    assert w_out["pressure_hpa"] == pytest.approx(
+        1008.0 * (1 - 0.0065 * 3000 / 288.15) ** 5.25588, abs=0.05
+    )
+    assert w_out["wind_dir_deg"] == pytest.approx(200.0, abs=0.5)
+
+
+def test_a_silent_host_hands_its_weather_back(daemon: RunningDaemon) -> None:
+    with CigiHostSocket(ig_address(daemon)) as host:
+        drive(host, 0.3, "big", session_body(0.0))
+    assert status(daemon)["target"]["sources"]["layers"] == "cigi"
+    time.sleep(2.0)  # [cigi] hold_s = 1.5
+    target = status(daemon)["target"]
+    assert target["sources"]["layers"] == "preset" and target["layers"] == []
+
+
+class _Recorder:
+    """The daemon's side of the listener, recorded."""
+
+    def __init__(self) -> None:
+        self.heard = 0
+        self.patches: list[WeatherPatch] = []
+
+    def cigi_weather(self, patch: WeatherPatch) -> None:
+        self.patches.append(patch)
+
+    def cigi_heard(self) -> None:
+        self.heard += 1
+
+    def cigi_camera(self, eye: Eye) -> None:
+        pass
+
+    def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None:
+        pass
+
+    def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]:
+        return []
+
+
+def test_only_allowed_hosts_are_heard(tmp_path: Path) -> None:
+    async def run(allow: tuple[str, ...]) -> tuple[_Recorder, dict[str, Any]]:
+        rec = _Recorder()
+        ig = CigiIg(IgSettings(("127.0.0.1", 0), None, parse_networks(allow)), rec)
+        await ig.start()
+        try:
+            with CigiHostSocket(("127.0.0.1", ig.port)) as host:
+                host.send(frame(1, STRATUS))
+                for _ in range(50):
+                    await asyncio.sleep(0.01)
+                    if ig.stats.messages or ig.stats.errors:
+                        break
+            return rec, ig.detail()
+        finally:
+            ig.close()
+
+    rec, detail = asyncio.run(run(("10.1.2.3",)))
+    assert rec.heard == 0 and not rec.patches
+    assert detail["dropped"] == {"not_allowed": 1} and "127.0.0.1" in detail["last_error"]
+    rec, detail = asyncio.run(run(("127.0.0.0/8",)))
+    assert rec.heard == 1 and rec.patches and detail["dropped"] == {}
