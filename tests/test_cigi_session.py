@@ -345,3 +345,37 @@ def test_answers_carry_the_request_id_and_the_point_weather() -> None:
     ]
     only_weather = make("environmental_conditions_request", request_weather=1, request_id=1)
     assert [p.key for p in responses(only_weather, point)] == ["weather_conditions_response"]
+
+
+def test_blended_stations_sent_as_regions_give_each_station_its_own_clouds() -> None:
+    from wxsky.protocols.cigi_source import SourceFrame, host_message
+    from wxsky.weather.state import CloudLayer, WeatherPatch, WeatherState
+    from wxsky.weather.stations import StationWeather
+
+    def station(name: str, lat: float, lon: float, *layers: CloudLayer) -> StationWeather:
+        patch = WeatherPatch(source=Source.METAR, layers=layers)
+        return StationWeather(name, lat, lon, 400.0, None, patch)
+
+    zurich = station("LSZH", 47.4647, 8.5492, CloudLayer(2, 1200.0, 1800.0, CloudType.CUMULUS))
+    bern = station("LSZB", 46.9141, 7.4971, CloudLayer(8, 600.0, 900.0, CloudType.STRATUS))
+    blended = WeatherState().apply(
+        WeatherPatch(
+            source=Source.METAR, layers=(CloudLayer(5, 900.0, 1500.0, CloudType.STRATOCUMULUS),)
+        )
+    )
+    message = host_message(blended, SourceFrame(1), (zurich, bern), region_slots=3)
+    got = absorb(HostState(), decode_datagram(encode_datagram(message)))
+    assert not got.dropped and sorted(got.state.regions) == [1, 2]
+
+    def clouds(lat: float, lon: float) -> set[tuple[CloudType, float]]:
+        layers = weather_patch(got.state, lat, lon, 500.0).layers or ()
+        return {(c.type, c.cover_oktas) for c in layers}
+
+    assert clouds(zurich.lat_deg, zurich.lon_deg) == {(CloudType.CUMULUS, 2.0)}
+    assert clouds(bern.lat_deg, bern.lon_deg) == {(CloudType.STRATUS, 8.0)}
+    # Far from both, beyond their regions' perimeters: the blended weather.
+    assert clouds(47.8, 7.0) == {(CloudType.STRATOCUMULUS, 5.0)}
+    # A station leaving the blend is destroyed at the IG with the next message.
+    later = host_message(blended, SourceFrame(2), (zurich,), region_slots=3)
+    gone = absorb(got.state, decode_datagram(encode_datagram(later)))
+    assert sorted(gone.state.regions) == [1]

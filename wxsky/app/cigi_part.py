@@ -34,6 +34,7 @@ from wxsky.protocols.cigi_source import SourceFrame, host_message
 from wxsky.scene.conditions import conditions_at
 from wxsky.settings.config import CigiSection
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
+from wxsky.weather.stations import StationWeather
 
 log = logging.getLogger("wxsky.app.cigi")
 
@@ -49,7 +50,11 @@ class CigiPart:
         clock_rate: float,
         listen: Sequence[str] = (),
         send_to: Sequence[str] = (),
+        blended: Callable[[], Sequence[StationWeather]] = tuple,
+        region_slots: int = 0,
     ) -> None:
+        """`blended` gives the METAR stations blended into the weather now; with
+        `region_slots` (the most that can be blended) the source sends them as regions."""
         self._engine = engine
         self._publish_target = publish_target
         self._set_camera = set_camera
@@ -72,6 +77,8 @@ class CigiPart:
             _Sender(CigiHostSocket(parse_udp(spec, "--cigi-send")), spec)
             for spec in dict.fromkeys((*section.send_to, *send_to))
         ]
+        self._blended = blended
+        self._region_slots = region_slots
         self._started = False
 
     def stats(self) -> list[tuple[str, InputStats]]:
@@ -110,7 +117,8 @@ class CigiPart:
         now = time.monotonic()
         for sender in self._senders:
             if now - sender.sent_at >= self._send_period_s:
-                sender.send(state, self._byte_order, now)
+                regions = self._blended() if self._region_slots else ()
+                sender.send(state, self._byte_order, now, regions, self._region_slots)
 
     def refresh(self) -> None:
         for ig in self.igs:
@@ -185,12 +193,18 @@ class _Sender:
         self.send_errors = 0
         self.refresh_detail()
 
-    def send(self, state: WeatherState, byte_order: str, now: float) -> None:
+    def send(
+        self,
+        state: WeatherState,
+        byte_order: str,
+        now: float,
+        stations: Sequence[StationWeather] = (),
+        region_slots: int = 0,
+    ) -> None:
         self.frame = self.frame.next()
+        message = host_message(state, self.frame, stations, region_slots)
         try:
-            self.sock.send(
-                host_message(state, self.frame), "little" if byte_order == "little" else "big"
-            )
+            self.sock.send(message, "little" if byte_order == "little" else "big")
         except OSError as exc:
             self.send_errors += 1
             self.stats.error(f"send to {self.sock.to}: {exc}")

@@ -55,6 +55,7 @@ from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M
 from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
+from wxsky.weather.stations import StationWeather
 
 log = logging.getLogger("wxsky.app.daemon")
 
@@ -170,6 +171,8 @@ class Daemon:
             clock_rate=config.clock.rate,
             listen=cigi,
             send_to=cigi_send,
+            blended=self._blended_stations,
+            region_slots=config.metar.blend_stations if config.metar.blend_stations > 1 else 0,
         )
         for name, stats in self._cigi.stats():
             if name in self.inputs:
@@ -509,6 +512,10 @@ class Daemon:
             self._had_feed_weather = True
             self.engine.settle()
             log.info("first METAR feed weather applied: %s", self.engine.state.summary())
+
+    def _blended_stations(self) -> tuple[StationWeather, ...]:
+        """The METAR stations blended into the weather now (the first feed that blends)."""
+        return next((feed.blended for feed in self._feeds if feed.blended), ())
 
     def _camera_lat_lon(self) -> tuple[float, float]:
         obs = self.engine.state.observer

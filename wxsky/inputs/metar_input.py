@@ -105,6 +105,7 @@ class Selection:
     fresh: int = 0
     stale_count: int = 0
     stale_stations: tuple[str, ...] = field(default=(), compare=False)
+    blended: tuple[StationWeather, ...] = field(default=(), compare=False)  # when more than one
 
 
 def ingest(
@@ -235,6 +236,7 @@ def select(
         used=tuple((s.station, d) for s, d in chosen),
         fresh=len(fresh),
         stale_count=len(stale),
+        blended=tuple(s for s, _ in chosen) if len(chosen) > 1 else (),
     )
 
 
@@ -258,6 +260,9 @@ class MetarFeedInput:
         self._positions = positions
         self._stations: Mapping[str, StationWeather] = {}
         self._last_patch: WeatherPatch | None = None
+        # The stations blended into the weather (more than one), each with its own report:
+        # a CIGI source sends them as regions.
+        self.blended: tuple[StationWeather, ...] = ()
         self._warn = RateLimitedLog(log)
         self._failures = 0
         self._content_ok = True  # what the source's current content gave (module docstring)
@@ -411,6 +416,7 @@ class MetarFeedInput:
             d["reason"] = choice.reason
             return
         d.pop("reason", None)
+        self.blended = choice.blended
         d["using"] = [{"station": s, "distance_km": round(m / 1000.0, 1)} for s, m in choice.used]
         if choice.patch != self._last_patch:
             # Remembered only once applied: after a failure here the restarted task applies it.
