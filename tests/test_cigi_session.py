@@ -105,6 +105,8 @@ def test_a_layer_stays_until_the_host_disables_it() -> None:
     ("packet", "reason", "words"),
     [
         (layer(1, thickness_m=0.0), "out_of_range", "thickness_m 0"),
+        # Found by the fuzzer: a top a float's step above the base is no layer.
+        (layer(1, base_elevation_m=-51.37, thickness_m=1e-6), "out_of_range", "thickness_m 1e-06"),
         (layer(1, base_elevation_m=30_000.0), "out_of_range", "base_elevation_m 30000"),
         (layer(1, wind_speed_mps=400.0), "out_of_range", "wind_speed_mps 400"),
         (

@@ -63,6 +63,7 @@ if str(ROOT) not in sys.path:
 from wxsky.errors import ConfigError, FeedError, MetarError  # noqa: E402 - after the path
 from wxsky.protocols.canaerospace import CanasDecoder  # noqa: E402
 from wxsky.protocols.cigi import REASONS as CIGI_REASONS  # noqa: E402
+from wxsky.protocols.cigi import CigiDatagram  # noqa: E402
 from wxsky.protocols.cigi import Packet as CigiPacket  # noqa: E402
 from wxsky.protocols.cigi import decode_datagram as decode_cigi  # noqa: E402
 from wxsky.protocols.cigi import encode_datagram as encode_cigi  # noqa: E402
@@ -70,6 +71,10 @@ from wxsky.protocols.cigi import make as make_cigi  # noqa: E402
 from wxsky.protocols.cigi_examples import messages as cigi_messages  # noqa: E402
 from wxsky.protocols.cigi_packets import PACKETS as CIGI_PACKETS  # noqa: E402
 from wxsky.protocols.cigi_packets import START_PACKETS as CIGI_START_PACKETS  # noqa: E402
+from wxsky.protocols.cigi_session import HostState as CigiHostState  # noqa: E402
+from wxsky.protocols.cigi_session import absorb as cigi_absorb  # noqa: E402
+from wxsky.protocols.cigi_session import eye as cigi_eye  # noqa: E402
+from wxsky.protocols.cigi_session import weather_patch as cigi_weather_patch  # noqa: E402
 from wxsky.protocols.nmea import NmeaDecoder, NmeaSettings  # noqa: E402
 from wxsky.protocols.result import Decoded  # noqa: E402
 from wxsky.scene.cloud_model_files import MODEL_TABLE, model_from_values  # noqa: E402
@@ -877,6 +882,27 @@ def check_cigi(data: bytes) -> None:
     again = decode_cigi(encode_cigi(message, d.byte_order))
     assert again.packets == tuple(message), "decoded packets do not encode back to themselves"
     assert not again.counts, f"a re-encoded datagram has problems: {dict(again.counts)}"
+    _assert_cigi_session(d)
+
+
+def _assert_cigi_session(d: CigiDatagram) -> None:
+    """What the IG makes of a host's datagram, twice over (the second time every packet
+    meets the state the first left): the weather a valid state, the eye finite and a camera."""
+    state = CigiHostState()
+    for _ in range(2):
+        got = cigi_absorb(state, d)
+        state = got.state
+        for reason, message in got.dropped:
+            assert reason in CIGI_REASONS and "\n" not in message, f"drop {reason}: {message!r}"
+        eye = cigi_eye(state)
+        own = state.ownship
+        place = (own.lat_deg, own.lon_deg, own.alt_m) if own else (47.0, 8.0, 500.0)
+        assert_patch_in_range(cigi_weather_patch(state, *place))
+        if eye is not None:
+            values = (eye.lat_deg, eye.lon_deg, eye.alt_m, eye.heading_deg, eye.pitch_deg)
+            assert all(math.isfinite(v) for v in values), f"eye {eye}"
+            assert -90.0 <= eye.pitch_deg <= 90.0 and 0.0 <= eye.heading_deg < 360.0, f"{eye}"
+            assert eye.fov_deg is None or 1.0 <= eye.fov_deg <= 170.0, f"eye {eye}"
 
 
 # --- settings files: config, presets, cloud models --------------------------------------------

@@ -50,6 +50,7 @@ OKTAS_PER_PCT = 8.0 / 100.0
 # "unlimited"); the weather keeps at most VISIBILITY_M's limit, and clamps to it.
 MAX_VISIBILITY_M = float(VISIBILITY_M.hi or 1e6)
 TOP_LIMIT_M = float(LAYER_HEIGHT_M.hi or 25_000.0)
+MIN_THICKNESS_M = 1.0
 # The fog veils a place within its layer and fades out across the layer's transition band.
 FOG_CODE_BELOW_M = 1000.0  # a fog layer thinner in visibility than this is FG, else BR
 
@@ -348,10 +349,11 @@ def _layer_problem(p: Packet) -> str:
     )
     if why:
         return why
-    if layer_id in CLOUD_LAYERS and p["cloud_type"] != 0 and thick <= 0.0:
-        return f"thickness_m {thick:g}: a cloud layer needs a thickness above 0"
-    if layer_id in (FOG_LAYER, *PRECIP_LAYERS) and thick <= 0.0:
-        return f"thickness_m {thick:g}: a fog or precipitation layer needs a thickness above 0"
+    # Under a metre a top is not above its base in the weather's floats.
+    if layer_id in CLOUD_LAYERS and p["cloud_type"] != 0 and thick < MIN_THICKNESS_M:
+        return f"thickness_m {thick:g}: a cloud layer needs at least {MIN_THICKNESS_M:g} m"
+    if layer_id in (FOG_LAYER, *PRECIP_LAYERS) and thick < MIN_THICKNESS_M:
+        return f"thickness_m {thick:g}: a fog or precipitation layer needs at least {MIN_THICKNESS_M:g} m"
     return ""
 
 
