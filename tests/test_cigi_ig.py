@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import asyncio
 import math
+import re
 import struct
+import subprocess
+import sys
 import time
 from collections.abc import Iterator, Sequence
 from datetime import datetime
@@ -245,6 +248,22 @@ def test_conditions_are_answered_in_cloud_and_out_of_it(daemon: RunningDaemon) -
         1008.0 * (1 - 0.0065 * 3000 / 288.15) ** 5.25588, abs=0.05
     )
     assert w_out["wind_dir_deg"] == pytest.approx(200.0, abs=0.5)
+
+
+def test_status_says_which_host_drives_the_ig(daemon: RunningDaemon) -> None:
+    with CigiHostSocket(ig_address(daemon)) as host:
+        drive(host, 0.3, "little", [*session_body(0.0), make("view_control", view_id=3)])
+        me = host.address
+    out = subprocess.run(
+        [sys.executable, "-m", "wxsky", "status", "--control", daemon.address],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=True,
+    ).stdout
+    (line,) = [x for x in out.splitlines() if x.startswith("input cigi:")]
+    assert f"host {me[0]}:{me[1]} (little)" in line and "Start of Frame sent" in line
+    assert re.search(r"ignored \d+ other_view", line), line
 
 
 def test_a_silent_host_hands_its_weather_back(daemon: RunningDaemon) -> None:

@@ -310,7 +310,18 @@ def _cmd_status(args: argparse.Namespace) -> int:
             line += ", using " + ", ".join(u["station"] for u in inp["using"])
         if inp.get("stale"):
             line += f", STALE ({inp.get('reason', '')})"
-        if inp.get("ignored"):
+        if inp["kind"] == "cigi":
+            line += (
+                f", host {inp['host_address'] or 'not heard yet'}"
+                f" ({inp['byte_order'] or '-'}), host frame {inp['last_host_frame']}, "
+                f"{inp['start_of_frame_sent']} Start of Frame sent"
+            )
+            if inp["dropped"]:
+                line += ", dropped " + _counts(inp["dropped"])
+        if isinstance(inp.get("ignored"), dict):
+            if inp["ignored"]:
+                line += ", ignored " + _counts(inp["ignored"])
+        elif inp.get("ignored"):
             line += f", {inp['ignored']} ignored"
         if not inp["ok"] and inp.get("state"):
             line += f" ({inp['state']})"
@@ -318,6 +329,10 @@ def _cmd_status(args: argparse.Namespace) -> int:
         if not inp["ok"] and inp.get("last_error"):
             print(f"  last error: {inp['last_error']}")
     return 0
+
+
+def _counts(counts: dict[str, int]) -> str:
+    return ", ".join(f"{n} {reason}" for reason, n in sorted(counts.items()))
 
 
 def _cmd_snapshot(args: argparse.Namespace) -> int:
