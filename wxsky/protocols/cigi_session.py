@@ -353,7 +353,10 @@ def _layer_problem(p: Packet) -> str:
     if layer_id in CLOUD_LAYERS and p["cloud_type"] != 0 and thick < MIN_THICKNESS_M:
         return f"thickness_m {thick:g}: a cloud layer needs at least {MIN_THICKNESS_M:g} m"
     if layer_id in (FOG_LAYER, *PRECIP_LAYERS) and thick < MIN_THICKNESS_M:
-        return f"thickness_m {thick:g}: a fog or precipitation layer needs at least {MIN_THICKNESS_M:g} m"
+        return (
+            f"thickness_m {thick:g}: a fog or precipitation layer needs at least "
+            f"{MIN_THICKNESS_M:g} m"
+        )
     return ""
 
 
