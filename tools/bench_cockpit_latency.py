@@ -118,7 +118,8 @@ def _chart(results: dict[str, list[float]], budget_ms: float, fps: float, path: 
     plt.close(fig)
 
 
-def _measure(client: ControlClient, case: Case, changes: int) -> list[float]:
+def _measure(client: ControlClient, case: Case, changes: int, topic: str = "target") -> list[float]:
+    """Milliseconds from each change to the first `topic` notification that shows it."""
     rng = random.Random(case.name)
     out = []
     for i in range(changes):
@@ -130,7 +131,7 @@ def _measure(client: ControlClient, case: Case, changes: int) -> list[float]:
             note = client.next_notification(timeout_s=2.0)
             if note is None:
                 raise SystemExit(f"{case.name}: change {i} never reached the stream")
-            if note.method == "target" and case.shows(i, note.params):
+            if note.method == topic and case.shows(i, note.params):
                 out.append((time.perf_counter() - start) * 1000.0)
                 break
     return out

@@ -1,6 +1,7 @@
 """A private wxsky daemon wired to cockpit links the calling tool drives: NMEA on a pty whose
 master the tool writes, and CANaerospace on a udp_multicast bus (None where the host has no
-multicast). Shared by the cockpit latency benchmark and the soak test.
+multicast). Shared by the cockpit latency benchmark and the soak test; `private_daemon`, the
+daemon alone, also by the CIGI latency benchmark.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import sys
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,20 +40,41 @@ def cockpit_daemon(group: str, config_toml: str = "") -> Iterator[CockpitDaemon]
     on the way out stop it with SIGTERM and release the pty and the bus."""
     master, slave = os.openpty()
     bus = multicast_bus(group)
+    args = ["--serial", os.ttyname(slave)]
+    if bus is not None:
+        args += ["--can", f"udp_multicast:{group}"]
+    try:
+        with private_daemon(config_toml, args) as (proc, client):
+            yield CockpitDaemon(proc, client, master, bus)
+    finally:
+        if bus is not None:
+            bus.shutdown()
+        os.close(master)
+        os.close(slave)
+
+
+@contextlib.contextmanager
+def private_daemon(
+    config_toml: str = "", args: Sequence[str] = ()
+) -> Iterator[tuple[subprocess.Popen[bytes], ControlClient]]:
+    """`wxsky run` with `config_toml` and `args`, its shared memory and control socket private
+    to this run, and a client connected to it; stopped with SIGTERM on the way out."""
     with tempfile.TemporaryDirectory() as tmp:
         sock = Path(tmp) / "wx.sock"
         cfg = Path(tmp) / "wxsky.toml"
-        shm_name = f"wxsky-tool-{uuid.uuid4().hex[:8]}"
-        cfg.write_text(f'{config_toml}\n[output]\nshm_name = "{shm_name}"\n')
+        shm = f'shm_name = "wxsky-tool-{uuid.uuid4().hex[:8]}"\n'
+        # TOML allows a table once: the name joins the caller's [output] where there is one.
+        if "[output]\n" in config_toml:
+            cfg.write_text(config_toml.replace("[output]\n", "[output]\n" + shm, 1))
+        else:
+            cfg.write_text(f"{config_toml}\n[output]\n{shm}")
         cmd = [sys.executable, "-m", "wxsky", "run", "--config", str(cfg)]
-        cmd += ["--control", f"unix:{sock}", "--serial", os.ttyname(slave)]
-        if bus is not None:
-            cmd += ["--can", f"udp_multicast:{group}"]
+        cmd += ["--control", f"unix:{sock}", *args]
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         client: ControlClient | None = None
         try:
             client = _connect(sock, proc)
-            yield CockpitDaemon(proc, client, master, bus)
+            yield proc, client
         finally:
             if client is not None:
                 client.close()
@@ -61,10 +83,6 @@ def cockpit_daemon(group: str, config_toml: str = "") -> Iterator[CockpitDaemon]
                 proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 proc.kill()
-            if bus is not None:
-                bus.shutdown()
-            os.close(master)
-            os.close(slave)
 
 
 def multicast_bus(group: str) -> can.BusABC | None:
