@@ -319,3 +319,28 @@ def test_only_allowed_hosts_are_heard(tmp_path: Path) -> None:
     assert detail["dropped"] == {"not_allowed": 1} and "127.0.0.1" in detail["last_error"]
     rec, detail = asyncio.run(run(("127.0.0.0/8",)))
     assert rec.heard == 1 and rec.patches and detail["dropped"] == {}
+
+
+def test_a_hosts_first_weather_replaces_the_sky_at_once_later_ones_move() -> None:
+    from wxsky.app.cigi_part import CigiPart
+    from wxsky.engine.stages import SkyEngine
+    from wxsky.scene.camera import Camera
+    from wxsky.scene.layout import SceneSettings
+    from wxsky.settings.config import CigiSection
+    from wxsky.weather.state import CloudLayer, CloudType, Source, WeatherState
+    from wxsky.weather.transition import TransitionRates
+
+    engine = SkyEngine(
+        WeatherState(), Camera((0.0, 0.0, 500.0)), SceneSettings(), rates=TransitionRates()
+    )
+    part = CigiPart(
+        engine, CigiSection(), publish_target=lambda: None, set_camera=lambda p: p, clock_rate=1.0
+    )
+    deck = (CloudLayer(8.0, 900.0, 1500.0, CloudType.STRATUS),)
+    part.cigi_weather(WeatherPatch(source=Source.CIGI, layers=deck))
+    assert engine.state.layers == deck
+    thinner = (CloudLayer(4.0, 900.0, 1500.0, CloudType.STRATUS),)
+    part.cigi_weather(WeatherPatch(source=Source.CIGI, layers=thinner))
+    assert engine.state.layers == deck and engine.target.layers == thinner
+    engine.run_weather(30.0)  # 2 oktas a minute by default
+    assert engine.state.layers[0].cover_oktas == pytest.approx(7.0)

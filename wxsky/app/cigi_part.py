@@ -132,7 +132,13 @@ class CigiPart:
         self._engine.heard_cigi()
 
     def cigi_weather(self, patch: WeatherPatch) -> None:
+        first = not self._engine.sources.cigi
         self._engine.apply(patch)
+        if first:
+            # A host's first weather (or its first after it fell silent) replaces the sky at
+            # once, as a feed's first METAR does: the sky before was a stand-in until the
+            # simulation said what it is, not weather to morph out of for minutes.
+            self._engine.settle()
         self._publish_target()
 
     def cigi_camera(self, eye: Eye) -> None:
