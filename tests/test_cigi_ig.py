@@ -21,7 +21,7 @@ from daemon_harness import RunningDaemon, running_daemon
 
 from wxsky.inputs.cigi_link import CigiHostSocket, CigiIg, IgSettings, parse_networks
 from wxsky.protocols.cigi import CigiDatagram, Packet, encode_datagram, encode_packet, make
-from wxsky.protocols.cigi_session import Eye
+from wxsky.protocols.cigi_eye import Eye
 from wxsky.weather.state import WeatherPatch
 
 LSZH = (47.4647, 8.5492)

@@ -1,6 +1,6 @@
 """A CIGI host's packets as wxsky the IG remembers them, and the weather, camera and clock
-they make (`protocols.cigi_session`); every message goes through the real encoder and
-decoder, in both byte orders."""
+they make (`protocols.cigi_session`, `cigi_weather`, `cigi_eye`); every message goes through
+the real encoder and decoder, in both byte orders."""
 
 from __future__ import annotations
 
@@ -10,16 +10,9 @@ from datetime import UTC, datetime
 import pytest
 
 from wxsky.protocols.cigi import Packet, decode_datagram, encode_datagram, make
-from wxsky.protocols.cigi_session import (
-    Absorbed,
-    HostState,
-    Region,
-    absorb,
-    eye,
-    region_weight,
-    responses,
-    weather_patch,
-)
+from wxsky.protocols.cigi_eye import eye
+from wxsky.protocols.cigi_session import Absorbed, HostState, Region, absorb, responses
+from wxsky.protocols.cigi_weather import region_weight, weather_patch
 from wxsky.weather.atmosphere import PointWeather
 from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
 from wxsky.weather.state import CloudType, PrecipKind, Source

@@ -13,7 +13,8 @@ import pytest
 from daemon_harness import running_daemon
 from tool_loader import load_tool
 
-from wxsky.protocols.cigi_session import Region, region_weight
+from wxsky.protocols.cigi_session import Region
+from wxsky.protocols.cigi_weather import region_weight
 
 # Before the tool that imports it, so both share one module.
 script = load_tool("cigi_script")

@@ -69,12 +69,12 @@ from wxsky.protocols.cigi import decode_datagram as decode_cigi  # noqa: E402
 from wxsky.protocols.cigi import encode_datagram as encode_cigi  # noqa: E402
 from wxsky.protocols.cigi import make as make_cigi  # noqa: E402
 from wxsky.protocols.cigi_examples import messages as cigi_messages  # noqa: E402
+from wxsky.protocols.cigi_eye import eye as cigi_eye  # noqa: E402
 from wxsky.protocols.cigi_packets import PACKETS as CIGI_PACKETS  # noqa: E402
 from wxsky.protocols.cigi_packets import START_PACKETS as CIGI_START_PACKETS  # noqa: E402
 from wxsky.protocols.cigi_session import HostState as CigiHostState  # noqa: E402
 from wxsky.protocols.cigi_session import absorb as cigi_absorb  # noqa: E402
-from wxsky.protocols.cigi_session import eye as cigi_eye  # noqa: E402
-from wxsky.protocols.cigi_session import weather_patch as cigi_weather_patch  # noqa: E402
+from wxsky.protocols.cigi_weather import weather_patch as cigi_weather_patch  # noqa: E402
 from wxsky.protocols.nmea import NmeaDecoder, NmeaSettings  # noqa: E402
 from wxsky.protocols.result import Decoded  # noqa: E402
 from wxsky.scene.cloud_model_files import MODEL_TABLE, model_from_values  # noqa: E402

@@ -29,7 +29,8 @@ from wxsky.inputs.cigi_link import (
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog
 from wxsky.protocols.cigi import Packet
-from wxsky.protocols.cigi_session import Eye, responses
+from wxsky.protocols.cigi_eye import Eye
+from wxsky.protocols.cigi_session import responses
 from wxsky.protocols.cigi_source import SourceFrame, host_message
 from wxsky.scene.conditions import conditions_at
 from wxsky.settings.config import CigiSection

@@ -40,14 +40,9 @@ from wxsky.protocols.cigi import (
     encode_datagram,
     make,
 )
-from wxsky.protocols.cigi_session import (
-    Absorbed,
-    Eye,
-    HostState,
-    absorb,
-    eye,
-    weather_patch,
-)
+from wxsky.protocols.cigi_eye import Eye, eye
+from wxsky.protocols.cigi_session import Absorbed, HostState, absorb
+from wxsky.protocols.cigi_weather import weather_patch
 from wxsky.weather.state import WeatherPatch
 
 log = logging.getLogger("wxsky.inputs.cigi")

@@ -1,0 +1,205 @@
+"""The weather a CIGI host's packets make at a place: its global layers with a region's
+blended in by the region's weight there (1 inside its rounded rectangle, falling smoothly to
+0 across the transition perimeter outside it), the fog layer's visibility where the place is
+in the fog, precipitation layers and the present weather they report. Pure.
+"""
+
+from __future__ import annotations
+
+import math
+
+from wxsky.protocols.cigi_session import (
+    CLOUD_LAYERS,
+    FOG_CODE_BELOW_M,
+    FOG_LAYER,
+    MAX_VISIBILITY_M,
+    OKTAS_PER_PCT,
+    TOP_LIMIT_M,
+    HostState,
+    Layer,
+    Region,
+)
+from wxsky.weather.atmosphere import dewpoint_from_humidity
+from wxsky.weather.geo import enu_from_geodetic
+from wxsky.weather.state import (
+    MAX_LAYERS,
+    WIND_SPEED_MPS,
+    CloudLayer,
+    CloudType,
+    PrecipKind,
+    PrecipLayer,
+    Source,
+    WeatherPatch,
+    WindLayer,
+)
+
+
+def region_weight(region: Region, lat_deg: float, lon_deg: float) -> float:
+    """How much of a region's weather holds at a place: 1 inside its rounded rectangle,
+    falling smoothly to 0 across the transition perimeter outside it, 0 beyond (and for an
+    inactive region)."""
+    if not region.active:
+        return 0.0
+    east, north, _ = enu_from_geodetic(region.lat_deg, region.lon_deg, lat_deg, lon_deg, 0.0)
+    rot = math.radians(region.rotation_deg)
+    along = east * math.sin(rot) + north * math.cos(rot)  # the region's x axis
+    across = east * math.cos(rot) - north * math.sin(rot)  # its y axis, to the right
+    hx, hy = region.size_x_m / 2.0, region.size_y_m / 2.0
+    rc = min(region.corner_radius_m, hx, hy)
+    qx, qy = abs(along) - (hx - rc), abs(across) - (hy - rc)
+    outside_m = math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0) - rc
+    if outside_m <= 0.0:
+        return 1.0
+    if region.transition_perimeter_m <= 0.0 or outside_m >= region.transition_perimeter_m:
+        return 0.0
+    t = outside_m / region.transition_perimeter_m
+    return 1.0 - t * t * (3.0 - 2.0 * t)
+
+
+def _region_at(host: HostState, lat_deg: float, lon_deg: float) -> tuple[int | None, float]:
+    """The region whose weather holds at a place and how much (None, 0 for none): the one
+    weighing most; of equal ones the higher id (CIGI's "use last" of overlapping regions)."""
+    best: tuple[float, int] | None = None
+    for rid, region in host.regions.items():
+        w = region_weight(region, lat_deg, lon_deg)
+        if w > 0.0 and (best is None or (w, rid) > best):
+            best = (w, rid)
+    return (None, 0.0) if best is None else (best[1], best[0])
+
+
+def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float) -> WeatherPatch:
+    """The weather the host's packets make at a place (the ownship's): global layers with a
+    region's blended in by its weight there, the fog layer's visibility where the place is in
+    it. Only what the host set: a host that sent no Atmosphere Control leaves visibility,
+    temperature and pressure to the sources below it."""
+    rid, weight = _region_at(host, lat_deg, lon_deg)
+    ids = sorted({lid for (r, lid) in host.layers if r is None or r == rid})
+    clouds: list[CloudLayer] = []
+    winds: list[WindLayer] = []
+    precip: list[PrecipLayer] = []
+    fog: Layer | None = None
+    for lid in ids:
+        g = host.layers.get((None, lid))
+        r = host.layers.get((rid, lid)) if rid is not None else None
+        # A region that leaves a layer id unset leaves the global layer there.
+        w = weight if r is not None else 0.0
+        if lid in CLOUD_LAYERS:
+            clouds += _blend_clouds(g, r, w)
+            if (wind := _blend_wind(g, r, w)) is not None:
+                winds.append(wind)
+        else:
+            # Fog and precipitation are there or not: the region's where it mostly holds.
+            chosen = r if r is not None and w >= 0.5 else g
+            if chosen is None:
+                continue
+            if lid == FOG_LAYER:
+                fog = chosen
+            elif chosen.coverage_pct > 0.0:
+                precip.append(_precip(chosen))
+    atm = host.atmosphere
+    fields: dict[str, object] = {}
+    if host.sent_layers:
+        fields["layers"] = tuple(sorted(clouds, key=lambda c: -c.cover_oktas)[:MAX_LAYERS])
+        fields["precipitation"] = tuple(precip)
+        codes = [p.metar_code for p in precip]
+        if fog is not None:
+            codes.append("FG" if fog.visibility_m < FOG_CODE_BELOW_M else "BR")
+        fields["present_weather"] = tuple(codes)
+    if atm is not None:
+        winds.append(_wind(0.0, atm.wind_speed_mps, atm.wind_dir_deg))
+        fields["temperature_c"] = atm.temperature_c
+        fields["dewpoint_c"] = dewpoint_from_humidity(atm.temperature_c, atm.humidity_pct)
+        fields["qnh_hpa"] = atm.pressure_hpa
+    if atm is not None or fog is not None:
+        vis = atm.visibility_m if atm is not None else MAX_VISIBILITY_M
+        if fog is not None:
+            vis = _fogged(vis, fog, alt_m)
+        fields["visibility_m"] = vis
+    if winds:  # a host that gives no wind leaves it to the sources below
+        fields["wind"] = tuple(winds)
+    return WeatherPatch(source=Source.CIGI, **fields)  # type: ignore[arg-type]
+
+
+def _cloud(layer: Layer, cover_pct: float, base_m: float, thickness_m: float) -> CloudLayer:
+    return CloudLayer(
+        min(8.0, cover_pct * OKTAS_PER_PCT),
+        base_m,
+        min(TOP_LIMIT_M, base_m + thickness_m),
+        CloudType(layer.cloud_type),
+    )
+
+
+def _blend_clouds(g: Layer | None, r: Layer | None, w: float) -> list[CloudLayer]:
+    """One cloud layer id's clouds at a place `w` into a region: a layer of one type on both
+    sides is one layer between the two; different types are both there, each with its
+    share of the cover (one thins out as the other thickens across the perimeter)."""
+    g = g if g is not None and g.cloud_type != 0 else None
+    r = r if r is not None and r.cloud_type != 0 and w > 0.0 else None
+    if g is not None and r is not None and g.cloud_type == r.cloud_type:
+        mix = _lerp(g.coverage_pct, r.coverage_pct, w)
+        return [
+            _cloud(
+                g,
+                mix,
+                _lerp(g.base_m, r.base_m, w),
+                _lerp(g.thickness_m, r.thickness_m, w),
+            )
+        ]
+    out = []
+    if g is not None and g.coverage_pct * (1.0 - w) > 0.0:
+        out.append(_cloud(g, g.coverage_pct * (1.0 - w), g.base_m, g.thickness_m))
+    if r is not None and r.coverage_pct * w > 0.0:
+        out.append(_cloud(r, r.coverage_pct * w, r.base_m, r.thickness_m))
+    return out
+
+
+def _blend_wind(g: Layer | None, r: Layer | None, w: float) -> WindLayer | None:
+    """A cloud layer's wind at its middle, blended as a vector; a layer sending no wind
+    (speed 0) leaves its height to the winds above and below it."""
+    sides = [(layer, weight) for layer, weight in ((g, 1.0 - w), (r, w)) if layer is not None]
+    sides = [(layer, wt) for layer, wt in sides if layer.wind_speed_mps > 0.0 and wt > 0.0]
+    if not sides:
+        return None
+    total = sum(weight for _, weight in sides) or 1.0
+    east = north = alt = 0.0
+    for layer, weight in sides:
+        to_rad = math.radians(layer.wind_dir_deg + 180.0)
+        east += weight / total * layer.wind_speed_mps * math.sin(to_rad)
+        north += weight / total * layer.wind_speed_mps * math.cos(to_rad)
+        alt += weight / total * (layer.base_m + layer.thickness_m / 2.0)
+    speed = math.hypot(east, north)
+    direction = (math.degrees(math.atan2(east, north)) + 180.0) % 360.0
+    return _wind(alt, speed, direction)
+
+
+def _wind(alt_m: float, speed_mps: float, dir_deg: float) -> WindLayer:
+    return WindLayer(alt_m, dir_deg % 360.0, min(speed_mps, float(WIND_SPEED_MPS.hi or 150.0)))
+
+
+def _precip(layer: Layer) -> PrecipLayer:
+    return PrecipLayer(
+        PrecipKind(layer.layer_id),
+        layer.base_m,
+        layer.base_m + layer.thickness_m,
+        layer.coverage_pct,
+        layer.severity,
+        layer.visibility_m,
+    )
+
+
+def _fogged(clear_m: float, fog: Layer, alt_m: float) -> float:
+    """The visibility at alt_m: the fog's inside its layer, the clear air's beyond its
+    transition band, between the two (geometrically) across the band."""
+    top = fog.base_m + fog.thickness_m
+    out_m = max(fog.base_m - alt_m, alt_m - top, 0.0)
+    inside = min(clear_m, fog.visibility_m)
+    if out_m <= 0.0:
+        return inside
+    if fog.transition_band_m <= 0.0 or out_m >= fog.transition_band_m:
+        return clear_m
+    t = out_m / fog.transition_band_m
+    return float(math.exp(_lerp(math.log(max(inside, 1.0)), math.log(max(clear_m, 1.0)), t)))
+
+
+def _lerp(a: float, b: float, t: float) -> float:
+    return a + (b - a) * t
