@@ -20,7 +20,8 @@ settled: the daemon moves its sky toward a host's weather at the [transition] ra
 minutes, rebuilding the ring on the way, and those frames are the weather's cost. Prints
 median, p99 and max per case, and the daemon's frame rate meanwhile (a camera change shows in
 the frame after the one being drawn), against the issue's budget, one daemon tick plus 20 ms.
-Frames are 640x360, so llvmpipe draws them quickly on a small CPU.
+Frames are 640x360 by default (`--size`): a camera change waits for the frame being drawn and
+then draws one, so on a CPU renderer the frame's own time decides whether it fits the budget.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from bench_cockpit_latency import Case, _measure, _p99
+from bench_cockpit_latency import Case, _drain, _measure, _p99
 from cigi_host import HostLink, Sof
 from cigi_script import AIRPORT_LAT, AIRPORT_LON
 from cockpit_daemon import private_daemon
@@ -48,14 +49,15 @@ CONFIG = """
 [daemon]
 tick_hz = {tick_hz}
 [output]
-max_width = 640
-max_height = 360
+max_width = {width}
+max_height = {height}
 [camera]
-width = 640
-height = 360
+width = {width}
+height = {height}
 """
 HOST_RATE_HZ = 60.0
-SHOW_TIMEOUT_S = 10.0  # a change that never shows stops the run instead of hanging it
+SHOW_TIMEOUT_S = 10.0
+SYNC = "sync ownship -> frame"  # a change that never shows stops the run instead of hanging it
 
 
 class HostLoop(threading.Thread):
@@ -174,6 +176,36 @@ def _cases(loop: HostLoop) -> tuple[Case, Case]:
     )
 
 
+def _synchronous(client: ControlClient, loop: HostLoop, changes: int) -> list[float]:
+    """Ownship changes sent the moment a Start of Frame arrives, as a host in CIGI's
+    synchronous mode answers each IG frame with its own; ms to the `frame` notification
+    showing each. The host's data then lands just after the IG published a frame, and the
+    next frame takes it."""
+    out = []
+    for i in range(changes):
+        seen = len(loop.link.sofs)
+        deadline = time.perf_counter() + SHOW_TIMEOUT_S
+        while len(loop.link.sofs) == seen:
+            if time.perf_counter() > deadline:
+                raise SystemExit("ownship, synchronous host: no Start of Frame")
+            time.sleep(0.0002)
+        _drain(client)
+        place = _place(1000 + i)
+        start = time.perf_counter()
+        loop.change(_packets(None, place))
+        while True:
+            note = client.next_notification(timeout_s=2.0)
+            if note is None:
+                raise SystemExit(f"ownship, synchronous host: change {i} never shown")
+            cam = note.params["camera"] if note.method == "frame" else None
+            if cam is not None and abs(float(cam["heading_deg"]) - place[2]) < 0.01:
+                x, y, _ = cam["position_m"]
+                if abs(x - place[0]) + abs(y - place[1]) < 0.5:
+                    out.append((time.perf_counter() - start) * 1000.0)
+                    break
+    return out
+
+
 def _sof_ms(loop: HostLoop, changes: Sequence[tuple[int, float]]) -> list[float]:
     """Per change, ms to the first Start of Frame that had applied its host frame."""
     out = []
@@ -185,11 +217,14 @@ def _sof_ms(loop: HostLoop, changes: Sequence[tuple[int, float]]) -> list[float]
     return out
 
 
-def measure(changes: int, tick_hz: float) -> dict[str, Any]:
+def measure(changes: int, tick_hz: float, size: tuple[int, int] = (640, 360)) -> dict[str, Any]:
     args = ["--cigi", "udp:127.0.0.1:0"]
     spans: dict[str, tuple[float, float]] = {}  # case -> perf_counter() span, for its fps
     with (
-        private_daemon(CONFIG.format(tick_hz=tick_hz), args) as (_, client),
+        private_daemon(CONFIG.format(tick_hz=tick_hz, width=size[0], height=size[1]), args) as (
+            _,
+            client,
+        ),
         ControlClient.connect(client.address) as frames,
     ):
         status = client.call("status")
@@ -208,11 +243,20 @@ def measure(changes: int, tick_hz: float) -> dict[str, Any]:
                 start = time.perf_counter()
                 results[case.name] = _measure(client_, case, changes, topic)
                 spans[case.name] = (start, time.perf_counter())
+                if case is ownship:
+                    start = time.perf_counter()
+                    results[SYNC] = _synchronous(frames, loop, changes)
+                    spans[SYNC] = (start, time.perf_counter())
         finally:
             loop.stop()
             loop.link.close()
         sof = _sof_ms(loop, loop.sent[:changes])
-        results = {ownship.name: results[ownship.name], "ownship -> SOF": sof, **results}
+        results = {
+            ownship.name: results[ownship.name],
+            "ownship -> SOF": sof,
+            SYNC: results[SYNC],
+            weather.name: results[weather.name],
+        }
         spans["ownship -> SOF"] = spans[ownship.name]
     budget_ms = 1000.0 / tick_hz + 20.0
     return {
@@ -221,7 +265,7 @@ def measure(changes: int, tick_hz: float) -> dict[str, Any]:
         "tick_hz": tick_hz,
         "tick_ms": 1000.0 / tick_hz,
         "budget_ms": budget_ms,
-        "frame_size": "640x360",
+        "frame_size": f"{size[0]}x{size[1]}",
         "host_rate_hz": HOST_RATE_HZ,
         "cases": {
             name: _stats(ms, budget_ms, _fps(loop.link.sofs, *spans[name]))
@@ -269,13 +313,13 @@ def report(r: dict[str, Any]) -> str:
         f"{r['tick_hz']:g} Hz ({r['tick_ms']:.1f} ms), {r['frame_size']}; host "
         f"{r['host_rate_hz']:g} Hz",
         f"budget: one tick + 20 ms = {r['budget_ms']:.1f} ms (p99)",
-        f"{'case':<18} {'n':>4} {'median ms':>10} {'p99 ms':>8} {'max ms':>8} {'fps':>5}"
+        f"{'case':<22} {'n':>4} {'median ms':>10} {'p99 ms':>8} {'max ms':>8} {'fps':>5}"
         "  within budget",
     ]
     for name, c in r["cases"].items():
         verdict = "p99 within" if c["p99_within_budget"] else "p99 OVER"
         lines.append(
-            f"{name:<18} {c['n']:>4} {c['median_ms']:>10.2f} {c['p99_ms']:>8.2f} "
+            f"{name:<22} {c['n']:>4} {c['median_ms']:>10.2f} {c['p99_ms']:>8.2f} "
             f"{c['max_ms']:>8.2f} {c['fps']:>5.1f}  {c['within_budget']}/{c['n']}, {verdict}"
         )
     return "\n".join(lines)
@@ -285,9 +329,13 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--changes", type=int, default=120, help="changes per case (>= 100)")
     p.add_argument("--tick-hz", type=float, default=30.0, help="the daemon's [daemon] tick_hz")
+    p.add_argument("--size", default="640x360", help="frame size WxH (default 640x360)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     args = p.parse_args()
-    result = measure(args.changes, args.tick_hz)
+    width, _, height = args.size.partition("x")
+    if not (width.isdigit() and height.isdigit()):
+        p.error(f"--size {args.size!r}: expected WxH, e.g. 320x180")
+    result = measure(args.changes, args.tick_hz, (int(width), int(height)))
     print(json.dumps(result, indent=2) if args.json else report(result))
     return 0
 
