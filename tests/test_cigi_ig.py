@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import asyncio
 import math
+import os
 import re
+import socket
 import struct
 import subprocess
 import sys
@@ -17,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from daemon_harness import RunningDaemon, running_daemon
+from daemon_harness import RunningDaemon, running_daemon, write_config
 
 from wxsky.inputs.cigi_link import CigiHostSocket, CigiIg, IgSettings, parse_networks
 from wxsky.protocols.cigi import CigiDatagram, Packet, encode_datagram, encode_packet, make
@@ -344,3 +346,30 @@ def test_a_hosts_first_weather_replaces_the_sky_at_once_later_ones_move() -> Non
     assert engine.state.layers == deck and engine.target.layers == thinner
     engine.run_weather(30.0)  # 2 oktas a minute by default
     assert engine.state.layers[0].cover_oktas == pytest.approx(7.0)
+
+
+def test_a_port_already_taken_stops_the_start_with_one_line(tmp_path: Path) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        run = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "wxsky",
+                "run",
+                "--control",
+                f"unix:{tmp_path / 's'}",
+                "--cigi",
+                f"udp:127.0.0.1:{port}",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)},
+        )
+    assert run.returncode == 1, run.stderr
+    errors = [line for line in run.stderr.splitlines() if line.startswith("wxsky: error:")]
+    assert errors == [
+        f"wxsky: error: cigi:udp:127.0.0.1:{port}: cannot listen: Address already in use"
+    ]

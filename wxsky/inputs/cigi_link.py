@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any, Protocol, cast
 
-from wxsky.errors import ConfigError
+from wxsky.errors import ConfigError, RuntimeFailure
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog
 from wxsky.protocols.cigi import (
@@ -143,7 +143,7 @@ class CigiIg(asyncio.DatagramProtocol):
                 lambda: self, local_addr=(host, port), family=family
             )
         except OSError as exc:
-            raise ConfigError(f"{self.name}: cannot listen: {exc.strerror or exc}") from None
+            raise RuntimeFailure(f"{self.name}: cannot listen: {exc.strerror or exc}") from None
         log.info("CIGI IG listening on udp %s:%d", host, self.port)
 
     @property
