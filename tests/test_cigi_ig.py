@@ -352,16 +352,11 @@ def test_a_port_already_taken_stops_the_start_with_one_line(tmp_path: Path) -> N
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
         port = taken.getsockname()[1]
+        config = write_config(tmp_path / "wxsky.toml", f"wxsky-test-{os.getpid()}-taken")
         run = subprocess.run(
             [
-                sys.executable,
-                "-m",
-                "wxsky",
-                "run",
-                "--control",
-                f"unix:{tmp_path / 's'}",
-                "--cigi",
-                f"udp:127.0.0.1:{port}",
+                *(sys.executable, "-m", "wxsky", "run", "--config", str(config)),
+                *("--control", f"unix:{tmp_path / 's'}", "--cigi", f"udp:127.0.0.1:{port}"),
             ],
             capture_output=True,
             text=True,
