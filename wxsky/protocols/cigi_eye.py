@@ -84,14 +84,21 @@ def _angles(m: Mat3) -> tuple[float, float, float]:
     right = (m[0][1], m[1][1], m[2][1])
     pitch = math.degrees(math.asin(max(-1.0, min(1.0, fwd[2]))))
     if abs(fwd[2]) > 0.999999:  # straight up or down: heading from the right axis
-        heading = math.degrees(math.atan2(-right[1], right[0])) % 360.0
+        heading = _wrapped(math.degrees(math.atan2(-right[1], right[0])))
         return heading, pitch, 0.0
-    heading = math.degrees(math.atan2(fwd[0], fwd[1])) % 360.0
+    heading = _wrapped(math.degrees(math.atan2(fwd[0], fwd[1])))
     # Roll: how far the right axis has dipped below the horizontal.
     level_right = (math.cos(math.radians(heading)), -math.sin(math.radians(heading)), 0.0)
     up_axis = _cross(level_right, fwd)
     roll = math.degrees(math.atan2(-_dot(right, up_axis), _dot(right, level_right)))
     return heading, pitch, roll
+
+
+def _wrapped(deg: float) -> float:
+    """deg in [0, 360): a tiny negative angle taken modulo 360 rounds to 360 itself (found by
+    the fuzzer), which is north again."""
+    out = deg % 360.0
+    return 0.0 if out >= 360.0 else out
 
 
 def _cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
