@@ -368,3 +368,35 @@ def test_a_port_already_taken_stops_the_start_with_one_line(tmp_path: Path) -> N
     assert errors == [
         f"wxsky: error: cigi:udp:127.0.0.1:{port}: cannot listen: Address already in use"
     ]
+
+
+def test_one_wxsky_drives_another_over_cigi(tmp_path: Path) -> None:
+    """wxsky as a CIGI source (`--cigi-send`) and wxsky as the IG: the IG's sky is the
+    source's applied weather, clock and all."""
+    (tmp_path / "ig").mkdir()
+    (tmp_path / "source").mkdir()
+    with running_daemon(
+        tmp_path / "ig", CONFIG, ("--preset", "clear", "--cigi", "udp:127.0.0.1:0")
+    ) as ig:
+        port = ig_address(ig)[1]
+        with running_daemon(
+            tmp_path / "source",
+            "[clock]\nrate = 0.0\n",
+            ("--preset", "thunderstorm", "--cigi-send", f"udp:127.0.0.1:{port}"),
+        ) as source:
+            deadline = time.monotonic() + 20.0
+            while time.monotonic() < deadline:
+                sent = status(source)
+                sender = next(i for i in sent["inputs"] if i["kind"] == "cigi-send")
+                got = status(ig)
+                # Until the IG took the weather and the source heard the IG answer.
+                if got["target"]["sources"]["layers"] == "cigi" and sender["last_ig_frame"]:
+                    break
+                time.sleep(0.2)
+        target = got["target"]
+        assert target["sources"]["layers"] == "cigi"
+        assert target["layers"] == sent["weather"]["layers"]
+        assert target["visibility_m"] == sent["weather"]["visibility_m"]
+        assert target["qnh_hpa"] == pytest.approx(sent["weather"]["qnh_hpa"], abs=0.01)
+        assert got["weather"]["time_utc"][:16] == sent["weather"]["time_utc"][:16]
+        assert sender["sent"] > 0 and sender["last_ig_frame"] > 0
