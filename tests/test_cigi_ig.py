@@ -400,3 +400,36 @@ def test_one_wxsky_drives_another_over_cigi(tmp_path: Path) -> None:
         assert target["qnh_hpa"] == pytest.approx(sent["weather"]["qnh_hpa"], abs=0.01)
         assert got["weather"]["time_utc"][:16] == sent["weather"]["time_utc"][:16]
         assert sender["sent"] > 0 and sender["last_ig_frame"] > 0
+
+
+def _split_distance(d: RunningDaemon, after_s: float) -> float | None:
+    """The near layer's split distance in the first frame notification after_s from now."""
+    with d.client() as c:
+        c.subscribe(["frame"])
+        start = time.monotonic()
+        while True:
+            note = c.next_notification(timeout_s=5.0)
+            assert note is not None, "no frame notification"
+            if note.method == "frame" and time.monotonic() - start >= after_s:
+                value = note.params["split_distance_m"]
+                return None if value is None else float(value)
+
+
+def test_an_external_view_splits_the_near_layer_at_the_ownship(daemon: RunningDaemon) -> None:
+    chase = make(
+        "view_control",
+        view_id=0,
+        entity_id=0,
+        x_enable=1,
+        z_enable=1,
+        x_offset_m=-60.0,  # 60 m behind the ownship
+        z_offset_m=-11.0,  # 11 m above it
+    )
+    pilot = make("view_control", view_id=0, entity_id=0, x_enable=1, z_enable=1)
+    with CigiHostSocket(ig_address(daemon)) as host:
+        drive(host, 0.5, "big", [*session_body(30.0), chase])
+        split = _split_distance(daemon, 0.3)
+        drive(host, 0.5, "big", [*session_body(30.0), pilot])
+        none = _split_distance(daemon, 0.3)
+    assert split == pytest.approx(math.hypot(60.0, 11.0), abs=0.5)
+    assert none is None

@@ -198,6 +198,8 @@ def test_the_eye_is_the_ownship_with_the_views_offset_and_angles() -> None:
     assert e.heading_deg == pytest.approx(0.0, abs=1e-6) or e.heading_deg == pytest.approx(360.0)
     assert e.pitch_deg == pytest.approx(10.0) and e.roll_deg == pytest.approx(0.0, abs=1e-6)
     assert e.fov_deg == pytest.approx(75.0)
+    assert e.offset_m == pytest.approx(math.hypot(100.0, 10.0))
+    assert e.ownship == (ZRH[0], ZRH[1], 1500.0)
 
 
 @pytest.mark.parametrize(

@@ -39,6 +39,10 @@ from wxsky.weather.stations import StationWeather
 
 log = logging.getLogger("wxsky.app.cigi")
 
+# A view this far or farther from the ownship looks at it from outside (a chase or tower
+# view): the near clouds are split at the ownship so the host can draw it between them.
+EXTERNAL_VIEW_M = 10.0
+
 
 class CigiPart:
     def __init__(
@@ -158,10 +162,13 @@ class CigiPart:
         except WxskyError as exc:
             self._warn.warning("camera", f"CIGI ownship not placed: {exc}")
             return
+        if eye.offset_m < EXTERNAL_VIEW_M:
+            # The pilot's eye: nothing of the aircraft to draw between clouds, and a split
+            # would cost a near_front layer every frame for nothing.
+            self._engine.set_aircraft(None)
+            return
         obs = self._engine.state.observer
-        self._engine.set_aircraft(
-            enu_from_geodetic(obs.lat_deg, obs.lon_deg, eye.lat_deg, eye.lon_deg, eye.alt_m)
-        )
+        self._engine.set_aircraft(enu_from_geodetic(obs.lat_deg, obs.lon_deg, *eye.ownship))
 
     def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None:
         if time_utc is not None:

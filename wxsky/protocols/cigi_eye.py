@@ -23,6 +23,8 @@ class Eye:
     pitch_deg: float
     roll_deg: float
     fov_deg: float | None
+    ownship: tuple[float, float, float]  # lat_deg, lon_deg, alt_m of the ownship itself
+    offset_m: float  # how far the eye is from the ownship (0 for a pilot's eye point)
 
 
 def eye(host: HostState) -> Eye | None:
@@ -44,7 +46,17 @@ def eye(host: HostState) -> Eye | None:
     in_body = (view[1], view[0], (-view[2][0], -view[2][1], -view[2][2]))
     combined = _matmul(body, in_body)
     heading, pitch, roll = _angles(combined)
-    return Eye(lat, lon, own.alt_m + up, heading, pitch, roll, host.fov_deg)
+    return Eye(
+        lat,
+        lon,
+        own.alt_m + up,
+        heading,
+        pitch,
+        roll,
+        host.fov_deg,
+        (own.lat_deg, own.lon_deg, own.alt_m),
+        math.sqrt(fwd * fwd + right * right + down * down),
+    )
 
 
 Mat3 = tuple[tuple[float, float, float], ...]
