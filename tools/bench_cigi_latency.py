@@ -217,8 +217,10 @@ def _sof_ms(loop: HostLoop, changes: Sequence[tuple[int, float]]) -> list[float]
     return out
 
 
-def measure(changes: int, tick_hz: float, size: tuple[int, int] = (640, 360)) -> dict[str, Any]:
-    args = ["--cigi", "udp:127.0.0.1:0"]
+def measure(
+    changes: int, tick_hz: float, size: tuple[int, int] = (640, 360), preset: str | None = None
+) -> dict[str, Any]:
+    args = ["--cigi", "udp:127.0.0.1:0", *(("--preset", preset) if preset else ())]
     spans: dict[str, tuple[float, float]] = {}  # case -> perf_counter() span, for its fps
     with (
         private_daemon(CONFIG.format(tick_hz=tick_hz, width=size[0], height=size[1]), args) as (
@@ -266,6 +268,7 @@ def measure(changes: int, tick_hz: float, size: tuple[int, int] = (640, 360)) ->
         "tick_ms": 1000.0 / tick_hz,
         "budget_ms": budget_ms,
         "frame_size": f"{size[0]}x{size[1]}",
+        "preset": preset or "the config's (fair-cumulus)",
         "host_rate_hz": HOST_RATE_HZ,
         "cases": {
             name: _stats(ms, budget_ms, _fps(loop.link.sofs, *spans[name]))
@@ -310,7 +313,7 @@ def _stats(ms: list[float], budget_ms: float, fps: float) -> dict[str, Any]:
 def report(r: dict[str, Any]) -> str:
     lines = [
         f"cpu: {r['cpu_cores']} cores, load {r['load_average_1min']:.1f}; daemon tick "
-        f"{r['tick_hz']:g} Hz ({r['tick_ms']:.1f} ms), {r['frame_size']}; host "
+        f"{r['tick_hz']:g} Hz ({r['tick_ms']:.1f} ms), {r['frame_size']}, {r['preset']}; host "
         f"{r['host_rate_hz']:g} Hz",
         f"budget: one tick + 20 ms = {r['budget_ms']:.1f} ms (p99)",
         f"{'case':<22} {'n':>4} {'median ms':>10} {'p99 ms':>8} {'max ms':>8} {'fps':>5}"
@@ -330,12 +333,13 @@ def main() -> int:
     p.add_argument("--changes", type=int, default=120, help="changes per case (>= 100)")
     p.add_argument("--tick-hz", type=float, default=30.0, help="the daemon's [daemon] tick_hz")
     p.add_argument("--size", default="640x360", help="frame size WxH (default 640x360)")
+    p.add_argument("--preset", help="the daemon's start-up sky (default: the config's)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     args = p.parse_args()
     width, _, height = args.size.partition("x")
     if not (width.isdigit() and height.isdigit()):
         p.error(f"--size {args.size!r}: expected WxH, e.g. 320x180")
-    result = measure(args.changes, args.tick_hz, (int(width), int(height)))
+    result = measure(args.changes, args.tick_hz, (int(width), int(height)), args.preset)
     print(json.dumps(result, indent=2) if args.json else report(result))
     return 0
 
