@@ -189,7 +189,11 @@ class CigiIg(asyncio.DatagramProtocol):
                 self._drop("wrong_direction", f"IG→host message from {source[0]}:{source[1]}")
             self.refresh_detail()
             return
-        self._take(decoded, source)
+        try:
+            self._take(decoded, source)
+        except Exception as exc:  # a wxsky defect: the host's datagram must not end the daemon
+            log.debug("CIGI datagram from %s", source, exc_info=True)
+            self._drop("internal_error", f"datagram from {source[0]}:{source[1]}: {exc!r}")
         self.refresh_detail()
 
     def _allowed(self, host: str) -> bool:
