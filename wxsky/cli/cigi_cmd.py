@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import ipaddress
 import json
 import time
 from collections.abc import Callable
@@ -120,14 +119,6 @@ def _udp(flag: str) -> Callable[[str], Address]:
     return parse
 
 
-def _default_bind(to: Address) -> Address | None:
-    """None (the socket's own loopback default) for an IG on loopback; every interface
-    otherwise, so the datagrams can leave the machine."""
-    if ipaddress.ip_address(to[0]).is_loopback:
-        return None
-    return ("::" if ":" in to[0] else "0.0.0.0", 0)
-
-
 def _cmd_send(args: argparse.Namespace) -> int:
     from wxsky.host.client import ControlClient
     from wxsky.inputs.cigi_link import CigiHostSocket
@@ -139,7 +130,8 @@ def _cmd_send(args: argparse.Namespace) -> int:
         status = client.call("status")
         weather = status.get("weather") if isinstance(status, dict) else None
         state = _state(weather, f"the daemon at {address}")
-        with CigiHostSocket(args.to, args.bind or _default_bind(args.to)) as sock:
+        # Without --bind the socket picks loopback for an IG on loopback, every interface else.
+        with CigiHostSocket(args.to, args.bind) as sock:
             sender = _Sender(args, client, sock, state)
             if not args.json:
                 host, port = sock.address
