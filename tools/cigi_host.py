@@ -37,8 +37,15 @@ from pathlib import Path
 from typing import Any
 
 from wxsky.errors import ConfigError
-from wxsky.inputs.cigi_link import TICKS_PER_S, Address, CigiHostSocket, parse_udp
-from wxsky.protocols.cigi import ByteOrder, CigiDatagram, Packet, encode_datagram, make
+from wxsky.inputs.cigi_link import Address, CigiHostSocket, parse_udp
+from wxsky.protocols.cigi import (
+    ByteOrder,
+    CigiDatagram,
+    Packet,
+    encode_datagram,
+    make,
+    timestamp_10us,
+)
 
 TOOLS = str(Path(__file__).resolve().parent)
 if TOOLS not in sys.path:  # the sibling tools, when this is loaded as a module
@@ -96,7 +103,7 @@ class HostLink:
                 ig_mode=1,
                 timestamp_valid=1,
                 host_frame_number=self.host_frame & 0xFFFF_FFFF,
-                timestamp_10us=int(time.monotonic() * TICKS_PER_S) & 0xFFFF_FFFF,
+                timestamp_10us=timestamp_10us(time.monotonic()),
                 last_ig_frame_number=self.sofs[-1].ig_frame if self.sofs else 0,
             )
             data = encode_datagram([lead, *packets], self.byte_order)

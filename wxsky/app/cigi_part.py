@@ -28,7 +28,7 @@ from wxsky.inputs.cigi_link import (
 )
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog
-from wxsky.protocols.cigi import Packet
+from wxsky.protocols.cigi import ByteOrder, Packet
 from wxsky.protocols.cigi_eye import Eye
 from wxsky.protocols.cigi_session import responses
 from wxsky.protocols.cigi_source import SourceFrame, host_message
@@ -76,7 +76,7 @@ class CigiPart:
             )
             for spec in dict.fromkeys((*section.listen, *listen))
         ]
-        self._byte_order = "little" if section.send_byte_order == "little" else "big"
+        self._byte_order: ByteOrder = "little" if section.send_byte_order == "little" else "big"
         self._send_period_s = 1.0 / section.send_rate_hz if section.send_rate_hz > 0 else 0.0
         self._senders = [
             _Sender(CigiHostSocket(parse_udp(spec, "--cigi-send")), spec)
@@ -210,7 +210,7 @@ class _Sender:
     def send(
         self,
         state: WeatherState,
-        byte_order: str,
+        byte_order: ByteOrder,
         now: float,
         stations: Sequence[StationWeather] = (),
         region_slots: int = 0,
@@ -218,7 +218,7 @@ class _Sender:
         self.frame = self.frame.next()
         message = host_message(state, self.frame, stations, region_slots)
         try:
-            self.sock.send(message, "little" if byte_order == "little" else "big")
+            self.sock.send(message, byte_order)
         except OSError as exc:
             self.send_errors += 1
             self.stats.error(f"send to {self.sock.to}: {exc}")

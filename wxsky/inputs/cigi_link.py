@@ -39,6 +39,7 @@ from wxsky.protocols.cigi import (
     decode_datagram,
     encode_datagram,
     make,
+    timestamp_10us,
 )
 from wxsky.protocols.cigi_eye import Eye, eye
 from wxsky.protocols.cigi_session import Absorbed, HostState, absorb
@@ -52,7 +53,6 @@ MAX_DATAGRAM = 65_535
 # the 1472-byte UDP payload of an Ethernet frame, so no host sees a fragmented reply.
 MAX_REPLY_BYTES = 1400
 MAX_PENDING_RESPONSES = 256  # answers waiting for the next frame; more are dropped, counted
-TICKS_PER_S = 100_000  # CIGI timestamps count 10 µs
 Address = tuple[str, int]
 
 
@@ -85,10 +85,6 @@ def parse_networks(
         except ValueError:
             raise ConfigError(f"cigi.allow_from: {item!r} is not an address or network") from None
     return tuple(out)
-
-
-def _timestamp() -> int:
-    return int(time.monotonic() * TICKS_PER_S) & 0xFFFF_FFFF
 
 
 class CigiHandler(Protocol):
@@ -174,7 +170,6 @@ class CigiIg(asyncio.DatagramProtocol):
         source: Address = (str(addr[0]), int(addr[1]))
         if not self._allowed(source[0]):
             self._drop("not_allowed", f"datagram from {source[0]}:{source[1]}, not in allow_from")
-            self.refresh_detail()
             return
         decoded = decode_datagram(data)
         for problem in decoded.problems:
@@ -187,14 +182,12 @@ class CigiIg(asyncio.DatagramProtocol):
         if decoded.refused or decoded.direction != "host_to_ig":
             if not decoded.refused:
                 self._drop("wrong_direction", f"IG→host message from {source[0]}:{source[1]}")
-            self.refresh_detail()
             return
         try:
             self._take(decoded, source)
         except Exception as exc:  # a wxsky defect: the host's datagram must not end the daemon
             log.debug("CIGI datagram from %s", source, exc_info=True)
             self._drop("internal_error", f"datagram from {source[0]}:{source[1]}: {exc!r}")
-        self.refresh_detail()
 
     def _allowed(self, host: str) -> bool:
         nets = self.settings.allow_from
@@ -230,7 +223,7 @@ class CigiIg(asyncio.DatagramProtocol):
         view = eye(self.state)
         if done.camera_changed and view is not None:
             h.cigi_camera(view)
-        if done.weather_changed or (done.camera_changed and self.state.regions):
+        if done.weather_changed:
             self._weather(view)
         if done.requests:
             answers = h.cigi_answers(done.requests)
@@ -240,14 +233,14 @@ class CigiIg(asyncio.DatagramProtocol):
             self._pending += answers[: max(0, room)]
 
     def _weather(self, view: Eye | None) -> None:
-        """The host's weather at the ownship (or at no place before it has one), to the
-        daemon when it differs from what was sent last."""
-        own = self.state.ownship
-        lat, lon, alt = (own.lat_deg, own.lon_deg, own.alt_m) if own else (0.0, 0.0, 0.0)
-        if view is not None:
-            lat, lon, alt = view.lat_deg, view.lon_deg, view.alt_m
-        patch = weather_patch(self.state, lat, lon, alt) if own or not self.state.regions else None
-        if patch is not None and patch != self._patch:
+        """The host's weather at the rendered view's eye, to the daemon when it differs from
+        what was sent last. Before the host placed its ownship only a host without regions
+        has weather that holds anywhere."""
+        if view is None and self.state.regions:
+            return
+        lat, lon, alt = (view.lat_deg, view.lon_deg, view.alt_m) if view else (0.0, 0.0, 0.0)
+        patch = weather_patch(self.state, lat, lon, alt)
+        if patch != self._patch:
             self._patch = patch
             self._handler.cigi_weather(patch)
 
@@ -266,7 +259,7 @@ class CigiIg(asyncio.DatagramProtocol):
             ig_mode=state.ig_mode,
             timestamp_valid=1,
             ig_frame_number=ig_frame & 0xFFFF_FFFF,
-            timestamp_10us=_timestamp(),
+            timestamp_10us=timestamp_10us(time.monotonic()),
             last_host_frame_number=(host_frame or 0) & 0xFFFF_FFFF,
         )
         pending, self._pending = self._pending, []
@@ -279,14 +272,13 @@ class CigiIg(asyncio.DatagramProtocol):
                 return
         self._sof_sent += 1
         self._responses_sent += len(pending)
-        if self._sof_sent % 30 == 1:
-            self.refresh_detail()
 
     @property
     def last_host_frame(self) -> int | None:
         return self.state.host_frame
 
     def refresh_detail(self) -> None:
+        """Bring `stats.detail` up to date (status asks for it; nothing per datagram)."""
         s = self.state
         self.stats.detail = {
             "host_address": None

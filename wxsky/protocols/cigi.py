@@ -44,6 +44,7 @@ ByteOrder = Literal["big", "little"]
 Value = int | float
 
 F32_MAX = struct.unpack(">f", b"\x7f\x7f\xff\xff")[0]
+TICKS_PER_S = 100_000  # CIGI timestamps count 10 µs
 MAX_PROBLEMS = 16  # messages kept per datagram; the counts cover every problem
 
 # Reason name -> what happens to the bytes. The names are status counters: keep them stable.
@@ -174,6 +175,11 @@ class Packet:
     def __repr__(self) -> str:
         fields = ", ".join(f"{k}={v!r}" for k, v in self.as_dict().items())
         return f"Packet({self.key}, {fields})"
+
+
+def timestamp_10us(seconds: float) -> int:
+    """A CIGI timestamp (IG Control, Start of Frame): 10 µs ticks, wrapping at 2**32."""
+    return int(seconds * TICKS_PER_S) & 0xFFFF_FFFF
 
 
 def make(key: str, **values: Value) -> Packet:
@@ -443,4 +449,5 @@ __all__ = [
     "encode_packet",
     "make",
     "reasons_markdown",
+    "timestamp_10us",
 ]

@@ -206,17 +206,19 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
                     float(p["pitch_deg"]),
                     float(p["yaw_deg"]),
                 )
-                camera = camera or own != s.ownship
-                # The ownship's place decides the regional and fog weather.
-                weather = weather or bool(regions) or (None, FOG_LAYER) in layers
-                s = dataclasses.replace(s, ownship=own)
+                if own != s.ownship:
+                    camera = True
+                    weather = weather or _placed_weather(layers, regions)
+                    s = dataclasses.replace(s, ownship=own)
         elif key == "view_control":
             if p["view_id"] != view_id or p["entity_id"] != 0:
                 ignored["other_view"] += 1
             else:
                 view = _view_offset(p)
-                camera = camera or view != s.view
-                s = dataclasses.replace(s, view=view)
+                if view != s.view:
+                    camera = True
+                    weather = weather or _placed_weather(layers, regions)
+                    s = dataclasses.replace(s, view=view)
         elif key == "view_definition":
             if p["view_id"] != view_id:
                 ignored["other_view"] += 1
@@ -313,6 +315,13 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
         tuple(dropped),
         MappingProxyType(dict(ignored)),
     )
+
+
+def _placed_weather(
+    layers: Mapping[tuple[int | None, int], Layer], regions: Mapping[int, Region]
+) -> bool:
+    """The host's weather depends on where the eye is: regions and the fog layer."""
+    return bool(regions) or (None, FOG_LAYER) in layers
 
 
 # --- checks: what the weather can hold --------------------------------------------------------

@@ -14,16 +14,15 @@ that draws regional weather shows each station's sky near it. Pure.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
-from wxsky.protocols.cigi import CigiDatagram, Packet, make
+from wxsky.protocols.cigi import CigiDatagram, Packet, make, timestamp_10us
 from wxsky.weather.atmosphere import humidity_at, temperature_at
-from wxsky.weather.state import CloudLayer, PrecipKind, PrecipLayer, WeatherState
+from wxsky.weather.state import CloudLayer, PrecipKind, PrecipLayer, WeatherState, dir_from_deg
 from wxsky.weather.stations import StationWeather, distance_m
 
 CLOUD_LAYER_IDS = (1, 2, 3)
@@ -85,7 +84,7 @@ def host_message(
             ig_mode=1,
             timestamp_valid=1,
             host_frame_number=frame.number,
-            timestamp_10us=int(time.monotonic() * 100_000) & 0xFFFF_FFFF,
+            timestamp_10us=timestamp_10us(time.monotonic()),
             last_ig_frame_number=frame.last_ig_frame or 0,
         ),
         make(
@@ -166,7 +165,7 @@ def cloud_packets(
                 base_elevation_m=lay.base_m,
                 thickness_m=lay.thickness_m,
                 wind_speed_mps=(ve * ve + vn * vn) ** 0.5,
-                wind_dir_deg=_from_deg(ve, vn),
+                wind_dir_deg=dir_from_deg(ve, vn) if ve or vn else 0.0,
                 pressure_hpa=state.qnh_hpa,
                 **scope,
             )
@@ -244,10 +243,3 @@ def precipitation(state: WeatherState) -> tuple[PrecipLayer, ...]:
                     state.visibility_m,
                 )
     return tuple(out.values())
-
-
-def _from_deg(east: float, north: float) -> float:
-    """The direction a wind of velocity (east, north) blows from, 0..360."""
-    if east == 0.0 and north == 0.0:
-        return 0.0
-    return (math.degrees(math.atan2(-east, -north))) % 360.0

@@ -31,6 +31,7 @@ from wxsky.weather.state import (
     Source,
     WeatherPatch,
     WindLayer,
+    dir_from_deg,
 )
 
 
@@ -168,8 +169,7 @@ def _blend_wind(g: Layer | None, r: Layer | None, w: float) -> WindLayer | None:
         north += weight / total * layer.wind_speed_mps * math.cos(to_rad)
         alt += weight / total * (layer.base_m + layer.thickness_m / 2.0)
     speed = math.hypot(east, north)
-    direction = (math.degrees(math.atan2(east, north)) + 180.0) % 360.0
-    return _wind(alt, speed, direction)
+    return _wind(alt, speed, dir_from_deg(east, north))
 
 
 def _wind(alt_m: float, speed_mps: float, dir_deg: float) -> WindLayer:

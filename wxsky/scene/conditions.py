@@ -17,7 +17,7 @@ from wxsky.scene.formation import layer_block
 from wxsky.scene.gather import Drift, blocks_within
 from wxsky.scene.in_cloud import in_cloud, sprite_depths
 from wxsky.weather.atmosphere import PointWeather, air_at
-from wxsky.weather.state import CloudType, WeatherState
+from wxsky.weather.state import CloudType, WeatherState, dir_from_deg
 
 # Liquid (or ice) water in the dense part of each kind of cloud, g/m³: typical figures of
 # the cloud-physics literature (cumulus 0.3-1, cumulonimbus up to 2-3, stratiform 0.1-0.5,
@@ -74,7 +74,7 @@ def conditions_at(
     inside = in_cloud(SpriteBatch.concat(batches), point_m, state.visibility_m)
     ve, vn = state.wind_at(alt)
     speed = float(np.hypot(ve, vn))
-    direction = float(np.degrees(np.arctan2(-ve, -vn)) % 360.0) if speed > 0.0 else 0.0
+    direction = dir_from_deg(ve, vn) if speed > 0.0 else 0.0
     return PointWeather(
         temperature_c=temperature,
         humidity_pct=100.0

@@ -177,6 +177,13 @@ class WindLayer:
         return (self.speed_mps * math.sin(to_rad), self.speed_mps * math.cos(to_rad))
 
 
+def dir_from_deg(east_mps: float, north_mps: float) -> float:
+    """The direction (0..360, true) a wind of this (east, north) velocity blows from: the
+    inverse of `WindLayer.velocity_mps`. The velocity points where the air goes; the wind is
+    named for where it comes from."""
+    return (math.degrees(math.atan2(east_mps, north_mps)) + 180.0) % 360.0
+
+
 @dataclass(frozen=True)
 class Provenance:
     """The source of each top-level field of a WeatherState."""

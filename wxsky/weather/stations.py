@@ -25,7 +25,14 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
-from wxsky.weather.state import MAX_LAYERS, CloudLayer, Source, WeatherPatch, WindLayer
+from wxsky.weather.state import (
+    MAX_LAYERS,
+    CloudLayer,
+    Source,
+    WeatherPatch,
+    WindLayer,
+    dir_from_deg,
+)
 
 EARTH_RADIUS_M = 6_371_000.0
 LAYER_MATCH_M = 600.0  # layers of one type closer than this are the same layer
@@ -145,11 +152,7 @@ def _blend_wind(
     north = sum(layer.velocity_mps()[1] * w for layer, w in known) / total
     speed = math.hypot(east, north)
     nearest_layer = known[0][0]
-    direction = (
-        nearest_layer.dir_from_deg
-        if speed < 0.05
-        else (math.degrees(math.atan2(east, north)) + 180.0) % 360.0
-    )
+    direction = nearest_layer.dir_from_deg if speed < 0.05 else dir_from_deg(east, north)
     return (
         WindLayer(
             alt_m=sum(layer.alt_m * w for layer, w in known) / total,

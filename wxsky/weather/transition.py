@@ -17,7 +17,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from wxsky.weather.state import MAX_LAYERS, CloudLayer, WeatherState, WindLayer
+from wxsky.weather.state import MAX_LAYERS, CloudLayer, WeatherState, WindLayer, dir_from_deg
 
 MIN_THICKNESS_M = 10.0
 
@@ -161,7 +161,7 @@ def _step_wind(
             ve, vn = ge, gn
         speed = math.hypot(ve, vn)
         # Below a few cm/s the direction is noise; keep the one the wind is turning to.
-        direction = goal.dir_from_deg if speed < 0.05 else _dir_from(ve, vn)
+        direction = goal.dir_from_deg if speed < 0.05 else dir_from_deg(ve, vn)
         if (ve, vn) == (ge, gn):
             speed, direction = goal.speed_mps, goal.dir_from_deg
         gust_now = _gust_at(applied.wind, goal.alt_m)
@@ -175,11 +175,6 @@ def _step_wind(
             )
         )
     return tuple(out)
-
-
-def _dir_from(east_mps: float, north_mps: float) -> float:
-    # The velocity points where the air goes; the wind is named for where it comes from.
-    return (math.degrees(math.atan2(east_mps, north_mps)) + 180.0) % 360.0
 
 
 def _gust_at(wind: tuple[WindLayer, ...], alt_m: float) -> float:
