@@ -75,6 +75,38 @@ def test_the_command_prints_json(capsys: pytest.CaptureFixture[str], tmp_path: P
     assert out["frames"] == 3 and out["size"] == [64, 36] and out["path"] == str(path)
 
 
+@pytest.mark.gl
+def test_profile_counts_every_pass_and_its_pixels(capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_bench(
+        STATE, SETTINGS, straight_and_level(), 10, "ring", (96, 54), profile=True, ring_fade_s=0.1
+    )
+    rows = {r["pass"]: r for r in result.passes}
+    # The sky writes every pixel once a frame; the near layer's upsample writes all of it.
+    assert rows["sky"]["calls_per_frame"] == 1.0
+    assert rows["sky"]["mpix_per_call"] == pytest.approx(96 * 54 / 1e6)
+    assert rows["upsample near_reduced"]["mpix_per_call"] == pytest.approx(96 * 54 / 1e6)
+    # At most eight impostors in ten frames (one with no cloud in it draws nothing), each
+    # writing some of its 64 x 64 texels.
+    assert 0.0 < rows["impostor"]["calls_per_frame"] <= 0.8
+    assert 0.0 < rows["impostor"]["mpix_per_call"] <= 64 * 64 / 1e6
+    assert set(result.fill_limits) == {
+        "untextured",
+        "bilinear",
+        "bilinear_blend",
+        "trilinear_blend",
+    }
+    # Nothing fills faster than flat colour.
+    assert max(result.fill_limits.values()) == result.fill_limits["untextured"]
+    for row in result.passes:
+        assert row["limit_mpix_per_s"] == result.fill_limits[str(row["limit"])]
+        assert float(row["ratio"]) == pytest.approx(
+            float(row["mpix_per_s"]) / float(row["limit_mpix_per_s"])
+        )
+    table = result.table()
+    assert "upsample near_reduced" in table and "ratio" in table
+    assert result.to_dict()["passes"] == result.passes
+
+
 # No GL: the path is read before anything is drawn.
 def test_a_bad_camera_path_is_a_one_line_error(
     capsys: pytest.CaptureFixture[str], tmp_path: Path

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
@@ -391,3 +392,81 @@ def test_each_frame_compiles_in_only_the_features_it_shows() -> None:
         sky_textures.frame_uniforms(away, noon, sky_textures.SkyFeatures(False, False, False))
     )
     assert names == set()
+
+
+# -- split passes ---------------------------------------------------------------------------
+
+
+@pytest.fixture
+def one_pass_renderer(renderer: Renderer) -> Iterator[Renderer]:
+    # In the session's context: GL calls go to the context current on the thread.
+    with Renderer(ring_texture_px=renderer.ring_px, ctx=renderer.ctx, split_sky=False) as r:
+        yield r
+
+
+@pytest.mark.parametrize(
+    ("preset", "when", "where"),
+    [
+        ("clear", MOON_NIGHT, "moon-at-edge"),  # stars, and the moon cut by the picture's side
+        ("clear", datetime(2026, 6, 21, 14, 0, tzinfo=UTC), "moon-centre"),  # a day moon
+        ("fair-cumulus", datetime(2026, 6, 21, 13, 0, tzinfo=UTC), "rolled"),  # distant band
+        ("high-cirrus", datetime(2026, 5, 20, 10, 0, tzinfo=UTC), "moon-centre"),  # high cover
+        ("high-cirrus", datetime(2026, 5, 20, 10, 0, tzinfo=UTC), "down"),
+    ],
+)
+def test_sky_drawn_in_parts_equals_one_pass(
+    renderer: Renderer,
+    one_pass_renderer: Renderer,
+    preset: str,
+    when: datetime,
+    where: str,
+) -> None:
+    """The sky without moon and dome over the picture, then each over its own rectangle, is
+    the picture that one pass with every feature makes: the rectangles miss no pixel."""
+    state = _state(preset, when)
+    sky = sky_params(state)
+    moon = sky.moon
+    if where == "moon-at-edge":  # the disc across the right edge of a 20° view
+        turn_deg = math.degrees(
+            math.atan(math.tan(math.radians(10.0)) / math.cos(math.radians(moon.elevation_deg)))
+        )
+        cam = _camera(state, moon.azimuth_deg - turn_deg, moon.elevation_deg, fov_deg=20.0)
+    elif where == "moon-centre":
+        cam = _camera(state, moon.azimuth_deg, moon.elevation_deg, fov_deg=30.0)
+    elif where == "rolled":
+        cam = dataclasses.replace(_camera(state, 120.0, 2.0), roll_deg=25.0)
+    else:
+        cam = _camera(state, 200.0, -60.0)
+    feats = sky_textures.features(cam, sky)
+    assert feats.moon or not where.startswith("moon")
+    assert feats.dome == (preset != "clear")
+    split = take_snapshot(state, cam, SETTINGS, renderer).layers["sky"].astype(int)
+    whole = take_snapshot(state, cam, SETTINGS, one_pass_renderer).layers["sky"].astype(int)
+    assert np.abs(split - whole).max() == 0
+    if where == "moon-at-edge":
+        rect = sky_textures.moon_rect_ndc(cam, sky)
+        assert rect is not None and rect[2] == 1.0 and rect[0] > 0.5  # only the edge
+
+
+def test_dome_rectangle_is_the_band_above_the_horizon() -> None:
+    """Without high cover the dome shows only in a band a few degrees above the horizon: a
+    level camera redraws that strip, not the picture."""
+    state = _state("fair-cumulus", datetime(2026, 6, 21, 13, 0, tzinfo=UTC))
+    sky = sky_params(state)
+    cam = dataclasses.replace(_camera(state, 90.0, 0.0), position_m=(0.0, 0.0, 1500.0))
+    rect = sky_textures.dome_rect_ndc(cam, sky)
+    assert rect is not None
+    x0, y0, x1, y1 = rect
+    assert (x0, x1) == (-1.0, 1.0)
+    # NDC y runs down the picture: the horizon is the middle row, the band just above it,
+    # reaching highest at the picture's sides (where z = h at y = -h·√(1 + tx²) / (ty·√(1 - h²))).
+    h = sky_textures.dome_band(sky)[1]
+    band_top = (
+        -h * math.hypot(1.0, cam.tan_half_fov_x) / (cam.tan_half_fov_y * math.sqrt(1 - h * h))
+    )
+    margin = 2.0 * 2.0 / (cam.height_px / 10.0)  # two grid cells
+    assert band_top - margin <= y0 <= band_top
+    assert 0.0 <= y1 <= margin
+    # Looking down from above the band's reach shows none of it.
+    down = dataclasses.replace(cam, pitch_deg=-60.0)
+    assert sky_textures.dome_rect_ndc(down, sky) is None

@@ -81,6 +81,10 @@ class BenchResult:
     # any channel of the near layer that the new order makes against the old one.
     order_changed: list[bool] = field(default_factory=list)
     order_diff: list[int] = field(default_factory=list)
+    # With profile: one row per renderer pass (render.profile.PassProfiler.rows) and the fill
+    # limits, in Mpix/s, measured on this machine at the frame's size.
+    passes: list[dict[str, Any]] = field(default_factory=list)
+    fill_limits: dict[str, float] = field(default_factory=dict)
 
     @property
     def frames(self) -> int:
@@ -116,6 +120,11 @@ class BenchResult:
                     }
                 }
                 if self.order_diff
+                else {}
+            ),
+            **(
+                {"passes": self.passes, "fill_limits_mpix_per_s": self.fill_limits}
+                if self.passes
                 else {}
             ),
         }
@@ -154,7 +163,25 @@ class BenchResult:
                 f"/255; frames over 8/255: {o['frames_over_8']}"
             )
         lines.append(f"startup {self.startup_s:.2f} s, {self.frames} frames {self.frames_s:.2f} s")
+        if self.passes:
+            lines.extend(self.pass_table())
         return "\n".join(lines)
+
+    def pass_table(self) -> list[str]:
+        limits = ", ".join(f"{k} {v:.0f}" for k, v in self.fill_limits.items())
+        lines = [
+            "",
+            f"passes (each timed to an idle GPU; fill limits here, Mpix/s: {limits})",
+            f"{'pass':<22}{'calls/frame':>12}{'median ms':>11}{'ms/frame':>10}"
+            f"{'Mpix/call':>11}{'Mpix/s':>9}{'limit':>17}{'ratio':>7}",
+        ]
+        for r in self.passes:
+            lines.append(
+                f"{r['pass']:<22}{r['calls_per_frame']:>12.2f}{r['median_ms']:>11.2f}"
+                f"{r['total_ms_per_frame']:>10.2f}{r['mpix_per_call']:>11.3f}"
+                f"{r['mpix_per_s']:>9.0f}{r['limit']:>17}{r['ratio']:>7.2f}"
+            )
+        return lines
 
 
 def run_bench(
@@ -172,11 +199,13 @@ def run_bench(
     trace: TraceWriter | None = None,
     started_s: float | None = None,
     check_order: bool = False,
+    profile: bool = False,
 ) -> BenchResult:
     """Render `frames` frames along `path`; `started_s`: the perf_counter reading the process's
     startup is counted from (default: now). `check_order`: also measure what each change in the
     near sprites' back-to-front order does to the picture (see `order_change`), outside the
-    timed stages."""
+    timed stages. `profile`: also time and count the fragments of every renderer pass (which
+    makes the stages slower: each pass then waits for the GPU) and measure the fill limits."""
     from wxsky.render.context import describe
     from wxsky.render.renderer import Renderer
 
@@ -226,6 +255,7 @@ def run_bench(
             stage_s={name: [] for name in STAGES},
         )
         previous_keys: npt.NDArray[np.uint64] | None = None
+        profiler = renderer.start_profile() if profile else None
         loop_start = time.perf_counter()
         for k in range(frames):
             engine.set_camera(camera_at(k * dt_s))
@@ -243,6 +273,8 @@ def run_bench(
             with times.stage("publish"):
                 publish_plan(renderer, writer, plan, k + 1, settings.ring_texture_px)
             result.frame_s.append(time.perf_counter() - t0)
+            if profiler is not None:
+                profiler.frame_done()
             for name in STAGES:
                 result.stage_s[name].append(times.frame.get(name, 0.0))
             result.sprites.append(len(plan.frame.near))
@@ -260,6 +292,11 @@ def run_bench(
                 previous_keys = keys
         result.frames_s = time.perf_counter() - loop_start
         result.build_s = list(build_s)
+        if profiler is not None:
+            from wxsky.render.profile import measure_fill_limits
+
+            result.fill_limits = measure_fill_limits(renderer.ctx, size, renderer.finish)
+            result.passes = profiler.rows(result.fill_limits)
     return result
 
 

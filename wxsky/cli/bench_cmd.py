@@ -76,6 +76,12 @@ def add_commands(sub: Subparsers) -> None:
         action="store_true",
         help="also measure how much each change in the near sprites' order changes a pixel",
     )
+    bench.add_argument(
+        "--profile",
+        action="store_true",
+        help="also time every renderer pass, count the pixels it writes and compare its fill "
+        "rate with this machine's limits (the passes then wait for the GPU one by one)",
+    )
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.add_argument("--trace", type=Path, metavar="FILE", help="write ring events there")
     bench.set_defaults(func=_cmd_bench)
@@ -123,6 +129,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             trace=trace,
             started_s=STARTED_S,
             check_order=args.check_order,
+            profile=args.profile,
         )
     finally:
         if trace is not None:

@@ -6,6 +6,8 @@ and must be used from the thread that created it.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -17,6 +19,7 @@ import numpy.typing as npt
 from wxsky.errors import RenderError
 from wxsky.render import sky_textures
 from wxsky.render.context import create_context, gil_free_finish
+from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import load_sheet, support_radii
 from wxsky.scene.camera import Camera
@@ -42,6 +45,7 @@ _INSTANCE_ATTRS = ("in_centre", "in_size", "in_rotation", "in_texture", "in_rgba
 
 @dataclass
 class _Target:
+    name: str
     texture: moderngl.Texture
     fbo: moderngl.Framebuffer
 
@@ -63,12 +67,16 @@ class Renderer:
         ring_texture_px: int = 256,
         ctx: moderngl.Context | None = None,
         near_scale: float = NEAR_SCALE,
+        split_sky: bool = True,
     ) -> None:
+        """`split_sky=False` draws every sky feature a frame shows over the whole picture in
+        one pass: the slow reference the split passes are tested against."""
         self._own_ctx = ctx is None
         self.ctx = ctx if ctx is not None else create_context()
         self._closed = False
         self.ring_px = ring_texture_px
         self.near_scale = near_scale
+        self.split_sky = split_sky
         self.shaders = ShaderLibrary(self.ctx)
         defines = {
             "SHEET_CELLS": str(SHEET_CELLS),
@@ -105,6 +113,7 @@ class Renderer:
         # after each draw instead. A GPU works asynchronously; there only the read-back waits.
         renderer_name = str(self.ctx.info.get("GL_RENDERER", "")).lower()
         self._finish_each_draw = any(cpu in renderer_name for cpu in ("llvmpipe", "softpipe"))
+        self._profiler: PassProfiler | None = None
         self._check("initialising the renderer")
 
     # -- public API -------------------------------------------------------------------
@@ -188,6 +197,13 @@ class Renderer:
             )
         self._check("rendering the impostor ring")
 
+    def start_profile(self) -> PassProfiler:
+        """Time and count the fragments of every pass from now on (each pass then waits for
+        the GPU: a profiled frame is slower than a plain one)."""
+        if self._profiler is None:
+            self._profiler = PassProfiler(self.ctx, self._finish)
+        return self._profiler
+
     def finish(self) -> None:
         """Wait for every GL command issued so far (GIL-free): a benchmark's stage ends here."""
         self._finish()
@@ -238,24 +254,55 @@ class Renderer:
     # -- passes -----------------------------------------------------------------------
 
     def _draw_sky(self, name: str, cam: Camera, sky: SkyParams) -> None:
+        """The sky without the moon and dome over the whole picture, then the variant with
+        the dome over where it can show, and the one with everything over the moon's disc
+        (sky.glsl: outside a feature the variants agree bit for bit)."""
         target = self._target(name, cam.width_px, cam.height_px)
         target.fbo.use()
         self.ctx.disable(moderngl.BLEND)
+        feats = sky_textures.features(cam, sky)
+        if not self.split_sky:
+            self._sky_draw("sky", cam, sky, feats, sky_textures.FULL_RECT)
+            return
+        plain = dataclasses.replace(feats, moon=False, dome=False)
+        self._sky_draw("sky", cam, sky, plain, sky_textures.FULL_RECT)
+        if feats.dome:
+            rect = sky_textures.dome_rect_ndc(cam, sky)
+            if rect is not None:
+                self._sky_draw("sky dome", cam, sky, dataclasses.replace(feats, moon=False), rect)
+        if feats.moon:
+            rect = sky_textures.moon_rect_ndc(cam, sky)
+            if rect is not None:
+                self._sky_draw("sky moon", cam, sky, feats, rect)
+
+    def _sky_draw(
+        self,
+        pass_name: str,
+        cam: Camera,
+        sky: SkyParams,
+        feats: sky_textures.SkyFeatures,
+        rect: sky_textures.Rect,
+    ) -> None:
         right, up, fwd = cam.basis()
-        prog, vao, uniforms = self._sky.prepare(cam, sky)
-        _set(prog, "u_right", tuple(right))
-        _set(prog, "u_up", tuple(up))
-        _set(prog, "u_forward", tuple(fwd))
-        _set(prog, "u_tan_half_fov", (cam.tan_half_fov_x, cam.tan_half_fov_y))
-        _set(prog, "u_sun_dir", sky.sun.direction_enu)
-        _set(prog, "u_zenith", sky.zenith_rgb)
-        _set(prog, "u_horizon", sky.horizon_rgb)
-        _set(prog, "u_ground", sky.ground_rgb)
-        _set(prog, "u_sun_rgb", sky.sun_rgb)
-        _set(prog, "u_sun_cos_radius", math.cos(math.radians(SUN_RADIUS_DEG)))
-        for uniform, value in uniforms.items():
+        prog, vao, uniforms = self._sky.prepare(cam, sky, feats)
+        camera = {
+            "u_rect": rect,
+            "u_target_size": (float(cam.width_px), float(cam.height_px)),
+            "u_right": tuple(right),
+            "u_up": tuple(up),
+            "u_forward": tuple(fwd),
+            "u_tan_half_fov": (cam.tan_half_fov_x, cam.tan_half_fov_y),
+            "u_sun_dir": sky.sun.direction_enu,
+            "u_zenith": sky.zenith_rgb,
+            "u_horizon": sky.horizon_rgb,
+            "u_ground": sky.ground_rgb,
+            "u_sun_rgb": sky.sun_rgb,
+            "u_sun_cos_radius": math.cos(math.radians(SUN_RADIUS_DEG)),
+        }
+        for uniform, value in (camera | uniforms).items():
             _set(prog, uniform, value)
-        vao.render(moderngl.TRIANGLES, vertices=3)
+        with self._pass(pass_name, "sky"):
+            vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
         if self._finish_each_draw:
             self._finish()
 
@@ -267,7 +314,8 @@ class Renderer:
         source.texture.use(0)
         _set(self._upsample_prog, "u_source", 0)
         _set(self._upsample_prog, "u_target_size", (float(dest.size[0]), float(dest.size[1])))
-        self._upsample_vao.render(moderngl.TRIANGLES, vertices=3)
+        with self._pass(f"upsample {source.name}", "upsample"):
+            self._upsample_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def _draw_sprites(
         self,
@@ -307,7 +355,8 @@ class Renderer:
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
-        self._sprite_vao.render(moderngl.TRIANGLE_STRIP, vertices=8, instances=n)
+        with self._pass(_sprite_pass_name(target.name), "sprites"):
+            self._sprite_vao.render(moderngl.TRIANGLE_STRIP, vertices=8, instances=n)
         self.ctx.disable(moderngl.BLEND)
         # Wait for this draw here, GIL-free, rather than inside the next GL call with the GIL
         # held (see gil_free_finish).
@@ -333,9 +382,14 @@ class Renderer:
             self._unbind()
             target.release()
         tex = self.ctx.texture((width, height), 4)
-        target = _Target(tex, self.ctx.framebuffer(color_attachments=[tex]))
+        target = _Target(name, tex, self.ctx.framebuffer(color_attachments=[tex]))
         self._targets[name] = target
         return target
+
+    def _pass(self, name: str, kind: str) -> contextlib.AbstractContextManager[None]:
+        if self._profiler is None:
+            return contextlib.nullcontext()
+        return self._profiler.measure(name, kind)
 
     def _unbind(self) -> None:
         # moderngl re-binds the current framebuffer after creating a new one: if that is one we
@@ -346,6 +400,12 @@ class Renderer:
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"GL error while {what}: {err}")
+
+
+def _sprite_pass_name(target: str) -> str:
+    if target.startswith("ring_"):
+        return "impostor"
+    return target.removesuffix("_reduced")
 
 
 def _octagon_strip() -> npt.NDArray[np.float32]:

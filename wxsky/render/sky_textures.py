@@ -60,6 +60,8 @@ from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
+Rect = tuple[float, float, float, float]  # NDC x0, y0, x1, y1
+FULL_RECT: Rect = (-1.0, -1.0, 1.0, 1.0)
 
 STAR_JITTER = 0.3  # greatest offset of a star from its cell centre, in cells
 # A flicker rate of G = k/255 makes k/255 * 2.55 = k/100 cycles per second, so every star's
@@ -191,11 +193,11 @@ class SkyPass:
         self.sunset.repeat_x = self.sunset.repeat_y = False
 
     def prepare(
-        self, cam: Camera, sky: SkyParams
+        self, cam: Camera, sky: SkyParams, feats: SkyFeatures
     ) -> tuple[moderngl.Program, moderngl.VertexArray, dict[str, object]]:
-        """The program and vertex array for this frame, with the textures bound, and the
-        uniforms it needs beyond the camera, gradient and sun."""
-        feats = features(cam, sky)
+        """The program and vertex array that draw `feats` (some of this frame's `features`),
+        with the textures bound, and the uniforms they need beyond the camera, gradient and
+        sun."""
         variant = self._variants.get(feats)
         if variant is None:
             prog = self._shaders.program("sky.glsl", shader_defines(feats))
@@ -232,6 +234,90 @@ def features(cam: Camera, sky: SkyParams) -> SkyFeatures:
     return SkyFeatures(stars=sky.stars > 0.0, moon=moon_in_view, dome=dome)
 
 
+def moon_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
+    """The rectangle (NDC x0, y0, x1, y1, y down the picture as the sky shader's quad) that
+    holds every pixel the moon's disc touches, with its anti-aliased edge; the whole picture
+    when the disc is too near the side of the eye to project safely; None when it is out of
+    the picture."""
+    right, up, fwd = cam.basis()
+    moon = np.asarray(sky.moon.direction_enu, np.float64)
+    # Out to where the shader's coverage is zero: the disc plus half a pixel, and a margin.
+    reach_rad = math.radians(sky.moon.angular_radius_deg) + 3.0 * pixel_rad(cam)
+    side = np.cross(moon, fwd)
+    if float(np.dot(side, side)) < 1e-12:
+        side = right
+    side = side / np.linalg.norm(side)
+    other = np.cross(moon, side)
+    angles = np.linspace(0.0, 2.0 * math.pi, 24, endpoint=False)
+    rim = math.cos(reach_rad) * moon + math.sin(reach_rad) * (
+        np.cos(angles)[:, None] * side + np.sin(angles)[:, None] * other
+    )
+    depth = rim @ fwd
+    if float(depth.min()) < 0.05:
+        return FULL_RECT
+    # The circle through 24 points is inside their polygon's bounding box scaled by
+    # 1/cos(7.5°); the pixel margin above covers that and more.
+    x = (rim @ right) / depth / cam.tan_half_fov_x
+    y = -(rim @ up) / depth / cam.tan_half_fov_y
+    pad_x, pad_y = 2.0 / cam.width_px, 2.0 / cam.height_px
+    return _clip_rect(
+        float(x.min()) - pad_x,
+        float(y.min()) - pad_y,
+        float(x.max()) + pad_x,
+        float(y.max()) + pad_y,
+    )
+
+
+def dome_band(sky: SkyParams) -> tuple[float, float]:
+    """sin(elevation) below which the dome's distant band is full, and above which it is gone.
+    The band is full up to a third of the sprites' edge and gone at twice it: a long fade,
+    because the sprites themselves fade out over their last quarter of range."""
+    horizon_deg = sky.dome.horizon_deg
+    return (
+        math.sin(math.radians(0.3 * horizon_deg)),
+        math.sin(math.radians(2.0 * horizon_deg + 0.5)),
+    )
+
+
+def dome_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
+    """The rectangle (as `moon_rect_ndc`) that holds every pixel where the dome can show: above
+    the horizon, and below the top of its distant band unless there is high cover. None when
+    no pixel of the picture is there.
+
+    Elevation across the picture is smooth: it is sampled on a grid of cells about 10 pixels
+    wide, a cell is in when its corners reach into the range, and one cell of margin on every
+    side stands for what lies between the corners."""
+    lo_z = 0.0
+    hi_z = 1.0 if sky.dome.high_cover > 0.0 else dome_band(sky)[1]
+    right, up, fwd = cam.basis()
+    nx = max(2, round(cam.width_px / 10.0) + 1)
+    ny = max(2, round(cam.height_px / 10.0) + 1)
+    xs = np.linspace(-1.0, 1.0, nx)
+    ys = np.linspace(-1.0, 1.0, ny)
+    gx, gy = np.meshgrid(xs * cam.tan_half_fov_x, ys * cam.tan_half_fov_y)
+    ray = fwd + gx[..., None] * right - gy[..., None] * up
+    z = ray[..., 2] / np.linalg.norm(ray, axis=-1)
+    corners = np.stack([z[:-1, :-1], z[:-1, 1:], z[1:, :-1], z[1:, 1:]])
+    inside = (corners.max(axis=0) > lo_z) & (corners.min(axis=0) < hi_z)
+    rows = np.flatnonzero(inside.any(axis=1))
+    cols = np.flatnonzero(inside.any(axis=0))
+    if rows.size == 0:
+        return None
+    return _clip_rect(
+        float(xs[max(cols[0] - 1, 0)]),
+        float(ys[max(rows[0] - 1, 0)]),
+        float(xs[min(cols[-1] + 2, nx - 1)]),
+        float(ys[min(rows[-1] + 2, ny - 1)]),
+    )
+
+
+def _clip_rect(x0: float, y0: float, x1: float, y1: float) -> Rect | None:
+    x0, y0, x1, y1 = max(x0, -1.0), max(y0, -1.0), min(x1, 1.0), min(y1, 1.0)
+    if x0 >= x1 or y0 >= y1:
+        return None
+    return (x0, y0, x1, y1)
+
+
 def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str, object]:
     """The sky pass's uniforms for the night sky, moon and cloud dome, those of the features
     drawn (the camera, gradient and sun ones are set by the renderer)."""
@@ -266,10 +352,7 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
     if feats.dome:
         dome = sky.dome
         frame = dome_frame(sky, cam.position_m[2])
-        # The distant band is full up to a third of the sprites' edge and gone at twice it: a
-        # long fade, because the sprites themselves fade out over their last quarter of range.
-        band_lo = math.sin(math.radians(0.3 * dome.horizon_deg))
-        band_hi = math.sin(math.radians(2.0 * dome.horizon_deg + 0.5))
+        band_lo, band_hi = dome_band(sky)
         out.update(
             {
                 "u_dome_tex": SkyPass.UNITS["u_dome_tex"],

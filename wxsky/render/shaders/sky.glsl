@@ -3,25 +3,29 @@
 // the thin cloud dome for high and distant cover. Full-screen triangle.
 // Needs STAR_FACE_PX, STAR_JITTER, STAR_RATE_SCALE_HZ and the switches SKY_STARS, SKY_MOON,
 // SKY_DOME (wxsky/render/sky_textures.py): llvmpipe runs both sides of every branch under a
-// mask, so a feature a frame does not need is compiled out, not skipped.
+// mask, so a feature a frame does not need is compiled out, not skipped. Where a feature does
+// show, it usually covers a small part of the picture (the moon's disc, the distant cloud
+// band above the horizon): the renderer draws the sky without it over the whole picture, then
+// the variant with it over the rectangle where it can be seen (u_rect). Outside a feature the
+// variants give the same colour, bit for bit, so only cost changes.
 #include "common.glsl"
 
 #if defined VERTEX_SHADER
-out vec2 v_ndc;
+uniform vec4 u_rect;  // NDC x0, y0, x1, y1 of the quad drawn (4 vertices, a strip)
 void main() {
-    vec2 p = vec2(float((gl_VertexID & 1) << 2) - 1.0, float((gl_VertexID & 2) << 1) - 1.0);
-    v_ndc = p;
+    vec2 p = vec2((gl_VertexID & 1) == 0 ? u_rect.x : u_rect.z,
+                  (gl_VertexID & 2) == 0 ? u_rect.y : u_rect.w);
     gl_Position = vec4(p, 0.0, 1.0);
 }
 #endif
 
 #if defined FRAGMENT_SHADER
-in vec2 v_ndc;
 out vec4 f_colour;
 uniform vec3 u_right;
 uniform vec3 u_up;
 uniform vec3 u_forward;
 uniform vec2 u_tan_half_fov;
+uniform vec2 u_target_size;       // pixels
 uniform float u_pixel_rad;
 uniform vec3 u_sun_dir;
 uniform vec3 u_zenith;
@@ -202,9 +206,12 @@ vec4 cloud_dome(vec3 ray) {
 #endif
 
 void main() {
-    // NDC y is flipped with respect to the image (row 0 is the top), as in every projection.
-    vec3 ray = normalize(u_forward + v_ndc.x * u_tan_half_fov.x * u_right
-                         - v_ndc.y * u_tan_half_fov.y * u_up);
+    // From the pixel's own position, not a varying, so that every quad the pixel is drawn
+    // by gives it the same ray to the last bit. NDC y is flipped with respect to the image
+    // (row 0 is the top), as in every projection.
+    vec2 ndc = gl_FragCoord.xy / u_target_size * 2.0 - 1.0;
+    vec3 ray = normalize(u_forward + ndc.x * u_tan_half_fov.x * u_right
+                         - ndc.y * u_tan_half_fov.y * u_up);
     vec3 col = sky_colour(ray, u_sun_dir, u_zenith, u_horizon, u_ground, u_sun_rgb);
 #if SKY_DOME
     vec4 dome = cloud_dome(ray);
