@@ -7,6 +7,7 @@ odd viewports so the centre pixel's ray is exactly the camera's forward vector.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 from collections.abc import Iterator
 from datetime import UTC, datetime
@@ -20,8 +21,9 @@ from sprite_helpers import sprite_batch
 from wxsky.app.snapshot import LAYER_NAMES, take_snapshot
 from wxsky.errors import RenderError
 from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring
+from wxsky.render import renderer as renderer_module
 from wxsky.render import shaders as shaders_mod
-from wxsky.render.renderer import NEAR_SCALE, Renderer
+from wxsky.render.renderer import NEAR_SCALE, Renderer, _mix_runs, turning_round
 from wxsky.render.shaders import ShaderLibrary, shader_source
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import SpriteBatch
@@ -230,6 +232,58 @@ def test_a_flat_bottomed_sprite_seen_from_below_turns_into_the_round_one(
     mid = near(TEX_FLAT_BOTTOM[0], 36.0)[..., 3].sum()
     ends = near(TEX_FLAT_BOTTOM[0], 36.0 - 36.0)[..., 3].sum(), overhead[..., 3].sum()
     assert mid >= 0.95 * min(ends)
+
+
+def test_only_flat_bottomed_sprites_part_way_round_need_the_second_read() -> None:
+    eye = (0.0, 0.0, 1000.0)
+    # Seen at sines of elevation 0.2 (none of the turn), 0.6 (part-way), 0.9 (complete).
+    centres = [(0.0, 1000.0 * math.sqrt(1 - e * e), 1000.0 + 1000.0 * e) for e in (0.2, 0.6, 0.9)]
+    flat = _draw(_sprites(centres, [300.0] * 3, texture=TEX_FLAT_BOTTOM[0]))
+    assert turning_round(flat, eye).tolist() == [False, True, False]
+    fog = _draw(_sprites(centres, [300.0] * 3, texture=TEX_FOG[0]))
+    assert not turning_round(fog, eye).any()
+    # A sprite with its own orientation never turns.
+    fixed = SpriteDraw(flat.sprites, flat.rgba, np.tile(np.float32([0, -1, 0]), (3, 1)))
+    assert not turning_round(fixed, eye).any()
+    runs = _mix_runs(np.array([False, True, True, False, False, True]))
+    assert runs == [(0, 1, False), (1, 3, True), (3, 5, False), (5, 6, True)]
+    assert _mix_runs(np.zeros(4, np.bool_)) == [(0, 4, False)]
+
+
+def test_sprites_drawn_in_runs_match_every_sprite_drawn_with_both_reads(
+    renderer: Renderer, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Flat-bottomed sprites at every angle of the turn, and round ones, overlapping: drawn
+    as runs with one read or two, the picture is the one the two-read shader alone makes."""
+    rng = np.random.default_rng(5)
+    n = 60
+    elevation = rng.uniform(0.0, 1.4, n)
+    azimuth = rng.uniform(-0.4, 0.4, n)
+    dist = rng.uniform(800.0, 3000.0, n)
+    centres = np.stack(
+        [
+            dist * np.cos(elevation) * np.sin(azimuth),
+            dist * np.cos(elevation) * np.cos(azimuth),
+            1000.0 + dist * np.sin(elevation),
+        ],
+        axis=1,
+    )
+    order = np.argsort(-dist)  # back to front
+    textures = np.where(rng.random(n) < 0.7, TEX_FLAT_BOTTOM[0], TEX_FOG[0])
+    batch = sprite_batch(centres[order].tolist(), rng.uniform(200.0, 600.0, n).tolist())
+    batch = dataclasses.replace(batch, texture=textures[order].astype(np.int32))
+    draw = SpriteDraw(batch, rng.uniform(0.3, 1.0, (n, 4)).astype(np.float32))
+    cam = _camera(pitch_deg=40.0, fov_deg=120.0)
+    turning = turning_round(draw, cam.position_m)
+    assert 5 <= turning.sum() <= n - 5  # both kinds, in several runs
+    with _near_scale(renderer, 1.0):
+        renderer.render_frame(FrameScene(cam, _sky(), draw))
+        runs = renderer.read("near").astype(int)
+        monkeypatch.setattr(renderer_module, "_mix_runs", lambda t: [(0, len(t), True)])
+        renderer.render_frame(FrameScene(cam, _sky(), draw))
+        both = renderer.read("near").astype(int)
+    assert runs[..., 3].max() > 200
+    assert np.abs(runs - both).max() <= 1
 
 
 @pytest.mark.parametrize("scale", [1.0, NEAR_SCALE])
@@ -486,8 +540,15 @@ def test_compile_error_names_the_file(renderer: Renderer, shader_dir: Path) -> N
 def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -> None:
     lib = ShaderLibrary(renderer.ctx)
     with pytest.raises(RenderError, match=r"shaders/sprites\.glsl"):
-        lib.program("sprites.glsl")  # needs SHEET_CELLS and the two slots
-    defines = {"SHEET_CELLS": "4", "FLAT_BOTTOM_SLOT": "0", "ROUND_SLOT": "1"}
+        lib.program("sprites.glsl")  # needs SHEET_CELLS, the two slots and the turn
+    defines = {
+        "SHEET_CELLS": "4",
+        "FLAT_BOTTOM_SLOT": "0",
+        "ROUND_SLOT": "1",
+        "ROUND_FROM": "0.45",
+        "ROUND_TO": "0.75",
+        "ROUND_MIX": "1",
+    }
     prog = lib.program("sprites.glsl", defines)
     assert lib.program("sprites.glsl", dict(defines)) is prog  # compiled once
     lib.release()

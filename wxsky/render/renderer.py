@@ -37,10 +37,22 @@ NEAR_SCALE = 0.5
 # The near layer's far band (FrameScene.near_far_count) is drawn no finer than the ring's
 # impostors (ring_px over 45°), unless that would save less than this share of its size.
 FAR_BAND_MAX_SCALE = 0.8
+# A flat-bottomed sprite turns into the round one as the sine of the angle it is seen at from
+# below or above goes from ROUND_FROM to ROUND_TO (sprites.glsl).
+ROUND_FROM = 0.45
+ROUND_TO = 0.75
+# Turns this close to none or complete are drawn as such: at most 1/40 of a colour level.
+ROUND_SNAP = 1e-4
 # centre (3) + size + rotation + texture + rgba (4) + normal (3), float32
 _INSTANCE_FLOATS = 13
-_INSTANCE_FORMAT = "3f f f f 4f 3f/i"
-_INSTANCE_ATTRS = ("in_centre", "in_size", "in_rotation", "in_texture", "in_rgba", "in_normal")
+_INSTANCE_LAYOUT = (
+    ("in_centre", "3f", 0),
+    ("in_size", "f", 3),
+    ("in_rotation", "f", 4),
+    ("in_texture", "f", 5),
+    ("in_rgba", "4f", 6),
+    ("in_normal", "3f", 10),
+)
 
 
 @dataclass
@@ -82,9 +94,15 @@ class Renderer:
             "SHEET_CELLS": str(SHEET_CELLS),
             "FLAT_BOTTOM_SLOT": str(TEX_FLAT_BOTTOM[0]),
             "ROUND_SLOT": str(TEX_FOG[0]),
+            "ROUND_FROM": repr(ROUND_FROM),
+            "ROUND_TO": repr(ROUND_TO),
         }
         self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
-        self._sprite_prog = self.shaders.program("sprites.glsl", defines)
+        # One read of the sheet per fragment, and two for the sprites turning round.
+        self._sprite_progs = {
+            mixing: self.shaders.program("sprites.glsl", defines | {"ROUND_MIX": str(int(mixing))})
+            for mixing in (False, True)
+        }
         self._upsample_prog = self.shaders.program("upsample.glsl")
         levels = load_sheet()  # 512 down to 32, as Wang's sheet
         size = (levels[0].shape[1], levels[0].shape[0])
@@ -97,13 +115,13 @@ class Renderer:
         self._sheet.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self._sheet.repeat_x = self._sheet.repeat_y = False
         self._corner_buf = self.ctx.buffer(_octagon_strip().tobytes())
-        _write(
-            self._sprite_prog,
-            "u_extent",
-            np.asarray(support_radii(levels), np.float32).tobytes(),
-        )
+        extent = np.asarray(support_radii(levels), np.float32).tobytes()
+        for prog in self._sprite_progs.values():
+            _write(prog, "u_extent", extent)
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
-        self._sprite_vao = self._make_sprite_vao()
+        self._sprite_vaos = {
+            mixing: self._make_sprite_vao(prog) for mixing, prog in self._sprite_progs.items()
+        }
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._targets: dict[str, _Target] = {}
         self._finish = gil_free_finish(self.ctx)
@@ -235,7 +253,8 @@ class Renderer:
         for target in self._targets.values():
             target.release()
         self._targets.clear()
-        self._sprite_vao.release()
+        for vao in self._sprite_vaos.values():
+            vao.release()
         self._sky.release()
         self._upsample_vao.release()
         self._instance_buf.release()
@@ -347,16 +366,22 @@ class Renderer:
         if len(data) > self._instance_buf.size:
             self._instance_buf.orphan(len(data) * 2)
         self._instance_buf.write(data)
-        prog = self._sprite_prog
         # GLSL matrices are column-major: hand it the transpose of numpy's row-major layout.
-        _write(prog, "u_view_rot", np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes())
-        _write(prog, "u_proj", np.ascontiguousarray(proj.T, dtype=np.float32).tobytes())
-        _set(prog, "u_sheet", 0)
+        view_rot = np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes()
+        projection = np.ascontiguousarray(proj.T, dtype=np.float32).tobytes()
+        for prog in self._sprite_progs.values():
+            _write(prog, "u_view_rot", view_rot)
+            _write(prog, "u_proj", projection)
+            _set(prog, "u_sheet", 0)
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         with self._pass(_sprite_pass_name(target.name), "sprites"):
-            self._sprite_vao.render(moderngl.TRIANGLE_STRIP, vertices=8, instances=n)
+            # In order, each run of sprites with the variant it needs (back to front holds).
+            for start, stop, mixing in _mix_runs(turning_round(draw, eye_m)):
+                vao = self._sprite_vaos[mixing]
+                self._bind_instances(vao, self._sprite_progs[mixing], start)
+                vao.render(moderngl.TRIANGLE_STRIP, vertices=8, instances=stop - start)
         self.ctx.disable(moderngl.BLEND)
         # Wait for this draw here, GIL-free, rather than inside the next GL call with the GIL
         # held (see gil_free_finish).
@@ -365,14 +390,29 @@ class Renderer:
 
     # -- plumbing ---------------------------------------------------------------------
 
-    def _make_sprite_vao(self) -> moderngl.VertexArray:
-        return self.ctx.vertex_array(
-            self._sprite_prog,
-            [
-                (self._corner_buf, "2f", "in_corner"),
-                (self._instance_buf, _INSTANCE_FORMAT, *_INSTANCE_ATTRS),
-            ],
-        )
+    def _make_sprite_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
+        vao = self.ctx.vertex_array(prog, [(self._corner_buf, "2f", "in_corner")])
+        self._bind_instances(vao, prog, 0)
+        return vao
+
+    def _bind_instances(
+        self, vao: moderngl.VertexArray, prog: moderngl.Program, first: int
+    ) -> None:
+        """Point the per-instance attributes at instance `first` of the instance buffer (GL
+        3.3 has no base instance)."""
+        stride = _INSTANCE_FLOATS * 4
+        for name, fmt, offset in _INSTANCE_LAYOUT:
+            member = prog[name]
+            assert isinstance(member, moderngl.Attribute)
+            vao.bind(
+                member.location,
+                "f",
+                self._instance_buf,
+                fmt,
+                offset=first * stride + offset * 4,
+                stride=stride,
+                divisor=1,
+            )
 
     def _target(self, name: str, width: int, height: int) -> _Target:
         target = self._targets.get(name)
@@ -400,6 +440,35 @@ class Renderer:
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"GL error while {what}: {err}")
+
+
+def turning_round(draw: SpriteDraw, eye_m: tuple[float, float, float]) -> npt.NDArray[np.bool_]:
+    """Per sprite, whether it is a flat-bottomed one part-way through turning into the round
+    one (sprites.glsl's round_mix strictly between 0 and 1): those need the second read."""
+    s = draw.sprites
+    flat = np.abs(s.texture - TEX_FLAT_BOTTOM[0]) < 0.5
+    if draw.normals is not None:  # a sprite with a fixed orientation never turns
+        flat &= np.einsum("ij,ij->i", draw.normals, draw.normals) <= 0.25
+    if not flat.any():
+        return flat
+    rel = s.centre_m[flat] - np.asarray(eye_m)
+    sine = np.abs(rel[:, 2]) / np.maximum(np.linalg.norm(rel, axis=1), 1e-3)
+    t = np.clip((sine - ROUND_FROM) / (ROUND_TO - ROUND_FROM), 0.0, 1.0)
+    mix = t * t * (3.0 - 2.0 * t)
+    out = np.zeros(len(s), np.bool_)
+    out[flat] = (mix > ROUND_SNAP) & (mix < 1.0 - ROUND_SNAP)
+    return out
+
+
+def _mix_runs(turning: npt.NDArray[np.bool_]) -> list[tuple[int, int, bool]]:
+    """(start, stop, needs the second read) for each run of equal need, in order."""
+    n = len(turning)
+    if not turning.any():
+        return [(0, n, False)]
+    edges = np.flatnonzero(np.diff(turning.astype(np.int8))) + 1
+    starts = np.concatenate(([0], edges))
+    stops = np.concatenate((edges, [n]))
+    return [(int(a), int(b), bool(turning[a])) for a, b in zip(starts, stops, strict=True)]
 
 
 def _sprite_pass_name(target: str) -> str:

@@ -2,6 +2,11 @@
 // camera; a sprite with a normal keeps that orientation (a flat cirrus sheet, or a sprite
 // whose facing locked while the camera is inside it) and fades as the eye sees it edge-on.
 // Sprite centres arrive relative to the eye so float32 keeps centimetre precision.
+//
+// ROUND_MIX 1 blends a flat-bottomed sprite into the round one with a second texture read per
+// fragment; llvmpipe pays for that read in every fragment of a draw whatever the branch says,
+// so the renderer draws only the few sprites half-way through that turn with it, and all
+// others with ROUND_MIX 0: one read, of the round texture where the turn is complete.
 
 #if defined VERTEX_SHADER
 in vec2 in_corner;        // per vertex: an octagon around the unit disc
@@ -17,8 +22,10 @@ uniform mat4 u_proj;
 // octagon shrinks to it, so no fragment is spent on empty texels.
 uniform float u_extent[SHEET_CELLS * SHEET_CELLS];
 out vec2 v_uv;
+#if ROUND_MIX
 out vec2 v_round_uv;
 out float v_round_mix;
+#endif
 out vec4 v_rgba;
 
 vec2 cell_uv(float cell, vec2 local) {
@@ -59,29 +66,39 @@ void main() {
         // below its straight edge is no base at all but a grey bar across the cloud, so it
         // turns into a round soft one (ROUND_SLOT) that still closes the base.
         if (abs(in_texture - float(FLAT_BOTTOM_SLOT)) < 0.5) {
-            round_mix = smoothstep(0.45, 0.75, abs(in_centre.z) / max(length(in_centre), 1e-3));
+            round_mix = smoothstep(ROUND_FROM, ROUND_TO,
+                                   abs(in_centre.z) / max(length(in_centre), 1e-3));
         }
     }
     gl_Position = u_proj * vec4(c, 1.0);
+#if ROUND_MIX
     v_uv = cell_uv(in_texture, local);
     v_round_uv = cell_uv(float(ROUND_SLOT), local);
     v_round_mix = round_mix;
+#else
+    // Only sprites whose turn is none (0) or complete (1) come here.
+    v_uv = cell_uv(round_mix > 0.5 ? float(ROUND_SLOT) : in_texture, local);
+#endif
     v_rgba = vec4(in_rgba.rgb, alpha);
 }
 #endif
 
 #if defined FRAGMENT_SHADER
 in vec2 v_uv;
+#if ROUND_MIX
 in vec2 v_round_uv;
 in float v_round_mix;
+#endif
 in vec4 v_rgba;
 uniform sampler2D u_sheet;
 out vec4 f_colour;
 void main() {
     vec4 t = texture(u_sheet, v_uv);
+#if ROUND_MIX
     if (v_round_mix > 0.0) {
         t = mix(t, texture(u_sheet, v_round_uv), v_round_mix);
     }
+#endif
     float a = t.a * v_rgba.a;
     // Most of a soft sprite is empty: skip the blend there (fill rate is what sprites cost).
     if (a < 1.0 / 512.0) {
