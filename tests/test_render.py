@@ -23,7 +23,14 @@ from wxsky.errors import RenderError
 from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring
 from wxsky.render import renderer as renderer_module
 from wxsky.render import shaders as shaders_mod
-from wxsky.render.renderer import NEAR_SCALE, Renderer, _mix_runs, turning_round
+from wxsky.render.renderer import (
+    IMPOSTOR_MIN_ROWS,
+    NEAR_SCALE,
+    Renderer,
+    _mix_runs,
+    impostor_rows,
+    turning_round,
+)
 from wxsky.render.shaders import ShaderLibrary, shader_source
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import SpriteBatch
@@ -401,6 +408,47 @@ def test_ring_impostor_shows_the_sprite_through_its_off_axis_frustum(renderer: R
     for i in range(1, RING_SIZE):
         assert not images[i][..., 3].any(), f"sprite leaked into ring_{i}"
         assert np.all(images[i][..., :3].max(axis=2) <= images[i][..., 3])
+
+
+def test_impostor_rows_follow_the_window_shape() -> None:
+    # A window a fifth as tall as wide: twice the square texels' rows, 2 * 256 / 5.
+    assert impostor_rows(256, 0.2 * 2 * 1000.0, 1000.0) == math.ceil(2 * 256 / 5)
+    assert impostor_rows(256, 2 * 1000.0, 1000.0) == 256  # square or taller: all of them
+    assert impostor_rows(256, 3 * 2 * 1000.0, 1000.0) == 256
+    assert impostor_rows(256, 1.0, 1000.0) == IMPOSTOR_MIN_ROWS
+
+
+def test_an_impostor_drawn_with_fewer_rows_is_the_same_picture_stretched(
+    renderer: Renderer, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A wide, low window (a layer seen edge-on) is drawn with fewer rows and stretched to
+    the square layer: the sprites land where the square drawing puts them, and only their
+    vertical detail softens."""
+    rng = np.random.default_rng(3)
+    n = 40
+    rel = np.stack(
+        [rng.uniform(-5000, 5000, n), rng.uniform(14_000, 30_000, n), rng.uniform(-200, 900, n)],
+        axis=1,
+    )
+    order = np.argsort(-rel[:, 1])
+    draw = _draw(
+        _sprites((np.asarray(RING_CENTRE) + rel[order]).tolist(), rng.uniform(300, 900, n)),
+        (0.9, 0.9, 0.95, 0.8),
+    )
+    scene = _ring_scene(draw, -400.0, 700.0)  # 1.1 km of a 6.6 km wide window
+    assert impostor_rows(renderer.ring_px, 1100.0, scene.geometry.half_width_m) < renderer.ring_px
+    renderer.render_ring(scene, indices=[0])
+    fewer = renderer.read("ring_0").astype(float)
+    monkeypatch.setattr(renderer_module, "IMPOSTOR_TEXEL_ASPECT", 1e9)
+    renderer.render_ring(scene, indices=[0])
+    square = renderer.read("ring_0").astype(float)
+    alpha_f, alpha_s = fewer[..., 3], square[..., 3]
+    assert alpha_s.sum() > 0.05 * 255 * alpha_s.size  # a good part of the window is cloud
+    assert abs(alpha_f.sum() / alpha_s.sum() - 1.0) < 0.02  # no cloud lost or made
+    rows = np.arange(alpha_s.shape[0])
+    centroid = [float(rows @ a.sum(axis=1) / a.sum()) for a in (alpha_f, alpha_s)]
+    assert abs(centroid[0] - centroid[1]) < 0.5  # not shifted by the stretch
+    assert np.abs(fewer - square).mean() < 1.5
 
 
 def test_ring_texture_row_zero_is_the_top_of_the_quad(renderer: Renderer) -> None:

@@ -37,6 +37,13 @@ NEAR_SCALE = 0.5
 # The near layer's far band (FrameScene.near_far_count) is drawn no finer than the ring's
 # impostors (ring_px over 45°), unless that would save less than this share of its size.
 FAR_BAND_MAX_SCALE = 0.8
+# Impostor texels are drawn at most this many times finer down than across (`impostor_rows`):
+# the host shows an impostor about as wide as 45° of its view, so across the texels are coarse
+# anyway, while the flat bases of distant clouds want a little more than that down.
+IMPOSTOR_TEXEL_ASPECT = 2.0
+IMPOSTOR_MIN_ROWS = 8
+IMPOSTOR_SHAPE = "quad"
+FAR_BAND_SHAPE = "quad"
 # A flat-bottomed sprite turns into the round one as the sine of the angle it is seen at from
 # below or above goes from ROUND_FROM to ROUND_TO (sprites.glsl).
 ROUND_FROM = 0.45
@@ -114,7 +121,9 @@ class Renderer:
             self._sheet.write(level.tobytes(), level=i)
         self._sheet.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self._sheet.repeat_x = self._sheet.repeat_y = False
-        self._corner_buf = self.ctx.buffer(_octagon_strip().tobytes())
+        self._corner_buf = self.ctx.buffer(
+            np.concatenate([_octagon_strip(), _QUAD_STRIP]).astype(np.float32).tobytes()
+        )
         extent = np.asarray(support_radii(levels), np.float32).tobytes()
         for prog in self._sprite_progs.values():
             _write(prog, "u_extent", extent)
@@ -176,7 +185,13 @@ class Renderer:
                 f"{name}_far", max(1, round(w * far_scale)), max(1, round(h * far_scale))
             )
             self._draw_sprites(
-                far, draw.slice(0, far_count), cam.position_m, view, proj, clear_rgba=clear_rgba
+                far,
+                draw.slice(0, far_count),
+                cam.position_m,
+                view,
+                proj,
+                clear_rgba=clear_rgba,
+                shape=FAR_BAND_SHAPE,
             )
             self._upsample(far, target)
             self._draw_sprites(
@@ -206,13 +221,18 @@ class Renderer:
             self._clear_ring_sets.discard(ring_set)
         for i in chosen:
             target = self._target(ring_target_name(i, ring_set), self.ring_px, self.ring_px)
+            rows = impostor_rows(self.ring_px, geo.top_m[i] - geo.bottom_m[i], geo.half_width_m)
+            work = target if rows >= self.ring_px else self._target("impostor", self.ring_px, rows)
             self._draw_sprites(
-                target,
+                work,
                 ring.impostors[i],
                 geo.centre_m,
                 geo.view_matrix(i),
                 geo.projection_matrix(i),
+                shape=IMPOSTOR_SHAPE,
             )
+            if work is not target:
+                self._upsample(work, target)
         self._check("rendering the impostor ring")
 
     def start_profile(self) -> PassProfiler:
@@ -344,9 +364,11 @@ class Renderer:
         view: npt.NDArray[np.float64],
         proj: npt.NDArray[np.float64],
         clear_rgba: tuple[float, float, float, float] | None = (0.0, 0.0, 0.0, 0.0),
+        shape: str = "octagon",
     ) -> None:
         """`clear_rgba`: premultiplied colour under the sprites (the in-cloud fog veil); None
-        draws over what the target holds."""
+        draws over what the target holds. `shape`: "octagon" (fewest fragments) or "quad"
+        (fewest triangles, for sprites a few pixels wide)."""
         target.fbo.use()
         if clear_rgba is not None:
             target.fbo.clear(*clear_rgba)
@@ -381,7 +403,12 @@ class Renderer:
             for start, stop, mixing in _mix_runs(turning_round(draw, eye_m)):
                 vao = self._sprite_vaos[mixing]
                 self._bind_instances(vao, self._sprite_progs[mixing], start)
-                vao.render(moderngl.TRIANGLE_STRIP, vertices=8, instances=stop - start)
+                vao.render(
+                    moderngl.TRIANGLE_STRIP,
+                    vertices=_SHAPES[shape][1],
+                    first=_SHAPES[shape][0],
+                    instances=stop - start,
+                )
         self.ctx.disable(moderngl.BLEND)
         # Wait for this draw here, GIL-free, rather than inside the next GL call with the GIL
         # held (see gil_free_finish).
@@ -442,6 +469,16 @@ class Renderer:
             raise RenderError(f"GL error while {what}: {err}")
 
 
+def impostor_rows(ring_px: int, window_height_m: float, half_width_m: float) -> int:
+    """Rows to draw an impostor at before it is stretched to ring_px square: its window is
+    usually much wider than tall (a layer seen edge-on), and drawn square its texels would be
+    4 to 8 times finer down than across, every sprite a sliver that costs its vertex work
+    and more fragments than it shows. IMPOSTOR_TEXEL_ASPECT times the rows of square texels,
+    at most ring_px."""
+    square_rows = ring_px * window_height_m / (2.0 * half_width_m)
+    return max(IMPOSTOR_MIN_ROWS, min(ring_px, math.ceil(IMPOSTOR_TEXEL_ASPECT * square_rows)))
+
+
 def turning_round(draw: SpriteDraw, eye_m: tuple[float, float, float]) -> npt.NDArray[np.bool_]:
     """Per sprite, whether it is a flat-bottomed one part-way through turning into the round
     one (sprites.glsl's round_mix strictly between 0 and 1): those need the second read."""
@@ -475,6 +512,12 @@ def _sprite_pass_name(target: str) -> str:
     if target.startswith("ring_"):
         return "impostor"
     return target.removesuffix("_reduced")
+
+
+# A square around the unit disc as a triangle strip, after the octagon in the corner buffer.
+_QUAD_STRIP = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]], np.float32)
+# (first vertex, vertices) of each sprite shape in the corner buffer.
+_SHAPES = {"octagon": (0, 8), "quad": (8, 4)}
 
 
 def _octagon_strip() -> npt.NDArray[np.float32]:
