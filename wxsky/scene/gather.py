@@ -9,9 +9,12 @@ integrated wind (`Drift`), so the clouds travel but never change shape.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
-from collections.abc import Iterator
+from collections import OrderedDict
+from collections.abc import Hashable, Iterator
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -75,6 +78,35 @@ class NearRing(NamedTuple):
 
 
 def gather_near(
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    radius_m: float,
+    max_range_m: float | None = None,
+) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
+    near, share, _ = gather_near_blocks(state, drift, rings, radius_m, max_range_m)
+    return near, share
+
+
+def gather_near_blocks(
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    radius_m: float,
+    max_range_m: float | None = None,
+) -> tuple[SpriteBatch, npt.NDArray[np.float32], NearBlocks | None]:
+    """`gather_near`, and the set of blocks it placed (`near_blocks`; None where it gathered
+    them anew): the same set, frame after frame, holds the same sprites."""
+    if len(drift) != len(state.layers):
+        drift = zero_drift(state)
+    blocks = near_blocks(state, drift, rings, radius_m, max_range_m)
+    placed = None if blocks is None else blocks.placed(drift, rings)
+    if placed is None:
+        return (*_gather_near(state, drift, rings, radius_m, max_range_m), None)
+    return (*placed, blocks)
+
+
+def _gather_near(
     state: WeatherState,
     drift: Drift,
     rings: tuple[NearRing, ...],
@@ -240,3 +272,161 @@ def gather_far(
         for lay in state.layers
     ]
     return _gather(state, drift, (ring,), radius_m, max_range_m, ranges, cancel)[0]
+
+
+# The near layer's blocks are chosen by the rings' centres and drifts, not by the camera: the
+# same few dozen blocks are gathered every frame until the ring is rebuilt, and their sprites
+# differ from frame to frame only by the drift, which is added last. So each set of blocks is
+# formed, joined and put at its layers' bases once (`near_blocks`), and a frame only adds its
+# drift to a copy of the centres (`NearBlocks.placed`): gathering anew every frame was most
+# of the scene stage. Keyed by content (the weather's layers and seed, and the blocks each
+# ring picks), so a hit is exactly what gathering again would give.
+_NEAR_SETS = 4  # the ring on show's, a cross-fade's (both rings'), the incoming ring's, one spare
+_PICKS = 64  # blocks_within results: per layer and ring, a few rings' worth
+
+
+@dataclass(frozen=True, eq=False)
+class NearBlocks:
+    """The sprites of the near layer's blocks before the frame's drift: formed at the
+    weather's cover, z MSL, x and y in each layer's drifting frame; layers in order, each
+    layer's blocks row by row (the order `gather_near` has always given)."""
+
+    batch: SpriteBatch
+    layer_rows: tuple[tuple[int, int, int], ...]  # (layer index, first row, end row)
+    block_rows: npt.NDArray[np.intp]  # (B,) sprites of each block, in batch order
+    members: npt.NDArray[np.bool_]  # (R, B) True where the block is within ring r's radius
+
+    def placed(
+        self, drift: Drift, rings: tuple[NearRing, ...]
+    ) -> tuple[SpriteBatch, npt.NDArray[np.float32]] | None:
+        """The sprites moved by `drift` and (N,) each one's share for these rings' weights
+        (see `gather_near`), or None where a weight leaves a block out (a ring weighing 0:
+        never the case in a fade, so not worth a set of its own)."""
+        weight = np.zeros(len(self.block_rows))
+        for member, ring in zip(self.members, rings, strict=True):
+            # In ring order, as the blocks' weights have always been summed.
+            weight = weight + np.where(member, ring.weight, 0.0)
+        if not (weight > 0.0).all():
+            return None
+        share = np.repeat(np.minimum(weight, 1.0).astype(np.float32), self.block_rows)
+        centre = self.batch.centre_m.copy()
+        for li, start, stop in self.layer_rows:
+            dx, dy = drift[li]
+            centre[start:stop, 0] += dx
+            centre[start:stop, 1] += dy
+        return dataclasses.replace(self.batch, centre_m=centre), share
+
+
+_near_lock = threading.Lock()
+_near_sets: OrderedDict[Hashable, NearBlocks] = OrderedDict()
+_picks: OrderedDict[tuple[float, float, float, float], tuple[tuple[int, int], ...]] = OrderedDict()
+
+
+def near_blocks(
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    radius_m: float,
+    max_range_m: float | None = None,
+) -> NearBlocks | None:
+    """The blocks `gather_near` gathers for these rings, before the drift (None without
+    rings). Safe from any thread: the ring's worker prepares the next ring's set with it."""
+    if not rings:
+        return None
+    if len(drift) != len(state.layers):
+        drift = zero_drift(state)
+    if max_range_m is None:
+        ranges = [(0.0, radius_m)] * len(state.layers)
+    else:
+        centre_z = rings[0].centre_m[2]
+        ranges = [
+            (0.0, radius_m if in_impostors(lay.base_m, lay.top_m, centre_z) else max_range_m)
+            for lay in state.layers
+        ]
+    picks: list[tuple[tuple[tuple[int, int], ...], ...]] = []
+    for li, layer in enumerate(state.layers):
+        lo_m, hi_m = ranges[li]
+        if layer.cover_oktas <= 0.0 or hi_m <= lo_m:
+            picks.append(())
+            continue
+        per_ring = []
+        for ring in rings:
+            select = ring.select_drift if len(ring.select_drift) == len(drift) else drift
+            sx, sy = select[li]
+            per_ring.append(
+                _blocks_picked(ring.centre_m[0] - sx, ring.centre_m[1] - sy, lo_m, hi_m)
+            )
+        picks.append(tuple(per_ring))
+    key = (state.seed, state.layers, len(rings), tuple(picks))
+    with _near_lock:
+        found = _near_sets.get(key)
+        if found is not None:
+            _near_sets.move_to_end(key)
+            return found
+    made = _make_near_blocks(state, picks, len(rings))
+    with _near_lock:
+        _near_sets[key] = made
+        while len(_near_sets) > _NEAR_SETS:
+            _near_sets.popitem(last=False)
+    return made
+
+
+def _blocks_picked(
+    qx_m: float, qy_m: float, lo_m: float, hi_m: float
+) -> tuple[tuple[int, int], ...]:
+    key = (qx_m, qy_m, lo_m, hi_m)
+    with _near_lock:
+        found = _picks.get(key)
+        if found is not None:
+            _picks.move_to_end(key)
+            return found
+    made = tuple(blocks_within(qx_m, qy_m, lo_m, hi_m))
+    with _near_lock:
+        _picks[key] = made
+        while len(_picks) > _PICKS:
+            _picks.popitem(last=False)
+    return made
+
+
+def _make_near_blocks(
+    state: WeatherState,
+    picks: list[tuple[tuple[tuple[int, int], ...], ...]],
+    n_rings: int,
+) -> NearBlocks:
+    batches: list[SpriteBatch] = []
+    rows: list[int] = []
+    members: list[list[bool]] = []
+    layer_rows: list[tuple[int, int, int]] = []
+    start = 0
+    for li, (key, layer, per_ring) in enumerate(
+        zip(layer_keys(state.layers), state.layers, picks, strict=True)
+    ):
+        within: dict[tuple[int, int], list[bool]] = {}
+        for r, blocks in enumerate(per_ring):
+            for xy in blocks:
+                within.setdefault(xy, [False] * n_rings)[r] = True
+        first = start
+        for (bx, by), member in sorted(within.items(), key=lambda kv: (kv[0][1], kv[0][0])):
+            block = layer_block(bx, by, key, layer, state.seed)
+            batches.append(block)
+            rows.append(len(block))
+            members.append(member)
+            start += len(block)
+        if start > first:
+            layer_rows.append((li, first, start))
+    batch = SpriteBatch.concat(batches)
+    for f in dataclasses.fields(batch):
+        getattr(batch, f.name).flags.writeable = False
+    return NearBlocks(
+        batch,
+        tuple(layer_rows),
+        np.asarray(rows, np.intp),
+        np.asarray(members, np.bool_).reshape(len(members), n_rings).T,
+    )
+
+
+def clear_near_blocks() -> None:
+    """Forget every near set (tests that count block generations)."""
+    with _near_lock:
+        _near_sets.clear()
+        _picks.clear()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
+import weakref
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -23,7 +24,14 @@ from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
-from wxsky.scene.gather import Drift, NearRing, check_cancel, gather_far, gather_near
+from wxsky.scene.gather import (
+    Drift,
+    NearBlocks,
+    NearRing,
+    check_cancel,
+    gather_far,
+    gather_near_blocks,
+)
 from wxsky.scene.in_cloud import (
     NO_LOCKS,
     NO_VEIL,
@@ -35,7 +43,14 @@ from wxsky.scene.in_cloud import (
     lock_facing,
 )
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
-from wxsky.scene.shading import DEFAULT_SHADING, ParticleLight, prepare_lighting, sprite_colours
+from wxsky.scene.shading import (
+    DEFAULT_SHADING,
+    ParticleLight,
+    Scattered,
+    prepare_lighting,
+    sprite_colours,
+)
+from wxsky.scene.shading_harris import scattered_light, scene_lights
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.weather.state import WeatherState
@@ -170,16 +185,19 @@ def shade_for_eye(
     light: ParticleLight | None = None,
     share: npt.NDArray[np.float32] | None = None,
     order: npt.NDArray[np.intp] | None = None,
+    scattered: Scattered | None = None,
 ) -> SpriteDraw:
     """`light`: a precompute (`prepare_lighting`) of a batch holding these sprites; `share`:
     (N,) a factor on each sprite's alpha after shading (see `gather_near`); `order`: the
-    back-to-front order if already known (`sort_order`)."""
+    back-to-front order if already known (`sort_order`); `scattered`: Harris's light on
+    each sprite of the batch (`near_scattered_light`)."""
     if order is None:
         order = sort_order(batch, eye_m)
     ordered = batch.take(order)
-    rgba = fade_by_range(
-        sprite_colours(ordered, sky, eye_m, shading, light), ordered, eye_m, sky, max_range_m
-    )
+    if scattered is not None:
+        scattered = scattered.take(order)
+    colours = sprite_colours(ordered, sky, eye_m, shading, light, scattered)
+    rgba = fade_by_range(colours, ordered, eye_m, sky, max_range_m)
     if share is not None and len(share) and share.min() < 1.0:
         rgba[:, 3] *= share[order]
     return SpriteDraw(ordered, rgba)
@@ -277,12 +295,22 @@ def build_frame(
     `split_at_m`: the host's aircraft, at whose distance the near layer is split; `lod`: far
     near clouds as one sprite each (off in direct mode, which draws every sprite)."""
     radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
-    near, share = gather_near(state, drift, rings, radius_m, settings.max_range_m)
+    near, share, blocks = gather_near_blocks(state, drift, rings, radius_m, settings.max_range_m)
+    scattered = None
+    if blocks is not None and settings.shading == "harris":
+        scattered = near_scattered_light(blocks, near, sky)
     eye = camera.position_m
     with (clock or NO_CLOCK).stage("sort"):
         order = sort_order(near, eye)
     shaded = shade_for_eye(
-        near, eye, sky, settings.max_range_m, settings.shading, share=share, order=order
+        near,
+        eye,
+        sky,
+        settings.max_range_m,
+        settings.shading,
+        share=share,
+        order=order,
+        scattered=scattered,
     )
     if lod and settings.lod_start_m > 0.0:
         collapsed = collapse_far_clouds(
@@ -321,6 +349,39 @@ def build_frame(
         near_far_count=far_count,
         near_dropped=dropped,
     )
+
+
+# Harris's light on the near layer's particles, per set of near blocks: it depends on the
+# sprites and the light directions only (rounded so that the sun moves them every half
+# minute or so), and the near layer's sprites are one set from one ring rebuild to the next.
+# Working it out every frame (identifying every sprite, hashing the batch, looking the light
+# up, scattering it) was a third of the scene stage.
+_near_light: weakref.WeakKeyDictionary[NearBlocks, Scattered] = weakref.WeakKeyDictionary()
+_near_light_lock = threading.Lock()
+
+
+def near_scattered_light(blocks: NearBlocks, near: SpriteBatch, sky: SkyParams) -> Scattered | None:
+    """Harris's light (`shading_harris.scattered_light`) on each sprite of `near`, the sprites
+    of `blocks` placed for a frame, a row per sprite (zeros for slab sprites); None when every
+    sprite is a slab's. The drift moves a cloud's sprites alike, so it changes none of it."""
+    slab = near.slab
+    if len(near) and slab.all():
+        return None
+    lights = scene_lights(sky)
+    with _near_light_lock:
+        found = _near_light.get(blocks)
+    if found is not None and np.array_equal(found.directions, lights.directions):
+        return found
+    if slab.any():
+        part = scattered_light(near.take(~slab), lights)
+        rows = np.zeros((len(near), part.rows.shape[1]), np.float32)
+        rows[~slab] = part.rows
+        made = Scattered(lights.directions, rows)
+    else:
+        made = scattered_light(near, lights)
+    with _near_light_lock:
+        _near_light[blocks] = made
+    return made
 
 
 def split_at_distance(

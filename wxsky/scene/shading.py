@@ -13,7 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from wxsky.scene.shading_harris import ParticleLight, harris_colours, particle_light, scene_lights
+from wxsky.scene.shading_harris import (
+    ParticleLight,
+    Scattered,
+    harris_colours,
+    particle_light,
+    scene_lights,
+)
 from wxsky.scene.shading_slab import slab_colours
 from wxsky.scene.shading_wang import wang_colours
 from wxsky.scene.sky import SkyParams
@@ -29,6 +35,7 @@ __all__ = [
     "DEFAULT_SHADING",
     "SHADING_MODELS",
     "ParticleLight",
+    "Scattered",
     "prepare_lighting",
     "sprite_colours",
 ]
@@ -50,16 +57,21 @@ def sprite_colours(
     eye_m: tuple[float, float, float],
     model: str = DEFAULT_SHADING,
     light: ParticleLight | None = None,
+    scattered: Scattered | None = None,
 ) -> F32:
     """(N, 4) straight-alpha RGBA for each sprite seen from eye_m. `light` is a precompute
-    from `prepare_lighting` over these sprites or a batch holding them."""
+    from `prepare_lighting` over these sprites or a batch holding them; `scattered`, for
+    Harris, `shading_harris.scattered_light` of these sprites' particles, a row per sprite
+    (slab sprites' rows unused)."""
     _check(model)
     slab = batch.slab
     if slab.all() and len(batch):
         return slab_colours(batch, sky, eye_m)
     particles = batch.take(~slab) if slab.any() else batch
     if model == "harris":
-        rgba = harris_colours(particles, sky, eye_m, light)
+        if scattered is not None and slab.any():
+            scattered = scattered.take(~slab)
+        rgba = harris_colours(particles, sky, eye_m, light, scattered)
     else:
         rgba = wang_colours(particles, sky)
     if not slab.any():

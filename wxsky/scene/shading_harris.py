@@ -16,6 +16,7 @@ import math
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -78,6 +79,25 @@ class ParticleLight:
             return None
         out: F32 = self.incident[pos]
         return out
+
+
+class Scattered(NamedTuple):
+    """The light reaching each sprite of a batch after multiple scattering, for these light
+    directions: the first, eye-independent half of `harris_colours`, which a caller that
+    shades the same sprites frame after frame (the near layer) works out once."""
+
+    directions: F64  # (L, 3) as `Lights.directions`
+    rows: F32  # (N, L) `multiple_scattering` of the precompute's light, a row per sprite
+
+    def take(self, index: npt.NDArray[np.intp] | npt.NDArray[np.bool_]) -> Scattered:
+        return Scattered(self.directions, self.rows[index])
+
+
+def scattered_light(batch: SpriteBatch, lights: Lights) -> Scattered:
+    """What `harris_colours` lights the batch's sprites with before it looks at the eye."""
+    incident = particle_light(batch, lights).lookup(batch)
+    assert incident is not None  # the batch's own precompute holds every sprite
+    return Scattered(lights.directions, multiple_scattering(incident))
 
 
 def scene_lights(sky: SkyParams, above_cloud: bool = False) -> Lights:
@@ -150,17 +170,23 @@ def harris_colours(
     sky: SkyParams,
     eye_m: tuple[float, float, float],
     light: ParticleLight | None = None,
+    scattered: Scattered | None = None,
 ) -> F32:
     """(N, 4) straight-alpha RGBA: each sprite's light scattered toward the eye (eq. 9). The
-    renderer's back-to-front blending is eq. 9's recurrence, with alpha as 1 - T."""
+    renderer's back-to-front blending is eq. 9's recurrence, with alpha as 1 - T.
+    `scattered`: `scattered_light` of these sprites, used where its directions are this
+    sky's."""
     lights = scene_lights(sky)
-    incident = None
-    if light is not None and np.array_equal(light.directions, lights.directions):
-        incident = light.lookup(batch)
-    if incident is None:
-        incident = particle_light(batch, lights).lookup(batch)
-        assert incident is not None  # the batch's own precompute holds every sprite
-    incident = multiple_scattering(incident)
+    if scattered is not None and np.array_equal(scattered.directions, lights.directions):
+        incident = scattered.rows
+    else:
+        found = None
+        if light is not None and np.array_equal(light.directions, lights.directions):
+            found = light.lookup(batch)
+        if found is None:
+            found = particle_light(batch, lights).lookup(batch)
+            assert found is not None  # the batch's own precompute holds every sprite
+        incident = multiple_scattering(found)
     view = batch.centre_m - np.asarray(eye_m, np.float64)  # (N, 3)
     dist = np.linalg.norm(view, axis=1, keepdims=True)
     view = np.divide(view, dist, out=np.zeros_like(view), where=dist > 1e-6)

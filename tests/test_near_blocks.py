@@ -1,0 +1,131 @@
+"""The near layer's blocks, kept from frame to frame (`gather.near_blocks`) with Harris's light
+on them (`layout.near_scattered_light`): every frame must hold exactly the sprites, shares and
+colours that gathering and shading them anew gives, whatever the drift, the rings and their
+weights in a cross-fade."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from wxsky.app.camera_path import straight_and_level
+from wxsky.engine.stages import SkyEngine
+from wxsky.scene.camera import Camera
+from wxsky.scene.gather import (
+    NearRing,
+    _gather_near,
+    advance_drift,
+    gather_near,
+    gather_near_blocks,
+    zero_drift,
+)
+from wxsky.scene.layout import SceneSettings, near_scattered_light, shade_for_eye, sort_order
+from wxsky.scene.sky import sky_params
+from wxsky.scene.sprites import SpriteBatch
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState, WindLayer
+
+PRESETS = (
+    "fair-cumulus",
+    "broken-stratocumulus",
+    "overcast-stratus",
+    "thunderstorm",
+    "high-cirrus",
+)
+
+
+def _same_batch(a: SpriteBatch, b: SpriteBatch) -> None:
+    for f in dataclasses.fields(SpriteBatch):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        assert x.dtype == y.dtype and x.shape == y.shape, f.name
+        assert x.tobytes() == y.tobytes(), f.name
+
+
+def _state(preset: str) -> WeatherState:
+    return WeatherState().apply(load_preset(preset, ()))
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_kept_blocks_give_what_gathering_anew_gives(preset: str) -> None:
+    state = _state(preset)
+    drift0 = advance_drift(state, zero_drift(state), 600.0)
+    old = NearRing((0.0, 0.0, 1500.0), drift0, 1.0)
+    new = NearRing((1300.0, -250.0, 1500.0), advance_drift(state, drift0, 10.0), 1.0)
+    cases = [
+        (old,),
+        (old._replace(weight=0.7), new._replace(weight=0.3)),
+        (old._replace(weight=1e-9), new._replace(weight=1.0 - 1e-9)),
+        (old._replace(weight=0.0), new._replace(weight=1.0)),  # a block left out: gathered anew
+        (new,),
+    ]
+    for rings in cases:
+        for seconds in (0.0, 1.0 / 30.0, 7.3):  # the set is reused as the layers drift on
+            drift = advance_drift(state, drift0, seconds)
+            for max_range_m in (None, 40_000.0):
+                near, share = gather_near(state, drift, rings, 8000.0, max_range_m)
+                want, want_share = _gather_near(state, drift, rings, 8000.0, max_range_m)
+                _same_batch(near, want)
+                assert share.dtype == want_share.dtype
+                assert share.tobytes() == want_share.tobytes()
+
+
+def test_one_set_of_blocks_serves_every_frame_until_the_rings_change() -> None:
+    state = _state("fair-cumulus")
+    drift = zero_drift(state)
+    ring = (NearRing((0.0, 0.0, 1500.0), drift, 1.0),)
+    _, _, first = gather_near_blocks(state, drift, ring, 8000.0, 40_000.0)
+    _, _, again = gather_near_blocks(
+        state, advance_drift(state, drift, 3.0), ring, 8000.0, 40_000.0
+    )
+    assert first is not None and again is first
+    moved = (NearRing((5000.0, 0.0, 1500.0), drift, 1.0),)
+    _, _, other = gather_near_blocks(state, drift, moved, 8000.0, 40_000.0)
+    assert other is not None and other is not first
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_kept_light_shades_exactly_as_shading_anew(preset: str) -> None:
+    state = _state(preset)
+    sky = sky_params(state)
+    drift = zero_drift(state)
+    rings = (NearRing((0.0, 0.0, 1500.0), drift, 1.0),)
+    eye = (150.0, -40.0, 1500.0)
+    for seconds in (0.0, 2.0, 9.0):
+        moved = advance_drift(state, drift, seconds)
+        near, share, blocks = gather_near_blocks(state, moved, rings, 8000.0, 40_000.0)
+        assert blocks is not None
+        scattered = near_scattered_light(blocks, near, sky)
+        order = sort_order(near, eye)
+        kept = shade_for_eye(near, eye, sky, 40_000.0, "harris", None, share, order, scattered)
+        anew = shade_for_eye(near, eye, sky, 40_000.0, "harris", None, share, order)
+        _same_batch(kept.sprites, anew.sprites)
+        assert kept.rgba.tobytes() == anew.rgba.tobytes()
+
+
+def test_frames_along_a_flight_through_rebuilds_match_a_fresh_gather_and_shade() -> None:
+    """The engine's near layer, frame by frame across ring rebuilds and cross-fades, against
+    the straightforward gather and shading of the same rings."""
+    layers = (
+        CloudLayer(5.0, 1900.0, 2500.0, CloudType.CUMULUS),
+        CloudLayer(6.0, 2600.0, 3000.0, CloudType.STRATOCUMULUS),
+    )
+    state = WeatherState(layers=layers, wind=(WindLayer(0.0, 250.0, 12.0),))
+    settings = SceneSettings(max_near_sprites=0, far_band_m=0.0, shadow_map_px=0)
+    path = straight_and_level(speed_mps=900.0, alt_m=1500.0)
+    seen_fade = False
+    with SkyEngine(state, Camera((0.0, 0.0, 1500.0)), settings, ring_build="sync") as engine:
+        for k in range(70):
+            pose = path.at(k / 30.0)
+            engine.set_camera(Camera(pose.position_m, pose.heading_deg, pose.pitch_deg))
+            plan = engine.advance(1.0 / 30.0 if k else 0.0)
+            rings = plan.rings.near_rings(plan.frame.camera, engine.drift)
+            seen_fade |= len(rings) == 2
+            eye = plan.frame.camera.position_m
+            near, share = _gather_near(plan.state, engine.drift, rings, 8000.0, 40_000.0)
+            sky = plan.frame.sky
+            want = shade_for_eye(near, eye, sky, 40_000.0, settings.shading, share=share)
+            got = plan.frame.near
+            _same_batch(got.sprites, want.sprites)
+            assert got.rgba.tobytes() == want.rgba.tobytes()
+    assert seen_fade
