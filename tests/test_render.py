@@ -451,6 +451,33 @@ def test_an_impostor_drawn_with_fewer_rows_is_the_same_picture_stretched(
     assert np.abs(fewer - square).mean() < 1.5
 
 
+@pytest.mark.parametrize("window", [(-400.0, 700.0), (-3000.0, 3000.0)])  # stretched, square
+def test_an_impostor_drawn_in_slices_is_the_impostor_drawn_whole(
+    renderer: Renderer, window: tuple[float, float]
+) -> None:
+    rng = np.random.default_rng(9)
+    n = 50
+    rel = np.stack(
+        [rng.uniform(-5000, 5000, n), rng.uniform(14_000, 30_000, n), rng.uniform(-200, 600, n)],
+        axis=1,
+    )
+    order = np.argsort(-rel[:, 1])
+    draw = _draw(
+        _sprites((np.asarray(RING_CENTRE) + rel[order]).tolist(), rng.uniform(300, 900, n)),
+        (0.9, 0.85, 0.95, 0.7),
+    )
+    scene = _ring_scene(draw, *window)
+    renderer.render_ring(scene, indices=[0], ring_set=1)
+    whole = renderer.read("ring_b_0")
+    # Another impostor drawn meanwhile into the other set must not disturb the slices.
+    for start, stop in ((0, 7), (7, 30), (30, n)):
+        renderer.render_impostor_slice(scene, 0, start, stop, ring_set=1)
+        renderer.render_ring(scene, indices=[0], ring_set=0)
+    sliced = renderer.read("ring_b_0")
+    assert whole[..., 3].astype(int).sum() > 0
+    np.testing.assert_array_equal(sliced, whole)
+
+
 def test_ring_texture_row_zero_is_the_top_of_the_quad(renderer: Renderer) -> None:
     # A sprite near the window's top edge appears in the first rows of the texture.
     rel = np.array([0.0, 16_000.0, 5000.0])  # y on the quad: 2500 of -1000..3000

@@ -5,17 +5,28 @@ layer's share of each ring while the two fade."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import math
 import threading
 from datetime import timedelta
 
 import numpy as np
 import pytest
+from sprite_helpers import sprite_batch
 
-from wxsky.engine.ring_schedule import RETRY_AFTER_S, RING_WEATHER_GAP_S, RingPolicy, RingSchedule
+from wxsky.engine.ring_schedule import (
+    FIRST_SECONDS_PER_UNIT,
+    MAX_SLICES,
+    RETRY_AFTER_S,
+    RING_WEATHER_GAP_S,
+    Builder,
+    RingPolicy,
+    RingSchedule,
+)
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift, NearRing, gather_near, zero_drift
-from wxsky.scene.layout import RingScene, empty_ring
-from wxsky.scene.ring import RING_SIZE
+from wxsky.scene.layout import RingScene, SpriteDraw, empty_ring
+from wxsky.scene.ring import RING_SIZE, WINDOW_FILL_COST, RingGeometry, impostor_costs
 from wxsky.scene.sky import SkyParams, sky_params
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState, WindLayer
 
@@ -58,6 +69,107 @@ def test_a_rebuild_renders_one_impostor_per_frame_then_fades() -> None:
     assert all(not f.events for f in frames[14:])
     versions = [f.version for f in frames]
     assert versions == sorted(versions) and versions[13] > versions[7]
+
+
+def sprite_build(n: int) -> Builder:
+    """A ring whose every impostor holds n equal sprites 20 km out, in its own direction."""
+
+    def build(state: WeatherState, drift: Drift, centre: tuple, sky: SkyParams) -> RingScene:
+        ring = empty_ring(centre, R, drift)
+        draws = []
+        for i in range(RING_SIZE):
+            _right, _up, fwd = ring.geometry.axes(i)
+            centres = np.asarray(centre) + fwd * np.linspace(20_000.0, 19_000.0, n)[:, None]
+            draws.append(SpriteDraw(sprite_batch(centres, 200.0), np.ones((n, 4), np.float32)))
+        return dataclasses.replace(ring, impostors=tuple(draws))
+
+    return build
+
+
+def test_sliced_impostors_cover_every_sprite_once_in_order_within_the_budget() -> None:
+    n = 3000
+    s = RingSchedule(sprite_build(n), R, mode="sync", fade_s=0.0, slice_ms=2.0)
+    costs = impostor_costs(s_geometry(), 0, sprite_build(n)(STATE, DRIFT, (0, 0, 1500), SKY)
+                           .impostors[0].sprites)  # fmt: skip
+    frames = [s.step(STATE, DRIFT, cam(), SKY, DT) for _ in range(200)]
+    pieces = [f.render_slice for f in frames if f.render_slice is not None]
+    # Before any slice was timed: FIRST_SECONDS_PER_UNIT, so 2 ms holds this many units.
+    per_slice = 2e-3 / FIRST_SECONDS_PER_UNIT
+    expected_slices = math.ceil(costs.sum() / per_slice)
+    assert 1 < expected_slices <= MAX_SLICES
+    for i in range(RING_SIZE):
+        mine = [p for p in pieces if p.index == i]
+        assert len(mine) == expected_slices
+        # Consecutive, back to front, every sprite once; the last one completes it.
+        assert mine[0].start == 0 and mine[-1].stop == n
+        assert all(a.stop == b.start for a, b in itertools.pairwise(mine))
+        assert [p.last for p in mine] == [False] * (len(mine) - 1) + [True]
+        assert all(p.units <= per_slice + costs.max() for p in mine)
+    # One impostor a frame, in order; each done when its last slice is drawn.
+    indices = [p.index for p in pieces]
+    assert indices == sorted(indices)
+    done = [(k, e.fields) for k, f in enumerate(frames) for e in f.events
+            if e.event == "impostor_rendered"]  # fmt: skip
+    assert [d["index"] for _, d in done] == list(range(RING_SIZE))
+    assert all(d["slices"] == expected_slices for _, d in done)
+    assert events(frames[8 * expected_slices - 1])[-2:] == [
+        "impostor_rendered",
+        "ring_rebuild_done",
+    ]
+
+
+def test_slices_follow_what_drawing_them_took() -> None:
+    s = RingSchedule(sprite_build(3000), R, mode="sync", fade_s=0.0, slice_ms=2.0)
+    first = s.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+    assert first is not None and not first.last
+    # That slice took ten times longer than assumed: the next ones shrink toward a tenth.
+    s.note_render(first.units, 10 * first.units * FIRST_SECONDS_PER_UNIT)
+    second = s.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+    assert second is not None and second.start == first.stop
+    assert second.units < 0.25 * first.units
+    # A fast machine (a GPU) takes the whole impostor in one slice.
+    fast = RingSchedule(sprite_build(3000), R, mode="sync", fade_s=0.0, slice_ms=2.0)
+    piece = fast.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+    assert piece is not None
+    for _ in range(20):
+        fast.note_render(piece.units, 1e-9)
+    for _ in range(2 * MAX_SLICES):
+        piece = fast.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+        assert piece is not None
+        if piece.index == 1:
+            break
+    assert (piece.start, piece.last) == (0, True)
+
+
+def test_without_a_slice_budget_an_impostor_is_drawn_whole() -> None:
+    s = RingSchedule(sprite_build(3000), R, mode="sync", fade_s=0.0)
+    frames = [s.step(STATE, DRIFT, cam(), SKY, DT) for _ in range(8)]
+    assert [f.render for f in frames] == [(k,) for k in range(RING_SIZE)]
+    assert all(f.render_slice is None for f in frames)
+
+
+def s_geometry() -> RingGeometry:
+    return sprite_build(1)(STATE, DRIFT, (0.0, 0.0, 1500.0), SKY).geometry
+
+
+def test_impostor_costs_count_each_sprite_and_its_share_of_the_window() -> None:
+    geo = s_geometry()
+    _right, _up, fwd = geo.axes(2)
+    centre = np.asarray(geo.centre_m)
+    # One tiny sprite, one covering a quarter of the window's height at the ring radius, one
+    # far larger than the window: 1, 1 + its share x WINDOW_FILL_COST, and 1 + the cap.
+    height = geo.top_m[2] - geo.bottom_m[2]
+    width = 2 * geo.half_width_m
+    sizes = [1.0, 0.25 * height, 10 * max(height, width)]
+    batch = sprite_batch([centre + fwd * R] * 3, sizes)
+    costs = impostor_costs(geo, 2, batch)
+    np.testing.assert_allclose(
+        costs,
+        [1.0 + WINDOW_FILL_COST / (width * height), 1 + WINDOW_FILL_COST * (0.25 * height) ** 2
+         / (width * height), 1 + WINDOW_FILL_COST],
+        rtol=1e-6,
+    )  # fmt: skip
+    assert impostor_costs(geo, 2, batch.take(np.arange(0))).shape == (0,)
 
 
 def _run(s: RingSchedule, xs: list[float], z: float = 1500.0) -> list[tuple[int, str, dict]]:

@@ -5,7 +5,8 @@ Stages, in frame order (each ends with the GPU idle, so its time is its own):
 
     scene           weather step, ring schedule, gathering, shading (engine.advance less sort)
     sort            the near sprites back to front
-    impostor_slice  the ring impostor this frame renders (none in most frames, or direct mode)
+    impostor_slice  the ring impostor (or slice of one) this frame renders (none in most
+                    frames, or direct mode)
     near_pass       the sky and the near sprites (renderer.render_frame)
     publish         reading the layers into a real shared-memory slot and publishing it
 
@@ -32,6 +33,7 @@ import numpy.typing as npt
 from wxsky.app.camera_path import CameraPath
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.trace import TraceWriter
+from wxsky.engine.ring_schedule import DEFAULT_SLICE_MS
 from wxsky.engine.stages import SkyEngine
 from wxsky.output.shm import FrameWriter
 from wxsky.scene.camera import Camera
@@ -196,6 +198,7 @@ def run_bench(
     fov_deg: float = 60.0,
     fps: float = 30.0,
     ring_fade_s: float = 1.0,
+    ring_slice_ms: float | None = DEFAULT_SLICE_MS,
     trace: TraceWriter | None = None,
     started_s: float | None = None,
     check_order: bool = False,
@@ -240,6 +243,7 @@ def run_bench(
             render_mode=mode,
             ring_build="async",
             ring_fade_s=ring_fade_s,
+            ring_slice_ms=ring_slice_ms,
         ) as engine,
     ):
         engine.time_ring_builds(build_s)
@@ -267,6 +271,8 @@ def run_bench(
                 if plan.rings.render or plan.rings.current is None:
                     draw_ring(renderer, plan)
                     renderer.finish()
+            if plan.rings.render_slice is not None:
+                engine.note_ring_render(times.frame["impostor_slice"])
             with times.stage("near_pass"):
                 renderer.render_frame(plan.frame)
                 renderer.finish()

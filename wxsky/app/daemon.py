@@ -144,6 +144,7 @@ class Daemon:
             cigi_hold_s=config.cigi.hold_s,
             ring_build="async",
             ring_fade_s=config.scene.ring_fade_s,
+            ring_slice_ms=config.scene.ring_slice_ms or None,
         )
         for patch in patches:
             if patch.source not in (Source.DEFAULT, Source.PRESET):
@@ -379,7 +380,14 @@ class Daemon:
     def _render_and_publish(self, plan: FramePlan) -> FrameMeta:
         r, writer = self._renderer, self._writer
         assert r is not None and writer is not None
-        draw_ring(r, plan)
+        if plan.rings.render_slice is not None:
+            t0 = time.perf_counter()
+            draw_ring(r, plan)
+            # Drawn to the end where the renderer waits per draw (a CPU one); on a GPU this is
+            # what issuing it cost, and slices only grow there.
+            self.engine.note_ring_render(time.perf_counter() - t0)
+        else:
+            draw_ring(r, plan)
         r.render_frame(plan.frame)
         frame_number = self.frames_published + 1
         export = None

@@ -1,7 +1,8 @@
 """Drawing a frame plan and handing it to hosts: the steps the daemon runs per frame, shared
 with `wxsky bench` so the benchmark times exactly what the daemon does.
 
-    draw_ring (one impostor of a rebuild, or none) -> renderer.render_frame (sky + near)
+    draw_ring (one impostor of a rebuild, a slice of one, or none)
+    -> renderer.render_frame (sky + near)
     -> publish_plan (read the layers into the shared-memory slot, the frame record, publish)
 """
 
@@ -26,6 +27,10 @@ class RingRenderer(Protocol):
         ring: RingScene,
         indices: range | list[int] | tuple[int, ...] | None = None,
         ring_set: int = 0,
+    ) -> None: ...
+
+    def render_impostor_slice(
+        self, ring: RingScene, index: int, start: int, stop: int, ring_set: int
     ) -> None: ...
 
     def read_into(self, name: str, buffer: memoryview) -> None: ...
@@ -73,7 +78,13 @@ def draw_ring(renderer: RingRenderer, plan: FramePlan) -> None:
         # Nothing built yet: the set on show is the empty ring (transparent images).
         renderer.render_ring(plan.ring, ring_set=rings.current_set)
     if rings.render and rings.render_ring is not None:
-        renderer.render_ring(rings.render_ring, rings.render, rings.render_set)
+        piece = rings.render_slice
+        if piece is None:
+            renderer.render_ring(rings.render_ring, rings.render, rings.render_set)
+        else:
+            renderer.render_impostor_slice(
+                rings.render_ring, piece.index, piece.start, piece.stop, rings.render_set
+            )
 
 
 def publish_plan(

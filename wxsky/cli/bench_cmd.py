@@ -126,6 +126,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             fov_deg=args.fov_deg,
             fps=args.fps,
             ring_fade_s=config.scene.ring_fade_s,
+            ring_slice_ms=config.scene.ring_slice_ms or None,
             trace=trace,
             started_s=STARTED_S,
             check_order=args.check_order,

@@ -10,6 +10,13 @@ drifted. A rebuild never stalls a frame:
     frame, 8 frames, into the second set) -> fading (the host cross-fades from the old set
     to the new over `fade_s`) -> idle, the new set now the current one
 
+With `slice_ms`, an impostor whose drawing would take longer than that is drawn over several
+frames instead, in slices of its back-to-front sprite list (`ImpostorSlice`), each drawn over
+the last: the same picture, and no frame pays a whole impostor (30-150 ms on a CPU renderer).
+Slices are cut by each sprite's estimated cost (`scene.ring.impostor_costs`) and the time a
+unit of it took in the slices drawn so far (`note_render`). Impostors still go one at a time,
+in order, and the fade starts once the eighth is complete.
+
 Two physical sets of 8 textures exist (0 and 1), so the old ring stays on screen, whole,
 until the new one is complete. A need to rebuild that arises mid-cycle waits for the cycle to
 end, and is judged then against the newest ring (a weather change under way rebuilds once per
@@ -38,7 +45,13 @@ from typing import Any
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import BuildCancelled, Drift, NearRing
 from wxsky.scene.layout import RingScene
-from wxsky.scene.ring import MOVE_HORIZONTAL_FRAC, MOVE_VERTICAL_FRAC, RING_SIZE, moved_reason
+from wxsky.scene.ring import (
+    MOVE_HORIZONTAL_FRAC,
+    MOVE_VERTICAL_FRAC,
+    RING_SIZE,
+    ImpostorCuts,
+    moved_reason,
+)
 from wxsky.scene.sky import SkyParams
 from wxsky.weather.state import WeatherState
 
@@ -69,6 +82,14 @@ RING_SETTLE_S = 1.0
 # meanwhile; the first change after a quiet spell rebuilds at once.
 RING_WEATHER_GAP_S = 3.0
 
+# A third of a frame at 30 fps, less a margin: what one frame may spend on impostors.
+DEFAULT_SLICE_MS = 8.0
+# An impostor is cut into at most this many slices whatever the estimate, so that a rebuild
+# on a very slow machine still ends in 8 x MAX_SLICES frames.
+MAX_SLICES = 16
+# Seconds per cost unit assumed before any slice was timed (llvmpipe on 2 cores, measured).
+FIRST_SECONDS_PER_UNIT = 1.5e-6
+
 Builder = Callable[[WeatherState, Drift, tuple[float, float, float], SkyParams], RingScene]
 
 
@@ -94,6 +115,18 @@ class RingEvent:
 
 
 @dataclass(frozen=True)
+class ImpostorSlice:
+    """Sprites start..stop of impostor `index`, back to front: the first slice clears the
+    impostor, each next one draws over it, the last completes it."""
+
+    index: int
+    start: int
+    stop: int
+    last: bool
+    units: float  # its estimated cost (`impostor_costs`)
+
+
+@dataclass(frozen=True)
 class RingFrame:
     """What the renderer draws and the publisher sends for the ring in one frame."""
 
@@ -106,6 +139,8 @@ class RingFrame:
     fade: float  # weight of `incoming`: 0 while it is rendered, rising to 1 as it fades in
     version: int  # bumps whenever a ring image or the fade weight changes
     events: tuple[RingEvent, ...]
+    # With slicing: the part of `render`'s one impostor to draw this frame (None: all of it)
+    render_slice: ImpostorSlice | None = None
 
     @property
     def incoming_set(self) -> int:
@@ -147,7 +182,10 @@ class RingSchedule:
         mode: str = "async",
         fade_s: float = DEFAULT_FADE_S,
         policy: RingPolicy | None = None,
+        slice_ms: float | None = None,
     ) -> None:
+        """`slice_ms`: spread an impostor over frames so that each spends about this long on
+        it (None: one whole impostor a frame, as Wang)."""
         if mode not in BUILD_MODES:
             raise ValueError(f"ring build mode must be one of {', '.join(BUILD_MODES)}: {mode!r}")
         self._build = build
@@ -175,6 +213,11 @@ class RingSchedule:
         self._steady_s = 0.0  # how long what the ring shows of it has not changed
         self._shown_for_s = math.inf  # since the newest ring finished fading in
         self._weather_built = False  # the newest ring was built for a weather change
+        self.slice_ms = slice_ms
+        self._seconds_per_unit = FIRST_SECONDS_PER_UNIT
+        self._cuts: ImpostorCuts | None = None  # of the impostor being drawn
+        self._slice_start = 0
+        self._slices = 0
 
     @property
     def current(self) -> RingScene | None:
@@ -266,15 +309,47 @@ class RingSchedule:
                 self._newest = None
                 self._retry_in_s = RETRY_AFTER_S
                 events.append(RingEvent("ring_rebuild_failed", {"error": str(exc)}))
+        piece: ImpostorSlice | None = None
         if self._incoming is not None and self._next_index < RING_SIZE:
             render, render_ring = (self._next_index,), self._incoming
             render_set = 1 - self._current_set
-            events.append(RingEvent("impostor_rendered", {"index": self._next_index}))
-            self._next_index += 1
+            done = True
+            if self.slice_ms is not None:
+                piece = self._next_slice(self._incoming)
+                done = piece.last
+            if done:
+                done_fields: dict[str, Any] = {"index": self._next_index}
+                if piece is not None:
+                    done_fields["slices"] = self._slices
+                events.append(RingEvent("impostor_rendered", done_fields))
+                self._next_index += 1
+                self._cuts = None
             self._version += 1
             if self._next_index == RING_SIZE:
                 events.append(RingEvent("ring_rebuild_done", {}))
-        return self._frame(render, render_ring, render_set, events)
+        return self._frame(render, render_ring, render_set, events, piece)
+
+    def note_render(self, units: float, seconds: float) -> None:
+        """The time a slice of `units` (its `ImpostorSlice.units`) took to draw, which sizes
+        the next slices. Render thread only."""
+        if units > 0.0 and seconds > 0.0 and math.isfinite(seconds):
+            # Half the way to each new measure: steady, yet a slow start is forgotten soon.
+            self._seconds_per_unit = 0.5 * (self._seconds_per_unit + seconds / units)
+
+    def _next_slice(self, ring: RingScene) -> ImpostorSlice:
+        index = self._next_index
+        if self._cuts is None:
+            self._cuts = ImpostorCuts(ring.geometry, index, ring.impostors[index].sprites)
+            self._slice_start = 0
+            self._slices = 0
+        assert self.slice_ms is not None
+        cuts = self._cuts
+        budget = max(self.slice_ms / 1000.0 / self._seconds_per_unit, cuts.total / MAX_SLICES)
+        start = self._slice_start
+        stop, units = cuts.cut(start, budget)
+        self._slice_start = stop
+        self._slices += 1
+        return ImpostorSlice(index, start, stop, stop >= len(cuts), units)
 
     def cancel(self) -> None:
         """Start no more builds, and make a build in flight give up at its next block (the
@@ -315,6 +390,7 @@ class RingSchedule:
         render_ring: RingScene | None,
         render_set: int,
         events: list[RingEvent],
+        piece: ImpostorSlice | None = None,
     ) -> RingFrame:
         return RingFrame(
             current=self._current,
@@ -326,6 +402,7 @@ class RingSchedule:
             fade=self._fade,
             version=self._version,
             events=tuple(events),
+            render_slice=piece,
         )
 
     def _start(

@@ -95,12 +95,15 @@ class SkyEngine:
         cigi_hold_s: float = DEFAULT_CIGI_HOLD_S,
         ring_build: str = "immediate",
         ring_fade_s: float = DEFAULT_FADE_S,
+        ring_slice_ms: float | None = None,
     ) -> None:
         """`state` is the base weather (defaults and the startup preset), also the first
         applied weather. Rates default to instant and the ring to being built whole in the
         frame that needs it, which suits one-off snapshots; the daemon builds it off the
         render thread and spreads it over frames (`ring_build="async"`, see ring_schedule).
-        `render_mode="direct"` draws every cloud as sprites and no ring (for comparison)."""
+        `render_mode="direct"` draws every cloud as sprites and no ring (for comparison).
+        `ring_slice_ms`: spread each impostor over frames at about this cost a frame
+        (ring_schedule; the renderer reports what slices cost through `note_ring_render`)."""
         if render_mode not in RENDER_MODES:
             raise ValueError(f"render mode must be one of {', '.join(RENDER_MODES)}")
         self._lock = threading.RLock()
@@ -134,6 +137,7 @@ class SkyEngine:
             settings.ring_radius_m,
             mode=ring_build,
             fade_s=ring_fade_s,
+            slice_ms=ring_slice_ms,
         )
         self._rings: RingFrame | None = None
         self._capping = False  # the near-sprite cap left sprites out last frame
@@ -190,6 +194,13 @@ class SkyEngine:
     @property
     def ring_version(self) -> int:
         return 0 if self._rings is None else self._rings.version
+
+    def note_ring_render(self, seconds: float) -> None:
+        """How long drawing this frame's impostor slice took (render thread), which sizes the
+        next slices."""
+        piece = None if self._rings is None else self._rings.render_slice
+        if piece is not None:
+            self._schedule.note_render(piece.units, seconds)
 
     def time_ring_builds(self, out: list[float]) -> None:
         """Append the seconds each later ring build takes (on whichever thread) to `out`."""

@@ -210,7 +210,6 @@ class Renderer:
     ) -> None:
         """Draw ring impostors (all 8 unless given), each from the ring centre, into texture
         set 0 or 1 (`ring_target_name`): a new ring is drawn into the set not on show."""
-        geo = ring.geometry
         chosen = list(indices if indices is not None else range(RING_SIZE))
         empty = all(len(ring.impostors[i]) == 0 for i in chosen)
         if empty and len(chosen) == RING_SIZE and ring_set in self._clear_ring_sets:
@@ -220,20 +219,41 @@ class Renderer:
         else:
             self._clear_ring_sets.discard(ring_set)
         for i in chosen:
-            target = self._target(ring_target_name(i, ring_set), self.ring_px, self.ring_px)
-            rows = impostor_rows(self.ring_px, geo.top_m[i] - geo.bottom_m[i], geo.half_width_m)
-            work = target if rows >= self.ring_px else self._target("impostor", self.ring_px, rows)
-            self._draw_sprites(
-                work,
-                ring.impostors[i],
-                geo.centre_m,
-                geo.view_matrix(i),
-                geo.projection_matrix(i),
-                shape=IMPOSTOR_SHAPE,
-            )
-            if work is not target:
-                self._upsample(work, target)
+            self._draw_impostor(ring, i, ring_set, 0, len(ring.impostors[i]))
         self._check("rendering the impostor ring")
+
+    def render_impostor_slice(
+        self, ring: RingScene, index: int, start: int, stop: int, ring_set: int
+    ) -> None:
+        """Draw sprites start..stop of impostor `index` (back to front) over the ones drawn
+        before, for a rebuild spread over frames (`ring_schedule.ImpostorSlice`): start 0
+        begins the impostor, stop at its last sprite completes it. One impostor at a time per
+        ring set, its slices in order."""
+        self._clear_ring_sets.discard(ring_set)
+        self._draw_impostor(ring, index, ring_set, start, stop)
+        self._check("rendering an impostor slice")
+
+    def _draw_impostor(self, ring: RingScene, i: int, ring_set: int, start: int, stop: int) -> None:
+        geo = ring.geometry
+        draw = ring.impostors[i]
+        target = self._target(ring_target_name(i, ring_set), self.ring_px, self.ring_px)
+        rows = impostor_rows(self.ring_px, geo.top_m[i] - geo.bottom_m[i], geo.half_width_m)
+        work = (
+            target
+            if rows >= self.ring_px
+            else self._target(f"impostor_{ring_set}", self.ring_px, rows)
+        )
+        self._draw_sprites(
+            work,
+            draw if (start, stop) == (0, len(draw)) else draw.slice(start, stop),
+            geo.centre_m,
+            geo.view_matrix(i),
+            geo.projection_matrix(i),
+            clear_rgba=(0.0, 0.0, 0.0, 0.0) if start == 0 else None,
+            shape=IMPOSTOR_SHAPE,
+        )
+        if work is not target and stop >= len(draw):
+            self._upsample(work, target)
 
     def start_profile(self) -> PassProfiler:
         """Time and count the fragments of every pass from now on (each pass then waits for
@@ -353,7 +373,7 @@ class Renderer:
         source.texture.use(0)
         _set(self._upsample_prog, "u_source", 0)
         _set(self._upsample_prog, "u_target_size", (float(dest.size[0]), float(dest.size[1])))
-        with self._pass(f"upsample {source.name}", "upsample"):
+        with self._pass(f"upsample {_sprite_pass_name(source.name)}", "upsample"):
             self._upsample_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def _draw_sprites(
@@ -509,7 +529,7 @@ def _mix_runs(turning: npt.NDArray[np.bool_]) -> list[tuple[int, int, bool]]:
 
 
 def _sprite_pass_name(target: str) -> str:
-    if target.startswith("ring_"):
+    if target.startswith(("ring_", "impostor_")):
         return "impostor"
     return target.removesuffix("_reduced")
 

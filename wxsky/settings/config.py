@@ -172,6 +172,9 @@ class SceneSection(_Section):
     ring_texture_px: int = _opt(256, _int(16, 4096, "px"))
     # A new ring cross-fades over the old one for this long (Wang); 0 swaps at once.
     ring_fade_s: float = _opt(1.0, _num(0.0, 30.0, "s"))
+    # A rebuild draws an impostor over as many frames as it takes to spend about this long on
+    # it in each (0: one whole impostor a frame, as Wang).
+    ring_slice_ms: float = _opt(8.0, _num(0.0, 1000.0, "ms"))
     # Near sprites this far away are drawn at the ring impostors' texel density (0: never).
     far_band_m: float = _opt(3000.0, _num(0.0, 200_000.0, "m"))
     # Near clouds this far away are drawn as one sprite each (Wang's LOD; 0: never).
