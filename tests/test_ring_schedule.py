@@ -9,6 +9,7 @@ import itertools
 import math
 import threading
 from datetime import timedelta
+from typing import Any
 
 import numpy as np
 import pytest
@@ -86,12 +87,29 @@ def sprite_build(n: int) -> Builder:
     return build
 
 
+def sliced_schedule(n: int, **kw: Any) -> RingSchedule:
+    """A sliced schedule past its first ring (drawn whole), the camera just far enough away
+    for the next frame to start a rebuild."""
+    s = RingSchedule(sprite_build(n), R, mode="sync", fade_s=0.0, slice_ms=2.0, **kw)
+    first = s.step(STATE, DRIFT, cam(), SKY, DT)
+    assert first.render == tuple(range(RING_SIZE)) and first.render_slice is None
+    assert events(first) == [
+        "ring_rebuild_start",
+        *["impostor_rendered"] * RING_SIZE,
+        "ring_rebuild_done",
+    ]
+    assert s.step(STATE, DRIFT, cam(), SKY, DT).current is not None  # faded in at once
+    return s
+
+
 def test_sliced_impostors_cover_every_sprite_once_in_order_within_the_budget() -> None:
     n = 3000
-    s = RingSchedule(sprite_build(n), R, mode="sync", fade_s=0.0, slice_ms=2.0)
+    s = sliced_schedule(n)
     costs = impostor_costs(s_geometry(), 0, sprite_build(n)(STATE, DRIFT, (0, 0, 1500), SKY)
                            .impostors[0].sprites)  # fmt: skip
-    frames = [s.step(STATE, DRIFT, cam(), SKY, DT) for _ in range(200)]
+    away = cam(0.2 * R)
+    frames = [s.step(STATE, DRIFT, away, SKY, DT) for _ in range(200)]
+    assert events(frames[0])[0] == "ring_rebuild_start"
     pieces = [f.render_slice for f in frames if f.render_slice is not None]
     # Before any slice was timed: FIRST_SECONDS_PER_UNIT, so 2 ms holds this many units.
     per_slice = 2e-3 / FIRST_SECONDS_PER_UNIT
@@ -119,22 +137,23 @@ def test_sliced_impostors_cover_every_sprite_once_in_order_within_the_budget() -
 
 
 def test_slices_follow_what_drawing_them_took() -> None:
-    s = RingSchedule(sprite_build(3000), R, mode="sync", fade_s=0.0, slice_ms=2.0)
-    first = s.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+    s = sliced_schedule(3000)
+    away = cam(0.2 * R)
+    first = s.step(STATE, DRIFT, away, SKY, DT).render_slice
     assert first is not None and not first.last
     # That slice took ten times longer than assumed: the next ones shrink toward a tenth.
     s.note_render(first.units, 10 * first.units * FIRST_SECONDS_PER_UNIT)
-    second = s.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+    second = s.step(STATE, DRIFT, away, SKY, DT).render_slice
     assert second is not None and second.start == first.stop
     assert second.units < 0.25 * first.units
     # A fast machine (a GPU) takes the whole impostor in one slice.
-    fast = RingSchedule(sprite_build(3000), R, mode="sync", fade_s=0.0, slice_ms=2.0)
-    piece = fast.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+    fast = sliced_schedule(3000)
+    piece = fast.step(STATE, DRIFT, away, SKY, DT).render_slice
     assert piece is not None
     for _ in range(20):
         fast.note_render(piece.units, 1e-9)
     for _ in range(2 * MAX_SLICES):
-        piece = fast.step(STATE, DRIFT, cam(), SKY, DT).render_slice
+        piece = fast.step(STATE, DRIFT, away, SKY, DT).render_slice
         assert piece is not None
         if piece.index == 1:
             break

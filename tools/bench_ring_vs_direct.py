@@ -157,13 +157,17 @@ def trace_check(wxsky: list[str], frames: int) -> dict[str, Any]:
         before = math.dist((start["camera_m"][0] - 4.0, start["camera_m"][1]), prev["centre_m"][:2])
         exact.append(moved > 0.15 * radius_m >= before)
     spread = []
+    slices: list[int] = []
     for k in range(len(starts)):
         idx = [e for e in rendered[8 * k : 8 * k + 8]]
         frames_k = [e["frame"] for e in idx]
-        spread.append(
-            [e["index"] for e in idx] == list(range(8))
-            and frames_k == list(range(frames_k[0], frames_k[0] + 8))
-        )
+        n_k = [int(e.get("slices", 1)) for e in idx]
+        if k == 0:  # the first ring, replacing none on show, all in one frame
+            consecutive = len(set(frames_k)) == 1
+        else:  # one impostor after the other, each over its slices' consecutive frames
+            consecutive = [b - a for a, b in itertools.pairwise(frames_k)] == n_k[1:]
+            slices += n_k
+        spread.append([e["index"] for e in idx] == list(range(8)) and consecutive)
     fades = sum(e["event"] == "crossfade_start" for e in lines)
     return {
         "frames": frames,
@@ -171,7 +175,8 @@ def trace_check(wxsky: list[str], frames: int) -> dict[str, Any]:
         "reasons": [s["reason"] for s in starts],
         "start_frames": [s["frame"] for s in starts],
         "starts_exactly_past_threshold": all(exact),
-        "each_spread_over_8_consecutive_frames": all(spread) and len(spread) == len(starts),
+        "each_impostor_after_the_other": all(spread) and len(spread) == len(starts),
+        "slices_per_impostor": slices,
         "crossfades": fades,
         "most_impostors_in_one_frame": max(per_frame.values(), default=0),
     }
@@ -209,9 +214,11 @@ def _trace_lines(t: dict[str, Any]) -> str:
         f"\n## Rebuild trace: {t['frames']} frames along the default flight\n\n"
         f"{t['rebuilds']} rebuilds ({', '.join(t['reasons'])}) starting at frames "
         f"{t['start_frames']}; each started on the first frame past the threshold: "
-        f"{t['starts_exactly_past_threshold']}; each spread over 8 consecutive frames: "
-        f"{t['each_spread_over_8_consecutive_frames']}; cross-fades started: {t['crossfades']}; "
-        f"most impostors rendered in one frame: {t['most_impostors_in_one_frame']}."
+        f"{t['starts_exactly_past_threshold']}; the first ring whole in one frame, then each "
+        f"impostor after the other over its slices' frames: {t['each_impostor_after_the_other']}"
+        f" (slices per impostor: {t['slices_per_impostor']}); cross-fades started: "
+        f"{t['crossfades']}; most impostors rendered in one frame: "
+        f"{t['most_impostors_in_one_frame']}."
     )
 
 
