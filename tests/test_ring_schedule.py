@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 import threading
 from datetime import timedelta
 from typing import Any
@@ -20,6 +21,7 @@ from wxsky.engine.ring_schedule import (
     MAX_SLICES,
     RETRY_AFTER_S,
     RING_WEATHER_GAP_S,
+    WORKER_NICENESS,
     Builder,
     RingPolicy,
     RingSchedule,
@@ -377,6 +379,28 @@ def test_async_builds_off_the_frame_and_renders_when_ready() -> None:
     finally:
         s.close()
         s.close()  # idempotent
+
+
+@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="no per-thread priority here")
+def test_the_ring_worker_runs_below_the_frames_priority() -> None:
+    seen: list[int] = []
+
+    def build(*args: object) -> RingScene:
+        seen.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+        return quick_build(*args)  # type: ignore[arg-type]
+
+    mine = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    s = RingSchedule(build, R, mode="async", fade_s=0.0)
+    try:
+        s.step(STATE, DRIFT, cam(), SKY, DT)
+        for _ in range(200):
+            if seen:
+                break
+            threading.Event().wait(0.01)
+    finally:
+        s.close()
+    assert seen == [min(19, mine + WORKER_NICENESS)]
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == mine  # frames keep it
 
 
 def test_a_failed_build_keeps_the_old_ring_and_tries_again(

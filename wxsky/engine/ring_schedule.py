@@ -36,6 +36,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -163,6 +164,24 @@ class RingFrame:
             return (cur._replace(weight=1.0),)
         new = NearRing(self.incoming.geometry.centre_m, self.incoming.drift, self.fade)
         return (cur, new)
+
+
+# Niceness the ring worker thread adds to its own: it shares the cores with the renderer's (on a CPU
+# renderer, llvmpipe's rasteriser threads), and a frame waiting for a build is a stall while a
+# build waiting for a frame is only a later ring.
+WORKER_NICENESS = 10
+
+
+def _yield_to_frames() -> None:
+    """Lower the calling thread's scheduling priority (Linux schedules threads one by one;
+    elsewhere, and where it is not allowed, this changes nothing)."""
+    try:
+        tid = threading.get_native_id()
+        os.setpriority(
+            os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + WORKER_NICENESS)
+        )
+    except (AttributeError, OSError) as exc:
+        log.debug("ring worker keeps its priority: %s", exc)
 
 
 @dataclass(frozen=True)
@@ -432,7 +451,9 @@ class RingSchedule:
     ) -> Future[RingScene]:
         self._note_newest(state, drift, camera, sky)
         if self._executor is None:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wxsky-ring")
+            self._executor = ThreadPoolExecutor(
+                max_workers=1, thread_name_prefix="wxsky-ring", initializer=_yield_to_frames
+            )
         return self._executor.submit(self._build, state, drift, camera.position_m, sky)
 
     def _note_newest(
