@@ -21,6 +21,7 @@ import pytest
 from daemon_harness import running_daemon
 from host_kit import gl_program, gl_sanitizer_env, host_kit, host_kit_sanitized  # noqa: F401
 
+from wxsky.host.compositor import stretch
 from wxsky.host.reference import host_frame
 from wxsky.output import shm
 from wxsky.output.frame_meta import FrameMeta
@@ -353,7 +354,7 @@ def test_a_rendered_frame_composites_as_the_python_reference_host_does(
 
 def python_composite_without_ring(images: dict[str, U8]) -> U8:
     sky = images["sky"].astype(np.float64) / 255.0
-    near = images["near"].astype(np.float64) / 255.0
+    near = stretch(images["near"], sky.shape[1], sky.shape[0])  # drawn at a fraction
     out = near + (1.0 - near[..., 3:4]) * sky
     out[..., 3] = 1.0
     return np.round(out * 255.0).astype(np.uint8)

@@ -89,7 +89,7 @@ def test_the_far_band_at_impostor_density_looks_the_same(renderer: Renderer) -> 
 
     whole = over_grey(FrameScene(cam, SKY, draw))
     banded = over_grey(FrameScene(cam, SKY, draw, near_far_count=far))
-    assert renderer.layer_size("near_far")[0] < renderer.layer_size("near_reduced")[0]
+    assert renderer.layer_size("near_far")[0] < renderer.layer_size("near")[0]
     diff = np.abs(whole - banded)
     assert diff.mean() < 1.0 and np.percentile(diff, 99) < 16, (
         diff.mean(),

@@ -20,7 +20,7 @@ from sprite_helpers import sprite_batch
 
 from wxsky.app.snapshot import LAYER_NAMES, take_snapshot
 from wxsky.errors import RenderError
-from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring
+from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring, stretch
 from wxsky.render import renderer as renderer_module
 from wxsky.render import shaders as shaders_mod
 from wxsky.render.renderer import (
@@ -29,6 +29,7 @@ from wxsky.render.renderer import (
     Renderer,
     _mix_runs,
     impostor_rows,
+    near_layer_size,
     turning_round,
 )
 from wxsky.render.shaders import ShaderLibrary, shader_source
@@ -96,6 +97,13 @@ def _near_scale(r: Renderer, scale: float) -> Iterator[Renderer]:
 # Near sprites at full resolution land within a pixel of the exact footprint; drawn at
 # NEAR_SCALE and upscaled bilinearly, within one reduced pixel more.
 SCALES = [(1.0, 1.0), (NEAR_SCALE, 1.0 + 1.0 / NEAR_SCALE)]
+
+
+def _near_seen(r: Renderer, width: int = W, height: int = H) -> np.ndarray:
+    """The near layer as a host shows it: stretched over the viewport (it is drawn at
+    near_scale of it), bilinearly, as 8-bit RGBA."""
+    seen = stretch(r.read("near"), width, height)
+    return np.round(seen * 255.0).astype(np.uint8)
 
 
 def _render_sky(r: Renderer, cam: Camera, sky: SkyParams) -> np.ndarray:
@@ -178,7 +186,8 @@ def test_empty_scene_clears_to_transparent(renderer: Renderer) -> None:
     assert renderer.read("near")[..., 3].any()
     renderer.render_frame(FrameScene(cam, _sky(), EMPTY))
     near = renderer.read("near")
-    assert near.shape == (H, W, 4)
+    w, h = near_layer_size(cam, renderer.near_scale)
+    assert near.shape == (h, w, 4) and (w, h) == (round(W * NEAR_SCALE), round(H * NEAR_SCALE))
     assert not near.any()
 
 
@@ -191,8 +200,7 @@ def test_single_sprite_straight_ahead_is_centred_with_its_projected_size(
     batch = _sprites([(0.0, distance, 1000.0)], [size], texture=TEX_FOG[0])  # round fog texture
     with _near_scale(renderer, scale):
         renderer.render_frame(FrameScene(cam, _sky(), _draw(batch)))
-    alpha = renderer.read("near")[..., 3]
-    assert alpha.shape == (H, W)
+    alpha = _near_seen(renderer)[..., 3]
     # Half the sprite's edge, in pixels: (size/2) / distance over tan(fov/2), times W/2.
     half_px = (size / 2.0) / distance / math.tan(math.radians(FOV / 2.0)) * (W / 2.0)
     r0, r1, c0, c1 = _bbox(alpha)
@@ -301,7 +309,7 @@ def test_the_in_cloud_veil_covers_the_near_layer_under_the_sprites(
     batch = _sprites([(0.0, 2000.0, 1000.0)], [400.0])
     with _near_scale(renderer, scale):
         renderer.render_frame(FrameScene(_camera(), _sky(), _draw(batch), veil_rgba=veil))
-    near = renderer.read("near").astype(int)
+    near = _near_seen(renderer).astype(int)
     expected = np.round(np.asarray(veil) * 255.0)
     assert np.abs(near[0, 0] - expected).max() <= 1  # a corner: no sprite, only the veil
     assert near[CR, CC, 3] > expected[3] + 50  # the sprite is drawn over it
@@ -316,8 +324,8 @@ def test_reduced_near_layer_matches_the_full_resolution_one(renderer: Renderer) 
     with _near_scale(renderer, 1.0):
         renderer.render_frame(FrameScene(cam, _sky(), draw))
     full = renderer.read("near").astype(int)
-    renderer.render_frame(FrameScene(cam, _sky(), draw))  # default: reduced + upscaled
-    reduced = renderer.read("near").astype(int)
+    renderer.render_frame(FrameScene(cam, _sky(), draw))  # default: reduced, host-stretched
+    reduced = _near_seen(renderer).astype(int)
     assert renderer.near_scale < 1.0
     assert np.all(reduced[..., :3].max(axis=2) <= reduced[..., 3])
     diff = np.abs(full - reduced)
@@ -335,7 +343,7 @@ def test_sprite_off_axis_lands_where_the_camera_projects_it(renderer: Renderer) 
     cam = _camera(heading_deg=30.0, pitch_deg=10.0, roll_deg=-12.0)
     centre = np.array([1500.0, 3000.0, 1400.0])
     renderer.render_frame(FrameScene(cam, _sky(), _draw(_sprites([centre], [150.0]))))
-    alpha = renderer.read("near")[..., 3].astype(float)
+    alpha = _near_seen(renderer)[..., 3].astype(float)
     clip = cam.view_projection() @ np.append(centre, 1.0)
     ndc = clip[:3] / clip[3]
     col = (ndc[0] + 1) / 2 * W - 0.5

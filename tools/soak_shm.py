@@ -8,8 +8,8 @@
                                             within MAX_S; answers one JSON line per command
 
 A frame counts as **torn** when its parts disagree: the frame record's frame number is not
-the slot's; a layer's size is not what the record says (sky and near at the record's camera
-size, ring_in_* present exactly while it fades, shadow exactly when it places one); or two
+the slot's; a layer's size is not what the record says (sky at the record's camera size, near
+at half of it, ring_in_* present exactly while it fades, shadow exactly when it places one); or two
 reads of the same frame number, one straight after the other, differ in any byte (the slot
 of a published frame is not written again until the writer has flipped twice, so a clean copy
 is always the same copy). Frame numbers going back count apart (`order_errors`).
@@ -33,6 +33,7 @@ import numpy as np
 from wxsky.errors import WxskyError
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import Frame, FrameReader
+from wxsky.render.renderer import near_layer_size
 
 MAX_PROBLEMS = 20  # torn frames and errors described in the stats; all are counted
 
@@ -188,12 +189,14 @@ def _structure_problem(frame: Frame) -> str | None:
     if meta.frame_number != frame.frame_number:
         return f"record says frame {meta.frame_number}"
     cam = (meta.camera.height_px, meta.camera.width_px)
+    near_w, near_h = near_layer_size(meta.camera)
+    expected = {"sky": cam, "near": (near_h, near_w)}
     layers = frame.layers
-    for name in ("sky", "near"):
-        if layers[name].shape[:2] != cam:
-            return f"{name} is {layers[name].shape[:2]}, the record's camera {cam}"
-    if layers["near_front"].size and layers["near_front"].shape[:2] != cam:
-        return f"near_front is {layers['near_front'].shape[:2]}, the record's camera {cam}"
+    for name, size in expected.items():
+        if layers[name].shape[:2] != size:
+            return f"{name} is {layers[name].shape[:2]}, for the record's camera {size}"
+    if layers["near_front"].size and layers["near_front"].shape[:2] != (near_h, near_w):
+        return f"near_front is {layers['near_front'].shape[:2]}, near {(near_h, near_w)}"
     ring = layers["ring_0"].shape
     for name, pixels in layers.items():
         if name.startswith("ring_in_"):

@@ -199,6 +199,7 @@ def run_bench(
     fps: float = 30.0,
     ring_fade_s: float = 1.0,
     ring_slice_ms: float | None = DEFAULT_SLICE_MS,
+    ring_build: str = "async",
     trace: TraceWriter | None = None,
     started_s: float | None = None,
     check_order: bool = False,
@@ -208,7 +209,9 @@ def run_bench(
     startup is counted from (default: now). `check_order`: also measure what each change in the
     near sprites' back-to-front order does to the picture (see `order_change`), outside the
     timed stages. `profile`: also time and count the fragments of every renderer pass (which
-    makes the stages slower: each pass then waits for the GPU) and measure the fill limits."""
+    makes the stages slower: each pass then waits for the GPU) and measure the fill limits.
+    `ring_build="sync"` builds rings in the frame that needs them (deterministic frames, for
+    tests) instead of on the worker thread as the daemon does."""
     from wxsky.render.context import describe
     from wxsky.render.renderer import Renderer
 
@@ -241,7 +244,7 @@ def run_bench(
             settings,
             clock_rate=1.0,
             render_mode=mode,
-            ring_build="async",
+            ring_build=ring_build,
             ring_fade_s=ring_fade_s,
             ring_slice_ms=ring_slice_ms,
         ) as engine,

@@ -35,6 +35,8 @@ class RingRenderer(Protocol):
 
     def read_into(self, name: str, buffer: memoryview) -> None: ...
 
+    def layer_size(self, name: str) -> tuple[int, int]: ...
+
 
 class LayerExport(Protocol):
     """The zero-copy textures of the slot being filled (render/texture_export.SlotTextures,
@@ -104,7 +106,8 @@ def publish_plan(
     names = ("sky", "near", "near_front") if plan.frame.near_front is not None else ("sky", "near")
     copies: list[tuple[str, str]] = [(name, name) for name in names]
     for name in names:
-        renderer.read_into(name, sink.layer_buffer(name, cam.width_px, cam.height_px))
+        # The near layers are smaller than the picture (Renderer.near_scale): hosts stretch.
+        renderer.read_into(name, sink.layer_buffer(name, *renderer.layer_size(name)))
     for i in range(RING_SIZE):
         source = ring_target_name(i, rings.current_set)
         renderer.read_into(source, sink.layer_buffer(f"ring_{i}", ring_px, ring_px))

@@ -117,10 +117,9 @@ def composite(layers: Layers, camera: Camera, ground: Ground | None = None) -> U
     with `ground`, the host's flat ground drawn over the sky and hiding the ring's clouds
     beyond it (as a host's depth buffer does)."""
     h, w = camera.height_px, camera.width_px
-    if layers.sky.shape[:2] != (h, w) or layers.near.shape[:2] != (h, w):
+    if layers.sky.shape[:2] != (h, w):
         raise ValueError(
-            f"sky {layers.sky.shape[:2]} and near {layers.near.shape[:2]} layers must match "
-            f"the camera viewport {(h, w)}"
+            f"the sky layer {layers.sky.shape[:2]} must match the camera viewport {(h, w)}"
         )
     out = layers.sky.astype(np.float64) / 255.0
     ring, ring_t = sample_ring_depth(layers.ring, layers.ring_quads_m, camera)
@@ -134,11 +133,11 @@ def composite(layers: Layers, camera: Camera, ground: Ground | None = None) -> U
         out[on_ground] = colour[on_ground]
         ring = np.where((ring_t < hit_t)[..., None], ring, 0.0)
     out = ring + (1.0 - ring[..., 3:4]) * out
-    near = layers.near.astype(np.float64) / 255.0
+    near = stretch(layers.near, w, h)
     out = near + (1.0 - near[..., 3:4]) * out
     # (A host draws its own aircraft here.)
     if layers.near_front is not None:
-        front = layers.near_front.astype(np.float64) / 255.0
+        front = stretch(layers.near_front, w, h)
         out = front + (1.0 - front[..., 3:4]) * out
     out[..., 3] = 1.0
     result: U8 = np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
@@ -195,6 +194,18 @@ def sample_ring_depth(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> tup
         out[hit] = bilinear(image, a[hit], b[hit])
         best_t[hit] = t[hit]
     return out, best_t
+
+
+def stretch(image: U8, width: int, height: int) -> F64:
+    """(height, width, 4) 0..1: a layer drawn at another size (the near layers are drawn at a
+    fraction of the picture) over the viewport, sampled bilinearly at each pixel's centre
+    with edges clamped, as a host's GL does; exact when the sizes agree."""
+    if image.shape[:2] == (height, width):
+        same: F64 = image.astype(np.float64) / 255.0
+        return same
+    a = np.broadcast_to((np.arange(width) + 0.5) / width, (height, width)).reshape(-1)
+    b = np.broadcast_to(((np.arange(height) + 0.5) / height)[:, None], (height, width))
+    return bilinear(image, a, b.reshape(-1)).reshape(height, width, 4)
 
 
 def bilinear(image: U8, a: F64, b: F64) -> F64:

@@ -31,8 +31,9 @@ from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
 log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.27
-# The near sprites are drawn at this fraction of the viewport and upscaled: fill rate is what
-# limits a CPU renderer, and soft sprites look the same.
+# The near sprites are drawn at this fraction of the viewport and stretched over it by the
+# host as it draws the layer: fill rate is what limits a CPU renderer, soft sprites look the
+# same, and a host uploads a quarter of the pixels.
 NEAR_SCALE = 0.5
 # The near layer's far band (FrameScene.near_far_count) is drawn no finer than the ring's
 # impostors (ring_px over 45°), unless that would save less than this share of its size.
@@ -163,19 +164,13 @@ class Renderer:
         clear_rgba: tuple[float, float, float, float],
         far_count: int = 0,
     ) -> None:
-        """Near sprites into layer `name`, at near_scale and upsampled (fill rate is what
-        near sprites cost), or straight at full size. The first `far_count` sprites (the far
-        band, drawn first as the draw is back to front) go at the ring impostors' texel
-        density where that is coarser, and are upsampled under the rest."""
+        """Near sprites into layer `name` at near_scale of the picture (fill rate is what
+        near sprites cost; a host stretches the layer over its viewport, bilinearly, as it
+        draws it). The first `far_count` sprites (the far band, drawn first as the draw is back
+        to front) go at the ring impostors' texel density where that is coarser, and are
+        upsampled under the rest."""
         view, proj = cam.view_matrix(), cam.projection_matrix()
-        if self.near_scale >= 1.0:
-            target = self._target(name, cam.width_px, cam.height_px)
-        else:
-            target = self._target(
-                f"{name}_reduced",
-                max(1, round(cam.width_px * self.near_scale)),
-                max(1, round(cam.height_px * self.near_scale)),
-            )
+        target = self._target(name, *near_layer_size(cam, self.near_scale))
         far_count = min(far_count, len(draw))
         w, h = target.size
         impostor_px_per_deg = self.ring_px / (360.0 / RING_SIZE)
@@ -199,8 +194,6 @@ class Renderer:
             )
         else:
             self._draw_sprites(target, draw, cam.position_m, view, proj, clear_rgba=clear_rgba)
-        if self.near_scale < 1.0:
-            self._upsample(target, self._target(name, cam.width_px, cam.height_px))
 
     def render_ring(
         self,
@@ -489,6 +482,12 @@ class Renderer:
             raise RenderError(f"GL error while {what}: {err}")
 
 
+def near_layer_size(cam: Camera, near_scale: float = NEAR_SCALE) -> tuple[int, int]:
+    """The near layers' size for a camera: its picture's at near_scale (at most 1)."""
+    scale = min(near_scale, 1.0)
+    return max(1, round(cam.width_px * scale)), max(1, round(cam.height_px * scale))
+
+
 def impostor_rows(ring_px: int, window_height_m: float, half_width_m: float) -> int:
     """Rows to draw an impostor at before it is stretched to ring_px square: its window is
     usually much wider than tall (a layer seen edge-on), and drawn square its texels would be
@@ -531,7 +530,7 @@ def _mix_runs(turning: npt.NDArray[np.bool_]) -> list[tuple[int, int, bool]]:
 def _sprite_pass_name(target: str) -> str:
     if target.startswith(("ring_", "impostor_")):
         return "impostor"
-    return target.removesuffix("_reduced")
+    return target
 
 
 # A square around the unit disc as a triangle strip, after the octagon in the corner buffer.
