@@ -92,8 +92,9 @@ def test_profile_counts_every_pass_and_its_pixels(capsys: pytest.CaptureFixture[
         ring_build="sync",  # from the first frame on, however busy the machine
     )
     rows = {r["pass"]: r for r in result.passes}
-    # The sky writes every pixel once a frame; the near layer is the host's to stretch.
-    assert rows["sky"]["calls_per_frame"] == 1.0
+    # The sky writes every pixel when it is drawn, which a steady view does only when the
+    # sun has moved enough; the near layer is the host's to stretch.
+    assert 0.0 < rows["sky"]["calls_per_frame"] < 1.0
     assert rows["sky"]["mpix_per_call"] == pytest.approx(96 * 54 / 1e6)
     assert "upsample near" not in rows
     # Eight impostors in ten frames (one with no cloud in it would draw nothing); the layer

@@ -10,7 +10,7 @@ import contextlib
 import dataclasses
 import math
 from collections.abc import Iterator
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -23,6 +23,7 @@ from wxsky.errors import RenderError
 from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring, stretch
 from wxsky.render import renderer as renderer_module
 from wxsky.render import shaders as shaders_mod
+from wxsky.render.profile import PassProfiler
 from wxsky.render.renderer import (
     IMPOSTOR_MIN_ROWS,
     NEAR_SCALE,
@@ -162,6 +163,39 @@ def test_horizon_and_ground_colours_looking_level_away_from_the_sun(renderer: Re
     steps = np.diff(column, axis=0) * np.sign(zenith - horizon)
     assert np.all(steps >= -1)
     assert np.abs(column[-1] - horizon).sum() > 20  # and actually gets somewhere
+
+
+def test_a_steady_view_keeps_its_sky_layer_until_what_it_shows_moves(
+    renderer: Renderer,
+) -> None:
+    profiler = renderer.start_profile()
+    try:
+        _check_sky_reuse(renderer, profiler)
+    finally:
+        renderer.stop_profile()
+
+
+def _check_sky_reuse(renderer: Renderer, profiler: PassProfiler) -> None:
+    cam = _camera(heading_deg=200.0, pitch_deg=10.0)
+    t0 = ZURICH_AFTERNOON
+
+    def sky_draws(cam: Camera, t: datetime) -> int:
+        before = len(profiler.passes["sky"].seconds) if "sky" in profiler.passes else 0
+        renderer.render_frame(FrameScene(cam, _sky(t), EMPTY))
+        return len(profiler.passes["sky"].seconds) - before
+
+    sky_draws(cam, t0 - timedelta(minutes=5))  # whatever the layer held before
+    assert sky_draws(cam, t0) == 1
+    kept = renderer.read("sky")
+    # A frame later the sun has moved 2.4e-6 rad: the layer stays as it is.
+    assert sky_draws(cam, t0 + timedelta(seconds=1 / 30)) == 0
+    # A second later it is redrawn, and differs by no more than rounding from what was kept.
+    assert sky_draws(cam, t0 + timedelta(seconds=1)) == 1
+    assert np.abs(renderer.read("sky").astype(int) - kept.astype(int)).max() <= 1
+    # Any turn of the camera redraws at once.
+    turned = dataclasses.replace(cam, heading_deg=200.01)
+    assert sky_draws(turned, t0 + timedelta(seconds=1)) == 1
+    assert sky_draws(turned, t0 + timedelta(seconds=1)) == 0
 
 
 def test_sky_follows_roll(renderer: Renderer) -> None:

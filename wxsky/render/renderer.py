@@ -10,6 +10,7 @@ import contextlib
 import dataclasses
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import moderngl
@@ -31,6 +32,11 @@ from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
 log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.27
+# The sky layer is drawn again only when a number it is drawn from (camera axes, sun direction,
+# colours, the dome's offsets, the stars' clock) moves by more than this: by day the sun moves
+# 2.4e-6 rad a frame at 30 fps, so a steady view redraws its sky every few frames, by steps a
+# hundredth of a pixel and a hundredth of a colour level wide.
+SKY_REUSE_TOLERANCE = 2e-5
 # The near sprites are drawn at this fraction of the viewport and stretched over it by the
 # host as it draws the layer: fill rate is what limits a CPU renderer, soft sprites look the
 # same, and a host uploads a quarter of the pixels.
@@ -142,6 +148,7 @@ class Renderer:
         renderer_name = str(self.ctx.info.get("GL_RENDERER", "")).lower()
         self._finish_each_draw = any(cpu in renderer_name for cpu in ("llvmpipe", "softpipe"))
         self._profiler: PassProfiler | None = None
+        self._sky_drawn: dict[str, _SkyKey] = {}  # by sky layer: what it holds
         self._check("initialising the renderer")
 
     # -- public API -------------------------------------------------------------------
@@ -255,6 +262,10 @@ class Renderer:
             self._profiler = PassProfiler(self.ctx, self._finish)
         return self._profiler
 
+    def stop_profile(self) -> None:
+        """Profile no more passes."""
+        self._profiler = None
+
     def finish(self) -> None:
         """Wait for every GL command issued so far (GIL-free): a benchmark's stage ends here."""
         self._finish()
@@ -308,35 +319,49 @@ class Renderer:
     def _draw_sky(self, name: str, cam: Camera, sky: SkyParams) -> None:
         """The sky without the moon and dome over the whole picture, then the variant with
         the dome over where it can show, and the one with everything over the moon's disc
-        (sky.glsl: outside a feature the variants agree bit for bit)."""
+        (sky.glsl: outside a feature the variants agree bit for bit). Not drawn again while
+        everything it is drawn from holds within SKY_REUSE_TOLERANCE of what the layer
+        already shows: a steady view, by day and without a drifting dome."""
         target = self._target(name, cam.width_px, cam.height_px)
-        target.fbo.use()
-        self.ctx.disable(moderngl.BLEND)
         feats = sky_textures.features(cam, sky)
         if not self.split_sky:
-            self._sky_draw("sky", cam, sky, feats, sky_textures.FULL_RECT)
+            parts = [("sky", feats, sky_textures.FULL_RECT)]
+        else:
+            parts = [
+                ("sky", dataclasses.replace(feats, moon=False, dome=False), sky_textures.FULL_RECT)
+            ]
+            if feats.dome:
+                rect = sky_textures.dome_rect_ndc(cam, sky)
+                if rect is not None:
+                    parts.append(("sky dome", dataclasses.replace(feats, moon=False), rect))
+            if feats.moon:
+                rect = sky_textures.moon_rect_ndc(cam, sky)
+                if rect is not None:
+                    parts.append(("sky moon", feats, rect))
+        draws = [
+            (pass_name, part, self._sky_uniforms(cam, sky, part, rect))
+            for pass_name, part, rect in parts
+        ]
+        key = _SkyKey(
+            target.texture.glo, tuple((d[0], d[1], tuple(d[2])) for d in draws), _flat_values(draws)
+        )
+        drawn = self._sky_drawn.get(name)
+        if drawn is not None and drawn.same(key):
             return
-        plain = dataclasses.replace(feats, moon=False, dome=False)
-        self._sky_draw("sky", cam, sky, plain, sky_textures.FULL_RECT)
-        if feats.dome:
-            rect = sky_textures.dome_rect_ndc(cam, sky)
-            if rect is not None:
-                self._sky_draw("sky dome", cam, sky, dataclasses.replace(feats, moon=False), rect)
-        if feats.moon:
-            rect = sky_textures.moon_rect_ndc(cam, sky)
-            if rect is not None:
-                self._sky_draw("sky moon", cam, sky, feats, rect)
+        target.fbo.use()
+        self.ctx.disable(moderngl.BLEND)
+        for pass_name, part, uniforms in draws:
+            self._sky_draw(pass_name, part, uniforms)
+        self._sky_drawn[name] = key
 
-    def _sky_draw(
+    def _sky_uniforms(
         self,
-        pass_name: str,
         cam: Camera,
         sky: SkyParams,
         feats: sky_textures.SkyFeatures,
         rect: sky_textures.Rect,
-    ) -> None:
+    ) -> dict[str, object]:
         right, up, fwd = cam.basis()
-        prog, vao, uniforms = self._sky.prepare(cam, sky, feats)
         camera = {
             "u_rect": rect,
             "u_target_size": (float(cam.width_px), float(cam.height_px)),
@@ -351,7 +376,13 @@ class Renderer:
             "u_sun_rgb": sky.sun_rgb,
             "u_sun_cos_radius": math.cos(math.radians(SUN_RADIUS_DEG)),
         }
-        for uniform, value in (camera | uniforms).items():
+        return camera | sky_textures.frame_uniforms(cam, sky, feats)
+
+    def _sky_draw(
+        self, pass_name: str, feats: sky_textures.SkyFeatures, uniforms: dict[str, object]
+    ) -> None:
+        prog, vao = self._sky.prepare(feats)
+        for uniform, value in uniforms.items():
             _set(prog, uniform, value)
         with self._pass(pass_name, "sky"):
             vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
@@ -480,6 +511,34 @@ class Renderer:
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"GL error while {what}: {err}")
+
+
+@dataclass(frozen=True)
+class _SkyKey:
+    """What a sky layer was drawn from: its texture, its parts (pass, variant, uniform names)
+    and every uniform's numbers, flattened."""
+
+    texture: int
+    parts: tuple[object, ...]
+    values: npt.NDArray[np.float64]
+
+    def same(self, other: _SkyKey) -> bool:
+        return (
+            self.texture == other.texture
+            and self.parts == other.parts
+            and self.values.shape == other.values.shape
+            and bool(np.all(np.abs(self.values - other.values) <= SKY_REUSE_TOLERANCE))
+        )
+
+
+def _flat_values(
+    draws: Sequence[tuple[str, object, dict[str, object]]],
+) -> npt.NDArray[np.float64]:
+    numbers: list[float] = []
+    for _name, _feats, uniforms in draws:
+        for value in uniforms.values():
+            numbers.extend(np.asarray(value, np.float64).ravel().tolist())
+    return np.asarray(numbers, np.float64)
 
 
 def near_layer_size(cam: Camera, near_scale: float = NEAR_SCALE) -> tuple[int, int]:

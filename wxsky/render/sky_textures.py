@@ -192,12 +192,10 @@ class SkyPass:
         self.sunset.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.sunset.repeat_x = self.sunset.repeat_y = False
 
-    def prepare(
-        self, cam: Camera, sky: SkyParams, feats: SkyFeatures
-    ) -> tuple[moderngl.Program, moderngl.VertexArray, dict[str, object]]:
+    def prepare(self, feats: SkyFeatures) -> tuple[moderngl.Program, moderngl.VertexArray]:
         """The program and vertex array that draw `feats` (some of this frame's `features`),
-        with the textures bound, and the uniforms they need beyond the camera, gradient and
-        sun."""
+        with the textures bound; `frame_uniforms` gives the uniforms they need beyond the
+        camera, gradient and sun."""
         variant = self._variants.get(feats)
         if variant is None:
             prog = self._shaders.program("sky.glsl", shader_defines(feats))
@@ -207,7 +205,7 @@ class SkyPass:
         self.galaxy.use(self.UNITS["u_galaxy_tex"])
         self.dome.use(self.UNITS["u_dome_tex"])
         self.sunset.use(self.UNITS["u_sunset_tex"])
-        return variant[0], variant[1], frame_uniforms(cam, sky, feats)
+        return variant
 
     def release(self) -> None:
         for _prog, vao in self._variants.values():
