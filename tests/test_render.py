@@ -567,10 +567,11 @@ def test_compositor_through_the_ring_matches_a_direct_render(renderer: Renderer)
     diff = np.abs(via_ring[..., :3] - direct[..., :3])
     assert diff[covered].mean() < 2.0
     assert np.percentile(diff[covered], 95) < 8
-    # Outside the sprite both are the sky (to a level: the impostor's bilinear lookup spreads
-    # the faintest edge of the sprite a texel beyond where the direct one stops).
+    # Outside the sprite both are the sky (to two levels: the impostor's bilinear lookup, of
+    # a sprite read from its nearest mip level, spreads the faintest edge of the sprite a
+    # texel beyond where the direct one stops).
     outside = ~covered & (direct_near[..., 3] == 0)
-    assert np.abs(via_ring[outside] - images["sky"][outside].astype(int)).max() <= 1
+    assert np.abs(via_ring[outside] - images["sky"][outside].astype(int)).max() <= 2
 
 
 def test_snapshot_of_an_empty_sky_is_the_sky_layer(renderer: Renderer) -> None:
