@@ -99,8 +99,9 @@ def test_the_ridge_hides_the_far_clouds_and_near_clouds_stay_in_front(
     # layer over it (premultiplied over), to rounding.
     near = stretch(pic["near"], W, H)  # drawn at a fraction of the picture; GL stretches it
     expected = near[..., :3] + (1.0 - near[..., 3:]) * _f(pic["terrain"])[..., :3]
+    # (To rounding: GL stretches the 8-bit near layer and rounds once more than this does.)
     diff = np.abs(expected - _f(pic["final"])[..., :3])[ridge]
-    assert diff.max() <= 1.5 / 255.0, diff.max() * 255
+    assert diff.max() <= 2.0 / 255.0, diff.max() * 255
     # The clouds in front (the near layer) stay in front of the terrain.
     in_front = ground & (near[..., 3] > 0.5)
     if in_front.any():
