@@ -22,10 +22,16 @@ from dataclasses import dataclass, field
 import moderngl
 import numpy as np
 
-# Which limit bounds which pass: sprites sample the mip-mapped sheet (trilinear) and blend;
+# Which limit bounds which pass: sprites sample the mip-mapped sheet (trilinear; small ones,
+# the far band and impostors, bilinearly from one level) and blend;
 # the sky computes its colour and writes without blending (its texture reads are few and
 # small); an upsample is one bilinear read and a write.
-LIMIT_OF_PASS = {"sprites": "trilinear_blend", "sky": "untextured", "upsample": "bilinear"}
+LIMIT_OF_PASS = {
+    "sprites": "trilinear_blend",
+    "small_sprites": "bilinear_blend",
+    "sky": "untextured",
+    "upsample": "bilinear",
+}
 
 _FILL_SHADERS = {
     "untextured": "f_colour = vec4(0.25, 0.3, 0.35, 0.5);",

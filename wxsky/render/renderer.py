@@ -443,7 +443,8 @@ class Renderer:
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
-        with self._pass(_sprite_pass_name(target.name), "sprites"):
+        kind = "sprites" if shape == "octagon" else "small_sprites"
+        with self._pass(_sprite_pass_name(target.name), kind):
             # In order, each run of sprites with the variant it needs (back to front holds).
             for start, stop, mixing in _mix_runs(turning_round(draw, eye_m)):
                 vao = self._sprite_vaos[mixing]
