@@ -8,6 +8,7 @@ with `wxsky bench` so the benchmark times exactly what the daemon does.
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from datetime import UTC
 from typing import Protocol
 
@@ -50,7 +51,11 @@ class LayerExport(Protocol):
 
 
 class LayerSink(Protocol):
-    def layer_buffer(self, layer: str, width: int, height: int) -> memoryview: ...
+    def layer_buffer(
+        self, layer: str, width: int, height: int, content: Hashable | None = None
+    ) -> memoryview: ...
+
+    def keep_layer(self, layer: str, width: int, height: int, content: Hashable) -> bool: ...
 
     def publish(self, frame_number: int, meta: bytes = b"") -> None: ...
 
@@ -108,16 +113,13 @@ def publish_plan(
     for name in names:
         # The near layers are smaller than the picture (Renderer.near_scale): hosts stretch.
         renderer.read_into(name, sink.layer_buffer(name, *renderer.layer_size(name)))
-    for i in range(RING_SIZE):
-        source = ring_target_name(i, rings.current_set)
-        renderer.read_into(source, sink.layer_buffer(f"ring_{i}", ring_px, ring_px))
-        copies.append((f"ring_{i}", source))
+    # A complete ring's images never change while it is on show or fading in (a new ring
+    # draws into the other set), so a slot that holds them from an earlier frame keeps them:
+    # they are read twice per ring, once into each slot, not 2 MB every frame.
+    _publish_ring(renderer, sink, copies, "ring", rings.current, rings.current_set, ring_px)
     incoming = rings.incoming if rings.fade > 0.0 else None
     if incoming is not None:
-        for i in range(RING_SIZE):
-            source = ring_target_name(i, rings.incoming_set)
-            renderer.read_into(source, sink.layer_buffer(f"ring_in_{i}", ring_px, ring_px))
-            copies.append((f"ring_in_{i}", source))
+        _publish_ring(renderer, sink, copies, "ring_in", incoming, rings.incoming_set, ring_px)
     # The ring on show's shadow map, changing with it. Its 1 MB (at 512 px) is copied into
     # every slot: slots alternate and the writer keeps no layer from frame to frame, and a
     # memcpy of it is a tenth of a millisecond.
@@ -159,3 +161,23 @@ def publish_plan(
     )
     sink.publish(frame_number, meta.pack())
     return meta
+
+
+def _publish_ring(
+    renderer: RingRenderer,
+    sink: LayerSink,
+    copies: list[tuple[str, str]],
+    prefix: str,
+    ring: RingScene | None,
+    ring_set: int,
+    ring_px: int,
+) -> None:
+    """The 8 images of `ring` (None: the empty ring drawn before the first, read every
+    frame) from texture set `ring_set` into layers prefix_0..7 of the slot being filled."""
+    for i in range(RING_SIZE):
+        layer, source = f"{prefix}_{i}", ring_target_name(i, ring_set)
+        copies.append((layer, source))
+        content = None if ring is None else ("ring", ring.serial, ring_set, i)
+        if content is not None and sink.keep_layer(layer, ring_px, ring_px, content):
+            continue
+        renderer.read_into(source, sink.layer_buffer(layer, ring_px, ring_px, content))

@@ -84,7 +84,7 @@ import re
 import struct
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -417,6 +417,14 @@ class FrameWriter:
         self._target = 1  # slot being filled; slot 0 is "active" but empty until publish 1
         self._writing = False
         self._dims: dict[int, tuple[int, int]] = {}
+        # What each slot's layers hold, where the caller named it (`layer_buffer`'s content):
+        # layer index -> (content, width, height), set when the slot is published and dropped
+        # as soon as a buffer of that layer in that slot is handed out again. Only this writer
+        # writes the segment (readers map it read-only), so a slot's pixels stay as published.
+        self._held: tuple[dict[int, tuple[Hashable, int, int]], ...] = tuple(
+            {} for _ in range(SLOT_COUNT)
+        )
+        self._filling: dict[int, tuple[Hashable, int, int]] = {}  # named in the slot being filled
         self._handed_out: list[memoryview] = []
         self._last_frame = -1
         self._closed = False
@@ -515,10 +523,42 @@ class FrameWriter:
             self._put64(seq, self._u64[seq // 8] + 1)  # odd: readers of this slot retry
             self._writing = True
 
-    def layer_buffer(self, layer: str, width: int, height: int) -> memoryview:
+    def layer_buffer(
+        self, layer: str, width: int, height: int, content: Hashable | None = None
+    ) -> memoryview:
         """The writable pixels of `layer` in the slot being filled: width*height*4 contiguous
         bytes (RGBA8, premultiplied, rows top to bottom). Valid until the next `publish`; a layer
-        not asked for before `publish` is published as absent (0x0)."""
+        not asked for before `publish` is published as absent (0x0). `content`: a name for
+        what the caller writes there, by which a later frame filling this slot again may keep
+        the pixels instead of writing them (`keep_layer`)."""
+        index = self._layer_index(layer, width, height)
+        self._begin()
+        self._dims[index] = (width, height)
+        self._held[self._target].pop(index, None)
+        if content is None:
+            self._filling.pop(index, None)
+        else:
+            self._filling[index] = (content, width, height)
+        start = self._layout.slot_base(self._target) + self._layout.pixel_offsets[index]
+        view = self._view[start : start + width * height * BYTES_PER_PIXEL]
+        self._handed_out.append(view)
+        return view
+
+    def keep_layer(self, layer: str, width: int, height: int, content: Hashable) -> bool:
+        """Publish `layer` in the slot being filled with the pixels it already holds, if they
+        are `content` at width x height: written under that name (`layer_buffer`) in an
+        earlier frame published in this slot, and not handed out for writing since. False,
+        and nothing done, otherwise: the caller writes the layer. Slots alternate, so a layer
+        that stays the same (the ring's images between rebuilds) is written twice, once into
+        each slot, and then kept."""
+        index = self._layer_index(layer, width, height)
+        if self._held[self._target].get(index) != (content, width, height):
+            return False
+        self._begin()
+        self._dims[index] = (width, height)
+        return True
+
+    def _layer_index(self, layer: str, width: int, height: int) -> int:
         self._check_open()
         index = self._index.get(layer)
         if index is None:
@@ -529,12 +569,7 @@ class FrameWriter:
                 f"layer {layer!r}: {width}x{height} exceeds its capacity "
                 f"{spec.max_width}x{spec.max_height}"
             )
-        self._begin()
-        self._dims[index] = (width, height)
-        start = self._layout.slot_base(self._target) + self._layout.pixel_offsets[index]
-        view = self._view[start : start + width * height * BYTES_PER_PIXEL]
-        self._handed_out.append(view)
-        return view
+        return index
 
     def publish(self, frame_number: int, meta: bytes = b"") -> None:
         """Complete the frame being filled and make it the one readers get."""
@@ -565,6 +600,8 @@ class FrameWriter:
         self._put64(HDR_LATEST_FRAME, frame_number)
         self._put64(HDR_PUBLISH_COUNT, self._u64[HDR_PUBLISH_COUNT // 8] + 1)
         self._release_handed_out()
+        self._held[self._target].update(self._filling)
+        self._filling.clear()
         self._target ^= 1
         self._writing = False
         self._dims.clear()

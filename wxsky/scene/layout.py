@@ -10,6 +10,7 @@ LOD and cap options, and split at the host's aircraft.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import threading
 import weakref
@@ -102,6 +103,9 @@ class SpriteDraw:
         return SpriteDraw(self.sprites.take(index), self.rgba[index], normals)
 
 
+_ring_serials = itertools.count(1)
+
+
 @dataclass(frozen=True)
 class RingScene:
     geometry: RingGeometry
@@ -110,6 +114,12 @@ class RingScene:
     # The clouds' shadow on the ground over the ring's area (2 ring radii square), made with
     # the ring's drift and sun; None for an empty ring or with `shadow_map_px` 0.
     shadow: CloudShadow | None = None
+    # Unique to this ring in the process: what a publisher names its images by, so a slot
+    # that already holds them keeps them (`FrameWriter.keep_layer`).
+    serial: int = field(init=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "serial", next(_ring_serials))
 
 
 @dataclass(frozen=True)
