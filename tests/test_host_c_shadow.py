@@ -34,10 +34,11 @@ pytestmark = pytest.mark.gl
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
-# GL's bilinear weights are fixed point (8 bits on llvmpipe and most GPUs): between two texels
-# 255 levels apart that is up to half a level, plus the RGBA8 map's own rounding on neither
-# side, so one level of 255 bounds the difference.
-LEVEL = 1.0 / 255.0
+# GL's bilinear weights are fixed point (8 bits on llvmpipe and most GPUs), and may be
+# truncated rather than rounded: between two texels 255 levels apart that is up to one level
+# along each axis of the 2 x 2 footprint, so two levels of 255 bound the difference (a CI run
+# measured 1.03 at a shadow's edge). A texel or half-texel misplacement shows as tens.
+LEVEL = 2.0 / 255.0
 
 
 @pytest.fixture
