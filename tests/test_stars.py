@@ -20,8 +20,9 @@ from wxsky.render import sky_texture_gen, sky_textures
 from wxsky.render.renderer import Renderer
 from wxsky.scene import ephemeris
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import SceneSettings
-from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, sky_params
+from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw
+from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams, sky_params
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
@@ -36,6 +37,7 @@ STAR_CONTRAST = 12  # levels above the local median that make a star
 SETTINGS = SceneSettings(max_range_m=16_000.0)
 
 U8 = npt.NDArray[np.uint8]
+NO_SPRITES = SpriteDraw(SpriteBatch.empty(), np.zeros((0, 4), np.float32))
 
 
 def _state(preset: str, when: datetime) -> WeatherState:
@@ -446,6 +448,67 @@ def test_sky_drawn_in_parts_equals_one_pass(
     if where == "moon-at-edge":
         rect = sky_textures.moon_rect_ndc(cam, sky)
         assert rect is not None and rect[2] == 1.0 and rect[0] > 0.5  # only the edge
+
+
+def _sky_passes(renderer: Renderer, cam: Camera, sky: SkyParams) -> dict[str, int]:
+    """Draw the sky layer for cam and sky; the calls of each sky pass it took."""
+    profiler = renderer.start_profile()
+    before = {name: len(p.seconds) for name, p in profiler.passes.items()}
+    try:
+        renderer.render_frame(FrameScene(cam, sky, NO_SPRITES))
+    finally:
+        renderer.stop_profile()
+    return {
+        name: len(p.seconds) - before.get(name, 0)
+        for name, p in profiler.passes.items()
+        if name.startswith("sky") and len(p.seconds) > before.get(name, 0)
+    }
+
+
+def _fresh_sky(renderer: Renderer, cam: Camera, sky: SkyParams) -> npt.NDArray[np.int64]:
+    renderer._sky_drawn.clear()  # forget what the layer holds: everything is drawn
+    renderer.render_frame(FrameScene(cam, sky, NO_SPRITES))
+    return renderer.read("sky").astype(np.int64)
+
+
+def test_a_kept_sky_redraws_only_the_drifting_dome_and_the_moving_moon(
+    renderer: Renderer, one_pass_renderer: Renderer
+) -> None:
+    """While the sun and the view hold still, a drifting dome redraws its band and a moving
+    moon its disc (and the plain sky where the disc was), and the kept layer is then exactly
+    the sky drawn afresh in one pass."""
+    state = _state("high-cirrus", datetime(2026, 5, 20, 10, 0, tzinfo=UTC))
+    sky0 = sky_params(state)
+    moon = sky0.moon
+    cam = _camera(state, moon.azimuth_deg, moon.elevation_deg, fov_deg=30.0)
+    feats = sky_textures.features(cam, sky0)
+    assert feats.dome and feats.moon
+    renderer._sky_drawn.clear()
+    assert set(_sky_passes(renderer, cam, sky0)) == {"sky", "sky dome", "sky moon"}
+    first = renderer.read("sky").astype(np.int64)
+    assert _sky_passes(renderer, cam, sky0) == {}  # nothing moved: nothing drawn
+    # The dome drifts on 20 s: its band and the moon over it are drawn again, not the sky.
+    drifted = dataclasses.replace(sky0, sky_time_s=sky0.sky_time_s + 20.0)
+    assert _sky_passes(renderer, cam, drifted) == {"sky dome": 1, "sky moon": 1}
+    kept = renderer.read("sky").astype(np.int64)
+    assert np.abs(kept - first).max() > 8  # the dome did move
+    np.testing.assert_array_equal(kept, _fresh_sky(one_pass_renderer, cam, drifted))
+    # The moon alone moves off its rectangle (1.5° east): the plain sky is drawn where it
+    # was, then the moon; no trace of the old disc is left.
+    moved = dataclasses.replace(
+        drifted, moon=dataclasses.replace(moon, azimuth_deg=moon.azimuth_deg + 1.5)
+    )
+    old_rect = sky_textures.moon_rect_ndc(cam, drifted)
+    new_rect = sky_textures.moon_rect_ndc(cam, moved)
+    assert old_rect is not None and new_rect is not None and old_rect != new_rect
+    passes = _sky_passes(renderer, cam, moved)
+    assert passes["sky moon"] == 1 and passes.get("sky", 0) == 1  # the old disc's rectangle
+    np.testing.assert_array_equal(
+        renderer.read("sky").astype(np.int64), _fresh_sky(one_pass_renderer, cam, moved)
+    )
+    # The sun moving past the tolerance draws everything.
+    later = sky_params(dataclasses.replace(state, time_utc=state.time_utc + timedelta(seconds=5)))
+    assert set(_sky_passes(renderer, cam, later)) == {"sky", "sky dome", "sky moon"}
 
 
 def test_dome_rectangle_is_the_band_above_the_horizon() -> None:

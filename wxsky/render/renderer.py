@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import itertools
 import logging
 import math
 from collections.abc import Sequence
@@ -148,7 +149,7 @@ class Renderer:
         renderer_name = str(self.ctx.info.get("GL_RENDERER", "")).lower()
         self._finish_each_draw = any(cpu in renderer_name for cpu in ("llvmpipe", "softpipe"))
         self._profiler: PassProfiler | None = None
-        self._sky_drawn: dict[str, _SkyKey] = {}  # by sky layer: what it holds
+        self._sky_drawn: dict[str, _SkyDrawn] = {}  # by sky layer: what it holds
         self._check("initialising the renderer")
 
     # -- public API -------------------------------------------------------------------
@@ -319,9 +320,10 @@ class Renderer:
     def _draw_sky(self, name: str, cam: Camera, sky: SkyParams) -> None:
         """The sky without the moon and dome over the whole picture, then the variant with
         the dome over where it can show, and the one with everything over the moon's disc
-        (sky.glsl: outside a feature the variants agree bit for bit). Not drawn again while
-        everything it is drawn from holds within SKY_REUSE_TOLERANCE of what the layer
-        already shows: a steady view, by day and without a drifting dome."""
+        (sky.glsl: outside a feature the variants agree bit for bit). A part is not drawn
+        again while everything it is drawn from holds within SKY_REUSE_TOLERANCE of what the
+        layer already shows (`_sky_redraw`): by day a steady view keeps its sky, and a
+        drifting dome redraws its band, not the picture."""
         target = self._target(name, cam.width_px, cam.height_px)
         feats = sky_textures.features(cam, sky)
         if not self.split_sky:
@@ -338,21 +340,27 @@ class Renderer:
                 rect = sky_textures.moon_rect_ndc(cam, sky)
                 if rect is not None:
                     parts.append(("sky moon", feats, rect))
-        draws = [
-            (pass_name, part, self._sky_uniforms(cam, sky, part, rect))
+        new = tuple(
+            _SkyPart.of(pass_name, part, rect, self._sky_uniforms(cam, sky, part, rect))
             for pass_name, part, rect in parts
-        ]
-        key = _SkyKey(
-            target.texture.glo, tuple((d[0], d[1], tuple(d[2])) for d in draws), _flat_values(draws)
         )
         drawn = self._sky_drawn.get(name)
-        if drawn is not None and drawn.same(key):
+        kept = drawn.parts if drawn is not None and drawn.texture == target.texture.glo else None
+        draws, now = _sky_redraw(kept, new)
+        if not draws:
             return
         target.fbo.use()
         self.ctx.disable(moderngl.BLEND)
-        for pass_name, part, uniforms in draws:
-            self._sky_draw(pass_name, part, uniforms)
-        self._sky_drawn[name] = key
+        for part in draws:
+            self._sky_draw(part.pass_name, part.feats, part.uniforms)
+        self._sky_drawn[name] = _SkyDrawn(target.texture.glo, now, next(_sky_serials))
+
+    def layer_version(self, name: str) -> int | None:
+        """A number that changes whenever layer `name` is drawn again, for layers kept from
+        frame to frame while nothing they show moves (the sky); None for layers drawn every
+        frame. A publisher names the layer's pixels by it (`FrameWriter.keep_layer`)."""
+        drawn = self._sky_drawn.get(name)
+        return None if drawn is None else drawn.serial
 
     def _sky_uniforms(
         self,
@@ -515,32 +523,111 @@ class Renderer:
             raise RenderError(f"GL error while {what}: {err}")
 
 
-@dataclass(frozen=True)
-class _SkyKey:
-    """What a sky layer was drawn from: its texture, its parts (pass, variant, uniform names)
-    and every uniform's numbers, flattened."""
+_sky_serials = itertools.count(1)
 
-    texture: int
-    parts: tuple[object, ...]
+
+@dataclass(frozen=True)
+class _SkyPart:
+    """One sky pass as drawn: its pass name, shader variant, rectangle (NDC), uniforms, and
+    every uniform's numbers flattened for comparison."""
+
+    pass_name: str
+    feats: sky_textures.SkyFeatures
+    rect: sky_textures.Rect
+    uniforms: dict[str, object]
     values: npt.NDArray[np.float64]
 
-    def same(self, other: _SkyKey) -> bool:
+    @staticmethod
+    def of(
+        pass_name: str,
+        feats: sky_textures.SkyFeatures,
+        rect: sky_textures.Rect,
+        uniforms: dict[str, object],
+    ) -> _SkyPart:
+        numbers: list[float] = []
+        for value in uniforms.values():
+            numbers.extend(np.asarray(value, np.float64).ravel().tolist())
+        return _SkyPart(pass_name, feats, rect, uniforms, np.asarray(numbers, np.float64))
+
+    def same(self, other: _SkyPart) -> bool:
+        """Drawn from the same things: the same variant over the same rectangle, every
+        number within SKY_REUSE_TOLERANCE."""
         return (
-            self.texture == other.texture
-            and self.parts == other.parts
+            self.pass_name == other.pass_name
+            and self.feats == other.feats
+            and self.rect == other.rect
+            and tuple(self.uniforms) == tuple(other.uniforms)
             and self.values.shape == other.values.shape
             and bool(np.all(np.abs(self.values - other.values) <= SKY_REUSE_TOLERANCE))
         )
 
 
-def _flat_values(
-    draws: Sequence[tuple[str, object, dict[str, object]]],
-) -> npt.NDArray[np.float64]:
-    numbers: list[float] = []
-    for _name, _feats, uniforms in draws:
-        for value in uniforms.values():
-            numbers.extend(np.asarray(value, np.float64).ravel().tolist())
-    return np.asarray(numbers, np.float64)
+@dataclass(frozen=True)
+class _SkyDrawn:
+    """What a sky layer holds: the texture drawn into, its parts, and a serial that changes
+    with every draw into it (`Renderer.layer_version`)."""
+
+    texture: int
+    parts: tuple[_SkyPart, ...]
+    serial: int
+
+
+def _sky_redraw(
+    kept: tuple[_SkyPart, ...] | None, new: tuple[_SkyPart, ...]
+) -> tuple[list[_SkyPart], tuple[_SkyPart, ...]]:
+    """The passes that bring a sky layer holding `kept` (None: nothing known) to `new`, and
+    what the layer then holds. The first part (the plain sky, over the picture) decides: when
+    it moved, everything is drawn. Otherwise the overlays (dome, moon: each drawn over its
+    rectangle, overwriting it) that moved are drawn again; where one moved off part of its old
+    rectangle, or is gone, the plain sky is drawn again there first, as it was drawn before
+    (the kept numbers, so no seam); and an overlay under a rectangle drawn again is redrawn
+    after it, in order."""
+    if kept is None or not kept or not kept[0].same(new[0]):
+        return list(new), new
+    old = {p.pass_name: p for p in kept[1:]}
+    now = {p.pass_name: p for p in new[1:]}
+    changed = {n for n, p in now.items() if n not in old or not p.same(old[n])}
+    stale: list[sky_textures.Rect] = [p.rect for n, p in old.items() if n not in now]
+    for n in changed:
+        if n in old and not _rect_contains(now[n].rect, old[n].rect):
+            stale.append(old[n].rect)
+    if not changed and not stale:
+        return [], kept
+    draws: list[_SkyPart] = []
+    touched: sky_textures.Rect | None = None
+    if stale:
+        touched = _rect_union(stale)
+        plain = kept[0]
+        draws.append(
+            dataclasses.replace(plain, rect=touched, uniforms=plain.uniforms | {"u_rect": touched})
+        )
+    holds: list[_SkyPart] = [kept[0]]
+    for part in new[1:]:
+        if part.pass_name in changed or (touched is not None and _rects_meet(part.rect, touched)):
+            draws.append(part)
+            touched = part.rect if touched is None else _rect_union([touched, part.rect])
+            holds.append(part)
+        else:
+            holds.append(old[part.pass_name])  # what it was drawn from, so changes add up
+    return draws, tuple(holds)
+
+
+def _rect_contains(outer: sky_textures.Rect, inner: sky_textures.Rect) -> bool:
+    x0, y0, x1, y1 = outer
+    return x0 <= inner[0] and y0 <= inner[1] and x1 >= inner[2] and y1 >= inner[3]
+
+
+def _rects_meet(a: sky_textures.Rect, b: sky_textures.Rect) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+def _rect_union(rects: Sequence[sky_textures.Rect]) -> sky_textures.Rect:
+    return (
+        min(r[0] for r in rects),
+        min(r[1] for r in rects),
+        max(r[2] for r in rects),
+        max(r[3] for r in rects),
+    )
 
 
 def near_layer_size(cam: Camera, near_scale: float = NEAR_SCALE) -> tuple[int, int]:

@@ -62,6 +62,7 @@ U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
 Rect = tuple[float, float, float, float]  # NDC x0, y0, x1, y1
 FULL_RECT: Rect = (-1.0, -1.0, 1.0, 1.0)
+MOON_RECT_GRID_PX = 8
 
 STAR_JITTER = 0.3  # greatest offset of a star from its cell centre, in cells
 # A flicker rate of G = k/255 makes k/255 * 2.55 = k/100 cycles per second, so every star's
@@ -258,11 +259,15 @@ def moon_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
     x = (rim @ right) / depth / cam.tan_half_fov_x
     y = -(rim @ up) / depth / cam.tan_half_fov_y
     pad_x, pad_y = 2.0 / cam.width_px, 2.0 / cam.height_px
+    # Out to a grid of MOON_RECT_GRID_PX pixels, so that the rectangle stays put while the
+    # moon crosses a cell (a minute and more) and a kept sky layer needs only the moon again.
+    step_x = 2.0 * MOON_RECT_GRID_PX / cam.width_px
+    step_y = 2.0 * MOON_RECT_GRID_PX / cam.height_px
     return _clip_rect(
-        float(x.min()) - pad_x,
-        float(y.min()) - pad_y,
-        float(x.max()) + pad_x,
-        float(y.max()) + pad_y,
+        math.floor((float(x.min()) - pad_x) / step_x) * step_x,
+        math.floor((float(y.min()) - pad_y) / step_y) * step_y,
+        math.ceil((float(x.max()) + pad_x) / step_x) * step_x,
+        math.ceil((float(y.max()) + pad_y) / step_y) * step_y,
     )
 
 
