@@ -1,7 +1,8 @@
 """The ring's images kept in a shared-memory slot from frame to frame (`publish_plan` with
 `FrameWriter.keep_layer`): a host reading the real segment must see, in every frame, exactly
 the images of the texture sets on show, across ring rebuilds, cross-fades and the alternating
-slots, while the images are read from the renderer only when a slot does not hold them."""
+slots, while the images are read from the renderer only when a slot does not hold them. The
+sky layer, which the renderer keeps while nothing it shows moves, is kept the same way."""
 
 from __future__ import annotations
 
@@ -31,6 +32,17 @@ class FakeRenderer:
         self.images: dict[str, bytes] = {}
         self.drawings = 0
         self.reads: list[str] = []
+        self.sky_version = 0  # the sky is kept for a few frames, then drawn again
+
+    def draw_sky(self, frame: int) -> None:
+        if frame % 7 == 0:
+            self.sky_version += 1
+            self.images["sky"] = (self.sky_version % 251 + 1).to_bytes(1, "little") * (
+                SIZE[0] * SIZE[1] * 4
+            )
+
+    def layer_version(self, name: str) -> int | None:
+        return self.sky_version if name == "sky" else None
 
     def _draw(self, name: str, px: int) -> None:
         self.drawings += 1
@@ -65,7 +77,7 @@ class FakeRenderer:
     # set 0 every time (snapshots' "immediate"): the set alone does not name the images.
     [("sync", 0.1), ("sync", 0.05), ("immediate", 0.0)],
 )
-def test_a_host_sees_the_sets_on_show_in_every_frame_while_kept_images_are_not_read(
+def test_a_host_sees_the_sets_and_sky_on_show_in_every_frame_while_kept_ones_are_not_read(
     build: str, fade_s: float
 ) -> None:
     state = WeatherState(layers=(CloudLayer(3.0, 2500.0, 3000.0, CloudType.CUMULUS),), wind=())
@@ -89,10 +101,14 @@ def test_a_host_sees_the_sets_on_show_in_every_frame_while_kept_images_are_not_r
             engine.set_camera(Camera(pose.position_m, pose.heading_deg, pose.pitch_deg))
             plan = engine.advance(1.0 / 30.0 if k else 0.0)
             draw_ring(renderer, plan)
+            renderer.draw_sky(k)
             renderer.reads.clear()
             publish_plan(renderer, writer, plan, k + 1, PX)
             frame = reader.read()
             frames += 1
+            assert frame.layers["sky"].tobytes() == renderer.images["sky"]
+            # The sky is read into each slot once per drawing of it: in its first two frames.
+            assert ("sky" in renderer.reads) == (k % 7 < 2)
             rings = plan.rings
             for i in range(RING_SIZE):
                 want = renderer.images.get(ring_target_name(i, rings.current_set), b"")

@@ -38,6 +38,8 @@ class RingRenderer(Protocol):
 
     def layer_size(self, name: str) -> tuple[int, int]: ...
 
+    def layer_version(self, name: str) -> int | None: ...
+
 
 class LayerExport(Protocol):
     """The zero-copy textures of the slot being filled (render/texture_export.SlotTextures,
@@ -112,7 +114,14 @@ def publish_plan(
     copies: list[tuple[str, str]] = [(name, name) for name in names]
     for name in names:
         # The near layers are smaller than the picture (Renderer.near_scale): hosts stretch.
-        renderer.read_into(name, sink.layer_buffer(name, *renderer.layer_size(name)))
+        width, height = renderer.layer_size(name)
+        # A layer the renderer kept from an earlier frame (the sky of a steady view) is kept
+        # by a slot that already holds it too: 3.7 MB not read at 1280x720.
+        version = renderer.layer_version(name)
+        content = None if version is None else ("layer", name, version)
+        if content is not None and sink.keep_layer(name, width, height, content):
+            continue
+        renderer.read_into(name, sink.layer_buffer(name, width, height, content))
     # A complete ring's images never change while it is on show or fading in (a new ring
     # draws into the other set), so a slot that holds them from an earlier frame keeps them:
     # they are read twice per ring, once into each slot, not 2 MB every frame.
@@ -120,14 +129,14 @@ def publish_plan(
     incoming = rings.incoming if rings.fade > 0.0 else None
     if incoming is not None:
         _publish_ring(renderer, sink, copies, "ring_in", incoming, rings.incoming_set, ring_px)
-    # The ring on show's shadow map, changing with it. Its 1 MB (at 512 px) is copied into
-    # every slot: slots alternate and the writer keeps no layer from frame to frame, and a
-    # memcpy of it is a tenth of a millisecond.
+    # The ring on show's shadow map, changing with it: written into each slot once per map.
     shadow = plan.ring.shadow
     placement = None
     if shadow is not None:
-        buffer = sink.layer_buffer("shadow", shadow.px, shadow.px)
-        np.frombuffer(buffer, np.uint8)[:] = shadow.rgba.reshape(-1)
+        map_name = ("shadow", shadow.serial)
+        if not sink.keep_layer("shadow", shadow.px, shadow.px, map_name):
+            buffer = sink.layer_buffer("shadow", shadow.px, shadow.px, map_name)
+            np.frombuffer(buffer, np.uint8)[:] = shadow.rgba.reshape(-1)
         placement = ShadowPlacement(
             version=shadow.serial,
             # Moved on with the clouds since the map was made, so shadows stay under them.
