@@ -12,6 +12,7 @@ import textwrap
 import numpy as np
 import pytest
 
+from wxsky.scene import sprite_cull
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import (
     BLOCK_CACHE,
@@ -177,6 +178,40 @@ def test_no_two_sprites_of_a_cloud_closer_than_the_cull_distance(name: str) -> N
         assert np.all(d >= reach * (1 - 1e-9)), f"{name}: cloud {cid}"
         checked += len(one)
     assert checked == len(sprites)
+
+
+def _walk(centre_m: np.ndarray, reach_m: np.ndarray) -> np.ndarray:
+    """Wang's cull as he states it: in order, keep a sprite unless one kept before is closer
+    than the larger reach of the two."""
+    kept: list[int] = []
+    for j in range(len(reach_m)):
+        if all(
+            np.sum((centre_m[i] - centre_m[j]) ** 2) >= max(reach_m[i], reach_m[j]) ** 2
+            for i in kept
+        ):
+            kept.append(j)
+    mask = np.zeros(len(reach_m), np.bool_)
+    mask[kept] = True
+    return mask
+
+
+@pytest.mark.parametrize("dense", [True, False])
+@pytest.mark.parametrize(("n", "k"), [(16, 48), (3, 1), (1, 120), (0, 4), (5, 0)])
+def test_cloud_by_cloud_cull_keeps_what_the_in_order_walk_keeps(
+    n: int, k: int, dense: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    if not dense:  # the voxel-grid form it falls back to for big clouds
+        monkeypatch.setattr(sprite_cull, "DENSE_PAIRS_MAX", 0)
+    rng = np.random.default_rng(n * 100 + k)
+    # Crowded: most sprites have a neighbour within reach, some chains are long.
+    centre_m = rng.uniform(0.0, 300.0, size=(n, k, 3))
+    reach_m = rng.uniform(10.0, 80.0, size=(n, k))
+    keep = sprite_cull.cull_mask_clouds(centre_m, reach_m)
+    assert keep.shape == (n, k)
+    for c in range(n):
+        np.testing.assert_array_equal(keep[c], _walk(centre_m[c], reach_m[c]))
+    if n and k > 1:
+        assert 0 < keep.sum() < n * k
 
 
 def test_cull_removes_sprites_only_where_boxes_crowd() -> None:

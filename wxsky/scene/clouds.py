@@ -18,7 +18,7 @@ import numpy as np
 
 from wxsky.scene.block_cache import BlockCache
 from wxsky.scene.cloud_models import BoxTemplate, CloudModel
-from wxsky.scene.sprite_cull import cull_mask
+from wxsky.scene.sprite_cull import cull_mask_clouds
 from wxsky.scene.sprites import F32, F64, I32, I64, SpriteBatch
 from wxsky.scene.texture_slots import TEX_FLAT_BOTTOM
 from wxsky.weather.state import CloudLayer, CloudType
@@ -131,7 +131,10 @@ def generate_block_clouds(
     # the middle of a layer too thin for that, never outside it.
     margin = np.minimum(0.3 * size, 0.5 * thickness_m)
     pos[:, 2] = np.clip(pos[:, 2], margin, thickness_m - margin)
-    keep = cull_mask(pos, model.cull_frac * size, cloud)
+    # Sprites are cloud-major, per_cloud to a cloud, as the cull walks them.
+    keep = cull_mask_clouds(
+        pos.reshape(n, per_cloud, 3), (model.cull_frac * size).reshape(n, per_cloud)
+    ).reshape(-1)
     pos, size, rot = pos[keep], size[keep], rot[keep]
     tex, group, cloud = tex[keep], group[keep], cloud[keep]
     # The flat-bottomed texture only works upright.

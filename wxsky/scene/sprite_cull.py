@@ -82,3 +82,38 @@ def cull_mask(centre_m: F64, reach_m: F64, group: I64) -> B:
         state[pending & ~beaten & ~waiting] = kept
     keep: B = state == kept
     return keep
+
+
+# Above this many sprite pairs per call the dense form's (n, k, k) tables cost more than the
+# voxel grid's searches: `cull_mask_clouds` falls back to `cull_mask`.
+DENSE_PAIRS_MAX = 2_000_000
+
+
+def cull_mask_clouds(centre_m: F64, reach_m: F64) -> B:
+    """`cull_mask` for n clouds of k sprites each, walked cloud by cloud: centre_m (n, k, 3),
+    reach_m (n, k); returns (n, k). A block's clouds are small (tens of sprites), so every
+    pair of a cloud is compared at once rather than found through a voxel grid: the same
+    sprites kept, for a fraction of the calls."""
+    n, k = reach_m.shape
+    if n * k * k > DENSE_PAIRS_MAX:
+        group = np.repeat(np.arange(n, dtype=np.int64), k)
+        flat: B = cull_mask(centre_m.reshape(-1, 3), reach_m.reshape(-1), group)
+        return flat.reshape(n, k)
+    # Summed as cull_mask sums them, axis by axis, so the same pairs count as close.
+    d2 = sum((centre_m[:, :, None, a] - centre_m[:, None, :, a]) ** 2 for a in range(3))
+    reach = np.maximum(reach_m[:, :, None], reach_m[:, None, :])
+    # close[c, i, j]: sprite i comes before j in cloud c and is within reach of it (as
+    # float32, so that "has a neighbour that..." is one batched matrix product).
+    close = ((d2 < reach * reach) & np.triu(np.ones((k, k), np.bool_), 1)[None]).astype(np.float32)
+    kept = np.zeros((n, 1, k), np.float32)
+    open_ = np.ones((n, 1, k), np.float32)
+    while open_.any():
+        # As cull_mask: a sprite goes if an earlier neighbour stays, stays once every
+        # earlier neighbour has gone; the first open sprite of a cloud always settles.
+        beaten = np.matmul(kept, close) > 0.0
+        waiting = np.matmul(open_, close) > 0.0
+        settles_kept = (open_ > 0.0) & ~beaten & ~waiting
+        kept[settles_kept] = 1.0
+        open_[beaten | ~waiting] = 0.0
+    out: B = kept[:, 0, :] > 0.0
+    return out
