@@ -8,10 +8,8 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import itertools
 import logging
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import moderngl
@@ -19,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.errors import RenderError
-from wxsky.render import sky_textures
+from wxsky.render import sky_layer, sky_textures
 from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
@@ -33,11 +31,6 @@ from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
 log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.27
-# The sky layer is drawn again only when a number it is drawn from (camera axes, sun direction,
-# colours, the dome's offsets, the stars' clock) moves by more than this: by day the sun moves
-# 2.4e-6 rad a frame at 30 fps, so a steady view redraws its sky every few frames, by steps a
-# hundredth of a pixel and a hundredth of a colour level wide.
-SKY_REUSE_TOLERANCE = 2e-5
 # The near sprites are drawn at this fraction of the viewport and stretched over it by the
 # host as it draws the layer: fill rate is what limits a CPU renderer, soft sprites look the
 # same, and a host uploads a quarter of the pixels.
@@ -149,7 +142,7 @@ class Renderer:
         renderer_name = str(self.ctx.info.get("GL_RENDERER", "")).lower()
         self._finish_each_draw = any(cpu in renderer_name for cpu in ("llvmpipe", "softpipe"))
         self._profiler: PassProfiler | None = None
-        self._sky_drawn: dict[str, _SkyDrawn] = {}  # by sky layer: what it holds
+        self._sky_drawn: dict[str, sky_layer.SkyLayerState] = {}  # by layer: what it holds
         self._check("initialising the renderer")
 
     # -- public API -------------------------------------------------------------------
@@ -320,10 +313,8 @@ class Renderer:
     def _draw_sky(self, name: str, cam: Camera, sky: SkyParams) -> None:
         """The sky without the moon and dome over the whole picture, then the variant with
         the dome over where it can show, and the one with everything over the moon's disc
-        (sky.glsl: outside a feature the variants agree bit for bit). A part is not drawn
-        again while everything it is drawn from holds within SKY_REUSE_TOLERANCE of what the
-        layer already shows (`_sky_redraw`): by day a steady view keeps its sky, and a
-        drifting dome redraws its band, not the picture."""
+        (sky.glsl: outside a feature the variants agree bit for bit); only what moved since
+        the layer was drawn, a strip at a time while it drifts (`sky_layer.plan_sky`)."""
         target = self._target(name, cam.width_px, cam.height_px)
         feats = sky_textures.features(cam, sky)
         if not self.split_sky:
@@ -340,20 +331,26 @@ class Renderer:
                 rect = sky_textures.moon_rect_ndc(cam, sky)
                 if rect is not None:
                     parts.append(("sky moon", feats, rect))
-        new = tuple(
-            _SkyPart.of(pass_name, part, rect, self._sky_uniforms(cam, sky, part, rect))
+        tolerances: dict[str, float] = {}
+        if feats.dome:
+            tol = sky_layer.dome_offset_tolerance(
+                sky_textures.pixel_rad(cam), sky, cam.position_m[2]
+            )
+            tolerances = {f"u_dome_off{i}": tol for i in range(3)}
+        new = [
+            sky_layer.SkyPart.of(
+                pass_name, part, rect, self._sky_uniforms(cam, sky, part, rect), tolerances
+            )
             for pass_name, part, rect in parts
-        )
-        drawn = self._sky_drawn.get(name)
-        kept = drawn.parts if drawn is not None and drawn.texture == target.texture.glo else None
-        draws, now = _sky_redraw(kept, new)
+        ]
+        draws, holds = sky_layer.plan_sky(self._sky_drawn.get(name), target.texture.glo, new)
+        self._sky_drawn[name] = holds
         if not draws:
             return
         target.fbo.use()
         self.ctx.disable(moderngl.BLEND)
-        for part in draws:
-            self._sky_draw(part.pass_name, part.feats, part.uniforms)
-        self._sky_drawn[name] = _SkyDrawn(target.texture.glo, now, next(_sky_serials))
+        for part, rect in draws:
+            self._sky_draw(part.pass_name, part.feats, part.uniforms | {"u_rect": rect})
 
     def layer_version(self, name: str) -> int | None:
         """A number that changes whenever layer `name` is drawn again, for layers kept from
@@ -521,113 +518,6 @@ class Renderer:
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"GL error while {what}: {err}")
-
-
-_sky_serials = itertools.count(1)
-
-
-@dataclass(frozen=True)
-class _SkyPart:
-    """One sky pass as drawn: its pass name, shader variant, rectangle (NDC), uniforms, and
-    every uniform's numbers flattened for comparison."""
-
-    pass_name: str
-    feats: sky_textures.SkyFeatures
-    rect: sky_textures.Rect
-    uniforms: dict[str, object]
-    values: npt.NDArray[np.float64]
-
-    @staticmethod
-    def of(
-        pass_name: str,
-        feats: sky_textures.SkyFeatures,
-        rect: sky_textures.Rect,
-        uniforms: dict[str, object],
-    ) -> _SkyPart:
-        numbers: list[float] = []
-        for value in uniforms.values():
-            numbers.extend(np.asarray(value, np.float64).ravel().tolist())
-        return _SkyPart(pass_name, feats, rect, uniforms, np.asarray(numbers, np.float64))
-
-    def same(self, other: _SkyPart) -> bool:
-        """Drawn from the same things: the same variant over the same rectangle, every
-        number within SKY_REUSE_TOLERANCE."""
-        return (
-            self.pass_name == other.pass_name
-            and self.feats == other.feats
-            and self.rect == other.rect
-            and tuple(self.uniforms) == tuple(other.uniforms)
-            and self.values.shape == other.values.shape
-            and bool(np.all(np.abs(self.values - other.values) <= SKY_REUSE_TOLERANCE))
-        )
-
-
-@dataclass(frozen=True)
-class _SkyDrawn:
-    """What a sky layer holds: the texture drawn into, its parts, and a serial that changes
-    with every draw into it (`Renderer.layer_version`)."""
-
-    texture: int
-    parts: tuple[_SkyPart, ...]
-    serial: int
-
-
-def _sky_redraw(
-    kept: tuple[_SkyPart, ...] | None, new: tuple[_SkyPart, ...]
-) -> tuple[list[_SkyPart], tuple[_SkyPart, ...]]:
-    """The passes that bring a sky layer holding `kept` (None: nothing known) to `new`, and
-    what the layer then holds. The first part (the plain sky, over the picture) decides: when
-    it moved, everything is drawn. Otherwise the overlays (dome, moon: each drawn over its
-    rectangle, overwriting it) that moved are drawn again; where one moved off part of its old
-    rectangle, or is gone, the plain sky is drawn again there first, as it was drawn before
-    (the kept numbers, so no seam); and an overlay under a rectangle drawn again is redrawn
-    after it, in order."""
-    if kept is None or not kept or not kept[0].same(new[0]):
-        return list(new), new
-    old = {p.pass_name: p for p in kept[1:]}
-    now = {p.pass_name: p for p in new[1:]}
-    changed = {n for n, p in now.items() if n not in old or not p.same(old[n])}
-    stale: list[sky_textures.Rect] = [p.rect for n, p in old.items() if n not in now]
-    for n in changed:
-        if n in old and not _rect_contains(now[n].rect, old[n].rect):
-            stale.append(old[n].rect)
-    if not changed and not stale:
-        return [], kept
-    draws: list[_SkyPart] = []
-    touched: sky_textures.Rect | None = None
-    if stale:
-        touched = _rect_union(stale)
-        plain = kept[0]
-        draws.append(
-            dataclasses.replace(plain, rect=touched, uniforms=plain.uniforms | {"u_rect": touched})
-        )
-    holds: list[_SkyPart] = [kept[0]]
-    for part in new[1:]:
-        if part.pass_name in changed or (touched is not None and _rects_meet(part.rect, touched)):
-            draws.append(part)
-            touched = part.rect if touched is None else _rect_union([touched, part.rect])
-            holds.append(part)
-        else:
-            holds.append(old[part.pass_name])  # what it was drawn from, so changes add up
-    return draws, tuple(holds)
-
-
-def _rect_contains(outer: sky_textures.Rect, inner: sky_textures.Rect) -> bool:
-    x0, y0, x1, y1 = outer
-    return x0 <= inner[0] and y0 <= inner[1] and x1 >= inner[2] and y1 >= inner[3]
-
-
-def _rects_meet(a: sky_textures.Rect, b: sky_textures.Rect) -> bool:
-    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
-
-
-def _rect_union(rects: Sequence[sky_textures.Rect]) -> sky_textures.Rect:
-    return (
-        min(r[0] for r in rects),
-        min(r[1] for r in rects),
-        max(r[2] for r in rects),
-        max(r[3] for r in rects),
-    )
 
 
 def near_layer_size(cam: Camera, near_scale: float = NEAR_SCALE) -> tuple[int, int]:

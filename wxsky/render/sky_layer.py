@@ -1,0 +1,235 @@
+"""Which parts of the sky layer a frame draws, so that a slowly changing sky costs little and
+the same every frame.
+
+The sky is drawn in parts (sky.glsl): the plain sky over the whole picture, then the dome's
+variant over its band and the moon's over its disc, each part's colour a function of the
+pixel and the uniforms only, so any part may be drawn over any sub-rectangle and agree with
+the rest to the bit. The layer is kept in `SKY_STRIPS` horizontal strips, and each part
+remembers, strip by strip, the numbers it was drawn there with:
+
+- what the layer shows changed in kind (another texture, another feature or rectangle):
+  everything is drawn;
+- a part some number of which moved by more than `SKY_CATCH_UP` tolerances in a strip (a
+  turn, a clock set, the stars' twinkle) is drawn again over all of its strips;
+- otherwise, once one of a part's strips has drifted past its tolerance, its stalest strips
+  are drawn again, as many a frame as keep them all within SKY_CATCH_UP at the rate things
+  drift. The sun moves a little every frame, and so does the dome: a steady view pays an
+  eighth of its plain sky and a piece of the dome's band every frame or so, instead of the
+  whole sky every few frames, and its frame time stays even.
+
+Drawing a part over a strip again means drawing the parts after it there too (each part
+overwrites its rectangle), not the ones before it: a drifting dome does not redraw the plain
+sky under it.
+
+Tolerances are in the uniforms' own units: `SKY_REUSE_TOLERANCE` for directions (radians),
+colours and the like; for the dome's texture offsets, what moves the nearest dome the eye can
+see by `DOME_REUSE_PX` of a pixel (`dome_offset_tolerance`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.render import sky_textures
+from wxsky.render.sky_textures import Rect, SkyFeatures
+from wxsky.scene.sky import SkyParams
+
+F64 = npt.NDArray[np.float64]
+
+# A number the sky is drawn from may move this much before the pixels it makes are drawn
+# again: by day the sun moves 2.4e-6 rad a frame at 30 fps, so a strip is drawn again every
+# few frames, by steps a hundredth of a pixel and a hundredth of a colour level wide.
+SKY_REUSE_TOLERANCE = 2e-5
+SKY_STRIPS = 8
+# Beyond this many tolerances a change is a jump, not a drift: drawn whole at once.
+SKY_CATCH_UP = 3.0
+# The dome drifts with the wind aloft: redrawn once it has moved this share of a pixel where
+# it is nearest the eye (a soft texture; the band at the horizon is 30 to 100 km off and
+# hardly moves, high cover overhead a few pixels a second).
+DOME_REUSE_PX = 0.25
+# Uniforms a change of which always redraws the whole layer (the stars twinkle every frame).
+_ALWAYS = frozenset({"u_star_clock_s"})
+_NOT_COMPARED = frozenset({"u_rect"})  # where a part is drawn, compared as the layout
+# Texture offsets repeat: 0.9999 and 0.0001 are a step of 0.0002.
+_PERIODS = {"u_dome_off0": 1.0, "u_dome_off1": 1.0, "u_dome_off2": 1.0}
+
+_serials = itertools.count(1)
+
+
+@dataclasses.dataclass(frozen=True)
+class SkyPart:
+    """One sky pass: its name, shader variant, rectangle (NDC), uniforms (less `u_rect`),
+    and the numbers it is drawn from with their tolerances, flattened alike."""
+
+    pass_name: str
+    feats: SkyFeatures
+    rect: Rect
+    uniforms: dict[str, object]
+    values: F64
+    tolerance: F64
+    period: F64  # of each number that wraps (the dome's texture offsets), else 0
+
+    def drift_from(self, drawn: F64) -> float:
+        """The largest change of any number since `drawn`, in its tolerances (any change of
+        one with none is a jump), the short way round for the periodic ones."""
+        return _drift(self.values, drawn, self.tolerance, self.period)
+
+    @staticmethod
+    def of(
+        pass_name: str,
+        feats: SkyFeatures,
+        rect: Rect,
+        uniforms: Mapping[str, object],
+        tolerances: Mapping[str, float] | None = None,
+    ) -> SkyPart:
+        """`tolerances`: by uniform name, where not SKY_REUSE_TOLERANCE."""
+        tolerances = tolerances or {}
+        values: list[float] = []
+        tolerance: list[float] = []
+        period: list[float] = []
+        for name, value in uniforms.items():
+            if name in _NOT_COMPARED:
+                continue
+            numbers = np.asarray(value, np.float64).ravel().tolist()
+            values.extend(numbers)
+            tol = 0.0 if name in _ALWAYS else tolerances.get(name, SKY_REUSE_TOLERANCE)
+            tolerance.extend([tol] * len(numbers))
+            period.extend([_PERIODS.get(name, 0.0)] * len(numbers))
+        drawn = {k: v for k, v in uniforms.items() if k not in _NOT_COMPARED}
+        return SkyPart(
+            pass_name,
+            feats,
+            rect,
+            drawn,
+            np.asarray(values, np.float64),
+            np.asarray(tolerance, np.float64),
+            np.asarray(period, np.float64),
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class SkyLayerState:
+    """What a sky layer holds: the texture drawn into, its parts' layout, the numbers each
+    part was drawn from in each strip, the numbers of the latest frame (drawn or not: how
+    fast things drift), and a serial that changes with every drawing into the layer."""
+
+    texture: int
+    layout: tuple[tuple[str, SkyFeatures, Rect], ...]
+    strips: tuple[tuple[F64, ...], ...]  # by part, by strip
+    latest: tuple[F64, ...]  # by part
+    serial: int
+
+
+def plan_sky(
+    kept: SkyLayerState | None, texture: int, parts: Sequence[SkyPart]
+) -> tuple[list[tuple[SkyPart, Rect]], SkyLayerState]:
+    """The draws (each part with the rectangle to draw it over, in order) that bring a sky
+    layer holding `kept` (None: nothing known) to `parts`, and what the layer then holds.
+
+    Part by part, in drawing order: of the strips a part covers, the stalest are drawn
+    again, as many as keep them all within SKY_CATCH_UP at this frame's drift (all of them
+    past it), and with them every strip an earlier part was drawn again in (a part
+    overwrites what lies under its rectangle, not what lies over it)."""
+    layout = tuple((p.pass_name, p.feats, p.rect) for p in parts)
+    if (
+        kept is None
+        or kept.texture != texture
+        or kept.layout != layout
+        or any(s[0].shape != p.values.shape for s, p in zip(kept.strips, parts, strict=True))
+    ):
+        return [(p, p.rect) for p in parts], SkyLayerState(
+            texture,
+            layout,
+            tuple((p.values,) * SKY_STRIPS for p in parts),
+            tuple(p.values for p in parts),
+            next(_serials),
+        )
+    draws: list[tuple[SkyPart, Rect]] = []
+    redrawn: set[int] = set()  # strips an earlier part was drawn in again
+    strips: list[tuple[F64, ...]] = []
+    for part, held, latest in zip(parts, kept.strips, kept.latest, strict=True):
+        mine = [i for i in range(SKY_STRIPS) if _intersect(part.rect, strip_rect(i))]
+        drift = {i: part.drift_from(held[i]) for i in mine}
+        stale = [i for i in sorted(mine, key=lambda i: -drift[i]) if drift[i] > 1.0]
+        if stale and drift[stale[0]] > SKY_CATCH_UP:
+            chosen = set(mine)
+        elif stale:
+            rate = part.drift_from(latest)
+            count = max(1, math.ceil(len(mine) * rate / (SKY_CATCH_UP - 1.0)))
+            chosen = set(stale[:count])
+        else:
+            chosen = set()
+        redo = sorted(chosen | (redrawn & set(mine)))
+        for first, last in _runs(redo):
+            band = (-1.0, strip_rect(first)[1], 1.0, strip_rect(last)[3])
+            clipped = _intersect(part.rect, band)
+            if clipped is not None:
+                draws.append((part, clipped))
+        redrawn |= set(redo)
+        strips.append(tuple(part.values if i in redo else v for i, v in enumerate(held)))
+    latest_values = tuple(p.values for p in parts)
+    if not draws:
+        return [], dataclasses.replace(kept, latest=latest_values)
+    return draws, SkyLayerState(texture, layout, tuple(strips), latest_values, next(_serials))
+
+
+def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
+    """Sorted indices as runs of consecutive ones, (first, last) each."""
+    runs: list[tuple[int, int]] = []
+    for i in indices:
+        if runs and runs[-1][1] == i - 1:
+            runs[-1] = (runs[-1][0], i)
+        else:
+            runs.append((i, i))
+    return runs
+
+
+def strip_rect(index: int) -> Rect:
+    """Strip `index` of SKY_STRIPS, top (NDC y -1, as the sky shader's quad) to bottom."""
+    y0 = -1.0 + 2.0 * index / SKY_STRIPS
+    y1 = -1.0 + 2.0 * (index + 1) / SKY_STRIPS
+    return (-1.0, y0, 1.0, y1)
+
+
+def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) -> float:
+    """How far the dome's texture offsets (tile units) may move before the dome nearest the
+    eye has moved DOME_REUSE_PX of a pixel: 0 where no dome is drawn."""
+    frame = sky_textures.dome_frame(sky, eye_alt_m)
+    if frame.height_m <= 0.0:
+        return 0.0
+    # The nearest visible dome: overhead under high cover, else the top of the distant band.
+    top_z = 1.0 if sky.dome.high_cover > 0.0 else sky_textures.dome_band(sky)[1]
+    nearest_m = frame.height_m / max(top_z, 1e-3)
+    # A texture offset of 1 moves the dome by at most a (stretched) tile.
+    tile_m = max(1.0 / min(math.hypot(m[0], m[2]), math.hypot(m[1], m[3])) for m in frame.matrices)
+    return DOME_REUSE_PX * pixel_rad * nearest_m / tile_m
+
+
+def _drift(values: F64, drawn: F64, tolerance: F64, period: F64) -> float:
+    """The largest change of any number, in its tolerances (any change of one with none is
+    a jump), the short way round for the periodic ones."""
+    if values.size == 0:
+        return 0.0
+    change = np.abs(values - drawn)
+    wrapped = np.mod(change, np.where(period > 0.0, period, np.inf))
+    change = np.where(period > 0.0, np.minimum(wrapped, period - wrapped), change)
+    ratio = np.where(
+        tolerance > 0.0,
+        change / np.where(tolerance > 0.0, tolerance, 1.0),
+        np.where(change > 0.0, np.inf, 0.0),
+    )
+    return float(ratio.max())
+
+
+def _intersect(a: Rect, b: Rect) -> Rect | None:
+    x0, y0 = max(a[0], b[0]), max(a[1], b[1])
+    x1, y1 = min(a[2], b[2]), min(a[3], b[3])
+    if x0 >= x1 or y0 >= y1:
+        return None
+    return (x0, y0, x1, y1)
