@@ -11,16 +11,27 @@ import pytest
 
 from wxsky.app.camera_path import straight_and_level
 from wxsky.engine.stages import SkyEngine
+from wxsky.scene import gather as gather_module
+from wxsky.scene import layout as layout_module
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import (
     NearRing,
     _gather_near,
     advance_drift,
+    clear_near_blocks,
     gather_near,
     gather_near_blocks,
+    near_blocks,
     zero_drift,
 )
-from wxsky.scene.layout import SceneSettings, near_scattered_light, shade_for_eye, sort_order
+from wxsky.scene.layout import (
+    SceneSettings,
+    empty_ring,
+    near_scattered_light,
+    prepare_near,
+    shade_for_eye,
+    sort_order,
+)
 from wxsky.scene.sky import sky_params
 from wxsky.scene.sprites import SpriteBatch
 from wxsky.settings.presets import load_preset
@@ -129,3 +140,43 @@ def test_frames_along_a_flight_through_rebuilds_match_a_fresh_gather_and_shade()
             _same_batch(got.sprites, want.sprites)
             assert got.rgba.tobytes() == want.rgba.tobytes()
     assert seen_fade
+
+
+def test_a_new_rings_worker_prepares_the_near_sets_and_light_its_frames_ask_for() -> None:
+    """`prepare_near`, run with a new ring: the set the ring's frames gather (alone, and in the
+    cross-fade from the ring on show) and Harris's light on it are made already, and are the
+    ones the frames then use."""
+    state = _state("fair-cumulus")
+    settings = SceneSettings(max_range_m=16_000.0)
+    sky = sky_params(state)
+    drift0 = zero_drift(state)
+    drift1 = advance_drift(state, drift0, 30.0)
+    shown = empty_ring((0.0, 0.0, 1500.0), settings.ring_radius_m, drift0)
+    ring = empty_ring((1300.0, -250.0, 1500.0), settings.ring_radius_m, drift1)
+    clear_near_blocks()
+    alone = (NearRing(ring.geometry.centre_m, ring.drift, 1.0),)
+    fading = (
+        NearRing(shown.geometry.centre_m, shown.drift, 0.6),
+        NearRing(ring.geometry.centre_m, ring.drift, 0.4),
+    )
+    with pytest.MonkeyPatch.context() as mp:
+        made: list[object] = []
+        real = gather_module._make_near_blocks
+        mp.setattr(gather_module, "_make_near_blocks", lambda *a: made.append(a) or real(*a))
+        prepare_near(state, ring, shown, sky, settings)
+        assert len(made) == 2  # the ring's own set, and the fade's
+        lights = {}
+        for rings in (alone, fading):
+            blocks = near_blocks(state, drift1, rings, settings.ring_radius_m, 16_000.0)
+            assert blocks is not None
+            lights[rings] = layout_module._near_light.get(blocks)
+            assert lights[rings] is not None  # its light is there before any frame
+        # A frame of the fade, a little later, finds both: nothing is made in it.
+        later = advance_drift(state, drift1, 2.0)
+        for rings in (alone, fading):
+            near, _, blocks = gather_near_blocks(
+                state, later, rings, settings.ring_radius_m, 16_000.0
+            )
+            assert blocks is not None
+            assert near_scattered_light(blocks, near, sky) is lights[rings]
+        assert len(made) == 2

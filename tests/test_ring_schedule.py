@@ -21,7 +21,6 @@ from wxsky.engine.ring_schedule import (
     MAX_SLICES,
     RETRY_AFTER_S,
     RING_WEATHER_GAP_S,
-    WORKER_NICENESS,
     Builder,
     RingPolicy,
     RingSchedule,
@@ -382,27 +381,6 @@ def test_async_builds_off_the_frame_and_renders_when_ready() -> None:
 
 
 @pytest.mark.skipif(not hasattr(os, "setpriority"), reason="no per-thread priority here")
-def test_the_ring_worker_runs_below_the_frames_priority() -> None:
-    seen: list[int] = []
-
-    def build(*args: object) -> RingScene:
-        seen.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
-        return quick_build(*args)  # type: ignore[arg-type]
-
-    mine = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-    s = RingSchedule(build, R, mode="async", fade_s=0.0)
-    try:
-        s.step(STATE, DRIFT, cam(), SKY, DT)
-        for _ in range(200):
-            if seen:
-                break
-            threading.Event().wait(0.01)
-    finally:
-        s.close()
-    assert seen == [min(19, mine + WORKER_NICENESS)]
-    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == mine  # frames keep it
-
-
 def test_a_failed_build_keeps_the_old_ring_and_tries_again(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
@@ -473,3 +451,40 @@ def test_gather_near_weighs_each_block_by_the_rings_it_is_near_to() -> None:
     # One ring at weight 1 is what gather_blocks gives, share 1 everywhere.
     single, ones = gather_near(state, drift, (a._replace(weight=1.0),), 6000.0)
     assert len(single) and np.all(ones == 1.0)
+
+
+def test_before_the_first_ring_the_near_layer_is_the_one_the_ring_being_built_complements() -> None:
+    """While the first ring builds, the near layer gathers the blocks around the ring's
+    centre (as its drift picks them), not around the moving camera: the same set frame after
+    frame, and the set the ring's own frames then use, so no frame makes a set and its light."""
+    release = threading.Event()
+
+    def build(state: WeatherState, drift: Drift, centre: tuple, sky: SkyParams) -> RingScene:
+        release.wait(10.0)
+        return quick_build(state, drift, centre, sky)
+
+    s = RingSchedule(build, R, mode="async", fade_s=0.0)
+    try:
+        first = s.step(STATE, DRIFT, cam(), SKY, DT)
+        assert first.current is None
+        built_for = (NearRing(cam().position_m, DRIFT, 1.0),)
+        for x in (50.0, 400.0):  # the camera flies on while the ring builds
+            f = s.step(STATE, DRIFT, cam(x), SKY, DT)
+            assert f.current is None and f.near_rings(cam(x), DRIFT) == built_for
+        release.set()
+        for _ in range(500):
+            f = s.step(STATE, DRIFT, cam(450.0), SKY, DT)
+            if f.current is not None:
+                break
+            threading.Event().wait(0.005)
+        assert f.current is not None
+        assert f.near_rings(cam(450.0), DRIFT) == built_for
+    finally:
+        s.close()
+    # With no ring asked for yet, the camera is all there is.
+    nothing = RingSchedule(quick_build, R, mode="async", fade_s=0.0)
+    try:
+        blank = nothing._frame((), None, 1, [])
+        assert blank.near_rings(cam(10.0), DRIFT) == (NearRing(cam(10.0).position_m, DRIFT, 1.0),)
+    finally:
+        nothing.close()

@@ -36,7 +36,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -143,6 +142,10 @@ class RingFrame:
     events: tuple[RingEvent, ...]
     # With slicing: the part of `render`'s one impostor to draw this frame (None: all of it)
     render_slice: ImpostorSlice | None = None
+    # Before the first ring is on show: the near ring of the one being built, the near layer
+    # then being the blocks that ring will complement (not blocks around a moving camera,
+    # which change as it flies and cost a frame their light each time).
+    building: NearRing | None = None
 
     @property
     def incoming_set(self) -> int:
@@ -158,30 +161,12 @@ class RingFrame:
             if self.incoming is not None and self.fade > 0.0:
                 ring = self.incoming
                 return (NearRing(ring.geometry.centre_m, ring.drift, 1.0),)
-            return (NearRing(camera.position_m, drift, 1.0),)
+            return (self.building or NearRing(camera.position_m, drift, 1.0),)
         cur = NearRing(self.current.geometry.centre_m, self.current.drift, 1.0 - self.fade)
         if self.incoming is None or self.fade <= 0.0:
             return (cur._replace(weight=1.0),)
         new = NearRing(self.incoming.geometry.centre_m, self.incoming.drift, self.fade)
         return (cur, new)
-
-
-# Niceness the ring worker thread adds to its own: it shares the cores with the renderer's (on a CPU
-# renderer, llvmpipe's rasteriser threads), and a frame waiting for a build is a stall while a
-# build waiting for a frame is only a later ring.
-WORKER_NICENESS = 10
-
-
-def _yield_to_frames() -> None:
-    """Lower the calling thread's scheduling priority (Linux schedules threads one by one;
-    elsewhere, and where it is not allowed, this changes nothing)."""
-    try:
-        tid = threading.get_native_id()
-        os.setpriority(
-            os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + WORKER_NICENESS)
-        )
-    except (AttributeError, OSError) as exc:
-        log.debug("ring worker keeps its priority: %s", exc)
 
 
 @dataclass(frozen=True)
@@ -438,6 +423,11 @@ class RingSchedule:
             version=self._version,
             events=tuple(events),
             render_slice=piece,
+            building=(
+                NearRing(self._newest.centre_m, self._newest.drift, 1.0)
+                if self._current is None and self._newest is not None
+                else None
+            ),
         )
 
     def _start(
@@ -451,9 +441,7 @@ class RingSchedule:
     ) -> Future[RingScene]:
         self._note_newest(state, drift, camera, sky)
         if self._executor is None:
-            self._executor = ThreadPoolExecutor(
-                max_workers=1, thread_name_prefix="wxsky-ring", initializer=_yield_to_frames
-            )
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wxsky-ring")
         return self._executor.submit(self._build, state, drift, camera.position_m, sky)
 
     def _note_newest(

@@ -38,6 +38,7 @@ from wxsky.scene.layout import (
     build_frame,
     build_ring,
     empty_ring,
+    prepare_near,
 )
 from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
@@ -215,6 +216,8 @@ class SkyEngine:
     ) -> RingScene:
         t0 = time.perf_counter()
         ring = build_ring(state, drift, centre_m, sky, self.settings, self._schedule.cancel_event)
+        shown = self._schedule.current  # (read off the render thread: a hint, nothing more)
+        prepare_near(state, ring, shown, sky, self.settings)
         if self._build_times is not None:
             self._build_times.append(time.perf_counter() - t0)
         return ring

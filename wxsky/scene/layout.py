@@ -32,6 +32,7 @@ from wxsky.scene.gather import (
     check_cancel,
     gather_far,
     gather_near_blocks,
+    near_blocks,
 )
 from wxsky.scene.in_cloud import (
     NO_LOCKS,
@@ -392,6 +393,30 @@ def near_scattered_light(blocks: NearBlocks, near: SpriteBatch, sky: SkyParams) 
     with _near_light_lock:
         _near_light[blocks] = made
     return made
+
+
+def prepare_near(
+    state: WeatherState,
+    ring: RingScene,
+    shown: RingScene | None,
+    sky: SkyParams,
+    settings: SceneSettings,
+) -> None:
+    """Make, with a new ring (on its worker), the near sets the frames will ask for once it
+    is complete, and Harris's light on them: the cross-fade's (with `shown`, the ring then on
+    show) and the new ring's own. Made in a frame, each cost that frame tens of milliseconds."""
+    new = NearRing(ring.geometry.centre_m, ring.drift, 1.0)
+    sets: list[tuple[NearRing, ...]] = [(new,)]
+    if shown is not None:
+        cur = NearRing(shown.geometry.centre_m, shown.drift, 0.5)
+        sets.append((cur, new._replace(weight=0.5)))
+    for rings in sets:
+        blocks = near_blocks(state, ring.drift, rings, settings.ring_radius_m, settings.max_range_m)
+        if blocks is None or settings.shading != "harris":
+            continue
+        placed = blocks.placed(ring.drift, rings)
+        if placed is not None:
+            near_scattered_light(blocks, placed[0], sky)
 
 
 def split_at_distance(
