@@ -26,6 +26,7 @@ from typing import Any
 from wxsky import __version__
 from wxsky.app.cigi_part import CigiPart
 from wxsky.app.control import (
+    ControlError,
     apply_metar,
     apply_preset,
     camera_from_params,
@@ -37,6 +38,7 @@ from wxsky.app.control import (
     set_time,
 )
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.share_part import SharePart
 from wxsky.app.trace import TraceWriter
 from wxsky.engine.stages import FramePlan, SkyEngine, geodetic_from_enu
 from wxsky.errors import ConfigError, RenderError, WxskyError
@@ -179,6 +181,22 @@ class Daemon:
             if name in self.inputs:
                 raise ConfigError(f"two inputs are named {name!r}")
             self.inputs[name] = stats
+        self._share = SharePart(self.engine, config)
+        if self._share.role == "channel":
+            inputs = [
+                name
+                for name, given in (
+                    ("METAR feeds", self._feeds),
+                    ("cockpit links", self._links),
+                    ("CIGI", (*config.cigi.listen, *cigi)),
+                )
+                if given
+            ]
+            if inputs:
+                raise ConfigError(
+                    f"channel {config.channel.name!r} takes its weather from the sky master; "
+                    f"it cannot also read {', '.join(inputs)} (give them to the master)"
+                )
         self._target_version = -1
         self._had_feed_weather = False
         self.frames_published = 0
@@ -256,6 +274,7 @@ class Daemon:
             self._feed_tasks.append(asyncio.create_task(feed.run_supervised(self._stop)))
             log.info("METAR feed %s", feed.source.name)
         await self._cigi.start()
+        await self._share.start(self.fps)
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
             link.start(mailbox.post)
@@ -273,6 +292,7 @@ class Daemon:
         while not self._stop.is_set():
             now = loop.time()
             host_frames = self._cigi.host_frames()  # what this frame has applied
+            self._share.before_frame()  # a channel: the master's clock and camera
             # The scene is built on the render thread too: a ring build takes long enough on a
             # CPU to hold up cockpit input if it ran here.
             plan, meta = await loop.run_in_executor(
@@ -283,6 +303,8 @@ class Daemon:
             self._count_frame()
             self._broadcast_frame(plan, meta)
             self._cigi.frame_published(meta.frame_number, host_frames, plan.state)
+            self._share.frame_time(plan.state.time_utc)
+            self._share.after_frame(plan.state.time_utc)  # a master: its tick and state
             if self.engine.ring is not shown_ring:
                 shown_ring = self.engine.ring
                 self._server_broadcast("scene", self.scene_info())
@@ -308,6 +330,11 @@ class Daemon:
         self._stop.set()
         # First, so a ring build in flight gives up while the rest shuts down.
         self.engine.cancel_scene_work()
+        # Then the bus: a master's channels see it go at once and keep the last sky.
+        try:
+            await asyncio.wait_for(self._share.close(), timeout=max(0.05, timeout / 4))
+        except TimeoutError:
+            log.warning("shutdown: the channel bus did not close in time; left it")
         if self._feed_tasks:
             _, pending = await asyncio.wait(self._feed_tasks, timeout=max(0.05, timeout / 4))
             for task in pending:
@@ -408,6 +435,9 @@ class Daemon:
         stats = self.inputs["control"]
         stats.message()
         try:
+            refused = self._share.refusal(method)
+            if refused is not None:
+                raise ControlError(refused)
             result = self._dispatch(method, params)
             if inspect.isawaitable(result):  # a command that needs the render thread
                 result = await result
@@ -553,6 +583,7 @@ class Daemon:
                 or (self._export_probe.reason if self._export_probe is not None else None),
                 "exported": self._slot_textures is not None,
             },
+            **self._share.status(),
         }
 
     def scene_info(self) -> dict[str, Any]:

@@ -90,6 +90,39 @@ def add_commands(sub: Subparsers) -> None:
         help="send the applied weather to a CIGI image generator there each frame "
         "(repeatable; adds to [cigi] send_to in the config)",
     )
+    share = run.add_argument_group(
+        "one sky on several daemons (docs/channels.md)",
+    )
+    share.add_argument(
+        "--share",
+        type=Checked("--share", _zenoh_spec),
+        metavar="zenoh:ENDPOINT",
+        help="be the site's sky master, serving on a Zenoh endpoint, e.g. "
+        "zenoh:tcp/127.0.0.1:7447 (sets [share] endpoint)",
+    )
+    share.add_argument(
+        "--join",
+        type=Checked("--join", _zenoh_spec),
+        metavar="zenoh:ENDPOINT",
+        help="be a display channel of the sky master there (sets [channel] join)",
+    )
+    share.add_argument("--channel", metavar="NAME", help="this channel's name ([channel] name)")
+    share.add_argument(
+        "--view-offset",
+        type=Checked("--view-offset", _view_offset),
+        metavar="YAW,PITCH,ROLL",
+        help="this channel's view turned from the shared camera, degrees "
+        "([channel] view_offset_deg)",
+    )
+    share.add_argument(
+        "--fov-deg",
+        type=float,
+        metavar="DEG",
+        help="this channel's horizontal field of view ([channel] fov_deg)",
+    )
+    share.add_argument(
+        "--site", metavar="NAME", help="the shared sky's site ([share] and [channel] site)"
+    )
     add_control_option(run)
     run.add_argument(
         "--preview",
@@ -236,6 +269,46 @@ def _can_spec(spec: str) -> Any:
     return CanInputSection.from_spec(spec)
 
 
+def _zenoh_spec(spec: str) -> str:
+    if not spec.startswith("zenoh:") or len(spec) <= len("zenoh:"):
+        raise ValueError("give zenoh:ENDPOINT, e.g. zenoh:tcp/127.0.0.1:7447")
+    return spec.removeprefix("zenoh:")
+
+
+def _view_offset(spec: str) -> tuple[float, float, float]:
+    parts = spec.split(",")
+    if len(parts) != 3:
+        raise ValueError("give YAW,PITCH,ROLL in degrees, e.g. -60,0,0")
+    return (float(parts[0]), float(parts[1]), float(parts[2]))
+
+
+def _shared_config(config: Any, args: argparse.Namespace) -> Any:
+    """The config with `run`'s sharing options laid over [share] and [channel]."""
+    import dataclasses
+
+    from wxsky.errors import ConfigError
+    from wxsky.schema import Invalid
+
+    share, channel = config.share, config.channel
+    try:
+        if args.share is not None:
+            share = dataclasses.replace(share, endpoint=args.share)
+        if args.join is not None:
+            channel = dataclasses.replace(channel, join=args.join)
+        if args.channel is not None:
+            channel = dataclasses.replace(channel, name=args.channel)
+        if args.view_offset is not None:
+            channel = dataclasses.replace(channel, view_offset_deg=args.view_offset)
+        if args.fov_deg is not None:
+            channel = dataclasses.replace(channel, fov_deg=args.fov_deg)
+        if args.site is not None:
+            share = dataclasses.replace(share, site=args.site)
+            channel = dataclasses.replace(channel, site=args.site)
+        return dataclasses.replace(config, share=share, channel=channel)
+    except Invalid as exc:
+        raise ConfigError(f"wxsky run: {exc}") from None
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     import asyncio
 
@@ -243,7 +316,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from wxsky.output.transport import parse_address
     from wxsky.settings.config import load_config
 
-    config = load_config(args.config)
+    config = _shared_config(load_config(args.config), args)
     setup_logging(log_level(args, config.daemon.log_level))
     patches = initial_patches(config, preset=args.preset, metar=args.metar)
     address = parse_address(args.control) if args.control else None

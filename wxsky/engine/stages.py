@@ -47,7 +47,7 @@ from wxsky.weather.precedence import DEFAULT_CIGI_HOLD_S, DEFAULT_COCKPIT_HOLD_S
 from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
 from wxsky.weather.transition import INSTANT, TransitionRates, settled, step_toward
 
-__all__ = ["FramePlan", "SkyEngine", "enu_from_geodetic", "geodetic_from_enu"]
+__all__ = ["FramePlan", "SharedSky", "SkyEngine", "enu_from_geodetic", "geodetic_from_enu"]
 
 RENDER_MODES = ("ring", "direct")  # far clouds as impostors, or every cloud as sprites
 DEFAULT_TRANSITION_STEP_S = 1.0
@@ -80,6 +80,20 @@ class FramePlan:
     def ring_changed(self) -> bool:
         """Some impostor must be drawn this frame (see `rings.render`)."""
         return self.rings.changed
+
+
+@dataclass(frozen=True)
+class SharedSky:
+    """An engine's sky as a display channel follows it (`SkyEngine.shared`, `follow`)."""
+
+    applied: WeatherState
+    target: WeatherState
+    anchor_utc: datetime  # the drift is anchor_drift moved by each layer's wind since then
+    anchor_drift: Drift
+    clock_rate: float
+    weather_version: int
+    camera: Camera
+    aircraft_m: tuple[float, float, float] | None
 
 
 class SkyEngine:
@@ -146,6 +160,9 @@ class SkyEngine:
         self._bodies: Bodies | None = None  # the latest frame's sun and moon
         self.weather_version = 0  # bumped when the applied weather or the target changes
         self.target_version = 0  # bumped when the target (or the clock, set from outside) changes
+        # A display channel's engine follows a sky master's (`follow`, `follow_time`): it
+        # moves neither its weather nor its clock itself.
+        self._following = False
 
     @property
     def state(self) -> WeatherState:
@@ -429,6 +446,61 @@ class SkyEngine:
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)
         return FramePlan(state, frame, shown, rings, events)
 
+    # -- several daemons, one sky (docs/channels.md) ---------------------------------------
+
+    def shared(self) -> SharedSky:
+        """What a channel needs to build this engine's cloud field for any sim time."""
+        with self._lock:
+            return SharedSky(
+                applied=self._state,
+                target=self._target,
+                anchor_utc=self._anchor_utc,
+                anchor_drift=self._anchor_drift,
+                clock_rate=self.clock_rate,
+                weather_version=self.weather_version,
+                camera=self._camera,
+                aircraft_m=self._aircraft_m,
+            )
+
+    @property
+    def following(self) -> bool:
+        """The engine follows another's sky (`follow`): its weather and clock are set."""
+        return self._following
+
+    def follow(self, sky: SharedSky) -> None:
+        """Take a sky master's applied and target weather, drift anchor and clock rate as
+        they are (a channel runs no transition of its own, so it shows the master's steps,
+        never a jump of its own); from now on the clock moves only by `follow_time`. The
+        camera and aircraft are the caller's business."""
+        with self._lock:
+            self._following = True
+            now = self._state.time_utc
+            applied = dataclasses.replace(sky.applied, time_utc=now)
+            target = dataclasses.replace(sky.target, time_utc=now)
+            changed = applied != self._state or target != self._target
+            anchored = (sky.anchor_utc, sky.anchor_drift) != (
+                self._anchor_utc,
+                self._anchor_drift,
+            )
+            self._state, self._target = applied, target
+            self._anchor_utc, self._anchor_drift = sky.anchor_utc, sky.anchor_drift
+            self.clock_rate = sky.clock_rate
+            self._settled = settled(applied, target)
+            self._drift = self._drift_at(now)
+            if changed or anchored:
+                self.weather_version += 1
+                self.target_version += 1
+
+    def follow_time(self, time_utc: datetime) -> None:
+        """Set a following engine's clock (every frame, from the master's); a step of more
+        than CLOCK_JUMP_S rebuilds the ring as a clock set does."""
+        with self._lock:
+            if abs((time_utc - self._state.time_utc).total_seconds()) > CLOCK_JUMP_S:
+                self._clock_jumps += 1
+            self._state = dataclasses.replace(self._state, time_utc=time_utc)
+            self._target = dataclasses.replace(self._target, time_utc=time_utc)
+            self._drift = self._drift_at(time_utc)
+
     def drift_for(self, seconds: float) -> None:
         """Move every layer as the wind would have in `seconds` (negative: back), at once: a
         picture at a later time than its weather's shows the clouds blown on."""
@@ -450,6 +522,9 @@ class SkyEngine:
             return self._state
 
     def _step_weather(self, dt_wall_s: float) -> None:
+        if self._following:  # the master moves the weather and the clock
+            self._wall_s += max(0.0, dt_wall_s)
+            return
         self._transition(max(0.0, dt_wall_s))
         dt_sim = max(0.0, dt_wall_s) * self.clock_rate
         if dt_sim > 0.0:

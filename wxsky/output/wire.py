@@ -357,3 +357,48 @@ class MessageDecoder:
             raise wrong(f"got {_type_name(method)} method (must be a string)")
         if not isinstance(params, dict):
             raise wrong(f"got {_type_name(params)} params (must be a map)")
+
+
+# -- single values (the channel bus: docs/channels.md) ------------------------------------
+
+MAX_DATA_SIZE = 1024 * 1024
+"""Largest single encoded value `unpack_data` accepts (a channel state message is 2-4 KB)."""
+
+
+def pack_data(value: object) -> bytes:
+    """One plain-data value (as the RPC's params: nil, bool, int, float, str, bytes, list,
+    str-keyed map) as one msgpack object. Raises WireError naming what cannot be sent."""
+    problem = _plain_data_problem(value, "value")
+    if problem is not None:
+        raise WireError(problem, recoverable=True)
+    packed: bytes = msgpack.packb(value, use_bin_type=True, default=_refuse)
+    return packed
+
+
+def unpack_data(data: bytes, max_size: int = MAX_DATA_SIZE) -> object:
+    """The one msgpack object that is all of `data`. Raises WireError (a one-line reason) for
+    anything else: too large, not msgpack, truncated, trailing bytes, extension types or map
+    keys that are not strings."""
+    if len(data) > max_size:
+        raise WireError(f"{len(data)} bytes exceed the {max_size}-byte limit", recoverable=True)
+    try:
+        value = msgpack.unpackb(
+            data,
+            raw=False,
+            strict_map_key=True,
+            use_list=True,
+            max_str_len=max_size,
+            max_bin_len=max_size,
+            max_array_len=max_size,
+            max_map_len=max_size // 2,
+            ext_hook=lambda code, _data: _refuse(msgpack.ExtType(code, b"")),
+        )
+    except msgpack.ExtraData:
+        raise WireError("trailing bytes after one msgpack value", recoverable=True) from None
+    except (ValueError, TypeError, msgpack.UnpackException, ProtocolError) as exc:
+        reason = str(exc) or type(exc).__name__
+        raise WireError(f"not one msgpack value: {reason}", recoverable=True) from None
+    problem = _plain_data_problem(value, "value")
+    if problem is not None:
+        raise WireError(problem, recoverable=True)
+    return value

@@ -11,6 +11,7 @@ framebuffer back gives rows in the order a host uploads them.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -120,3 +121,26 @@ def frustum(left: float, right: float, bottom: float, top: float, near: float, f
     m[3, 2] = -1.0
     m[1, :] *= -1.0
     return m
+
+
+def turned(camera: Camera, yaw_deg: float, pitch_deg: float, roll_deg: float) -> Camera:
+    """The camera's view turned by a view offset relative to it (yaw right, pitch up, roll
+    right wing down, applied in that order in the camera's own axes, as CIGI View Control
+    turns a view from its entity): a display channel's view of the shared camera."""
+    right, up, fwd = camera.basis()
+    body = np.stack([right, fwd, up], axis=1)  # camera axes (x right, y forward, z up) in ENU
+    v_right, _v_up, v_fwd = camera_basis(yaw_deg, pitch_deg, roll_deg)
+    f, r = body @ v_fwd, body @ v_right
+    pitch = math.degrees(math.asin(max(-1.0, min(1.0, float(f[2])))))
+    if abs(float(f[2])) > 0.999999:  # straight up or down: heading from the right axis
+        heading = math.degrees(math.atan2(-float(r[1]), float(r[0])))
+        roll = 0.0
+    else:
+        heading = math.degrees(math.atan2(float(f[0]), float(f[1])))
+        h = math.radians(heading)
+        level_right = np.array([math.cos(h), -math.sin(h), 0.0])
+        level_up = np.cross(level_right, f)
+        roll = math.degrees(math.atan2(-float(r @ level_up), float(r @ level_right)))
+    return dataclasses.replace(
+        camera, heading_deg=heading % 360.0, pitch_deg=max(-90.0, min(90.0, pitch)), roll_deg=roll
+    )

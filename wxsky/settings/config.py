@@ -40,6 +40,7 @@ from wxsky.schema import (
     Table,
     Tables,
     Text,
+    Tuple,
     fmt_number,
 )
 from wxsky.schema.toml_file import LocatedProblem, check_toml_text, located_error, read_toml
@@ -374,6 +375,46 @@ class CigiSection(_Section):
     send_byte_order: str = _opt("big", Text(choices=("big", "little")))
 
 
+_ZENOH = r"(tcp|udp|quic|tls|unixsock-stream)/[^\s]{1,200}"
+ZENOH_ENDPOINT = Text(
+    pattern=rf"({_ZENOH})?", pattern_desc="empty or a Zenoh locator such as tcp/127.0.0.1:7447"
+)
+SHARE_SITE = Text(
+    pattern=r"[a-z0-9][a-z0-9_-]{0,63}",
+    pattern_desc="1-64 lowercase letters, digits, '_' or '-', starting with a letter or digit",
+)
+VIEW_OFFSET = Tuple(
+    (_num(-180.0, 180.0, "deg"), PITCH_DEG, ROLL_DEG), "[yaw_deg, pitch_deg, roll_deg]"
+)
+
+
+@dataclass(frozen=True)
+class ShareSection(_Section):
+    """`[share]`: this daemon is its site's sky master, serving the sky on a Zenoh endpoint
+    (also `wxsky run --share zenoh:ENDPOINT`); docs/channels.md."""
+
+    SECTION: ClassVar[str] = "share"
+
+    endpoint: str = _opt("", ZENOH_ENDPOINT)  # empty: no sharing
+    site: str = _opt("default", SHARE_SITE)  # one key space per site: wxsky/<site>/...
+    camera: bool = _opt(True)  # share the camera (the ownship's) with the channels
+
+
+@dataclass(frozen=True)
+class ChannelSection(_Section):
+    """`[channel]`: this daemon is a display channel of a sky master's site (also `wxsky run
+    --join zenoh:ENDPOINT --channel NAME --view-offset Y,P,R`)."""
+
+    SECTION: ClassVar[str] = "channel"
+
+    join: str = _opt("", ZENOH_ENDPOINT)  # the master's endpoint; empty: not a channel
+    name: str = _opt("", Text(pattern=r"([a-z0-9][a-z0-9_-]{0,63})?", pattern_desc="a name"))
+    site: str = _opt("default", SHARE_SITE)
+    # The channel's view turned from the shared camera, as CIGI View Control turns a view.
+    view_offset_deg: tuple[float, float, float] = _opt((0.0, 0.0, 0.0), VIEW_OFFSET)
+    fov_deg: float = _opt(0.0, _num(0.0, 170.0, "deg"))  # 0: the [camera] fov_deg
+
+
 @dataclass(frozen=True)
 class DaemonConfig:
     daemon: DaemonSection = field(default_factory=DaemonSection)
@@ -388,10 +429,20 @@ class DaemonConfig:
     serial: tuple[SerialInputSection, ...] = ()  # [[serial]] tables
     can: tuple[CanInputSection, ...] = ()  # [[can]] tables
     cigi: CigiSection = field(default_factory=CigiSection)
+    share: ShareSection = field(default_factory=ShareSection)
+    channel: ChannelSection = field(default_factory=ChannelSection)
 
     def __post_init__(self) -> None:
         cam, out, scene = self.camera, self.output, self.scene
         problems = []
+        if self.share.endpoint and self.channel.join:
+            problems.append(
+                Problem(
+                    ("channel", "join"), "a daemon is a sky master ([share]) or a channel, not both"
+                )
+            )
+        if self.channel.join and not self.channel.name:
+            problems.append(Problem(("channel", "name"), "a channel needs a name"))
         if cam.width > out.max_width:
             problems.append(
                 Problem(

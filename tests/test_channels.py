@@ -1,0 +1,194 @@
+"""Several daemons, one sky (docs/channels.md): a sky master and two display channels, real
+`wxsky run` processes on loopback talking over a real Zenoh bus, asked through their real
+control sockets as a host would."""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import socket
+import time
+from collections.abc import Callable, Iterator
+from datetime import timedelta
+from pathlib import Path
+from typing import Any
+
+import pytest
+from daemon_harness import RunningDaemon, running_daemon
+
+from wxsky.weather.state import parse_time_utc
+
+pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed")
+
+SMALL = """
+[camera]
+width = 160
+height = 90
+pitch_deg = 0.0
+[scene]
+ring_texture_px = 64
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def status(d: RunningDaemon) -> dict[str, Any]:
+    with d.client() as c:
+        result: dict[str, Any] = c.call("status")
+        return result
+
+
+def wait_for(what: str, check: Callable[[], bool], timeout_s: float) -> float:
+    """Seconds until check() holds; fails naming `what` after timeout_s."""
+    start = time.monotonic()
+    while not check():
+        if time.monotonic() - start > timeout_s:
+            raise AssertionError(f"{what}: not within {timeout_s} s")
+        time.sleep(0.05)
+    return time.monotonic() - start
+
+
+def sim_skew_s(a: dict[str, Any], b: dict[str, Any]) -> float:
+    """b's sim time minus a's, compared at b's reading of the (shared) monotonic clock."""
+    ta = parse_time_utc(a["sim_clock"]["time_utc"])
+    tb = parse_time_utc(b["sim_clock"]["time_utc"])
+    rate = a["clock_rate"]
+    at_b = ta + timedelta(seconds=rate * (b["sim_clock"]["mono_s"] - a["sim_clock"]["mono_s"]))
+    return (tb - at_b).total_seconds()
+
+
+def channel_args(share: str, name: str, yaw_deg: float) -> tuple[str, ...]:
+    return ("--join", share, "--channel", name, f"--view-offset={yaw_deg},0,0")
+
+
+@contextlib.contextmanager
+def dome(tmp_path: Path, endpoint: str) -> Iterator[tuple[RunningDaemon, ...]]:
+    for name in ("master", "left", "right"):
+        (tmp_path / name).mkdir(exist_ok=True)
+    share = f"zenoh:{endpoint}"
+    with (
+        running_daemon(
+            tmp_path / "master", SMALL, ("--share", share, "--preset", "fair-cumulus")
+        ) as master,
+        running_daemon(tmp_path / "left", SMALL, channel_args(share, "left", -60.0)) as left,
+        running_daemon(tmp_path / "right", SMALL, channel_args(share, "right", 60.0)) as right,
+    ):
+        yield master, left, right
+
+
+def test_a_master_and_two_channels_show_one_sky_and_outlive_the_master(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with dome(tmp_path, endpoint) as (master, left, right):
+        channels = (left, right)
+
+        def joined() -> bool:
+            m = status(master)
+            return all(
+                (s := status(c))["channel"]["master_alive"] and s["sky_id"] == m["sky_id"]
+                for c in channels
+            )
+
+        wait_for("channels joined with the master's sky_id", joined, 15.0)
+        m = status(master)
+        assert m["channel"]["role"] == "master" and m["sky_id"]
+        for c, name in ((left, "left"), (right, "right")):
+            s = status(c)
+            assert s["channel"]["role"] == "channel" and s["channel"]["name"] == name
+            assert s["weather"]["layers"] == m["weather"]["layers"]
+            # The clock: the same sim time at one instant, within 10 ms (here both share one
+            # monotonic clock, so the channel's estimate of the offset is its error).
+            skews = [sim_skew_s(status(master), status(c)) for _ in range(5)]
+            assert min(abs(v) for v in skews) < 0.010, skews
+            assert abs(s["channel"]["clock_offset_ms"]) < 10.0
+            # Through `status` alone, read one after the other, within 100 ms.
+            assert abs(
+                parse_time_utc(status(master)["sim_clock"]["time_utc"])
+                - parse_time_utc(status(c)["sim_clock"]["time_utc"])
+            ) < timedelta(milliseconds=100)
+        # The shared camera, turned by each channel's view offset (level: yaw alone).
+        with master.client() as c:
+            c.call(
+                "set_camera",
+                {"position_m": [0.0, 0.0, 1500.0], "heading_deg": 90.0, "pitch_deg": 0.0},
+            )
+        wait_for(
+            "channels look 60° either side",
+            lambda: (
+                abs(status(left)["camera"]["heading_deg"] - 30.0) < 1e-6
+                and abs(status(right)["camera"]["heading_deg"] - 150.0) < 1e-6
+            ),
+            5.0,
+        )
+        assert status(left)["camera"]["position_m"] == [0.0, 0.0, 1500.0]
+        # The weather and the clock are the master's: a channel refuses them, one line.
+        for command, params in (
+            ("apply_preset", {"name": "overcast-stratus"}),
+            ("set_time", {"rate": 2.0}),
+            ("set_camera", {"heading_deg": 10.0}),
+        ):
+            with left.client() as c, pytest.raises(Exception, match="master") as err:
+                c.call(command, params)
+            assert "\n" not in str(err.value)
+        # A preset on the master reaches both channels' target within 2 s, as its transition.
+        start = time.monotonic()
+        with master.client() as c:
+            c.call("apply_preset", {"name": "overcast-stratus"})
+        target = status(master)["target"]["layers"]
+        for ch in channels:
+            wait_for(
+                "the master's new target",
+                lambda ch=ch: status(ch)["target"]["layers"] == target,  # type: ignore[misc]
+                2.0 - (time.monotonic() - start),
+            )
+        # The master dies: both channels say so within 3 s and keep publishing frames.
+        frames = {ch.shm_name: status(ch)["frames_published"] for ch in channels}
+        sky = status(left)["sky_id"]
+        master.proc.send_signal(signal.SIGKILL)
+        master.proc.wait(timeout=10)
+        killed = time.monotonic()
+        for ch in channels:
+            wait_for(
+                "master_alive false",
+                lambda ch=ch: not status(ch)["channel"]["master_alive"],  # type: ignore[misc]
+                3.0 - (time.monotonic() - killed),
+            )
+        time.sleep(0.5)
+        for ch in channels:
+            s = status(ch)
+            assert s["frames_published"] > frames[ch.shm_name] + 5
+            assert s["sky_id"] == sky  # the last sky, kept
+        # A master comes back on the same endpoint: joined and followed within 10 s.
+        (tmp_path / "master2").mkdir()
+        with running_daemon(
+            tmp_path / "master2", SMALL, ("--share", f"zenoh:{endpoint}", "--preset", "clear")
+        ) as again:
+            restarted = time.monotonic()
+
+            def followed() -> bool:
+                m = status(again)
+                return all(
+                    (s := status(c))["channel"]["master_alive"] and s["sky_id"] == m["sky_id"]
+                    for c in channels
+                )
+
+            wait_for("the new master followed", followed, 10.0)
+            assert time.monotonic() - restarted < 10.0
+            assert status(left)["target"]["layers"] == status(again)["target"]["layers"] == []
+
+
+def test_a_second_master_on_a_site_refuses_to_start(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    with running_daemon(tmp_path / "one", SMALL, ("--share", f"zenoh:{endpoint}")):
+        with (
+            pytest.raises(AssertionError, match="already has a sky master") as err,
+            running_daemon(tmp_path / "two", SMALL, ("--share", f"zenoh:{endpoint}")),
+        ):
+            pass
+        assert "exited early (2)" in str(err.value)  # the CLI's exit status for a bad start

@@ -1,0 +1,444 @@
+"""The daemon's side of one sky shared by several daemons (docs/channels.md): a sky master
+publishes its sky state, a clock tick per frame and its health; a display channel follows
+them, its engine taking the master's weather, drift anchor and clock, its camera the shared
+camera turned by its view offset.
+
+Zenoh delivers on its own threads; everything here runs on the daemon's event loop
+(callbacks hop over with `call_soon_threadsafe`), and the frame hooks run between frames.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import logging
+import secrets
+import time
+from collections.abc import Callable
+from datetime import datetime, timedelta
+from typing import Any
+
+from wxsky.engine.stages import SharedSky, SkyEngine
+from wxsky.logs import RateLimitedLog
+from wxsky.output.wire import WireError, pack_data, unpack_data
+from wxsky.scene.camera import Camera, turned
+from wxsky.settings.config import DaemonConfig
+from wxsky.share.clock import ClockFollower
+from wxsky.share.errors import BusError
+from wxsky.share.messages import (
+    ClockTick,
+    Health,
+    ShareError,
+    SkyState,
+    decode_pong,
+    decode_state,
+    decode_tick,
+    encode_health,
+    encode_pong,
+    encode_state,
+    encode_tick,
+    sky_id,
+)
+from wxsky.weather.state import format_time_utc
+
+log = logging.getLogger(__name__)
+
+# A master not heard from (no tick) for this long is taken for dead, token or no token: a
+# network cut leaves the token in place until Zenoh's lease runs out (10 s).
+MASTER_SILENT_S = 2.0
+STATE_REPEAT_S = 1.0  # the state is sent again this often (a partition heals by itself)
+HEALTH_EVERY_S = 1.0
+PING_EVERY_S = 0.5
+WEATHER_COMMANDS = ("apply_preset", "apply_metar", "release", "set_time")
+
+
+class SharePart:
+    """`role`: "master", "channel" or "standalone" (neither: nothing is shared)."""
+
+    def __init__(self, engine: SkyEngine, config: DaemonConfig) -> None:
+        self.engine = engine
+        share, channel = config.share, config.channel
+        self.role = "master" if share.endpoint else "channel" if channel.join else "standalone"
+        self.endpoint = share.endpoint or channel.join
+        self.site = share.site if share.endpoint else channel.site
+        self.name = channel.name if channel.join else "master"
+        self._share_camera = share.camera
+        self._view_offset = channel.view_offset_deg
+        self._fov_deg = channel.fov_deg
+        self._own_camera = engine.camera  # a channel's size and fov, before any shared one
+        self._master_id = secrets.token_hex(8)
+        self._bus: Any = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._sequence = 0
+        self._sent_version: tuple[int, int, float] | None = None
+        self._sent_at = 0.0
+        self._latest_state: bytes | None = None
+        self._state: SkyState | None = None  # a channel's latest good one (a master's own)
+        self._follower = ClockFollower()
+        self._tick_at: float | None = None  # local monotonic of the latest tick
+        self._token_alive = False
+        self._drops: dict[str, int] = {}
+        self._drop_log = RateLimitedLog(log)
+        self._health: dict[str, dict[str, Any]] = {}
+        self._frames = 0
+        self._fps: Callable[[], float] = lambda: 0.0
+
+    @property
+    def shared(self) -> bool:
+        return self.role != "standalone"
+
+    # -- life ---------------------------------------------------------------------------
+
+    async def start(self, fps: Callable[[], float]) -> None:
+        """Open the bus (a master claims its site first: a second master refuses to start)."""
+        self._fps = fps
+        if not self.shared:
+            return
+        from wxsky.share.zenoh_bus import ShareBus
+
+        loop = self._loop = asyncio.get_running_loop()
+        open_bus = functools.partial(
+            ShareBus, self.endpoint, role=self.role, site=self.site, name=self.name
+        )
+        try:
+            self._bus = await loop.run_in_executor(None, open_bus)
+        except BusError:
+            if self.role == "master":  # the endpoint is taken: by this site's master?
+                await loop.run_in_executor(None, self._no_master_there)
+            raise
+        bus = self._bus
+        if self.role == "master":
+            try:
+                await loop.run_in_executor(None, bus.claim_master)
+            except BaseException:
+                bus.close()
+                self._bus = None
+                raise
+            bus.serve(lambda: self._latest_state, self._pong)
+            self._publish_state(time.monotonic(), force=True)
+        else:
+            bus.on_state(self._hop(self._got_state))
+            bus.on_tick(self._hop(self._got_tick))
+            bus.on_master(self._hop(self._master_seen))
+            bus.announce_channel()
+            self._tasks.append(asyncio.create_task(self._pinger()))
+            first = await loop.run_in_executor(None, bus.fetch_state)
+            if first is not None:
+                self._got_state(first, time.monotonic())
+        bus.on_health(self._hop2(self._got_health))
+        self._tasks.append(asyncio.create_task(self._heartbeat()))
+        log.info(
+            "sky %s on zenoh:%s, site %r%s",
+            self.role,
+            self.endpoint,
+            self.site,
+            f", channel {self.name!r}" if self.role == "channel" else "",
+        )
+
+    async def close(self) -> None:
+        """Leave the bus (a master's channels see it go at once); idempotent."""
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        self._tasks.clear()
+        bus, self._bus = self._bus, None
+        self._loop = None
+        if bus is not None:
+            await asyncio.get_running_loop().run_in_executor(None, bus.close)
+
+    # -- the frame hooks ------------------------------------------------------------------
+
+    def before_frame(self) -> None:
+        """A channel's engine takes the master's sim time and shared camera for this frame."""
+        if self.role != "channel":
+            return
+        now = time.monotonic()
+        when = self._follower.time_at(now)
+        if when is not None and self._state is not None:
+            self.engine.follow_time(when)
+        tick = self._follower.latest
+        if tick is not None and tick.camera is not None and self.master_alive:
+            self.engine.set_camera(self._view_of(tick.camera))
+            self.engine.set_aircraft(tick.aircraft_m)
+
+    def after_frame(self, time_utc: datetime) -> None:
+        """A master ticks (and sends its state when it changed or is due again)."""
+        self._frames += 1
+        if self.role != "master" or self._bus is None:
+            return
+        now = time.monotonic()
+        self._publish_state(now)
+        sky = self.engine.shared()
+        tick = ClockTick(
+            site=self.site,
+            master_id=self._master_id,
+            master_mono_s=now,
+            time_utc=time_utc,
+            rate=sky.clock_rate,
+            sequence=self._sequence,
+            camera=sky.camera if self._share_camera else None,
+            aircraft_m=sky.aircraft_m if self._share_camera else None,
+        )
+        self._bus.publish_tick(pack_data(encode_tick(tick)))
+
+    # -- what the daemon asks -------------------------------------------------------------
+
+    def refusal(self, method: str) -> str | None:
+        """Why a channel refuses a control command (the weather is the master's; the camera
+        too while the master shares one), or None."""
+        if self.role != "channel":
+            return None
+        if method in WEATHER_COMMANDS:
+            return (
+                f"{method}: this daemon is channel {self.name!r} of a shared sky; the weather "
+                f"and the clock belong to the sky master at zenoh:{self.endpoint}"
+            )
+        tick = self._follower.latest
+        if method == "set_camera" and tick is not None and tick.camera is not None:
+            return (
+                f"set_camera: channel {self.name!r} shows the master's shared camera turned by "
+                "its view offset; set the camera on the master"
+            )
+        return None
+
+    @property
+    def master_alive(self) -> bool:
+        if self.role == "master":
+            return True
+        if self.role != "channel" or not self._token_alive or self._tick_at is None:
+            return False
+        return time.monotonic() - self._tick_at <= MASTER_SILENT_S
+
+    def status(self) -> dict[str, Any]:
+        """`sky_id`, `channel` and `sim_clock` for `status`."""
+        now = time.monotonic()
+        offset = self._follower.offset_s
+        tick = self._follower.latest
+        lag_ms = None
+        if self.role == "channel" and tick is not None and offset is not None:
+            lag_ms = 1000.0 * (now + offset - tick.master_mono_s)
+        state = self._state if self.role == "channel" else self._own_state()
+        when = self.sim_time(now)
+        return {
+            "sky_id": None if state is None else sky_id(state),
+            "channel": {
+                "name": self.name if self.shared else None,
+                "role": self.role,
+                "site": self.site if self.shared else None,
+                "endpoint": self.endpoint or None,
+                "master_alive": self.master_alive,
+                "lag_ms": lag_ms,
+                "clock_offset_ms": None if offset is None else 1000.0 * offset,
+                "rtt_ms": None if self._follower.rtt_s is None else 1000.0 * self._follower.rtt_s,
+                "dropped": dict(self._drops),
+                "peers": dict(self._health),
+            },
+            # The sim time at this instant of this process's monotonic clock: two daemons'
+            # readings compared at one instant give their clock skew.
+            "sim_clock": {
+                "mono_s": now,
+                "time_utc": None if when is None else _iso_us(when),
+            },
+        }
+
+    def sim_time(self, local_s: float) -> datetime | None:
+        """This daemon's sim time at a local monotonic reading."""
+        if self.role == "channel":
+            return self._follower.time_at(local_s)
+        sky = self.engine.shared()
+        at = self._last_frame
+        if at is None:
+            return sky.applied.time_utc
+        mono, t = at
+        return t + timedelta(seconds=sky.clock_rate * (local_s - mono))
+
+    _last_frame: tuple[float, datetime] | None = None
+
+    def frame_time(self, time_utc: datetime) -> None:
+        """The sim time of the frame just published (for `sim_time` on a master)."""
+        self._last_frame = (time.monotonic(), time_utc)
+
+    # -- a master -------------------------------------------------------------------------
+
+    def _own_state(self) -> SkyState:
+        sky = self.engine.shared()
+        return _sky_state(self.site, self._master_id, self._sequence, sky)
+
+    def _publish_state(self, now: float, force: bool = False) -> None:
+        sky = self.engine.shared()
+        version = (sky.weather_version, self.engine.target_version, sky.clock_rate)
+        if not force and version == self._sent_version and now - self._sent_at < STATE_REPEAT_S:
+            return
+        if version != self._sent_version:
+            self._sequence += 1
+        self._sent_version, self._sent_at = version, now
+        state = _sky_state(self.site, self._master_id, self._sequence, sky)
+        payload = pack_data(encode_state(state))
+        self._latest_state = payload
+        if self._bus is not None:
+            self._bus.publish_state(payload)
+
+    def _no_master_there(self) -> None:
+        """BusError if a master of this site answers on the endpoint (as a channel would)."""
+        from wxsky.share.zenoh_bus import ShareBus
+
+        with ShareBus(self.endpoint, role="channel", site=self.site, name="probe") as probe:
+            if probe.master_alive(wait_s=1.0):
+                raise BusError(
+                    f"zenoh:{self.endpoint}: site {self.site!r} already has a sky master there"
+                )
+
+    def _pong(self) -> bytes:
+        return pack_data(encode_pong(self.site, self._master_id, time.monotonic()))
+
+    # -- a channel ------------------------------------------------------------------------
+
+    def _hop(self, handler: Callable[[Any, float], None]) -> Callable[[Any], None]:
+        """A bus callback (Zenoh's thread) that runs `handler(value, arrival)` on the loop."""
+
+        def deliver(value: Any) -> None:
+            loop = self._loop
+            if loop is not None and not loop.is_closed():
+                loop.call_soon_threadsafe(handler, value, time.monotonic())
+
+        return deliver
+
+    def _hop2(self, handler: Callable[[str, bytes], None]) -> Callable[[str, bytes], None]:
+        def deliver(name: str, payload: bytes) -> None:
+            loop = self._loop
+            if loop is not None and not loop.is_closed():
+                loop.call_soon_threadsafe(handler, name, payload)
+
+        return deliver
+
+    def _got_state(self, payload: bytes, _arrived: float) -> None:
+        try:
+            state = decode_state(unpack_data(payload), self.site)
+        except (WireError, ShareError) as exc:
+            self._drop("state", exc)
+            return
+        if (
+            self._state is not None
+            and state.master_id == self._state.master_id
+            and state.sequence < self._state.sequence
+        ):
+            return  # overtaken (a repeat from before a newer one)
+        self._state = state
+        self.engine.follow(
+            SharedSky(
+                applied=state.applied,
+                target=state.target,
+                anchor_utc=state.anchor_utc,
+                anchor_drift=state.anchor_drift,
+                clock_rate=state.clock_rate,
+                weather_version=state.weather_version,
+                camera=self.engine.camera,
+                aircraft_m=None,
+            )
+        )
+
+    def _got_tick(self, payload: bytes, arrived: float) -> None:
+        try:
+            tick = decode_tick(unpack_data(payload), self.site)
+        except (WireError, ShareError) as exc:
+            self._drop("clock", exc)
+            return
+        self._follower.tick(tick, arrived)
+        self._tick_at = arrived
+        if self._state is None or self._state.master_id != tick.master_id:
+            # A master we have no state from (it restarted): ask for it.
+            self._tasks.append(asyncio.create_task(self._fetch_state()))
+
+    def _master_seen(self, alive: bool, _arrived: float) -> None:
+        if alive != self._token_alive:
+            log.info("sky master %s", "joined" if alive else "gone: keeping the last sky")
+        self._token_alive = alive
+
+    def _got_health(self, name: str, payload: bytes) -> None:
+        from wxsky.share.messages import decode_health
+
+        try:
+            health = decode_health(unpack_data(payload), self.site)
+        except (WireError, ShareError) as exc:
+            self._drop("health", exc)
+            return
+        self._health[name] = {
+            "role": health.role,
+            "fps": health.fps,
+            "lag_ms": health.lag_ms,
+            "frames": health.frames,
+        }
+
+    async def _fetch_state(self) -> None:
+        if self._bus is None or self._loop is None:
+            return
+        payload = await self._loop.run_in_executor(None, self._bus.fetch_state)
+        if payload is not None:
+            self._got_state(payload, time.monotonic())
+
+    async def _pinger(self) -> None:
+        assert self._loop is not None
+        while True:
+            bus = self._bus
+            if bus is not None:
+                answer = await self._loop.run_in_executor(None, bus.ping)
+                if answer is not None:
+                    sent, payload, received = answer
+                    try:
+                        master_id, mono_s = decode_pong(unpack_data(payload), self.site)
+                    except (WireError, ShareError) as exc:
+                        self._drop("pong", exc)
+                    else:
+                        self._follower.ping(sent, mono_s, received, master_id)
+            await asyncio.sleep(PING_EVERY_S)
+
+    async def _heartbeat(self) -> None:
+        while True:
+            await asyncio.sleep(HEALTH_EVERY_S)
+            bus = self._bus
+            if bus is None:
+                continue
+            lag = self.status()["channel"]["lag_ms"]
+            health = Health(self.site, self.name, self.role, self._fps(), lag or 0.0, self._frames)
+            bus.publish_health(pack_data(encode_health(health)))
+            if self.role == "master":
+                self._publish_state(time.monotonic())
+
+    def _view_of(self, shared: Camera) -> Camera:
+        own = self._own_camera
+        view = turned(shared, *self._view_offset)
+        return Camera(
+            position_m=view.position_m,
+            heading_deg=view.heading_deg,
+            pitch_deg=view.pitch_deg,
+            roll_deg=view.roll_deg,
+            fov_deg=self._fov_deg or own.fov_deg,
+            width_px=own.width_px,
+            height_px=own.height_px,
+        )
+
+    def _drop(self, what: str, exc: Exception) -> None:
+        self._drops[what] = self._drops.get(what, 0) + 1
+        self._drop_log.warning(f"share-{what}", f"dropped a {what} message from the bus: {exc}")
+
+
+def _sky_state(site: str, master_id: str, sequence: int, sky: SharedSky) -> SkyState:
+    return SkyState(
+        site=site,
+        master_id=master_id,
+        sequence=sequence,
+        weather_version=sky.weather_version,
+        applied=sky.applied,
+        target=sky.target,
+        anchor_utc=sky.anchor_utc,
+        anchor_drift=sky.anchor_drift,
+        clock_rate=sky.clock_rate,
+    )
+
+
+def _iso_us(t: datetime) -> str:
+    return format_time_utc(t)[:-1] + f".{t.microsecond:06d}Z"

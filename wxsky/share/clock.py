@@ -1,0 +1,92 @@
+"""A channel's sim clock, following the master's without trusting either wall clock. Pure.
+
+The master ticks: (its monotonic reading, its sim time, its rate). The channel knows how far
+the master's monotonic clock is ahead of its own from pings over the bus: a ping sent at
+local t0 and answered with the master's reading m arrives at t1; the master read m at about
+(t0 + t1) / 2, uncertain by half the round trip. Of the recent pings the one with the
+shortest round trip is the best estimate (NTP's clock filter, simplified). Until a ping has
+come back, a tick's arrival stands in for one (its one-way delay taken as zero: on one
+machine or a LAN, well under a millisecond).
+
+Sim time at local monotonic t: tick.time + rate * (t + offset - tick.master_mono).
+"""
+
+from __future__ import annotations
+
+import collections
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+
+from wxsky.share.messages import ClockTick
+
+PING_MEMORY = 16  # round trips kept for the clock filter
+
+
+@dataclass(frozen=True)
+class Ping:
+    sent_s: float  # local monotonic
+    master_s: float  # the master's monotonic in its reply
+    received_s: float  # local monotonic
+
+    @property
+    def rtt_s(self) -> float:
+        return self.received_s - self.sent_s
+
+    @property
+    def offset_s(self) -> float:
+        """Master monotonic minus local monotonic."""
+        return self.master_s - 0.5 * (self.sent_s + self.received_s)
+
+
+class ClockFollower:
+    def __init__(self) -> None:
+        self._pings: collections.deque[Ping] = collections.deque(maxlen=PING_MEMORY)
+        self._tick: ClockTick | None = None
+        self._tick_offset_s: float | None = None  # from the latest tick's arrival
+        self._master_id: str | None = None
+
+    def ping(self, sent_s: float, master_s: float, received_s: float, master_id: str) -> None:
+        """A round trip: sent and received on the local monotonic clock, and the master's
+        monotonic reading in its answer. Pings of an earlier master run are forgotten."""
+        if received_s < sent_s:
+            return
+        if master_id != self._master_id:
+            self._restart(master_id)
+        self._pings.append(Ping(sent_s, master_s, received_s))
+
+    def tick(self, tick: ClockTick, received_s: float) -> None:
+        if tick.master_id != self._master_id:
+            self._restart(tick.master_id)
+        if self._tick is not None and tick.master_mono_s < self._tick.master_mono_s:
+            return  # an older tick overtaken by a newer one
+        self._tick = tick
+        self._tick_offset_s = tick.master_mono_s - received_s
+
+    @property
+    def offset_s(self) -> float | None:
+        """Master monotonic minus local: from the best ping, else the latest tick's arrival."""
+        if self._pings:
+            return min(self._pings, key=lambda p: p.rtt_s).offset_s
+        return self._tick_offset_s
+
+    @property
+    def rtt_s(self) -> float | None:
+        return min((p.rtt_s for p in self._pings), default=None)
+
+    @property
+    def latest(self) -> ClockTick | None:
+        return self._tick
+
+    def time_at(self, local_s: float) -> datetime | None:
+        """The master's sim time at local monotonic `local_s` (None before the first tick)."""
+        tick, offset = self._tick, self.offset_s
+        if tick is None or offset is None:
+            return None
+        ahead_s = local_s + offset - tick.master_mono_s
+        return tick.time_utc + timedelta(seconds=tick.rate * ahead_s)
+
+    def _restart(self, master_id: str) -> None:
+        self._master_id = master_id
+        self._pings.clear()
+        self._tick = None
+        self._tick_offset_s = None
