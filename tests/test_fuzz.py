@@ -72,6 +72,7 @@ def test_the_targets_cover_every_parser() -> None:
     from wxsky.weather.feeds import FORMATS
 
     expected = {"metar", "nmea", "canaerospace", "cigi", "control", "wire", "config", "preset"}
+    expected |= {"share"}
     expected |= {"cloud-model", "feed-auto", *(f"feed-{f}" for f in FORMATS)}
     assert expected <= set(TARGETS)
 

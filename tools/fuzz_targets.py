@@ -1465,3 +1465,89 @@ def check_control(data: bytes) -> None:
     trouble = [line for line in daemon.new_log().splitlines() if _LOG_TROUBLE.search(line)]
     assert not trouble, f"the daemon logged: {trouble[0].split(' ', 1)[-1][:300]}"
     daemon.assert_alive()
+
+
+# --- the channel bus (wxsky/share/messages.py): what a channel decodes from the network ------
+
+
+def share_seeds() -> list[bytes]:
+    """A master's state, tick, pong and health as they go on the bus, for two presets."""
+    from wxsky.output.wire import pack_data
+    from wxsky.scene.camera import Camera
+    from wxsky.settings.presets import load_preset
+    from wxsky.share.messages import (
+        ClockTick,
+        Health,
+        SkyState,
+        encode_health,
+        encode_pong,
+        encode_state,
+        encode_tick,
+    )
+    from wxsky.weather.state import WeatherState
+
+    out: list[bytes] = []
+    for name in ("fair-cumulus", "thunderstorm"):
+        state = WeatherState().apply(load_preset(name))
+        drift = tuple((1.5 * i, -2.0) for i in range(len(state.layers)))
+        sky = SkyState(
+            "default", "0123456789abcdef", 7, 3, state, state, state.time_utc, drift, 1.0
+        )
+        out.append(pack_data(encode_state(sky)))
+    cam = Camera((10.0, -20.0, 1500.0), 90.0, 5.0, -3.0, 60.0, 320, 180)
+    tick = ClockTick(
+        "default",
+        "0123456789abcdef",
+        1234.5,
+        datetime(2026, 6, 21, tzinfo=UTC),
+        1.0,
+        7,
+        cam,
+        (1.0, 2.0, 3.0),
+    )
+    out.append(pack_data(encode_tick(tick)))
+    out.append(pack_data(encode_pong("default", "0123456789abcdef", 99.25)))
+    out.append(pack_data(encode_health(Health("default", "left", "channel", 29.5, 12.0, 100))))
+    return out
+
+
+@target("share", seeds=share_seeds, max_len=8192)
+def check_share(data: bytes) -> None:
+    """A channel's decoders: WireError/ShareError or a message whose values are in range,
+    and which encodes and decodes back to itself."""
+    from wxsky.output.wire import WireError, pack_data, unpack_data
+    from wxsky.share.messages import (
+        ShareError,
+        decode_health,
+        decode_pong,
+        decode_state,
+        decode_tick,
+        encode_health,
+        encode_state,
+        encode_tick,
+        sky_id,
+    )
+
+    try:
+        value = unpack_data(data)
+    except WireError:
+        return
+    for decoder, encoder in (
+        (decode_state, encode_state),
+        (decode_tick, encode_tick),
+        (decode_health, encode_health),
+        (decode_pong, None),
+    ):
+        try:
+            message = decoder(value, "default")  # type: ignore[operator]
+        except ShareError as exc:
+            assert "\n" not in str(exc), "a share error is not one line"
+            continue
+        if encoder is None:
+            continue
+        again = decoder(unpack_data(pack_data(encoder(message))), "default")  # type: ignore[operator]
+        assert again == message, "a decoded message does not encode back to itself"
+        if decoder is decode_state:
+            assert_state_in_range(message.applied, "shared applied weather")
+            assert_state_in_range(message.target, "shared target weather")
+            assert len(sky_id(message)) == 16

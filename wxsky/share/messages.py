@@ -98,6 +98,7 @@ def encode_state(s: SkyState) -> dict[str, Any]:
         "applied": weather_to_dict(s.applied),
         "applied_time_us": time_to_us(s.applied.time_utc),
         "target": weather_to_dict(s.target),
+        "target_time_us": time_to_us(s.target.time_utc),
         "anchor_us": time_to_us(s.anchor_utc),
         "anchor_drift": [[dx, dy] for dx, dy in s.anchor_drift],
         "clock_rate": s.clock_rate,
@@ -109,6 +110,7 @@ def decode_state(data: object, site: str) -> SkyState:
     applied = _weather(m, "applied")
     target = _weather(m, "target")
     applied = _replace_time(applied, time_from_us(_int(m, "applied_time_us", 0, _MAX_US)))
+    target = _replace_time(target, time_from_us(_int(m, "target_time_us", 0, _MAX_US)))
     drift_items = _list(m, "anchor_drift", _MAX_LAYERS)
     drift = tuple(_pair(v, f"anchor_drift[{i}]") for i, v in enumerate(drift_items))
     if len(drift) != len(applied.layers):

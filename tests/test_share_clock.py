@@ -1,0 +1,122 @@
+"""A channel's sim clock following the master's (wxsky/share/clock.py), the view a channel
+turns from the shared camera (scene.camera.turned), and an engine that follows another's sky
+(SkyEngine.follow): the same cloud field, to the bit, for the same sim time."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+import pytest
+
+from wxsky.engine.stages import SkyEngine
+from wxsky.scene.camera import Camera, turned
+from wxsky.scene.layout import SceneSettings
+from wxsky.settings.presets import load_preset
+from wxsky.share.clock import ClockFollower
+from wxsky.share.messages import ClockTick
+from wxsky.weather.state import Source, WeatherPatch, WeatherState
+from wxsky.weather.transition import TransitionRates
+
+T0 = datetime(2026, 6, 21, 13, 0, tzinfo=UTC)
+MASTER = "0123456789abcdef"
+
+
+def _tick(master_s: float, sim: datetime, rate: float = 1.0, master: str = MASTER) -> ClockTick:
+    return ClockTick("default", master, master_s, sim, rate, 1, None, None)
+
+
+def test_the_best_round_trip_sets_the_offset_and_time_follows_the_rate() -> None:
+    clock = ClockFollower()
+    assert clock.time_at(10.0) is None  # nothing heard yet
+    # The master's monotonic clock is 100 s ahead of ours; one-way delays of 1 and 4 ms.
+    clock.ping(sent_s=10.000, master_s=110.001, received_s=10.002, master_id=MASTER)
+    clock.ping(sent_s=11.000, master_s=111.006, received_s=11.008, master_id=MASTER)
+    assert clock.offset_s == pytest.approx(100.0, abs=1e-9)  # the 2 ms round trip wins
+    assert clock.rtt_s == pytest.approx(0.002)
+    clock.tick(_tick(112.0, T0, rate=2.0), received_s=12.003)
+    # At our 12.5 s the master reads 112.5: half a second after its tick, twice as fast.
+    assert clock.time_at(12.5) == T0 + timedelta(seconds=1.0)
+    # An older tick arriving late changes nothing.
+    clock.tick(_tick(111.0, T0 - timedelta(seconds=9)), received_s=12.6)
+    assert clock.time_at(12.5) == T0 + timedelta(seconds=1.0)
+
+
+def test_before_a_ping_a_ticks_arrival_stands_in_and_a_new_master_starts_afresh() -> None:
+    clock = ClockFollower()
+    clock.tick(_tick(50.0, T0), received_s=20.0)
+    assert clock.offset_s == pytest.approx(30.0)
+    assert clock.time_at(21.0) == T0 + timedelta(seconds=1.0)
+    clock.ping(20.0, 50.0005, 20.001, MASTER)
+    assert clock.offset_s == pytest.approx(30.0)
+    # A restarted master: another id, another monotonic clock; what was learnt is dropped.
+    clock.tick(_tick(5.0, T0 + timedelta(hours=1), master="fedcba9876543210"), received_s=30.0)
+    assert clock.rtt_s is None and clock.offset_s == pytest.approx(-25.0)
+    assert clock.time_at(30.5) == T0 + timedelta(hours=1, seconds=0.5)
+    clock.ping(31.0, 6.0, 30.9, "fedcba9876543210")  # received before sent: ignored
+    assert clock.rtt_s is None
+
+
+@pytest.mark.parametrize("heading", [0.0, 90.0, 271.0])
+def test_a_level_view_offset_turns_the_heading_alone(heading: float) -> None:
+    cam = Camera((1.0, 2.0, 3.0), heading, 0.0, 0.0, 60.0, 320, 180)
+    for yaw in (-60.0, 0.0, 60.0, 179.0):
+        view = turned(cam, yaw, 0.0, 0.0)
+        assert view.heading_deg == pytest.approx((heading + yaw) % 360.0, abs=1e-9)
+        assert view.pitch_deg == pytest.approx(0.0, abs=1e-9)
+        assert view.roll_deg == pytest.approx(0.0, abs=1e-9)
+        assert view.position_m == cam.position_m and view.width_px == 320
+
+
+def test_a_view_offset_is_turned_in_the_cameras_own_axes() -> None:
+    """Each view's forward ray is the camera's basis applied to the offset's, whatever the
+    camera's attitude: channels either side of a climbing, banking ownship stay side by side."""
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        h, p, r = rng.uniform(0, 360), rng.uniform(-60, 60), rng.uniform(-90, 90)
+        yaw, pitch, roll = rng.uniform(-120, 120), rng.uniform(-30, 30), rng.uniform(-20, 20)
+        cam = Camera((0.0, 0.0, 0.0), h, p, r)
+        right, up, fwd = cam.basis()
+        view = turned(cam, yaw, pitch, roll)
+        v_right, v_up, v_fwd = Camera((0.0, 0.0, 0.0), yaw, pitch, roll).basis()
+        body = np.stack([right, fwd, up], axis=1)
+        got_right, got_up, got_fwd = view.basis()
+        np.testing.assert_allclose(got_fwd, body @ v_fwd, atol=1e-9)
+        np.testing.assert_allclose(got_right, body @ v_right, atol=1e-9)
+        np.testing.assert_allclose(got_up, body @ v_up, atol=1e-9)
+    assert math.isclose(turned(Camera((0, 0, 0)), 0.0, 90.0, 0.0).pitch_deg, 90.0)
+
+
+def test_a_following_engine_builds_the_masters_cloud_field_for_the_same_time() -> None:
+    """The master runs a transition; a channel given its shared sky and its clock has the
+    same applied weather and drift (to the bit) and the same near sprites at every frame, and
+    never steps the weather itself."""
+    settings = SceneSettings(max_range_m=16_000.0)
+    start = dataclasses.replace(WeatherState().apply(load_preset("fair-cumulus")), time_utc=T0)
+    cam = Camera((0.0, 0.0, 1500.0), 90.0, 0.0, 0.0, 60.0, 160, 90)
+    slow = TransitionRates(cover_oktas_per_min=3.0)
+    with (
+        SkyEngine(start, cam, settings, rates=slow, ring_build="immediate") as master,
+        SkyEngine(WeatherState(), cam, settings, ring_build="immediate") as channel,
+    ):
+        master.drift_for(600.0)  # clouds blown on 10 minutes: a non-zero anchor
+        master.apply(
+            WeatherPatch(source=Source.CONTROL, layers=load_preset("overcast-stratus").layers)
+        )
+        for frame in range(6):
+            plan = master.advance(0.5 if frame else 0.0)
+            channel.follow(master.shared())
+            channel.follow_time(plan.state.time_utc)
+            mine = channel.advance(0.5 if frame else 0.0)
+            assert mine.state.layers == plan.state.layers
+            assert channel.drift == master.drift
+            assert mine.frame.near.sprites.centre_m.tobytes() == (
+                plan.frame.near.sprites.centre_m.tobytes()
+            )
+        assert not master.settled  # the transition is under way, in steps
+        # On its own the channel moves neither the clock nor the weather.
+        before = channel.state
+        channel.advance(5.0)
+        assert channel.state == before and channel.following
