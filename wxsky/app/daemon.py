@@ -303,8 +303,9 @@ class Daemon:
             self._count_frame()
             self._broadcast_frame(plan, meta)
             self._cigi.frame_published(meta.frame_number, host_frames, plan.state)
-            self._share.frame_time(plan.state.time_utc)
-            self._share.after_frame(plan.state.time_utc)  # a master: its tick and state
+            # The frame's sim time is the clock's at the frame's start (`now`, the loop's
+            # monotonic clock): a master ticks that pair, not the later moment of publishing.
+            self._share.after_frame(plan.state.time_utc, now)  # a master: its tick and state
             if self.engine.ring is not shown_ring:
                 shown_ring = self.engine.ring
                 self._server_broadcast("scene", self.scene_info())

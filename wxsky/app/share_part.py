@@ -83,6 +83,7 @@ class SharePart:
         self._drop_log = RateLimitedLog(log)
         self._health: dict[str, dict[str, Any]] = {}
         self._frames = 0
+        self._last_frame: tuple[float, datetime] | None = None  # (monotonic, sim time)
         self._fps: Callable[[], float] = lambda: 0.0
 
     @property
@@ -165,13 +166,15 @@ class SharePart:
             self.engine.set_camera(self._view_of(tick.camera))
             self.engine.set_aircraft(tick.aircraft_m)
 
-    def after_frame(self, time_utc: datetime) -> None:
-        """A master ticks (and sends its state when it changed or is due again)."""
+    def after_frame(self, time_utc: datetime, frame_mono_s: float) -> None:
+        """After a frame of sim time `time_utc`, begun at `frame_mono_s` (monotonic): a master
+        ticks that pair (and sends its state when it changed or is due again)."""
         self._frames += 1
+        self._last_frame = (frame_mono_s, time_utc)
         if self.role != "master" or self._bus is None:
             return
-        now = time.monotonic()
-        self._publish_state(now)
+        now = frame_mono_s
+        self._publish_state(time.monotonic())
         sky = self.engine.shared()
         tick = ClockTick(
             site=self.site,
@@ -255,12 +258,6 @@ class SharePart:
             return sky.applied.time_utc
         mono, t = at
         return t + timedelta(seconds=sky.clock_rate * (local_s - mono))
-
-    _last_frame: tuple[float, datetime] | None = None
-
-    def frame_time(self, time_utc: datetime) -> None:
-        """The sim time of the frame just published (for `sim_time` on a master)."""
-        self._last_frame = (time.monotonic(), time_utc)
 
     # -- a master -------------------------------------------------------------------------
 
