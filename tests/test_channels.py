@@ -7,6 +7,8 @@ from __future__ import annotations
 import contextlib
 import signal
 import socket
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from datetime import timedelta
@@ -96,6 +98,15 @@ def test_a_master_and_two_channels_show_one_sky_and_outlive_the_master(tmp_path:
         wait_for("channels joined with the master's sky_id", joined, 15.0)
         m = status(master)
         assert m["channel"]["role"] == "master" and m["sky_id"]
+        shown = subprocess.run(
+            [sys.executable, "-m", "wxsky", "status", "--control", left.address],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=True,
+        ).stdout
+        assert f"sky channel 'left' of site 'default' on zenoh:{endpoint}" in shown
+        assert f"sky_id {m['sky_id']}, master alive" in shown
         for c, name in ((left, "left"), (right, "right")):
             s = status(c)
             assert s["channel"]["role"] == "channel" and s["channel"]["name"] == name

@@ -373,6 +373,21 @@ def _cmd_status(args: argparse.Namespace) -> int:
         print(f"changing toward: clouds {target or 'none'}")
     for name, hold in sorted(status.get("overrides", {}).items()):
         print(f"override {name}: {hold['source']}")
+    ch = status.get("channel") or {}
+    if ch.get("role") in ("master", "channel"):
+        line = f"sky {ch['role']} {ch['name']!r} of site {ch['site']!r} on zenoh:{ch['endpoint']}"
+        line += f", sky_id {status.get('sky_id')}"
+        if ch["role"] == "channel":
+            alive = "alive" if ch["master_alive"] else "GONE (keeping the last sky)"
+            line += f", master {alive}"
+            if ch.get("lag_ms") is not None:
+                line += f", lag {ch['lag_ms']:.0f} ms"
+        peers = ch.get("peers") or {}
+        if peers:
+            line += ", peers " + ", ".join(
+                f"{n} ({p['role']}, {p['fps']:.0f} fps)" for n, p in sorted(peers.items())
+            )
+        print(line)
     for inp in status["inputs"]:
         state = "ok" if inp["ok"] else "FAILING"
         line = (
