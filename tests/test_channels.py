@@ -203,3 +203,30 @@ def test_a_second_master_on_a_site_refuses_to_start(tmp_path: Path) -> None:
         ):
             pass
         assert "exited early (2)" in str(err.value)  # the CLI's exit status for a bad start
+
+
+def test_a_channel_that_dies_and_restarts_catches_up_within_a_second(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    share = f"zenoh:{endpoint}"
+    for name in ("master", "left", "again"):
+        (tmp_path / name).mkdir()
+    with running_daemon(tmp_path / "master", SMALL, ("--share", share)) as master:
+        with running_daemon(tmp_path / "left", SMALL, channel_args(share, "left", -60.0)) as ch:
+            wait_for("joined", lambda: status(ch)["sky_id"] == status(master)["sky_id"], 15.0)
+            ch.proc.send_signal(signal.SIGKILL)
+            ch.proc.wait(timeout=10)
+        with master.client() as c:  # the sky moves on while the channel is down
+            c.call("apply_preset", {"name": "broken-stratocumulus"})
+        wait_for("the master's new sky", lambda: status(master)["settled"], 30.0)
+        with running_daemon(
+            tmp_path / "again", SMALL, channel_args(share, "left", -60.0)
+        ) as again:
+            # Up (its first frame published): it asked for the state before its first frame.
+            took = wait_for(
+                "caught up",
+                lambda: (s := status(again))["channel"]["master_alive"]
+                and s["sky_id"] == status(master)["sky_id"],
+                1.0,
+            )
+            assert status(again)["weather"]["layers"] == status(master)["weather"]["layers"]
+            assert took < 1.0

@@ -78,6 +78,7 @@ class SharePart:
         self._state: SkyState | None = None  # a channel's latest good one (a master's own)
         self._follower = ClockFollower()
         self._tick_at: float | None = None  # local monotonic of the latest tick
+        self._fetching = False  # a state query in flight
         self._token_alive = False
         self._drops: dict[str, int] = {}
         self._drop_log = RateLimitedLog(log)
@@ -346,8 +347,10 @@ class SharePart:
             return
         self._follower.tick(tick, arrived)
         self._tick_at = arrived
-        if self._state is None or self._state.master_id != tick.master_id:
-            # A master we have no state from (it restarted): ask for it.
+        new_master = self._state is None or self._state.master_id != tick.master_id
+        if new_master and self._bus is not None and not self._fetching:
+            # A master we have no state from (it restarted): ask for it, once at a time.
+            self._fetching = True
             self._tasks.append(asyncio.create_task(self._fetch_state()))
 
     def _master_seen(self, alive: bool, _arrived: float) -> None:
@@ -371,11 +374,15 @@ class SharePart:
         }
 
     async def _fetch_state(self) -> None:
-        if self._bus is None or self._loop is None:
-            return
-        payload = await self._loop.run_in_executor(None, self._bus.fetch_state)
-        if payload is not None:
-            self._got_state(payload, time.monotonic())
+        try:
+            if self._bus is None or self._loop is None:
+                return
+            payload = await self._loop.run_in_executor(None, self._bus.fetch_state)
+            if payload is not None:
+                self._got_state(payload, time.monotonic())
+        finally:
+            self._fetching = False
+            self._tasks = [t for t in self._tasks if not t.done()]
 
     async def _pinger(self) -> None:
         assert self._loop is not None
