@@ -58,7 +58,15 @@ void main() {
         // Seen edge-on a quad is a line: fade it by the angle to the eye (Wang's in-cloud rule).
         alpha *= abs(dot(n, normalize(-in_centre)));
     } else {
-        c = u_view_rot * in_centre + vec3(corner * 0.5 * in_size, 0.0);
+        // Face the eye point, upright (the world's up across the picture): the same quad in
+        // the world whichever way a view from this eye looks, so display channels turned from
+        // one camera meet without seams, and a rolled view does not roll the clouds' bases.
+        vec3 n = -in_centre / max(length(in_centre), 1e-6);
+        vec3 u = cross(vec3(0.0, 0.0, 1.0), n);
+        float across = length(u);
+        u = across > 1e-6 ? u / across : vec3(1.0, 0.0, 0.0);  // straight above or below
+        vec3 v = cross(n, u);
+        c = u_view_rot * (in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size);
         // Sprites the eye is about to pass through fade out instead of filling the screen.
         float dist = length(u_view_rot * in_centre);
         alpha *= smoothstep(0.1 * in_size, 0.6 * in_size, dist);

@@ -1,0 +1,173 @@
+"""Display channels meet without seams (docs/channels.md): a sky master and channels turned
+-60/0/+60 degrees with 60-degree views, and two with overlapping 70-degree views, real daemons
+on loopback, each frame read from its own shared memory and composited as a host would. The
+pixels where two views meet must agree: the edge columns of adjacent views, and the overlap
+of overlapping ones reprojected from one view into the other, mean difference at most 2/255."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from daemon_harness import RunningDaemon, running_daemon
+from test_channels import channel_args, free_port, status, wait_for
+
+from wxsky.host.reference import HostFrame, ReferenceHost
+from wxsky.png import write_png
+from wxsky.scene.camera import Camera
+
+pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed")
+
+W, H = 240, 136
+CONFIG = f"""
+[camera]
+width = {W}
+height = {H}
+pitch_deg = 0.0
+[scene]
+ring_texture_px = 128
+"""
+LEVEL = 2.0 / 255.0
+F = npt.NDArray[np.float64]
+
+
+def _camera(d: RunningDaemon) -> Camera:
+    c = status(d)["camera"]
+    return Camera(
+        tuple(c["position_m"]),
+        c["heading_deg"],
+        c["pitch_deg"],
+        c["roll_deg"],
+        c["fov_deg"],
+        c["width"],
+        c["height"],
+    )
+
+
+def _picture(d: RunningDaemon) -> F:
+    """The channel's latest frame once its ring has settled, composited: (H, W, 3) in 0..1."""
+    with ReferenceHost.connect(d.address) as host:
+        frame: HostFrame = host.wait_settled_frame(timeout_s=60.0)
+        rgb = frame.composite()
+    return np.asarray(rgb[..., :3], np.float64) / 255.0
+
+
+def _sample(img: F, col: F, row: F) -> F:
+    """Bilinear samples of img at fractional pixel centres (col, row)."""
+    h, w = img.shape[:2]
+    c0 = np.clip(np.floor(col).astype(int), 0, w - 2)
+    r0 = np.clip(np.floor(row).astype(int), 0, h - 2)
+    fc = np.clip(col - c0, 0.0, 1.0)[..., None]
+    fr = np.clip(row - r0, 0.0, 1.0)[..., None]
+    top = img[r0, c0] * (1 - fc) + img[r0, c0 + 1] * fc
+    bottom = img[r0 + 1, c0] * (1 - fc) + img[r0 + 1, c0 + 1] * fc
+    out: F = top * (1 - fr) + bottom * fr
+    return out
+
+
+def overlap_difference(a: F, cam_a: Camera, b: F, cam_b: Camera) -> tuple[float, int]:
+    """Mean absolute difference over the pixels of b whose rays land inside a's picture (a
+    sampled bilinearly there), and how many pixels that is."""
+    rays = cam_b.pixel_rays()
+    right, up, fwd = cam_a.basis()
+    depth = rays @ fwd
+    x = (rays @ right) / depth / cam_a.tan_half_fov_x
+    y = (rays @ up) / depth / cam_a.tan_half_fov_y
+    col = (x + 1.0) / 2.0 * cam_a.width_px - 0.5
+    row = (1.0 - y) / 2.0 * cam_a.height_px - 0.5
+    inside = (depth > 0) & (col >= 0) & (col <= cam_a.width_px - 1)
+    inside &= (row >= 0) & (row <= cam_a.height_px - 1)
+    if not inside.any():
+        return float("nan"), 0
+    got = _sample(a, col[inside], row[inside])
+    return float(np.abs(got - b[inside]).mean()), int(inside.sum())
+
+
+@contextlib.contextmanager
+def master(tmp_path: Path, endpoint: str) -> Iterator[RunningDaemon]:
+    (tmp_path / "master").mkdir()
+    args = ("--share", f"zenoh:{endpoint}", "--preset", "broken-stratocumulus")
+    with running_daemon(tmp_path / "master", CONFIG, args) as m:
+        with m.client() as c:
+            c.call(
+                "set_camera",
+                {"position_m": [0.0, 0.0, 900.0], "heading_deg": 0.0, "pitch_deg": 0.0},
+            )
+            c.call("set_time", {"time_utc": "2026-06-21T11:00:00Z", "rate": 0.0})
+        yield m
+
+
+def _run_channels(
+    stack: contextlib.ExitStack,
+    tmp_path: Path,
+    endpoint: str,
+    views: dict[str, tuple[float, float]],
+) -> dict[str, RunningDaemon]:
+    out = {}
+    for name, (yaw, fov) in views.items():
+        (tmp_path / name).mkdir()
+        args = (*channel_args(f"zenoh:{endpoint}", name, yaw), "--fov-deg", str(fov))
+        out[name] = stack.enter_context(running_daemon(tmp_path / name, CONFIG, args))
+    return out
+
+
+def _follow(m: RunningDaemon, chans: dict[str, RunningDaemon]) -> None:
+    def joined() -> bool:
+        sky = status(m)["sky_id"]
+        return all(
+            (s := status(c))["sky_id"] == sky and s["channel"]["master_alive"]
+            for c in chans.values()
+        )
+
+    wait_for("channels following the master", joined, 20.0)
+
+
+def test_adjacent_and_overlapping_channels_agree_where_they_meet(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with master(tmp_path, endpoint) as m, contextlib.ExitStack() as stack:
+        views = {"left": (-60.0, 60.0), "centre": (0.0, 60.0), "right": (60.0, 60.0)}
+        adjacent = _run_channels(stack, tmp_path, endpoint, views)
+        overlapping = _run_channels(
+            stack, tmp_path, endpoint, {"ovl": (-30.0, 70.0), "ovr": (30.0, 70.0)}
+        )
+        everyone = {**adjacent, **overlapping}
+        _follow(m, everyone)
+        pictures = {name: _picture(d) for name, d in everyone.items()}
+        cams = {name: _camera(d) for name, d in everyone.items()}
+        times = {status(d)["sim_clock"]["time_utc"][:19] for d in everyone.values()}
+        assert times == {"2026-06-21T11:00:00"}  # one moment: the clock stands still
+    # The pictures a person would look at: the three adjacent views side by side, then the two
+    # overlapping ones.
+    row1 = np.concatenate([pictures[n] for n in ("left", "centre", "right")], axis=1)
+    row2 = np.concatenate([pictures["ovl"], pictures["ovr"]], axis=1)
+    row2 = np.pad(row2, ((0, 0), (0, row1.shape[1] - row2.shape[1]), (0, 0)))
+    sheet = (np.concatenate([row1, row2], axis=0) * 255.0 + 0.5).astype(np.uint8)
+    sheet = np.concatenate([sheet, np.full((*sheet.shape[:2], 1), 255, np.uint8)], axis=2)
+    write_png(tmp_path / "seams.png", sheet)
+    # Adjacent: the last column of each view against the first of the next one (the rows of
+    # both edges see the same rays; the columns are a pixel apart).
+    seams = []
+    for a, b in (("left", "centre"), ("centre", "right")):
+        diff = float(np.abs(pictures[a][:, -1] - pictures[b][:, 0]).mean())
+        seams.append(diff)
+        assert diff <= LEVEL, f"{a}|{b} edge columns differ by {255 * diff:.2f}/255 on average"
+    # (The views are where the seams say.)
+    assert abs(cams["left"].heading_deg - 300.0) < 1e-6
+    assert abs(cams["right"].heading_deg - 60.0) < 1e-6
+    # Overlapping: 10 degrees of each 70-degree view are the other's.
+    diff, pixels = overlap_difference(pictures["ovl"], cams["ovl"], pictures["ovr"], cams["ovr"])
+    assert pixels > 0.1 * W * H, pixels
+    assert diff <= LEVEL, f"the overlap differs by {255 * diff:.2f}/255 on average"
+    print(
+        "seam means /255:",
+        [round(255 * s, 3) for s in seams],
+        "overlap /255:",
+        round(255 * diff, 3),
+        "over",
+        pixels,
+        "pixels",
+    )
