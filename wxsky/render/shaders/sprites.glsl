@@ -33,6 +33,15 @@ vec2 cell_uv(float cell, vec2 local) {
     return (origin + local * vec2(0.5, -0.5) + 0.5) / float(SHEET_CELLS);
 }
 
+// A quad's axes across its normal n: u level (the world's up across n), v up the quad; a
+// lying quad (n straight up or down) takes east for u.
+void quad_axes(vec3 n, out vec3 u, out vec3 v) {
+    u = cross(vec3(0.0, 0.0, 1.0), n);
+    float across = length(u);
+    u = across > 1e-6 ? u / across : vec3(1.0, 0.0, 0.0);
+    v = cross(n, u);
+}
+
 void main() {
     float round_mix = 0.0;
     int slot = int(in_texture + 0.5);
@@ -47,12 +56,11 @@ void main() {
     vec3 c;
     float alpha = in_rgba.a;
     if (dot(in_normal, in_normal) > 0.25) {
-        // Span the quad in the plane across the normal with a fixed "up": the world's up for
-        // a standing quad (so it reads as the facing sprite it was), north for a lying one.
+        // Spanned across the normal as a facing sprite is (quad_axes), so a sprite whose
+        // facing locks with the eye straight along its normal does not move.
         vec3 n = normalize(in_normal);
-        vec3 ref = abs(n.z) < 0.9 ? vec3(0.0, 0.0, 1.0) : vec3(0.0, 1.0, 0.0);
-        vec3 u = normalize(cross(ref, n));
-        vec3 v = cross(n, u);
+        vec3 u, v;
+        quad_axes(n, u, v);
         vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
         c = u_view_rot * world;
         // Seen edge-on a quad is a line: fade it by the angle to the eye (Wang's in-cloud rule).
@@ -61,11 +69,8 @@ void main() {
         // Face the eye point, upright (the world's up across the picture): the same quad in
         // the world whichever way a view from this eye looks, so display channels turned from
         // one camera meet without seams, and a rolled view does not roll the clouds' bases.
-        vec3 n = -in_centre / max(length(in_centre), 1e-6);
-        vec3 u = cross(vec3(0.0, 0.0, 1.0), n);
-        float across = length(u);
-        u = across > 1e-6 ? u / across : vec3(1.0, 0.0, 0.0);  // straight above or below
-        vec3 v = cross(n, u);
+        vec3 u, v;
+        quad_axes(-in_centre / max(length(in_centre), 1e-6), u, v);
         c = u_view_rot * (in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size);
         // Sprites the eye is about to pass through fade out instead of filling the screen.
         float dist = length(u_view_rot * in_centre);
