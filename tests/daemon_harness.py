@@ -58,8 +58,13 @@ max_height = 540
 
 @contextlib.contextmanager
 def running_daemon(
-    tmp_path: Path, extra_config: str = "", args: tuple[str, ...] = ()
+    tmp_path: Path,
+    extra_config: str = "",
+    args: tuple[str, ...] = (),
+    prefix: tuple[str, ...] = (),
 ) -> Iterator[RunningDaemon]:
+    """`wxsky run` with the config and args; `prefix`: a command it runs under (`ip netns exec
+    NS` for a daemon in a network namespace)."""
     shm_name = f"wxsky-test-{uuid.uuid4().hex[:10]}"
     config = write_config(tmp_path / "wxsky.toml", shm_name, extra_config)
     sock = tmp_path / "wx.sock"
@@ -67,6 +72,7 @@ def running_daemon(
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(
             [
+                *prefix,
                 sys.executable,
                 "-m",
                 "wxsky",
