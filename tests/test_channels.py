@@ -31,6 +31,8 @@ pitch_deg = 0.0
 ring_texture_px = 64
 """
 
+PRESET_APPLY = (sys.executable, "-m", "wxsky", "preset", "apply", "overcast-stratus")
+
 
 def free_port() -> int:
     with socket.socket() as s:
@@ -145,10 +147,23 @@ def test_a_master_and_two_channels_show_one_sky_and_outlive_the_master(tmp_path:
             with left.client() as c, pytest.raises(Exception, match="master") as err:
                 c.call(command, params)
             assert "\n" not in str(err.value)
-        # A preset on the master reaches both channels' target within 2 s, as its transition.
+        # `wxsky preset apply` on a channel is refused in one line; on the master it reaches
+        # both channels' target within 2 s (the command's own start-up included).
+        refused = subprocess.run(
+            [*PRESET_APPLY, "--control", left.address],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
+        assert refused.returncode != 0 and "sky master" in refused.stderr
+        assert len(refused.stderr.strip().splitlines()) == 1, refused.stderr
         start = time.monotonic()
-        with master.client() as c:
-            c.call("apply_preset", {"name": "overcast-stratus"})
+        subprocess.run(
+            [*PRESET_APPLY, "--control", master.address],
+            capture_output=True,
+            timeout=30,
+            check=True,
+        )
         target = status(master)["target"]["layers"]
         for ch in channels:
             wait_for(
@@ -218,14 +233,14 @@ def test_a_channel_that_dies_and_restarts_catches_up_within_a_second(tmp_path: P
         with master.client() as c:  # the sky moves on while the channel is down
             c.call("apply_preset", {"name": "broken-stratocumulus"})
         wait_for("the master's new sky", lambda: status(master)["settled"], 30.0)
-        with running_daemon(
-            tmp_path / "again", SMALL, channel_args(share, "left", -60.0)
-        ) as again:
+        with running_daemon(tmp_path / "again", SMALL, channel_args(share, "left", -60.0)) as again:
             # Up (its first frame published): it asked for the state before its first frame.
             took = wait_for(
                 "caught up",
-                lambda: (s := status(again))["channel"]["master_alive"]
-                and s["sky_id"] == status(master)["sky_id"],
+                lambda: (
+                    (s := status(again))["channel"]["master_alive"]
+                    and s["sky_id"] == status(master)["sky_id"]
+                ),
                 1.0,
             )
             assert status(again)["weather"]["layers"] == status(master)["weather"]["layers"]
