@@ -34,6 +34,9 @@ def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None
             preset="scattered-cumulus",
             ring_fade_s=0.1,
             trace=trace,
+            # Built in the frame that needs it, so the 80 frames surely hold the whole ring
+            # (in a worker process below the frames' priority, it may not be ready in them).
+            ring_build="sync",
         )
     assert result.frames == 80
     for name in STAGES:
@@ -45,10 +48,11 @@ def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None
     assert all({"frame", "event", "camera_m"} <= set(line) for line in lines)
     rendered = [line for line in lines if line["event"] == "impostor_rendered"]
     assert [line["index"] for line in rendered] == list(range(8))
-    # The first ring, replacing none on show, all in the frame its build is ready (later
-    # rebuilds slice: tests/test_ring_schedule.py).
-    assert len({line["frame"] for line in rendered}) == 1
-    assert all(line["slices"] == 1 for line in rendered)
+    # Sliced like every rebuild (tests/test_ring_schedule.py): each impostor completes in
+    # a frame of its own, after its slices.
+    frames = [line["frame"] for line in rendered]
+    assert frames == sorted(set(frames))
+    assert all(line["slices"] >= 1 for line in rendered)
     assert result.events["ring_rebuild_start"] == 1 and result.build_s
     d = result.to_dict()
     assert set(d["stages_ms"]) == set(STAGES) and d["frames"] == 80

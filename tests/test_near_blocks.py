@@ -163,8 +163,10 @@ def test_a_new_rings_worker_prepares_the_near_sets_and_light_its_frames_ask_for(
         made: list[object] = []
         real = gather_module._make_near_blocks
         mp.setattr(gather_module, "_make_near_blocks", lambda *a: made.append(a) or real(*a))
-        prepare_near(state, ring, shown, sky, settings)
+        shown_near = NearRing(shown.geometry.centre_m, shown.drift, 1.0)
+        prepared = prepare_near(state, ring, shown_near, sky, settings)
         assert len(made) == 2  # the ring's own set, and the fade's
+        assert [p.light is not None for p in prepared] == [True, True]
         lights = {}
         for rings in (alone, fading):
             blocks = near_blocks(state, drift1, rings, settings.ring_radius_m, 16_000.0)

@@ -34,6 +34,7 @@ from wxsky.app.camera_path import CameraPath
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.trace import TraceWriter
 from wxsky.engine.ring_schedule import DEFAULT_SLICE_MS
+from wxsky.engine.ring_worker import DEFAULT_NICE
 from wxsky.engine.stages import SkyEngine
 from wxsky.output.shm import FrameWriter
 from wxsky.scene.camera import Camera
@@ -200,6 +201,8 @@ def run_bench(
     ring_fade_s: float = 1.0,
     ring_slice_ms: float | None = DEFAULT_SLICE_MS,
     ring_build: str = "async",
+    ring_worker: str = "process",
+    ring_worker_nice: int = DEFAULT_NICE,
     trace: TraceWriter | None = None,
     started_s: float | None = None,
     check_order: bool = False,
@@ -247,9 +250,12 @@ def run_bench(
             ring_build=ring_build,
             ring_fade_s=ring_fade_s,
             ring_slice_ms=ring_slice_ms,
+            ring_worker=ring_worker,
+            ring_worker_nice=ring_worker_nice,
         ) as engine,
     ):
         engine.time_ring_builds(build_s)
+        engine.warm_up()
         result = BenchResult(
             preset=preset,
             mode=mode,

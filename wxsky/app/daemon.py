@@ -147,11 +147,14 @@ class Daemon:
             ring_build="async",
             ring_fade_s=config.scene.ring_fade_s,
             ring_slice_ms=config.scene.ring_slice_ms or None,
+            ring_worker=config.scene.ring_worker,
+            ring_worker_nice=config.scene.ring_worker_nice,
         )
         for patch in patches:
             if patch.source not in (Source.DEFAULT, Source.PRESET):
                 self.engine.apply(patch)
         self.engine.settle()
+        self.engine.warm_up()  # the first frame's near layer, made before the loop starts
         self.inputs = {
             "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
             "control": InputStats("control", "control"),

@@ -127,6 +127,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             fps=args.fps,
             ring_fade_s=config.scene.ring_fade_s,
             ring_slice_ms=config.scene.ring_slice_ms or None,
+            ring_worker=config.scene.ring_worker,
+            ring_worker_nice=config.scene.ring_worker_nice,
             trace=trace,
             started_s=STARTED_S,
             check_order=args.check_order,

@@ -10,13 +10,14 @@ drifted. A rebuild never stalls a frame:
     frame, 8 frames, into the second set) -> fading (the host cross-fades from the old set
     to the new over `fade_s`) -> idle, the new set now the current one
 
-With `slice_ms`, the first ring (with no ring on show to keep) is drawn whole in the frame it
-is ready, and from then on an impostor whose drawing would take longer than that is drawn over
-several frames instead, in slices of its back-to-front sprite list (`ImpostorSlice`), each
-drawn over the last: the same picture, and no frame pays a whole impostor (30-150 ms on a CPU
-renderer). Slices are cut by each sprite's estimated cost (`scene.ring.impostor_costs`) and
-the time a unit of it took in the slices drawn so far (`note_render`). Impostors still go one
-at a time, in order, and the fade starts once the eighth is complete.
+With `slice_ms`, an impostor whose drawing would take longer than that is drawn over several
+frames instead, in slices of its back-to-front sprite list (`ImpostorSlice`), each drawn over
+the last: the same picture, and no frame pays a whole impostor (30-150 ms on a CPU renderer).
+The first ring is sliced too: drawn whole, it made the frame it was ready in the slowest of
+the daemon's life (140-230 ms). Slices are cut by each sprite's estimated cost
+(`scene.ring.impostor_costs`) and the time a unit of it took in the slices drawn so far
+(`note_render`). Impostors still go one at a time, in order, and the fade starts once the
+eighth is complete.
 
 Two physical sets of 8 textures exist (0 and 1), so the old ring stays on screen, whole,
 until the new one is complete. A need to rebuild that arises mid-cycle waits for the cycle to
@@ -83,8 +84,9 @@ RING_SETTLE_S = 1.0
 # meanwhile; the first change after a quiet spell rebuilds at once.
 RING_WEATHER_GAP_S = 3.0
 
-# A third of a frame at 30 fps, less a margin: what one frame may spend on impostors.
-DEFAULT_SLICE_MS = 8.0
+# What one frame may spend on impostors: an eighth of a frame at 30 fps. At 8 ms (a quarter)
+# a frame drawing a slice took 1.5 times a fair-cumulus frame on a 2-core CPU renderer (17 ms).
+DEFAULT_SLICE_MS = 4.0
 # An impostor is cut into at most this many slices whatever the estimate, so that a rebuild
 # on a very slow machine still ends in 8 x MAX_SLICES frames.
 MAX_SLICES = 16
@@ -315,22 +317,7 @@ class RingSchedule:
                 self._retry_in_s = RETRY_AFTER_S
                 events.append(RingEvent("ring_rebuild_failed", {"error": str(exc)}))
         piece: ImpostorSlice | None = None
-        if (
-            self.slice_ms is not None
-            and self._current is None
-            and self._incoming is not None
-            and self._next_index == 0
-        ):
-            # The first ring replaces no ring on show: all of it in this one frame (a pause at
-            # startup) rather than seconds of slices with no distant clouds in the picture.
-            render, render_ring = tuple(range(RING_SIZE)), self._incoming
-            render_set = 1 - self._current_set
-            for index in range(RING_SIZE):
-                events.append(RingEvent("impostor_rendered", {"index": index, "slices": 1}))
-            events.append(RingEvent("ring_rebuild_done", {}))
-            self._next_index = RING_SIZE
-            self._version += 1
-        elif self._incoming is not None and self._next_index < RING_SIZE:
+        if self._incoming is not None and self._next_index < RING_SIZE:
             render, render_ring = (self._next_index,), self._incoming
             render_set = 1 - self._current_set
             done = True

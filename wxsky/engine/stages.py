@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 
 from wxsky.engine.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
+from wxsky.engine.ring_worker import DEFAULT_NICE, BuildJob, RingWorker, run_job
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift, NearRing, advance_drift, carry_drift, zero_drift
 from wxsky.scene.in_cloud import NO_LOCKS, Locks
@@ -36,9 +37,9 @@ from wxsky.scene.layout import (
     SceneSettings,
     StageClock,
     build_frame,
-    build_ring,
     empty_ring,
-    prepare_near,
+    install_near,
+    warm_near,
 )
 from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
@@ -50,6 +51,7 @@ from wxsky.weather.transition import INSTANT, TransitionRates, settled, step_tow
 __all__ = ["FramePlan", "SharedSky", "SkyEngine", "enu_from_geodetic", "geodetic_from_enu"]
 
 RENDER_MODES = ("ring", "direct")  # far clouds as impostors, or every cloud as sprites
+RING_WORKERS = ("process", "thread")  # where an async ring build runs
 DEFAULT_TRANSITION_STEP_S = 1.0
 # A cockpit position within this distance of the observer moves the camera; farther, the flat
 # local frame is no longer good and the position becomes the new observer (a new site).
@@ -111,6 +113,8 @@ class SkyEngine:
         ring_build: str = "immediate",
         ring_fade_s: float = DEFAULT_FADE_S,
         ring_slice_ms: float | None = None,
+        ring_worker: str = "thread",
+        ring_worker_nice: int = DEFAULT_NICE,
     ) -> None:
         """`state` is the base weather (defaults and the startup preset), also the first
         applied weather. Rates default to instant and the ring to being built whole in the
@@ -118,9 +122,17 @@ class SkyEngine:
         render thread and spreads it over frames (`ring_build="async"`, see ring_schedule).
         `render_mode="direct"` draws every cloud as sprites and no ring (for comparison).
         `ring_slice_ms`: spread each impostor over frames at about this cost a frame
-        (ring_schedule; the renderer reports what slices cost through `note_ring_render`)."""
+        (ring_schedule; the renderer reports what slices cost through `note_ring_render`).
+        `ring_worker="process"`: with `ring_build="async"`, build rings in a child process
+        at `ring_worker_nice` below the frames (`ring_worker`), not on a thread of this one."""
         if render_mode not in RENDER_MODES:
             raise ValueError(f"render mode must be one of {', '.join(RENDER_MODES)}")
+        if ring_worker not in RING_WORKERS:
+            raise ValueError(f"ring worker must be one of {', '.join(RING_WORKERS)}")
+        self._worker: RingWorker | None = None
+        if ring_worker == "process" and ring_build == "async" and render_mode == "ring":
+            self._worker = RingWorker(ring_worker_nice)
+            self._worker.start()
         self._lock = threading.RLock()
         self._stack = SourceStack(
             base=state, cockpit_hold_s=cockpit_hold_s, cigi_hold_s=cigi_hold_s
@@ -232,9 +244,14 @@ class SkyEngine:
         sky: SkyParams,
     ) -> RingScene:
         t0 = time.perf_counter()
-        ring = build_ring(state, drift, centre_m, sky, self.settings, self._schedule.cancel_event)
-        shown = self._schedule.current  # (read off the render thread: a hint, nothing more)
-        prepare_near(state, ring, shown, sky, self.settings)
+        current = self._schedule.current  # (read off the render thread: a hint, nothing more)
+        shown = None if current is None else NearRing(current.geometry.centre_m, current.drift, 1.0)
+        job = BuildJob(state, drift, centre_m, sky, self.settings, shown)
+        if self._worker is not None:
+            ring, prepared = self._worker.build(job, self._schedule.cancel_event)
+            install_near(prepared)
+        else:
+            ring, _ = run_job(job, self._schedule.cancel_event)
         if self._build_times is not None:
             self._build_times.append(time.perf_counter() - t0)
         return ring
@@ -252,7 +269,10 @@ class SkyEngine:
     def close(self, wait_s: float = 0.0) -> str | None:
         """Stop the ring builder, waiting up to wait_s for a build in flight to give up;
         idempotent. Returns what was abandoned (`RingSchedule.close`), or None."""
-        return self._schedule.close(wait_s)
+        cut = self._schedule.close(wait_s)
+        if self._worker is not None:
+            self._worker.close(max(wait_s, 0.5))
+        return cut
 
     def __enter__(self) -> SkyEngine:
         return self
@@ -445,6 +465,19 @@ class SkyEngine:
             events = (*events, RingEvent(name, fields))
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)
         return FramePlan(state, frame, shown, rings, events)
+
+    def warm_up(self) -> None:
+        """Do at startup what the first frame would otherwise pay for: gather the near
+        layer's blocks around the camera (where the first ring is built) and light them,
+        so that the first frame costs what later ones do (a quarter of a second on a
+        2-core CPU renderer for a thunderstorm)."""
+        if self.render_mode != "ring":
+            return
+        with self._lock:
+            state, drift, camera = self._state, self._drift, self._camera
+        self._bodies = bodies = bodies_for(state, self._bodies)
+        sky = sky_params(state, camera.position_m[2], bodies)
+        warm_near(state, drift, NearRing(camera.position_m, drift, 1.0), sky, self.settings)
 
     # -- several daemons, one sky (docs/channels.md) ---------------------------------------
 

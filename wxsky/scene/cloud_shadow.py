@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import threading
 from dataclasses import dataclass, field
 from datetime import datetime
 
@@ -54,7 +53,7 @@ from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModel
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
-from wxsky.scene.gather import check_cancel
+from wxsky.scene.gather import CancelFlag, check_cancel
 from wxsky.scene.scattering import pass_on
 from wxsky.scene.shading_harris import SHADOW_REACH, tau_of
 from wxsky.weather.state import CloudLayer, WeatherState
@@ -293,7 +292,7 @@ def shadow_casters(
     size_m: float,
     sun_direction_enu: tuple[float, float, float],
     max_range_m: float,
-    cancel: threading.Event | None = None,
+    cancel: CancelFlag | None = None,
 ) -> list[tuple[int, SpriteBatch]]:
     """(layer index, sprites) of every block, among those the scene draws (nearest point
     within max_range_m of the map's centre), whose clouds may shade the map: the blocks
@@ -375,7 +374,7 @@ def cloud_shadow(
     size_m: float,
     px: int,
     max_range_m: float,
-    cancel: threading.Event | None = None,
+    cancel: CancelFlag | None = None,
 ) -> CloudShadow:
     """The shadow map of the clouds `state` and `drift` place, centred over centre_m (its up
     is ignored: the map lies on the observer's ground altitude), for this sun. Raises

@@ -15,7 +15,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Hashable, Iterator
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -204,7 +204,14 @@ class BuildCancelled(Exception):
     """Scene work given up because its `cancel` Event was set (the daemon is stopping)."""
 
 
-def check_cancel(cancel: threading.Event | None) -> None:
+class CancelFlag(Protocol):
+    """What scene work polls to give up: a threading.Event, or a multiprocessing one when
+    the work runs in the ring's worker process."""
+
+    def is_set(self) -> bool: ...
+
+
+def check_cancel(cancel: CancelFlag | None) -> None:
     """Raise BuildCancelled once `cancel` is set: scene work that can take seconds calls this
     between blocks, so that a shutdown never waits for a ring to finish."""
     if cancel is not None and cancel.is_set():
@@ -218,7 +225,7 @@ def _gather(
     min_range_m: float,
     max_range_m: float,
     layer_ranges: list[tuple[float, float]] | None = None,
-    cancel: threading.Event | None = None,
+    cancel: CancelFlag | None = None,
 ) -> tuple[SpriteBatch, npt.NDArray[np.float32]]:
     """`layer_ranges`: per layer, (min, max) in place of (min_range_m, max_range_m); a layer
     with max <= min is skipped. `cancel`: see `check_cancel`."""
@@ -261,7 +268,7 @@ def gather_far(
     centre_m: tuple[float, float, float],
     radius_m: float,
     max_range_m: float,
-    cancel: threading.Event | None = None,
+    cancel: CancelFlag | None = None,
 ) -> SpriteBatch:
     """The ring's sprites: blocks from radius_m to max_range_m of the centre, of the layers
     close enough in altitude to go into impostors (`ring.in_impostors`). Raises
@@ -331,6 +338,18 @@ def near_blocks(
 ) -> NearBlocks | None:
     """The blocks `gather_near` gathers for these rings, before the drift (None without
     rings). Safe from any thread: the ring's worker prepares the next ring's set with it."""
+    keyed = near_blocks_keyed(state, drift, rings, radius_m, max_range_m)
+    return None if keyed is None else keyed[1]
+
+
+def near_blocks_keyed(
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    radius_m: float,
+    max_range_m: float | None = None,
+) -> tuple[Hashable, NearBlocks] | None:
+    """`near_blocks`, with the key it is kept under (`install_near_blocks`)."""
     if not rings:
         return None
     if len(drift) != len(state.layers):
@@ -362,13 +381,20 @@ def near_blocks(
         found = _near_sets.get(key)
         if found is not None:
             _near_sets.move_to_end(key)
-            return found
+            return key, found
     made = _make_near_blocks(state, picks, len(rings))
+    install_near_blocks(key, made)
+    return key, made
+
+
+def install_near_blocks(key: Hashable, blocks: NearBlocks) -> None:
+    """Keep a near set made elsewhere (the ring's worker process) under its key, as if it
+    had been made here: the frames then find it instead of gathering it."""
     with _near_lock:
-        _near_sets[key] = made
+        _near_sets[key] = blocks
+        _near_sets.move_to_end(key)
         while len(_near_sets) > _NEAR_SETS:
             _near_sets.popitem(last=False)
-    return made
 
 
 def _blocks_picked(

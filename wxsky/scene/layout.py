@@ -14,9 +14,10 @@ import itertools
 import math
 import threading
 import weakref
+from collections.abc import Hashable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -26,13 +27,15 @@ from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
 from wxsky.scene.gather import (
+    CancelFlag,
     Drift,
     NearBlocks,
     NearRing,
     check_cancel,
     gather_far,
     gather_near_blocks,
-    near_blocks,
+    install_near_blocks,
+    near_blocks_keyed,
 )
 from wxsky.scene.in_cloud import (
     NO_LOCKS,
@@ -238,7 +241,7 @@ def build_ring(
     centre_m: tuple[float, float, float],
     sky: SkyParams,
     settings: SceneSettings,
-    cancel: threading.Event | None = None,
+    cancel: CancelFlag | None = None,
 ) -> RingScene:
     """The ring's impostors and shadow map. Raises BuildCancelled (`gather.check_cancel`)
     between blocks and between stages once `cancel` is set."""
@@ -395,28 +398,68 @@ def near_scattered_light(blocks: NearBlocks, near: SpriteBatch, sky: SkyParams) 
     return made
 
 
+class PreparedNear(NamedTuple):
+    """A near set made with a ring, and Harris's light on it (None: not Harris, or every
+    sprite a slab's), under the key the frames look it up by (`gather.near_blocks_keyed`)."""
+
+    key: Hashable
+    blocks: NearBlocks
+    light: Scattered | None
+
+
 def prepare_near(
     state: WeatherState,
     ring: RingScene,
-    shown: RingScene | None,
+    shown: NearRing | None,
     sky: SkyParams,
     settings: SceneSettings,
-) -> None:
+) -> tuple[PreparedNear, ...]:
     """Make, with a new ring (on its worker), the near sets the frames will ask for once it
     is complete, and Harris's light on them: the cross-fade's (with `shown`, the ring then on
-    show) and the new ring's own. Made in a frame, each cost that frame tens of milliseconds."""
+    show, at any weight) and the new ring's own. Made in a frame, each cost that frame tens
+    of milliseconds. Returns them, for a worker in another process to hand back
+    (`install_near`)."""
     new = NearRing(ring.geometry.centre_m, ring.drift, 1.0)
     sets: list[tuple[NearRing, ...]] = [(new,)]
     if shown is not None:
-        cur = NearRing(shown.geometry.centre_m, shown.drift, 0.5)
+        cur = shown._replace(weight=0.5)
         sets.append((cur, new._replace(weight=0.5)))
+    made: list[PreparedNear] = []
     for rings in sets:
-        blocks = near_blocks(state, ring.drift, rings, settings.ring_radius_m, settings.max_range_m)
-        if blocks is None or settings.shading != "harris":
+        keyed = near_blocks_keyed(
+            state, ring.drift, rings, settings.ring_radius_m, settings.max_range_m
+        )
+        if keyed is None:
             continue
-        placed = blocks.placed(ring.drift, rings)
+        key, blocks = keyed
+        light = None
+        if settings.shading == "harris":
+            placed = blocks.placed(ring.drift, rings)
+            if placed is not None:
+                light = near_scattered_light(blocks, placed[0], sky)
+        made.append(PreparedNear(key, blocks, light))
+    return tuple(made)
+
+
+def warm_near(
+    state: WeatherState, drift: Drift, ring: NearRing, sky: SkyParams, settings: SceneSettings
+) -> None:
+    """Make the near set a frame gathers for `ring`, with its light, ahead of that frame."""
+    keyed = near_blocks_keyed(state, drift, (ring,), settings.ring_radius_m, settings.max_range_m)
+    if keyed is not None and settings.shading == "harris":
+        placed = keyed[1].placed(drift, (ring,))
         if placed is not None:
-            near_scattered_light(blocks, placed[0], sky)
+            near_scattered_light(keyed[1], placed[0], sky)
+
+
+def install_near(prepared: tuple[PreparedNear, ...]) -> None:
+    """Keep near sets and their light made by `prepare_near` in another process, so the
+    frames find them as if made here."""
+    for item in prepared:
+        install_near_blocks(item.key, item.blocks)
+        if item.light is not None:
+            with _near_light_lock:
+                _near_light[item.blocks] = item.light
 
 
 def split_at_distance(

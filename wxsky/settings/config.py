@@ -175,7 +175,12 @@ class SceneSection(_Section):
     ring_fade_s: float = _opt(1.0, _num(0.0, 30.0, "s"))
     # A rebuild draws an impostor over as many frames as it takes to spend about this long on
     # it in each (0: one whole impostor a frame, as Wang).
-    ring_slice_ms: float = _opt(8.0, _num(0.0, 1000.0, "ms"))
+    ring_slice_ms: float = _opt(4.0, _num(0.0, 1000.0, "ms"))
+    # Where a rebuild's sprite work runs: a child process below the frames' priority, or a
+    # thread of the daemon (shares the GIL with the frames: they stutter while it builds).
+    ring_worker: str = _opt("process", Text(choices=("process", "thread")))
+    # How far below the frames the worker process runs (0..19, as `nice`).
+    ring_worker_nice: int = _opt(19, _int(0, 19))
     # Near sprites this far away are drawn at the ring impostors' texel density (0: never).
     far_band_m: float = _opt(3000.0, _num(0.0, 200_000.0, "m"))
     # Near clouds this far away are drawn as one sprite each (Wang's LOD; 0: never).

@@ -1,0 +1,253 @@
+"""Ring builds in a child process, at a lower scheduling priority than the frames.
+
+A ring build is seconds of numpy and Python (gathering the far blocks, Harris's light, the
+bins, the shadow map, the next near sets). On a worker thread it shares the GIL with the
+frame thread: on a 2-core CPU renderer every frame drawn beside a build took two to three
+times as long (thunderstorm: 31 -> 90-110 ms, the scene stage alone 5 -> 40 ms), and a
+thread's priority cannot be lowered without making that worse (a descheduled thread holding
+the GIL stalls the frames). In a process of its own, the build holds no lock the frames need,
+and `nice` makes the kernel give the frames the cores first.
+
+The child is a fresh interpreter (`python -c`, never a fork: the parent holds a GL context
+and threads; not multiprocessing's spawn either, which runs the parent's main script again in
+the child and so breaks any script without a `__main__` guard), started when the engine
+starts so its imports are done before the first build. It talks over a socket pair with
+multiprocessing's pickling `Connection`. `build` sends one job and waits, watching the
+cancel flag; the child answers with the ring and the near sets it made
+(`scene.layout.prepare_near`), which the parent installs in its own caches. To cancel, the
+parent sends a word: the child's build looks for anything to read between blocks and gives
+up. A child that dies is started again by the next build (the schedule retries a failed
+build); one whose parent goes away reads the end of its socket and exits.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import os
+import socket
+import subprocess
+import sys
+import threading
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+
+from wxsky.scene.gather import BuildCancelled, CancelFlag, Drift, NearRing
+from wxsky.scene.layout import PreparedNear, RingScene, SceneSettings, build_ring, prepare_near
+from wxsky.scene.sky import SkyParams
+from wxsky.weather.state import WeatherState
+
+log = logging.getLogger(__name__)
+
+# How much lower than the frames the child runs. At 10 the frames drawn beside a build on
+# 2 cores stay within a few percent of those without one (docs/performance.md); the build
+# then takes the cores the frames leave, which at 30 Hz is most of one.
+DEFAULT_NICE = 19
+POLL_S = 0.05  # how often the waiting thread looks at the cancel flag and the child
+
+
+class RingWorkerError(RuntimeError):
+    """The ring's worker process failed (it died, or could not start)."""
+
+
+@dataclass(frozen=True)
+class BuildJob:
+    """Everything a ring build reads: immutable values, pickled to the child."""
+
+    state: WeatherState
+    drift: Drift
+    centre_m: tuple[float, float, float]
+    sky: SkyParams
+    settings: SceneSettings
+    shown: NearRing | None  # the ring on show, whose cross-fade near set is made too
+
+
+def run_job(
+    job: BuildJob, cancel: CancelFlag | None = None
+) -> tuple[RingScene, tuple[PreparedNear, ...]]:
+    """The build itself, in whichever process runs it."""
+    ring = build_ring(job.state, job.drift, job.centre_m, job.sky, job.settings, cancel)
+    return ring, prepare_near(job.state, ring, job.shown, job.sky, job.settings)
+
+
+class RingWorker:
+    """One child process that builds rings, one at a time. `build` from one thread at a
+    time (the schedule's builder thread); `close` from any, idempotent."""
+
+    def __init__(self, nice: int = DEFAULT_NICE) -> None:
+        self.nice = nice
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._conn: Connection | None = None
+        self._lock = threading.Lock()  # held by `build` while a job is out
+        self._closed = False
+
+    def start(self) -> None:
+        """Start the child now (its imports take a few hundred milliseconds), not at the
+        first build."""
+        with self._lock:
+            self._ensure()
+
+    @property
+    def pid(self) -> int | None:
+        proc = self._proc
+        return None if proc is None else proc.pid
+
+    def build(
+        self, job: BuildJob, cancel: threading.Event
+    ) -> tuple[RingScene, tuple[PreparedNear, ...]]:
+        """Run `job` in the child and return what it made; raises BuildCancelled once
+        `cancel` (or `close`) has made the child give up, RingWorkerError if it died."""
+        with self._lock:
+            if self._closed or cancel.is_set():
+                raise BuildCancelled("scene work cancelled")
+            conn, proc = self._ensure()
+            try:
+                conn.send(job)
+                asked = False
+                while not conn.poll(POLL_S):
+                    if not asked and (cancel.is_set() or self._closed):
+                        conn.send(("cancel",))
+                        asked = True
+                    if proc.poll() is not None:
+                        raise RingWorkerError(
+                            f"the ring's worker process died (exit code {proc.returncode})"
+                        )
+                reply = conn.recv()
+            except (EOFError, OSError) as exc:
+                self._drop()
+                raise RingWorkerError(f"the ring's worker process is gone: {exc}") from None
+            except RingWorkerError:
+                self._drop()
+                raise
+            if self._closed:
+                self._drop()
+        kind = reply[0]
+        if kind == "cancelled":
+            raise BuildCancelled("scene work cancelled")
+        if kind == "error":
+            raise RingWorkerError(f"ring build in the worker process: {reply[1]}")
+        ring, prepared = reply[1], reply[2]
+        # A ring's serial is unique in the process that shows it: the child's counter is not.
+        return dataclasses.replace(ring), prepared
+
+    def close(self, wait_s: float = 1.0) -> None:
+        """Make the child give up any build and exit, waiting up to wait_s before it is
+        killed. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True  # a builder thread waiting sends the cancel and drops the child
+        proc = self._proc
+        if self._lock.acquire(blocking=False):
+            try:
+                self._drop(wait_s)
+            finally:
+                self._lock.release()
+        elif proc is not None:
+            try:
+                proc.wait(max(0.0, wait_s))
+            except subprocess.TimeoutExpired:
+                log.warning("ring worker process still busy after %.1f s: killed", wait_s)
+                proc.kill()
+
+    def __enter__(self) -> RingWorker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _ensure(self) -> tuple[Connection, subprocess.Popen[bytes]]:
+        if self._closed:
+            raise BuildCancelled("scene work cancelled")
+        if self._proc is not None and self._conn is not None and self._proc.poll() is None:
+            return self._conn, self._proc
+        self._drop()
+        mine, theirs = socket.socketpair()
+        root = str(Path(__file__).resolve().parents[2])  # the directory holding wxsky/
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
+        code = f"from wxsky.engine.ring_worker import serve; serve({theirs.fileno()}, {self.nice})"
+        try:
+            proc = subprocess.Popen(
+                [sys.executable, "-c", code],
+                pass_fds=(theirs.fileno(),),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                env=env,
+            )
+        except OSError as exc:
+            mine.close()
+            raise RingWorkerError(f"cannot start the ring's worker process: {exc}") from None
+        finally:
+            theirs.close()
+        self._conn, self._proc = Connection(mine.detach()), proc
+        return self._conn, proc
+
+    def _drop(self, wait_s: float = 1.0) -> None:
+        """Close the socket (the child exits when it reads its end) and reap the child."""
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            try:
+                proc.wait(max(0.0, wait_s))
+            except subprocess.TimeoutExpired:
+                log.warning("ring worker process still busy after %.1f s: killed", wait_s)
+                proc.kill()
+                proc.wait()
+
+
+class _Asked:
+    """The child's cancel flag: anything to read while a build runs is the parent's word
+    to give up (or the end of its socket)."""
+
+    def __init__(self, conn: Connection) -> None:
+        self._conn = conn
+
+    def is_set(self) -> bool:
+        try:
+            return self._conn.poll(0)
+        except (EOFError, OSError):
+            return True
+
+
+def _lower_priority(nice: int) -> None:
+    """`nice` below the frames; at 19, Linux's idle class besides, which a waking frame
+    thread preempts at once rather than after the scheduler's granularity (nice 19 alone
+    left the frames drawn beside a build 15 % slower, p95 a third higher, on 2 cores)."""
+    if nice <= 0:
+        return
+    try:
+        os.nice(nice)
+    except OSError:  # (not allowed here: build at the frames' priority)
+        return
+    if nice >= 19 and hasattr(os, "SCHED_IDLE"):
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
+def serve(fd: int, nice: int) -> None:
+    """The child's main: build each job it is sent until its socket ends."""
+    _lower_priority(nice)
+    conn = Connection(fd)
+    asked = _Asked(conn)
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return  # the parent is gone, or closed the socket
+        if not isinstance(job, BuildJob):
+            continue  # (a cancel that came after its build ended)
+        try:
+            ring, prepared = run_job(job, asked)
+            reply: tuple[object, ...] = ("ok", ring, prepared)
+        except BuildCancelled:
+            reply = ("cancelled",)
+        except Exception as exc:  # the parent logs it and retries later
+            reply = ("error", f"{type(exc).__name__}: {exc}")
+        try:
+            conn.send(reply)
+        except (EOFError, OSError):
+            return
