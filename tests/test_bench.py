@@ -87,7 +87,7 @@ def test_profile_counts_every_pass_and_its_pixels(capsys: pytest.CaptureFixture[
         STATE,
         SETTINGS,
         straight_and_level(),
-        10,
+        20,
         "ring",
         (96, 54),
         profile=True,
@@ -98,12 +98,15 @@ def test_profile_counts_every_pass_and_its_pixels(capsys: pytest.CaptureFixture[
     rows = {r["pass"]: r for r in result.passes}
     # The sky writes every pixel when it is drawn, which a steady view does only when the
     # sun has moved enough; the near layer is the host's to stretch.
+    # (The first frame's whole sky is drawn at startup: `Renderer.warm_up`.) The layer is
+    # kept in 8 strips, and a call draws a run of them.
     assert 0.0 < rows["sky"]["calls_per_frame"] < 1.0
-    assert rows["sky"]["mpix_per_call"] == pytest.approx(96 * 54 / 1e6)
+    strip = 96 * 54 / 8 / 1e6
+    assert strip * (1 - 1e-6) <= rows["sky"]["mpix_per_call"] <= 8 * strip * (1 + 1e-6)
     assert "upsample near" not in rows
-    # Eight impostors in ten frames (one with no cloud in it would draw nothing); the layer
+    # Eight impostors in twenty frames (one with no cloud in it would draw nothing); the layer
     # seen edge-on is drawn with fewer rows and stretched to its 64 x 64 texels.
-    assert rows["impostor"]["calls_per_frame"] == pytest.approx(0.8)
+    assert rows["impostor"]["calls_per_frame"] == pytest.approx(0.4)
     assert rows["impostor"]["mpix_per_call"] > 0.0
     stretch = rows["upsample impostor"]
     assert stretch["calls_per_frame"] == rows["impostor"]["calls_per_frame"]

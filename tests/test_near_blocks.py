@@ -6,7 +6,9 @@ weights in a cross-fade."""
 from __future__ import annotations
 
 import dataclasses
+from datetime import timedelta
 
+import numpy as np
 import pytest
 
 from wxsky.app.camera_path import straight_and_level
@@ -32,6 +34,7 @@ from wxsky.scene.layout import (
     shade_for_eye,
     sort_order,
 )
+from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, scene_lights
 from wxsky.scene.sky import sky_params
 from wxsky.scene.sprites import SpriteBatch
 from wxsky.settings.presets import load_preset
@@ -125,6 +128,7 @@ def test_frames_along_a_flight_through_rebuilds_match_a_fresh_gather_and_shade()
     settings = SceneSettings(max_near_sprites=0, far_band_m=0.0, shadow_map_px=0)
     path = straight_and_level(speed_mps=900.0, alt_m=1500.0)
     seen_fade = False
+    worst = 0.0
     with SkyEngine(state, Camera((0.0, 0.0, 1500.0)), settings, ring_build="sync") as engine:
         for k in range(70):
             pose = path.at(k / 30.0)
@@ -138,8 +142,14 @@ def test_frames_along_a_flight_through_rebuilds_match_a_fresh_gather_and_shade()
             want = shade_for_eye(near, eye, sky, 40_000.0, settings.shading, share=share)
             got = plan.frame.near
             _same_batch(got.sprites, want.sprites)
-            assert got.rgba.tobytes() == want.rgba.tobytes()
+            # The kept light is the light of lights within LIGHT_REUSE_DEG of this sky's
+            # (the sun moves on as the frames go): the colours it gives are those of light
+            # made anew to within a fraction of a display level, and exact where it was made
+            # for this very sky.
+            worst = max(worst, float(np.abs(got.rgba - want.rgba).max()))
+            assert np.abs(got.rgba - want.rgba).max() <= 0.5 / 255.0
     assert seen_fade
+    print(f"largest difference from light made anew: {worst * 255:.3f}/255")
 
 
 def test_a_new_rings_worker_prepares_the_near_sets_and_light_its_frames_ask_for() -> None:
@@ -182,3 +192,35 @@ def test_a_new_rings_worker_prepares_the_near_sets_and_light_its_frames_ask_for(
             assert blocks is not None
             assert near_scattered_light(blocks, near, sky) is lights[rings]
         assert len(made) == 2
+
+
+def test_kept_light_serves_a_sun_that_moved_less_than_the_reuse_angle() -> None:
+    """A frame keeps the near layer's light while every light is within LIGHT_REUSE_DEG of
+    the sky's; past that it makes it again. What the kept light gives stays close to light
+    made anew."""
+    state = _state("fair-cumulus")
+    drift = zero_drift(state)
+    rings = (NearRing((0.0, 0.0, 1500.0), drift, 1.0),)
+    near, share, blocks = gather_near_blocks(state, drift, rings, 8000.0, 40_000.0)
+    assert blocks is not None
+    made = near_scattered_light(blocks, near, sky_params(state))
+    eye = (150.0, -40.0, 1500.0)
+    order = sort_order(near, eye)
+    moved_deg = []
+    for minutes in (0.5, 1.0, 20.0):
+        later = dataclasses.replace(state, time_utc=state.time_utc + timedelta(minutes=minutes))
+        sky = sky_params(later)
+        lights = scene_lights(sky)
+        assert made is not None
+        cos = np.sum(lights.directions * made.directions, axis=1).clip(-1.0, 1.0)
+        moved = float(np.degrees(np.arccos(cos)).max())
+        moved_deg.append(moved)
+        kept = near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG)
+        assert (kept is made) == (moved < LIGHT_REUSE_DEG)
+        if kept is made:
+            got = shade_for_eye(near, eye, sky, 40_000.0, "harris", None, share, order, kept)
+            want = shade_for_eye(near, eye, sky, 40_000.0, "harris", None, share, order)
+            assert np.abs(got.rgba - want.rgba).mean() < 0.25 / 255.0
+            assert np.abs(got.rgba - want.rgba).max() < 4.0 / 255.0
+    # The cases cover both sides of the angle.
+    assert min(moved_deg) < LIGHT_REUSE_DEG < max(moved_deg)

@@ -255,7 +255,9 @@ def run_bench(
         ) as engine,
     ):
         engine.time_ring_builds(build_s)
-        engine.warm_up()
+        first = engine.warm_up()
+        if first is not None:
+            renderer.warm_up(first)
         result = BenchResult(
             preset=preset,
             mode=mode,

@@ -154,7 +154,9 @@ class Daemon:
             if patch.source not in (Source.DEFAULT, Source.PRESET):
                 self.engine.apply(patch)
         self.engine.settle()
-        self.engine.warm_up()  # the first frame's near layer, made before the loop starts
+        # The first frame's near layer, made before the loop starts, and the frame itself,
+        # which the render thread draws once when it starts (`Renderer.warm_up`).
+        self._first_frame = self.engine.warm_up()
         self.inputs = {
             "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
             "control": InputStats("control", "control"),
@@ -390,6 +392,9 @@ class Daemon:
         from wxsky.render.texture_export import probe
 
         self._renderer = Renderer(self.config.scene.ring_texture_px)
+        if self._first_frame is not None:
+            self._renderer.warm_up(self._first_frame)
+            self._first_frame = None
         self._export_probe = probe(self._renderer.ctx)
         if self._export_probe.supported:
             log.info("zero-copy textures: available (%s)", self._export_probe.export)

@@ -22,7 +22,6 @@ build); one whose parent goes away reads the end of its socket and exits.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import logging
 import os
@@ -167,7 +166,12 @@ class RingWorker:
         root = str(Path(__file__).resolve().parents[2])  # the directory holding wxsky/
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
-        code = f"from wxsky.engine.ring_worker import serve; serve({theirs.fileno()}, {self.nice})"
+        # Lower first, then import: the imports are half a second of work the frames beside
+        # it would otherwise share the cores with.
+        code = (
+            f"from wxsky.engine.priority import lower_priority; lower_priority({self.nice}); "
+            f"from wxsky.engine.ring_worker import serve; serve({theirs.fileno()})"
+        )
         try:
             proc = subprocess.Popen(
                 [sys.executable, "-c", code],
@@ -213,24 +217,9 @@ class _Asked:
             return True
 
 
-def _lower_priority(nice: int) -> None:
-    """`nice` below the frames; at 19, Linux's idle class besides, which a waking frame
-    thread preempts at once rather than after the scheduler's granularity (nice 19 alone
-    left the frames drawn beside a build 15 % slower, p95 a third higher, on 2 cores)."""
-    if nice <= 0:
-        return
-    try:
-        os.nice(nice)
-    except OSError:  # (not allowed here: build at the frames' priority)
-        return
-    if nice >= 19 and hasattr(os, "SCHED_IDLE"):
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-
-
-def serve(fd: int, nice: int) -> None:
-    """The child's main: build each job it is sent until its socket ends."""
-    _lower_priority(nice)
+def serve(fd: int) -> None:
+    """The child's main: build each job it is sent until its socket ends (its priority
+    was lowered before it imported anything: `priority.lower_priority`)."""
     conn = Connection(fd)
     asked = _Asked(conn)
     while True:

@@ -147,6 +147,13 @@ class Renderer:
 
     # -- public API -------------------------------------------------------------------
 
+    def warm_up(self, frame: FrameScene) -> None:
+        """Draw `frame` (`SkyEngine.warm_up`) at startup: a CPU renderer compiles each
+        shader's machine code for the state it is drawn with at its first draw, and the kept
+        sky layer is drawn whole the first time; both made the first frame the slowest."""
+        self.render_frame(frame)
+        self.finish()
+
     def render_frame(self, frame: FrameScene) -> None:
         """Draw the sky and the near layer for the frame's camera, and the near_front layer
         when the frame is split at the host's aircraft."""

@@ -55,7 +55,12 @@ from wxsky.scene.shading import (
     prepare_lighting,
     sprite_colours,
 )
-from wxsky.scene.shading_harris import scattered_light, scene_lights
+from wxsky.scene.shading_harris import (
+    LIGHT_REUSE_DEG,
+    close_directions,
+    scattered_light,
+    scene_lights,
+)
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.weather.state import WeatherState
@@ -312,7 +317,7 @@ def build_frame(
     near, share, blocks = gather_near_blocks(state, drift, rings, radius_m, settings.max_range_m)
     scattered = None
     if blocks is not None and settings.shading == "harris":
-        scattered = near_scattered_light(blocks, near, sky)
+        scattered = near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG)
     eye = camera.position_m
     with (clock or NO_CLOCK).stage("sort"):
         order = sort_order(near, eye)
@@ -374,17 +379,21 @@ _near_light: weakref.WeakKeyDictionary[NearBlocks, Scattered] = weakref.WeakKeyD
 _near_light_lock = threading.Lock()
 
 
-def near_scattered_light(blocks: NearBlocks, near: SpriteBatch, sky: SkyParams) -> Scattered | None:
+def near_scattered_light(
+    blocks: NearBlocks, near: SpriteBatch, sky: SkyParams, within_deg: float = 0.0
+) -> Scattered | None:
     """Harris's light (`shading_harris.scattered_light`) on each sprite of `near`, the sprites
     of `blocks` placed for a frame, a row per sprite (zeros for slab sprites); None when every
-    sprite is a slab's. The drift moves a cloud's sprites alike, so it changes none of it."""
+    sprite is a slab's. The drift moves a cloud's sprites alike, so it changes none of it.
+    `within_deg`: light kept for lights that far from this sky's will do (a frame's case:
+    LIGHT_REUSE_DEG); 0, what the ring's worker asks, makes it for exactly these lights."""
     slab = near.slab
     if len(near) and slab.all():
         return None
     lights = scene_lights(sky)
     with _near_light_lock:
         found = _near_light.get(blocks)
-    if found is not None and np.array_equal(found.directions, lights.directions):
+    if found is not None and close_directions(found.directions, lights.directions, within_deg):
         return found
     if slab.any():
         part = scattered_light(near.take(~slab), lights)
