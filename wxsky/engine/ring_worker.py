@@ -40,9 +40,10 @@ from wxsky.weather.state import WeatherState
 
 log = logging.getLogger(__name__)
 
-# How much lower than the frames the child runs. At 10 the frames drawn beside a build on
-# 2 cores stay within a few percent of those without one (docs/performance.md); the build
-# then takes the cores the frames leave, which at 30 Hz is most of one.
+# How much lower than the frames the child runs; at 19 also in Linux's idle class
+# (`priority.lower_priority`). Frames drawn beside a build on 2 cores then stay within about
+# a tenth of those without one (docs/performance.md); the build takes the cores the frames
+# leave, which at 30 Hz is most of one.
 DEFAULT_NICE = 19
 POLL_S = 0.05  # how often the waiting thread looks at the cancel flag and the child
 
@@ -144,11 +145,7 @@ class RingWorker:
             finally:
                 self._lock.release()
         elif proc is not None:
-            try:
-                proc.wait(max(0.0, wait_s))
-            except subprocess.TimeoutExpired:
-                log.warning("ring worker process still busy after %.1f s: killed", wait_s)
-                proc.kill()
+            _reap(proc, wait_s)
 
     def __enter__(self) -> RingWorker:
         return self
@@ -195,12 +192,17 @@ class RingWorker:
             self._conn = None
         proc, self._proc = self._proc, None
         if proc is not None:
-            try:
-                proc.wait(max(0.0, wait_s))
-            except subprocess.TimeoutExpired:
-                log.warning("ring worker process still busy after %.1f s: killed", wait_s)
-                proc.kill()
-                proc.wait()
+            _reap(proc, wait_s)
+
+
+def _reap(proc: subprocess.Popen[bytes], wait_s: float) -> None:
+    """Wait up to wait_s for the child to exit, then kill it."""
+    try:
+        proc.wait(max(0.0, wait_s))
+    except subprocess.TimeoutExpired:
+        log.warning("ring worker process still busy after %.1f s: killed", wait_s)
+        proc.kill()
+        proc.wait()
 
 
 class _Asked:

@@ -205,8 +205,8 @@ class BuildCancelled(Exception):
 
 
 class CancelFlag(Protocol):
-    """What scene work polls to give up: a threading.Event, or a multiprocessing one when
-    the work runs in the ring's worker process."""
+    """What scene work polls to give up: a threading.Event, or in the ring's worker process
+    its socket (`engine.ring_worker`)."""
 
     def is_set(self) -> bool: ...
 

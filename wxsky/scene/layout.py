@@ -433,32 +433,36 @@ def prepare_near(
     if shown is not None:
         cur = shown._replace(weight=0.5)
         sets.append((cur, new._replace(weight=0.5)))
-    made: list[PreparedNear] = []
-    for rings in sets:
-        keyed = near_blocks_keyed(
-            state, ring.drift, rings, settings.ring_radius_m, settings.max_range_m
-        )
-        if keyed is None:
-            continue
-        key, blocks = keyed
-        light = None
-        if settings.shading == "harris":
-            placed = blocks.placed(ring.drift, rings)
-            if placed is not None:
-                light = near_scattered_light(blocks, placed[0], sky)
-        made.append(PreparedNear(key, blocks, light))
-    return tuple(made)
+    made = (_near_set(state, ring.drift, rings, sky, settings) for rings in sets)
+    return tuple(p for p in made if p is not None)
 
 
 def warm_near(
     state: WeatherState, drift: Drift, ring: NearRing, sky: SkyParams, settings: SceneSettings
 ) -> None:
     """Make the near set a frame gathers for `ring`, with its light, ahead of that frame."""
-    keyed = near_blocks_keyed(state, drift, (ring,), settings.ring_radius_m, settings.max_range_m)
-    if keyed is not None and settings.shading == "harris":
-        placed = keyed[1].placed(drift, (ring,))
+    _near_set(state, drift, (ring,), sky, settings)
+
+
+def _near_set(
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    sky: SkyParams,
+    settings: SceneSettings,
+) -> PreparedNear | None:
+    """The near set for `rings` (made, or found in the cache) and its light made for
+    exactly this sky."""
+    keyed = near_blocks_keyed(state, drift, rings, settings.ring_radius_m, settings.max_range_m)
+    if keyed is None:
+        return None
+    key, blocks = keyed
+    light = None
+    if settings.shading == "harris":
+        placed = blocks.placed(drift, rings)
         if placed is not None:
-            near_scattered_light(keyed[1], placed[0], sky)
+            light = near_scattered_light(blocks, placed[0], sky)
+    return PreparedNear(key, blocks, light)
 
 
 def install_near(prepared: tuple[PreparedNear, ...]) -> None:

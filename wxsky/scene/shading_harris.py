@@ -57,7 +57,6 @@ _QUANTUM = 1e-3
 # minute or two. What the kept light gives differs from light made anew by at most 0.13/255
 # on average and 3.4/255 in one sprite (fair-cumulus, scattered-cumulus, thunderstorm).
 LIGHT_REUSE_DEG = 0.5
-_REUSE_COS = math.cos(math.radians(LIGHT_REUSE_DEG))
 _CACHE_SIZE = 8
 
 
@@ -181,8 +180,7 @@ def close_directions(a: F64, b: F64, within_deg: float = LIGHT_REUSE_DEG) -> boo
         return False
     if within_deg <= 0.0:
         return bool(np.array_equal(a, b))
-    cos = _REUSE_COS if within_deg == LIGHT_REUSE_DEG else math.cos(math.radians(within_deg))
-    return bool(np.all(np.sum(a * b, axis=1) >= cos))
+    return bool(np.all(np.sum(a * b, axis=1) >= math.cos(math.radians(within_deg))))
 
 
 def harris_colours(
