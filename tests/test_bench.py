@@ -37,6 +37,7 @@ def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None
             # Built in the frame that needs it, so the 80 frames surely hold the whole ring
             # (in a worker process below the frames' priority, it may not be ready in them).
             ring_build="sync",
+            lead_in=False,  # the first ring's events are what this test reads
         )
     assert result.frames == 80
     for name in STAGES:
@@ -65,7 +66,10 @@ def test_direct_mode_draws_every_cloud_as_a_sprite() -> None:
     direct = run_bench(*args, "direct", (96, 54))
     ring = run_bench(*args, "ring", (96, 54))
     assert min(direct.sprites) > 3 * max(ring.sprites)
-    assert not direct.events  # no ring at all
+    assert not direct.events and direct.lead_in_frames == 0  # no ring at all
+    # The ring's timed frames came after its lead-in, which built, drew and faded in the
+    # first ring: none of its events is in them.
+    assert ring.lead_in_frames > 1 and "ring_rebuild_start" not in ring.events
 
 
 @pytest.mark.gl
@@ -79,6 +83,7 @@ def test_the_command_prints_json(capsys: pytest.CaptureFixture[str], tmp_path: P
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert out["frames"] == 3 and out["size"] == [64, 36] and out["path"] == str(path)
+    assert out["lead_in_frames"] > 1 and out["ring_events"].get("crossfade_done", 0) == 0
 
 
 @pytest.mark.gl
@@ -94,6 +99,7 @@ def test_profile_counts_every_pass_and_its_pixels(capsys: pytest.CaptureFixture[
         ring_fade_s=0.1,
         ring_slice_ms=None,  # one whole impostor a frame
         ring_build="sync",  # from the first frame on, however busy the machine
+        lead_in=False,  # the first ring's impostors are the passes counted
     )
     rows = {r["pass"]: r for r in result.passes}
     # The sky writes every pixel when it is drawn, which a steady view does only when the

@@ -82,6 +82,12 @@ def add_commands(sub: Subparsers) -> None:
         help="also time every renderer pass, count the pixels it writes and compare its fill "
         "rate with this machine's limits (the passes then wait for the GPU one by one)",
     )
+    bench.add_argument(
+        "--from-start",
+        action="store_true",
+        help="time the frames from the daemon's start, while its first ring is built (default: "
+        "untimed frames until the first ring is shown, then the timed ones)",
+    )
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.add_argument("--trace", type=Path, metavar="FILE", help="write ring events there")
     bench.set_defaults(func=_cmd_bench)
@@ -133,6 +139,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             started_s=STARTED_S,
             check_order=args.check_order,
             profile=args.profile,
+            lead_in=not args.from_start,
         )
     finally:
         if trace is not None:
