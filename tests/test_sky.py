@@ -419,3 +419,33 @@ def test_dome_controls_from_the_weather() -> None:
     # The sunset control is the sky's.
     evening = sky_params(_state(_at(2026, 6, 21, 19, 20), layers=cirrus))
     assert evening.dome.sunset == evening.sunset > 0.3
+
+
+def test_the_frames_sun_and_moon_are_the_ephemeris_interpolated_without_steps() -> None:
+    from wxsky.scene.ephemeris import SMOOTH_STEP_S, sun_and_moon, sun_and_moon_smooth
+
+    def apart_deg(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+        return math.degrees(math.acos(min(1.0, float(np.dot(a, b)))))
+
+    rng = np.random.default_rng(19)
+    start = datetime(2026, 1, 1, tzinfo=UTC)
+    # Sites from pole to pole, the sun near the zenith at the tropics among them.
+    for _ in range(300):
+        t = start + timedelta(seconds=float(rng.uniform(0.0, 3.15e7)))
+        lat, lon = float(rng.uniform(-89.0, 89.0)), float(rng.uniform(-180.0, 180.0))
+        (sun, moon), (s_sun, s_moon) = sun_and_moon(t, lat, lon), sun_and_moon_smooth(t, lat, lon)
+        assert apart_deg(sun.direction_enu, s_sun.direction_enu) < 1e-5
+        assert apart_deg(moon.direction_enu, s_moon.direction_enu) < 1e-5
+        assert abs(moon.illuminated_fraction - s_moon.illuminated_fraction) < 1e-8
+        limb = moon.bright_limb_from_zenith_deg - s_moon.bright_limb_from_zenith_deg
+        assert abs((limb + 180.0) % 360.0 - 180.0) < 0.01
+    # Exact on the grid; across a grid point the places run on without a step (a frame's
+    # worth of motion, not a jump).
+    grid = datetime.fromtimestamp(1_780_000_000.0 - 1_780_000_000.0 % SMOOTH_STEP_S, UTC)
+    assert sun_and_moon_smooth(grid, 47.0, 8.0) == sun_and_moon(grid, 47.0, 8.0)
+    tick = timedelta(milliseconds=1)
+    before = sun_and_moon_smooth(grid - tick, 47.0, 8.0)
+    after = sun_and_moon_smooth(grid + tick, 47.0, 8.0)
+    frame_deg = 360.0 / 86400.0 * 0.002  # the sky turns this far in 2 ms
+    for a, b in zip(before, after, strict=True):
+        assert 0.0 < apart_deg(a.direction_enu, b.direction_enu) < 2.0 * frame_deg

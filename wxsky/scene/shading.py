@@ -16,11 +16,13 @@ import numpy as np
 from wxsky.scene.shading_harris import (
     ParticleLight,
     Scattered,
+    close_directions,
     harris_colours,
+    harris_rgba,
     particle_light,
     scene_lights,
 )
-from wxsky.scene.shading_slab import slab_colours
+from wxsky.scene.shading_slab import slab_colours, slab_rgba
 from wxsky.scene.shading_wang import wang_colours
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, SpriteBatch
@@ -67,18 +69,36 @@ def sprite_colours(
     slab = batch.slab
     if slab.all() and len(batch):
         return slab_colours(batch, sky, eye_m)
-    particles = batch.take(~slab) if slab.any() else batch
-    if model == "harris":
-        if scattered is not None and slab.any():
-            scattered = scattered.take(~slab)
-        rgba = harris_colours(particles, sky, eye_m, light, scattered)
-    else:
-        rgba = wang_colours(particles, sky)
     if not slab.any():
-        return rgba
+        if model == "harris":
+            return harris_colours(batch, sky, eye_m, light, scattered)
+        return wang_colours(batch, sky)
     out = np.empty((len(batch), 4), np.float32)
-    out[~slab] = rgba
-    out[slab] = slab_colours(batch.take(slab), sky, eye_m)
+    particle = ~slab
+    lights = scene_lights(sky) if model == "harris" else None
+    if (
+        lights is not None
+        and scattered is not None
+        and close_directions(scattered.directions, lights.directions)
+    ):
+        # A frame's near layer: the light is known, and only the arrays the eye-dependent
+        # half reads are cut, not every field of the batch (which was a third of the stage).
+        out[particle] = harris_rgba(
+            batch.centre_m[particle],
+            batch.opacity[particle],
+            scattered.rows[particle],
+            lights,
+            eye_m,
+        )
+    else:
+        particles = batch.take(particle)
+        if model == "harris":
+            if scattered is not None:
+                scattered = scattered.take(particle)
+            out[particle] = harris_colours(particles, sky, eye_m, light, scattered)
+        else:
+            out[particle] = wang_colours(particles, sky)
+    out[slab] = slab_rgba(batch.centre_m[slab], batch.slab_m[slab], batch.opacity[slab], sky, eye_m)
     return out
 
 

@@ -205,7 +205,15 @@ def harris_colours(
             found = particle_light(batch, lights).lookup(batch)
             assert found is not None  # the batch's own precompute holds every sprite
         incident = multiple_scattering(found)
-    view = batch.centre_m - np.asarray(eye_m, np.float64)  # (N, 3)
+    return harris_rgba(batch.centre_m, batch.opacity, incident, lights, eye_m)
+
+
+def harris_rgba(
+    centre_m: F64, opacity: F32, incident: F32, lights: Lights, eye_m: tuple[float, float, float]
+) -> F32:
+    """`harris_colours` from the light reaching each sprite (`incident`, (N, L) for the L
+    `lights`): the eye-dependent half, on the few arrays it reads."""
+    view = centre_m - np.asarray(eye_m, np.float64)  # (N, 3)
     dist = np.linalg.norm(view, axis=1, keepdims=True)
     view = np.divide(view, dist, out=np.zeros_like(view), where=dist > 1e-6)
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
@@ -213,7 +221,7 @@ def harris_colours(
     cos = view @ lights.directions.T  # (N, L)
     phase = (1.0 - DIFFUSE_SHARE) * 4.0 * math.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
     radiance = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb  # (N, 3)
-    return np.concatenate([exposed(radiance), batch.opacity[:, None]], axis=1).astype(np.float32)
+    return np.concatenate([exposed(radiance), opacity[:, None]], axis=1).astype(np.float32)
 
 
 def exposed(radiance: F64) -> F64:

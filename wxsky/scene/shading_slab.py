@@ -167,18 +167,26 @@ def slab_colours(batch: SpriteBatch, sky: SkyParams, eye_m: tuple[float, float, 
     """(N, 4) straight-alpha RGBA for sprites of stratiform layers (`batch.slab_m` set), seen
     from eye_m. The eye is above a sprite's slab above its top, below it under its base, and
     inside it on the side of the sprite it looks at."""
+    return slab_rgba(batch.centre_m, batch.slab_m, batch.opacity, sky, eye_m)
+
+
+def slab_rgba(
+    centre_m: F64, slab_m: F32, opacity: F32, sky: SkyParams, eye_m: tuple[float, float, float]
+) -> F32:
+    """`slab_colours` on the three arrays it reads (a frame's slab sprites among others need
+    no sub-batch of every field)."""
     # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
     lights = scene_lights(sky, above_cloud=True)
     key_dir, key_rgb = lights.directions[0], lights.rgb[0]
     sky_rgb = lights.rgb[1:].sum(axis=0)
-    base_m = batch.slab_m[:, 0].astype(np.float64)
-    top_m = batch.slab_m[:, 1].astype(np.float64)
+    base_m = slab_m[:, 0].astype(np.float64)
+    top_m = slab_m[:, 1].astype(np.float64)
     eye = np.asarray(eye_m, np.float64)
-    ray = batch.centre_m - eye  # (N, 3) eye to sprite
+    ray = centre_m - eye  # (N, 3) eye to sprite
     dist = np.linalg.norm(ray, axis=1, keepdims=True)
     ray = np.divide(ray, dist, out=np.zeros_like(ray), where=dist > 1e-6)
     eye_above = np.where(
-        eye[2] >= top_m, True, np.where(eye[2] <= base_m, False, batch.centre_m[:, 2] <= eye[2])
+        eye[2] >= top_m, True, np.where(eye[2] <= base_m, False, centre_m[:, 2] <= eye[2])
     )
     # The light is on the top side whenever it is up; the deck is lit from below never.
     mu_l = float(key_dir[2])
@@ -188,7 +196,7 @@ def slab_colours(batch: SpriteBatch, sky: SkyParams, eye_m: tuple[float, float, 
     )
     # The sky term is the slab's own ambient: only the night floor (starlight, towns) is added.
     radiance = key[:, None] * key_rgb + sky_share[:, None] * sky_rgb + NIGHT_FLOOR_RGB
-    return np.concatenate([exposed(radiance), batch.opacity[:, None]], axis=1).astype(np.float32)
+    return np.concatenate([exposed(radiance), opacity[:, None]], axis=1).astype(np.float32)
 
 
 def _exp_difference(kh: F64, mu_v: F64, mu_l: float) -> F64:

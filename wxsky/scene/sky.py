@@ -20,7 +20,7 @@ from wxsky.scene.ephemeris import (
     MoonPosition,
     SunPosition,
     celestial_from_enu,
-    sun_and_moon,
+    sun_and_moon_smooth,
 )
 from wxsky.scene.ephemeris import sun_position as _ephemeris_sun_position
 from wxsky.weather.state import CloudLayer, CloudType, Observer, WeatherState
@@ -172,12 +172,13 @@ class Bodies:
 
 def bodies_for(state: WeatherState, known: Bodies | None = None) -> Bodies:
     """The sun and moon at the state's time and site: `known` where it is for exactly those,
-    else worked out afresh. The ephemeris is the dearest part of the sky, and a frame asks
-    for it more than once (its own sky, the scene the daemon reports)."""
+    else worked out afresh (`sun_and_moon_smooth`: exact every two seconds, interpolated
+    between). The ephemeris is the dearest part of the sky, and a frame asks for it more than
+    once (its own sky, the scene the daemon reports)."""
     obs = state.observer
     if known is not None and known.time_utc == state.time_utc and known.observer == obs:
         return known
-    sun, moon = sun_and_moon(state.time_utc, obs.lat_deg, obs.lon_deg, obs.alt_m)
+    sun, moon = sun_and_moon_smooth(state.time_utc, obs.lat_deg, obs.lon_deg, obs.alt_m)
     return Bodies(state.time_utc, obs, sun, moon)
 
 
