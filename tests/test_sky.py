@@ -21,6 +21,7 @@ import pytest
 from wxsky.scene import ephemeris
 from wxsky.scene.sky import (
     DISTANT_CLOUD_M,
+    MIN_HAZE_M,
     DomeControls,
     MoonPosition,
     SunPosition,
@@ -288,14 +289,15 @@ def test_overcast_greys_the_sky() -> None:
     assert sky_params(_state(t, layers=half)).cover == pytest.approx(0.75)
 
 
-def test_haze_grows_with_visibility() -> None:
+def test_haze_is_koschmieders_for_the_visibility() -> None:
     t = _at(2026, 6, 21, 11, 30)
     vis = [0.0, 200.0, 700.0, 1000.0, 3000.0, 10_000.0, 50_000.0, 200_000.0]
     haze = [sky_params(_state(t, visibility_m=v)).haze_m for v in vis]
-    assert all(h >= 2000.0 for h in haze)
-    assert all(a <= b for a, b in itertools.pairwise(haze))
-    assert haze[3] < haze[4] < haze[5] < haze[6] < haze[7]
-    assert haze[5] >= 10_000.0  # clouds at the visibility distance are not yet faded out
+    assert all(h >= MIN_HAZE_M for h in haze)  # never 0: the fade divides by it
+    assert all(a < b for a, b in itertools.pairwise(haze))
+    # A cloud at the visibility distance keeps 2 % of its contrast, as a dark object does.
+    for v, h in zip(vis[2:], haze[2:], strict=True):
+        assert math.exp(-v / h) == pytest.approx(0.02, rel=1e-3)
 
 
 def test_sky_params_to_dict_is_plain_data() -> None:

@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.sky import KOSCHMIEDER
 
 F32 = npt.NDArray[np.float32]
 SpriteKey = tuple[int, int, int]  # (cloud_id, size in cm, rotation in 1e-4 rad)
@@ -37,7 +38,6 @@ VISIBILITY_CORE_M = 40.0
 # The fog thickens from nothing at the edge of a cloud's dense part to all-hiding this far
 # in (as a share of the way to the centre), so entering a cloud never pops.
 VEIL_FULL_DEPTH = 0.5
-KOSCHMIEDER = 3.912  # extinction times visibility, at the 2 % contrast threshold
 NO_LOCKS: Locks = MappingProxyType({})
 NO_VEIL = (0.0, 0.0, 0.0, 0.0)
 

@@ -158,6 +158,8 @@ def sun_position(time_utc: datetime, lat_deg: float, lon_deg: float) -> SunPosit
 
 BOUNDARY_LAYER_M = 2_000.0  # depth of the hazy mixed layer over the ground, at most
 CLEAR_AIR_HAZE_M = 60_000.0  # haze distance in the clear air above it
+KOSCHMIEDER = 3.912  # -ln(0.02): the contrast threshold that defines visibility
+MIN_HAZE_M = 10.0  # in fog of no visibility at all, still a distance to divide by
 
 
 @dataclass(frozen=True)
@@ -289,10 +291,14 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
 
 
 def _haze_m(state: WeatherState, eye_m: float) -> float:
-    """Distance over which clouds fade into the horizon colour. The reported visibility is the
-    surface's: haze and mist stay in the boundary layer, no higher than the top of the lowest
-    cloud layer (an inversion caps both), so an eye above it looks through clear air."""
-    surface_m = max(2_000.0, 3.0 * state.visibility_m)
+    """Distance over which clouds fade into the horizon colour (the e-folding distance of
+    their contrast). In the boundary layer Koschmieder's: the visibility is where a dark
+    object's contrast has fallen to 2 %, exp(-3.912), so clouds 15-30 km off at 25 km
+    visibility keep 2-10 % of theirs (issue 17; it was 3 times the visibility, and distant
+    cumulus stood as crisp as cumulus overhead). The reported visibility is the surface's: haze
+    and mist stay in the boundary layer, no higher than the top of the lowest cloud layer (an
+    inversion caps both), so an eye above it looks through clear air."""
+    surface_m = max(MIN_HAZE_M, state.visibility_m / KOSCHMIEDER)
     mixed_top_m = state.observer.alt_m + BOUNDARY_LAYER_M
     if state.layers:
         mixed_top_m = min(mixed_top_m, min(lay.top_m for lay in state.layers))
