@@ -30,9 +30,10 @@ from wxsky.cli.common import parse_size  # noqa: E402
 from wxsky.png import write_png  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
+from wxsky.scene.ephemeris import sun_and_moon  # noqa: E402
 from wxsky.scene.layout import SceneSettings  # noqa: E402
 from wxsky.scene.shading import SHADING_MODELS  # noqa: E402
-from wxsky.scene.sky import sun_and_moon, sun_position  # noqa: E402
+from wxsky.scene.sky import sun_position  # noqa: E402
 from wxsky.settings.config import DaemonConfig  # noqa: E402
 from wxsky.settings.presets import list_presets, load_preset  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
