@@ -7,7 +7,6 @@ import dataclasses
 
 import numpy as np
 import numpy.typing as npt
-import pytest
 
 from wxsky.app.snapshot import take_snapshot
 from wxsky.host.compositor import composite, layers_from_images

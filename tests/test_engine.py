@@ -269,15 +269,16 @@ def test_plan_state_carries_the_frame_time() -> None:
 
 
 def _count_ephemeris(monkeypatch: pytest.MonkeyPatch) -> list[datetime]:
-    """The times the sky asks the ephemeris for, from now on."""
+    """The times the sky asks the ephemeris for, from now on (its smoothed form, which works
+    the exact one out every 2 s and interpolates between)."""
     calls: list[datetime] = []
-    real = sky_module.sun_and_moon
+    real = sky_module.sun_and_moon_smooth
 
     def counted(time_utc: datetime, *args: float, **kw: bool) -> object:
         calls.append(time_utc)
         return real(time_utc, *args, **kw)
 
-    monkeypatch.setattr(sky_module, "sun_and_moon", counted)
+    monkeypatch.setattr(sky_module, "sun_and_moon_smooth", counted)
     return calls
 
 

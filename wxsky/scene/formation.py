@@ -29,6 +29,7 @@ import numpy as np
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModels
 from wxsky.scene.clouds import BlockClouds, block_clouds
+from wxsky.scene.rain import SHAFT_TYPES, Rain, shaft_sprites
 from wxsky.scene.sprites import F32, SpriteBatch
 from wxsky.weather.state import CloudLayer
 
@@ -87,15 +88,19 @@ def layer_block(
     seed: int,
     offset_m: tuple[float, float] = (0.0, 0.0),
     models: CloudModels | None = None,
+    rain: Rain | None = None,
 ) -> SpriteBatch:
     """One block of a layer as drawn: the layer's model, its cover applied, z MSL, moved by
     `offset_m` (the layer's drift) in the same single addition. Near a subtype boundary the
-    cover is shared between the two models, so one's clouds dissipate as the other's form."""
+    cover is shared between the two models, so one's clouds dissipate as the other's form.
+    `rain` (`rain.rain_of`): what falls, for the shafts under the layer types that shed it."""
     blend = (models or default_models()).blend_for_layer(layer.type, layer.thickness_m)
     parts = []
     for model, weight in blend:
         block = block_clouds(block_x, block_y, layer_key, model, layer.thickness_m, seed)
         parts.append(visible_sprites(block, layer.cover_oktas * weight))
+    if rain is not None and layer.type in SHAFT_TYPES:
+        parts.append(shaft_sprites(SpriteBatch.concat(parts), layer.base_m, rain))
     sprites = SpriteBatch.concat(parts)
     if not len(sprites):
         return sprites

@@ -22,6 +22,7 @@ import numpy.typing as npt
 
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
+from wxsky.scene.rain import rain_of
 from wxsky.scene.ring import in_impostors
 from wxsky.weather.state import WeatherState
 
@@ -236,6 +237,7 @@ def _gather(
     )
     batches: list[SpriteBatch] = []
     shares: list[npt.NDArray[np.float32]] = []
+    rain = rain_of(state)
     for li, (key, layer, (dx, dy)) in enumerate(
         zip(layer_keys(state.layers), state.layers, drift, strict=True)
     ):
@@ -253,7 +255,7 @@ def _gather(
             check_cancel(cancel)
             # Cover only fades whole clouds in and out, so the cached generation of the
             # block is reused while the weather forms or dissipates it.
-            block = layer_block(bx, by, key, layer, state.seed, (dx, dy))
+            block = layer_block(bx, by, key, layer, state.seed, (dx, dy), rain=rain)
             if not len(block):
                 continue
             batches.append(block)
@@ -376,7 +378,7 @@ def near_blocks_keyed(
                 _blocks_picked(ring.centre_m[0] - sx, ring.centre_m[1] - sy, lo_m, hi_m)
             )
         picks.append(tuple(per_ring))
-    key = (state.seed, state.layers, len(rings), tuple(picks))
+    key = (state.seed, state.layers, rain_of(state), len(rings), tuple(picks))
     with _near_lock:
         found = _near_sets.get(key)
         if found is not None:
@@ -424,6 +426,7 @@ def _make_near_blocks(
     members: list[list[bool]] = []
     layer_rows: list[tuple[int, int, int]] = []
     start = 0
+    rain = rain_of(state)
     for li, (key, layer, per_ring) in enumerate(
         zip(layer_keys(state.layers), state.layers, picks, strict=True)
     ):
@@ -433,7 +436,7 @@ def _make_near_blocks(
                 within.setdefault(xy, [False] * n_rings)[r] = True
         first = start
         for (bx, by), member in sorted(within.items(), key=lambda kv: (kv[0][1], kv[0][0])):
-            block = layer_block(bx, by, key, layer, state.seed)
+            block = layer_block(bx, by, key, layer, state.seed, rain=rain)
             batches.append(block)
             rows.append(len(block))
             members.append(member)

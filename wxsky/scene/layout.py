@@ -184,12 +184,13 @@ def fade_by_range(
     sky: SkyParams,
     max_range_m: float,
 ) -> npt.NDArray[np.float32]:
-    """Aerial perspective: distant clouds take the horizon colour and fade out before the
-    edge of the generated range, so the range limit never shows as a hard line."""
+    """Aerial perspective: distant clouds take the haze's colour (`SkyParams.haze_rgb`) and
+    fade out before the edge of the generated range, so the range limit never shows as a
+    hard line."""
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1)
     haze = (1.0 - np.exp(-dist / sky.haze_m)).astype(np.float32)
     out = rgba.copy()
-    out[:, :3] = rgba[:, :3] * (1.0 - haze[:, None]) + np.asarray(sky.horizon_rgb) * haze[:, None]
+    out[:, :3] = rgba[:, :3] * (1.0 - haze[:, None]) + np.asarray(sky.haze_rgb) * haze[:, None]
     edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)
     out[:, 3] *= (edge * edge * (3.0 - 2.0 * edge)).astype(np.float32)
     return out

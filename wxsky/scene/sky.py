@@ -127,6 +127,15 @@ class SkyParams:
     # second, far below a pixel).
     celestial_from_enu: Matrix3 = _IDENTITY
 
+    @property
+    def haze_rgb(self) -> RGB:
+        """The colour distant clouds fade into (the airlight): the horizon's, greyed as far as
+        cloud covers the sky. Under a full deck the haze is lit by the grey light through it,
+        not by the dawn glow the sky's horizon keeps a touch of."""
+        r, g, b = self.horizon_rgb
+        luma = 0.2126 * r + 0.7152 * g + 0.0722 * b
+        return _mix(self.horizon_rgb, (luma, luma, luma), _smoothstep(0.6, 1.0, self.cover))
+
     def to_dict(self) -> dict[str, object]:
         return {
             "sun_elevation_deg": self.sun.elevation_deg,

@@ -132,8 +132,8 @@ class PrecipKind(enum.IntEnum):
 
 @dataclass(frozen=True)
 class PrecipLayer:
-    """A layer of falling precipitation (kept in the state for the renderers to come; the
-    sky does not draw it yet). `severity` is CIGI's 0 (lightest) to 5 (heaviest)."""
+    """A layer of falling precipitation: the scene hangs shafts of it under cumulonimbus and
+    nimbostratus (`scene.rain`). `severity` is CIGI's 0 (lightest) to 5 (heaviest)."""
 
     kind: PrecipKind
     base_m: float  # MSL
@@ -230,7 +230,7 @@ class WeatherState:
     dewpoint_c: float | None = 5.0
     qnh_hpa: float = 1013.25
     present_weather: tuple[str, ...] = ()  # METAR weather groups, e.g. ("-RA", "BR")
-    precipitation: tuple[PrecipLayer, ...] = ()  # sorted by base_m; not drawn yet
+    precipitation: tuple[PrecipLayer, ...] = ()  # sorted by base_m; shafts (scene.rain)
     seed: int = 1
     sources: Provenance = field(default_factory=Provenance)
 
