@@ -21,6 +21,7 @@ the block and the cell (`cell_rng`): the same volume in every process and on eve
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +34,7 @@ F32 = npt.NDArray[np.float32]
 _TOWER_STREAM = 0x70_77_65_72  # "towr"
 # Dobashi's continuous density: the 0/1 cloud field under a small smoothing filter. A binomial
 # 5-tap kernel along each axis (a separable stand-in for his weighted sphere of radius 2).
-BUBBLES = 5  # ellipsoids stacked up a full-grown tower
+BUBBLES = 7  # levels of bubbles stacked up a full-grown tower
 SMOOTH_KERNEL = (1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0)
 
 
@@ -173,38 +174,45 @@ def tower_ellipsoids(
     shape: tuple[int, int, int], maturity: float, turrets: F32 | None = None
 ) -> tuple[Ellipsoid, ...]:
     """A tower's ellipsoids at `maturity` 0..1: a broad bubble at the base, then bubbles
-    stacked upward, narrower and pushed a little sideways (the turrets), as many as maturity
-    has grown; the newest grows in from nothing, so the odds never jump. `turrets`: (K, 2)
-    sideways offsets in -1..1 (from the cell's stream), none by default."""
+    stacked upward, narrower and pushed a little sideways, each with a smaller one bulging
+    from its flank (the turrets and cauliflower lumps), as many levels as maturity has grown;
+    the newest grows in from nothing, so the odds never jump. `turrets`: (K, 4) in -1..1 from
+    the cell's stream (per level: sideways lean x and y, size, the lump's bearing); none: a
+    plain column."""
     nz, ny, nx = shape
     levels = BUBBLES if turrets is None else len(turrets)
     grown = min(max(maturity, 0.0), 1.0) * levels
+    rise = 0.85 * nz / levels  # each level's share of the tower's height
     out = []
     for k in range(levels):
-        part = min(1.0, grown - k)  # the newest bubble swells in with its share of the growth
+        part = min(1.0, grown - k)  # the newest level swells in with its share of the growth
         if part <= 0.0:
             break
-        shrink = 1.0 - 0.45 * k / max(levels - 1, 1)  # narrower toward the top
-        dx, dy = (0.0, 0.0) if turrets is None else (float(turrets[k, 0]), float(turrets[k, 1]))
-        lean = 0.3 * k / levels  # turrets wander off the column as they climb
-        rise = 0.85 * nz / levels  # each bubble's share of the tower's height
-        out.append(
-            Ellipsoid(
-                # It grows up from inside the one below it, weak and small at first; grown,
-                # it overlaps its neighbours by half, so the tower is one body.
-                centre=(
-                    0.5 * nx * (1.0 + dx * lean),
-                    0.5 * ny * (1.0 + dy * lean),
-                    2.0 + (k + 0.5 * part) * rise,
-                ),
-                radii=(
-                    0.3 * nx * shrink * part,
-                    0.3 * ny * shrink * part,
-                    (0.85 * rise + 1.0) * part,
-                ),
-                strength=part,
+        dx, dy, size, bearing = (0.0, 0.0, 0.0, 0.0) if turrets is None else turrets[k]
+        shrink = (1.0 - 0.45 * k / max(levels - 1, 1)) * (1.0 + 0.15 * float(size))
+        lean = 0.3 * k / levels  # levels wander off the column as they climb
+        cx = 0.5 * nx * (1.0 + float(dx) * lean)
+        cy = 0.5 * ny * (1.0 + float(dy) * lean)
+        # It grows up from inside the one below it, weak and small at first; grown, it
+        # overlaps its neighbours by half, so the tower is one body.
+        cz = 2.0 + (k + 0.5 * part) * rise
+        rx, ry = 0.3 * nx * shrink * part, 0.3 * ny * shrink * part
+        rz = (0.85 * rise + 1.0) * part
+        out.append(Ellipsoid(centre=(cx, cy, cz), radii=(rx, ry, rz), strength=part))
+        if turrets is not None:
+            # A lump half the size on the level's flank, a little lower: breaks the rim.
+            a = math.pi * float(bearing)
+            out.append(
+                Ellipsoid(
+                    centre=(
+                        cx + 0.8 * rx * math.cos(a),
+                        cy + 0.8 * ry * math.sin(a),
+                        cz - 0.2 * rz,
+                    ),
+                    radii=(0.5 * rx, 0.5 * ry, 0.6 * rz),
+                    strength=part,
+                )
             )
-        )
     return tuple(out)
 
 

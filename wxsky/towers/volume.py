@@ -62,7 +62,7 @@ class TowerVolume:
             raise ValueError(f"tower grid must be one of {GRIDS}, got {spec.grid}")
         self.spec = spec
         shape_rng = cell_rng(spec.weather_seed, spec.block, spec.cell, _TURRET_STREAM)
-        self._turrets = shape_rng.uniform(-1.0, 1.0, (BUBBLES, 2)).astype("float32")
+        self._turrets = shape_rng.uniform(-1.0, 1.0, (BUBBLES, 4)).astype("float32")
         self._restart()
 
     def _restart(self) -> None:
