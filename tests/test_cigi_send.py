@@ -202,12 +202,20 @@ def test_a_map_that_is_not_weather_is_refused(change: dict[str, Any], error: typ
 # -- the command line ---------------------------------------------------------------------------
 
 
+def _sigint_as_at_a_terminal() -> None:
+    # A shell that runs the tests in the background (`&` without job control) starts them
+    # with SIGINT ignored, and Python then installs no KeyboardInterrupt: Ctrl-C tests would
+    # hang. A command typed at a terminal has the default.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def wxsky_process(*args: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "wxsky", "cigi", "send", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_sigint_as_at_a_terminal,
     )
 
 

@@ -318,9 +318,13 @@ def test_fade_by_range_hazes_and_fades_distant_sprites() -> None:
     np.testing.assert_allclose(out[:3, 3], 1.0)
     assert 0.0 < out[3, 3] < 1.0
     np.testing.assert_allclose(out[4:, 3], 0.0)
-    # Black sprites take the horizon colour with distance: 1 - exp(-d / haze).
+    # Black sprites take the haze's colour with distance: 1 - exp(-d / haze), Koschmieder's
+    # (at the visibility, 2 % of their contrast is left).
     haze = 1.0 - np.exp(-dists / sky.haze_m)
-    np.testing.assert_allclose(out[:, :3], haze[:, None] * np.asarray(sky.horizon_rgb), rtol=1e-5)
+    np.testing.assert_allclose(out[:, :3], haze[:, None] * np.asarray(sky.haze_rgb), rtol=1e-5)
+    assert np.exp(-5000.0 / sky.haze_m) == pytest.approx(0.02, rel=1e-3)
+    # Under a part-clouded sky the haze is the horizon's colour; greyed as cover closes.
+    assert sky.haze_rgb == sky.horizon_rgb or sky.cover > 0.6
     assert np.all(rgba[:, 3] == 1.0)  # input not modified
 
 

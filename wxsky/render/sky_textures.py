@@ -56,7 +56,7 @@ from wxsky.render.sky_texture_gen import (
     SUNSET_SIZE_PX,
 )
 from wxsky.scene.camera import Camera
-from wxsky.scene.sky import DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
+from wxsky.scene.sky import CLEAR_AIR_HAZE_M, DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
@@ -371,6 +371,11 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
                 "u_dome_off2": frame.offsets[2],
                 "u_dome_rgb": tuple(float(v) for v in dome_light_rgb(sky)),
                 "u_haze_m": sky.haze_m,
+                # The dome is high cloud: only the part of its ray in the hazy layer is hazy.
+                "u_haze_depth_m": min(
+                    max(sky.haze_top_m - cam.position_m[2], 0.0), max(frame.height_m, 0.0)
+                ),
+                "u_clear_haze_m": CLEAR_AIR_HAZE_M,
             }
         )
     return out

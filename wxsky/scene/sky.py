@@ -126,6 +126,9 @@ class SkyParams:
     # the star field is pixel-still within a second and only flickers (it turns 0.004° a
     # second, far below a pixel).
     celestial_from_enu: Matrix3 = _IDENTITY
+    # Top of the hazy boundary layer, MSL: haze_m holds below it, clear air above (the sky
+    # pass fades the high-cloud dome only over the part of its ray below this).
+    haze_top_m: float = math.inf
 
     @property
     def haze_rgb(self) -> RGB:
@@ -252,6 +255,7 @@ def sky_params(
         sunset=sunset,
         cover=cover,
         haze_m=_haze_m(state, eye_m),
+        haze_top_m=_haze_top_m(state),
         moon=moon,
         moon_rgb=moon_rgb,
         open_zenith_rgb=open_zenith,
@@ -308,11 +312,18 @@ def _haze_m(state: WeatherState, eye_m: float) -> float:
     and mist stay in the boundary layer, no higher than the top of the lowest cloud layer (an
     inversion caps both), so an eye above it looks through clear air."""
     surface_m = max(MIN_HAZE_M, state.visibility_m / KOSCHMIEDER)
-    mixed_top_m = state.observer.alt_m + BOUNDARY_LAYER_M
-    if state.layers:
-        mixed_top_m = min(mixed_top_m, min(lay.top_m for lay in state.layers))
+    mixed_top_m = _haze_top_m(state)
     aloft = _smoothstep(mixed_top_m, mixed_top_m + 500.0, eye_m)
     return surface_m + (max(surface_m, CLEAR_AIR_HAZE_M) - surface_m) * aloft
+
+
+def _haze_top_m(state: WeatherState) -> float:
+    """Top of the hazy mixed layer, MSL: BOUNDARY_LAYER_M over the ground at most, capped by
+    the top of the lowest cloud layer."""
+    top_m = state.observer.alt_m + BOUNDARY_LAYER_M
+    if state.layers:
+        top_m = min(top_m, min(lay.top_m for lay in state.layers))
+    return top_m
 
 
 def _share_above(layer: CloudLayer, eye_m: float) -> float:

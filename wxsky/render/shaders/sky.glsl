@@ -61,6 +61,8 @@ uniform vec2 u_dome_off1;
 uniform vec2 u_dome_off2;
 uniform vec3 u_dome_rgb;          // cloud lit by sky and sun
 uniform float u_haze_m;
+uniform float u_haze_depth_m;     // of the dome's height, how much lies in the hazy layer
+uniform float u_clear_haze_m;     // haze distance in the clear air above it
 
 const float PI = 3.14159265358979;
 
@@ -199,7 +201,8 @@ vec4 cloud_dome(vec3 ray) {
     vec3 sunset_rgb = textureLod(u_sunset_tex, sunset_uv, 0.0).rgb
                       * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
     rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
-    float haze = 1.0 - exp(-u_dome_height_m / z / u_haze_m);
+    float haze = 1.0 - exp(-(u_haze_depth_m / u_haze_m
+                             + (u_dome_height_m - u_haze_depth_m) / u_clear_haze_m) / z);
     rgb = mix(rgb, u_horizon, haze * 0.85);
     return vec4(rgb, a);
 }
