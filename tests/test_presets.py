@@ -53,6 +53,7 @@ REQUIRED = [
     "overcast-stratus",
     "thunderstorm",
     "high-cirrus",
+    "towering-cumulus",
 ]
 LSZH = Observer(47.4647, 8.5492, 432.0)
 

@@ -34,6 +34,7 @@ PRESETS = (
     "overcast-stratus",
     "high-cirrus",
     "thunderstorm",
+    "towering-cumulus",
 )
 MODES = ("ring", "direct")
 CPU_STAGES = ("scene", "sort", "publish")

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.scene.footprints import footprints
 from wxsky.scene.sprites import SpriteBatch
 from wxsky.scene.texture_slots import TEX_FOG
 from wxsky.weather.state import CloudType, PrecipKind, WeatherState
@@ -28,7 +29,6 @@ INTENSITY = {"-": 0.35, "": 0.65, "+": 1.0}
 # Codes that fall from these clouds as shafts (drizzle falls from stratus, too fine to show).
 RAIN_CODES = ("RA", "GR", "GS", "PL", "UP")
 SNOW_CODES = ("SN", "SG")
-BASE_BAND_M = 400.0  # a cloud's base: its sprites this close above its lowest one
 SHAFT_RADIUS_FRAC = {False: 0.45, True: 0.7}  # of the cloud's base radius: rain, snow
 SHAFT_OPACITY = {False: 0.3, True: 0.2}  # per sprite, at full intensity: rain, snow
 SHAFT_DARKNESS = {False: 1.0, True: 0.35}  # rain is grey, snow whiter
@@ -88,20 +88,8 @@ def shaft_sprites(clouds: SpriteBatch, base_m: float, rain: Rain) -> SpriteBatch
     depth_m = base_m - rain.ground_m
     if not len(clouds) or depth_m <= 1.0 or rain.intensity <= 0.0:
         return SpriteBatch.empty()
-    ids, inverse = np.unique(clouds.cloud_id, return_inverse=True)
-    z = clouds.centre_m[:, 2]
-    lowest = np.full(len(ids), np.inf)
-    np.minimum.at(lowest, inverse, z)
-    base = z <= lowest[inverse] + BASE_BAND_M
-    count = np.bincount(inverse, base.astype(np.float64), minlength=len(ids))
-    axis = np.stack(
-        [np.bincount(inverse, base * clouds.centre_m[:, k], len(ids)) / count for k in (0, 1)],
-        axis=1,
-    )
-    reach = np.hypot(*(clouds.centre_m[:, :2] - axis[inverse]).T) + 0.5 * clouds.size_m
-    radius = np.zeros(len(ids))
-    np.maximum.at(radius, inverse, np.where(base, reach, 0.0))
-    formed = np.bincount(inverse, base * clouds.opacity, len(ids)) / count
+    feet = footprints(clouds)
+    ids, axis, radius, formed = feet.ids, feet.axis_m, feet.radius_m, feet.formed
     parts = [
         _column(float(axis[c, 0]), float(axis[c, 1]), float(radius[c]), depth_m, rain)
         for c in range(len(ids))

@@ -29,16 +29,25 @@ _TURRET_STREAM = 1  # the cell's stream for its shape (turret offsets), apart fr
 
 @dataclass(frozen=True)
 class TowerSpec:
-    """What makes one tower: whose it is (seed, block, cell), its grid, how fast it matures,
-    and the odds of the automaton (Dobashi's p_hum, p_act, and p_ext inside and outside its
-    ellipsoids). `supplied_s`: sim seconds of the cell's life during which vapour is supplied;
-    after it (the air clearing) nothing is supplied, and cloud vanishes with p_ext_clearing at
-    the ellipsoids' centres, rising to p_ext_outside at their surfaces: edges first."""
+    """What makes one tower: whose it is (seed, block, cell), its grid and box, its birth, how
+    fast it matures, and the odds of the automaton (Dobashi's p_hum, p_act, and p_ext inside
+    and outside its ellipsoids). `supplied_s`: sim seconds of the cell's life during which
+    vapour is supplied; after it (the air clearing) nothing is supplied, and cloud vanishes
+    with p_ext_clearing at the ellipsoids' centres, rising to p_ext_outside at their
+    surfaces: edges first."""
 
     weather_seed: int
     block: tuple[int, int]
     cell: int
     grid: int = GRID
+    # Where and how big (the box the grid fills), in the layer's drifting frame, z MSL; and
+    # when it was born, in sim seconds from the moment its weather was set (negative: it was
+    # already growing then).
+    axis_m: tuple[float, float] = (0.0, 0.0)
+    base_m: float = 0.0
+    width_m: float = 2000.0
+    height_m: float = 3000.0
+    born_s: float = 0.0
     mature_s: float = 1800.0
     p_hum: float = 0.1
     p_act: float = 0.01
