@@ -7,37 +7,44 @@ slice lighting and composited along the view.
         [--ages-min 0,10,20,30] [--cut-min M] [--grid 64] [--seed 2026]
 
 This is the volume alone, orthographic, before the towers are drawn in the sky: a check of
-the automaton, the ellipsoids and the lighting, not the picture a pilot sees.
+the automaton, the ellipsoids and the lighting (as the sprite clouds are lit, under the
+towering-cumulus preset's sky), not the picture a pilot sees.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
 
 from wxsky.png import write_png
-from wxsky.towers.lighting import EXTINCTION_PER_CELL, slice_light
+from wxsky.scene.ephemeris import SunPosition
+from wxsky.scene.sky import SkyParams, sky_params
+from wxsky.scene.tower_shading import tower_colours
+from wxsky.settings.presets import load_preset
+from wxsky.towers.lighting import EXTINCTION_PER_CELL
 from wxsky.towers.volume import TowerSpec, TowerVolume
+from wxsky.weather.state import WeatherState
 
-SKY = np.array([0.42, 0.62, 0.90], np.float32)
-SUN_RGB = np.array([1.0, 0.97, 0.92], np.float32)
-AMBIENT_RGB = np.array([0.30, 0.34, 0.42], np.float32)
 SCALE = 3  # pixels per cell
 
 
-def side_view(density: np.ndarray, light_dir: tuple[float, float, float]) -> np.ndarray:
-    """(nz, nx, 3) colour of the volume seen along +y (north) over the sky."""
-    light = slice_light(density, light_dir)
+def side_view(
+    density: np.ndarray, sky: SkyParams, view_dir: tuple[float, float, float]
+) -> np.ndarray:
+    """(nz, nx, 3) colour of the volume seen along +y (north) over the sky's colour behind it,
+    the cells lit as the sprite clouds are (`scene.tower_shading`)."""
+    colours = tower_colours(density, sky, view_dir)
     nz, ny, nx = density.shape
-    colour = np.broadcast_to(SKY, (nz, nx, 3)).copy()
+    behind = np.asarray(sky.zenith_rgb) * 0.6 + np.asarray(sky.horizon_rgb) * 0.4
+    colour = np.broadcast_to(behind, (nz, nx, 3)).copy()
     # Back to front: the far side (high y) first.
     for j in range(ny - 1, -1, -1):
         alpha = 1.0 - np.exp(-EXTINCTION_PER_CELL * density[:, j, :])
-        lit = light[:, j, :, None] * SUN_RGB + AMBIENT_RGB * 0.6
-        colour = colour * (1.0 - alpha[..., None]) + np.clip(lit, 0.0, 1.0) * alpha[..., None]
+        colour = colour * (1.0 - alpha[..., None]) + colours[:, j, :, :] * alpha[..., None]
     return colour[::-1]  # top row first
 
 
@@ -59,12 +66,13 @@ def main() -> int:
         supplied_s=60.0 * args.cut_min,
     )
     tower = TowerVolume(spec)
-    # Afternoon sun from the west, 35 degrees up: from the viewer's left.
-    el, az = math.radians(35.0), math.radians(270.0)
-    light = (math.cos(el) * math.sin(az), math.cos(el) * math.cos(az), math.sin(el))
+    # The towering-cumulus preset's afternoon sky, the sun from the west 35 degrees up: from
+    # the viewer's left, looking north.
+    state = WeatherState().apply(load_preset("towering-cumulus"))
+    sky = dataclasses.replace(sky_params(state), sun=SunPosition(35.0, 270.0))
     panels = []
     for age in (float(a) for a in args.ages_min.split(",")):
-        view = side_view(tower.density_at(60.0 * age), light)
+        view = side_view(tower.density_at(60.0 * age), sky, (0.0, 1.0, 0.0))
         panel = np.repeat(np.repeat(view, SCALE, axis=0), SCALE, axis=1)
         panel[:, -2:] = 1.0  # a white gap between panels
         panels.append(panel)
