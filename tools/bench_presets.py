@@ -6,7 +6,8 @@ stages and the per-pass profile, as a table and a JSON file.
         [--json out.json] [--no-profile]
 
 Made for a machine with a GPU (issue 19 asks for these figures at 1920x1080), where it needs
-no installed `wxsky`: it runs `python -m wxsky bench` from this checkout. The runs of one
+no installed `wxsky`: it runs `python -m wxsky bench` from this checkout (run it with this
+checkout on PYTHONPATH). Every shipped preset unless --preset names some. The runs of one
 preset alternate ring, direct, ring, direct ... and each figure is the median over its runs.
 After them, one `--profile` run per preset (ring mode) times every renderer pass to an idle
 GPU and compares its fill rate with the limits measured on the same machine: that is where
@@ -25,17 +26,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from wxsky.settings.presets import list_presets
+
 ROOT = Path(__file__).resolve().parents[1]
-PRESETS = (
-    "clear",
-    "fair-cumulus",
-    "scattered-cumulus",
-    "broken-stratocumulus",
-    "overcast-stratus",
-    "high-cirrus",
-    "thunderstorm",
-    "towering-cumulus",
-)
 MODES = ("ring", "direct")
 CPU_STAGES = ("scene", "sort", "publish")
 GPU_STAGES = ("impostor_slice", "near_pass")
@@ -80,7 +73,7 @@ def main() -> int:
     parser.add_argument("--no-profile", action="store_true", help="skip the per-pass runs")
     parser.add_argument("--json", type=Path, help="write the figures there")
     args = parser.parse_args()
-    presets = args.preset or list(PRESETS)
+    presets = args.preset or [p.name for p in list_presets() if p.origin == "builtin"]
     report: dict[str, Any] = {"size": args.size, "frames": args.frames, "presets": {}}
     print(f"wxsky bench --size {args.size} --frames {args.frames}, {args.repeats} runs each")
     print(
