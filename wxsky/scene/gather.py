@@ -22,7 +22,7 @@ import numpy.typing as npt
 
 from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
-from wxsky.scene.rain import rain_of
+from wxsky.scene.rain import Rain, rain_of
 from wxsky.scene.ring import in_impostors
 from wxsky.weather.state import WeatherState
 
@@ -378,13 +378,14 @@ def near_blocks_keyed(
                 _blocks_picked(ring.centre_m[0] - sx, ring.centre_m[1] - sy, lo_m, hi_m)
             )
         picks.append(tuple(per_ring))
-    key = (state.seed, state.layers, rain_of(state), len(rings), tuple(picks))
+    rain = rain_of(state)
+    key = (state.seed, state.layers, rain, len(rings), tuple(picks))
     with _near_lock:
         found = _near_sets.get(key)
         if found is not None:
             _near_sets.move_to_end(key)
             return key, found
-    made = _make_near_blocks(state, picks, len(rings))
+    made = _make_near_blocks(state, picks, len(rings), rain)
     install_near_blocks(key, made)
     return key, made
 
@@ -420,13 +421,13 @@ def _make_near_blocks(
     state: WeatherState,
     picks: list[tuple[tuple[tuple[int, int], ...], ...]],
     n_rings: int,
+    rain: Rain | None,
 ) -> NearBlocks:
     batches: list[SpriteBatch] = []
     rows: list[int] = []
     members: list[list[bool]] = []
     layer_rows: list[tuple[int, int, int]] = []
     start = 0
-    rain = rain_of(state)
     for li, (key, layer, per_ring) in enumerate(
         zip(layer_keys(state.layers), state.layers, picks, strict=True)
     ):

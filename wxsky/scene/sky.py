@@ -244,6 +244,7 @@ def sky_params(
     moon_gain *= 1.0 - 0.85 * _smoothstep(0.6, 1.0, cover)
     moon_rgb = _scale(moon_rgb, moon_gain * _smoothstep(-1.0, 0.0, moon.elevation_deg))
 
+    haze_top_m = _haze_top_m(state)
     whole_second = state.time_utc.replace(microsecond=0)
     return SkyParams(
         sun=sun,
@@ -254,8 +255,8 @@ def sky_params(
         ambient=0.06 + 0.94 * day,
         sunset=sunset,
         cover=cover,
-        haze_m=_haze_m(state, eye_m),
-        haze_top_m=_haze_top_m(state),
+        haze_m=_haze_m(state, eye_m, haze_top_m),
+        haze_top_m=haze_top_m,
         moon=moon,
         moon_rgb=moon_rgb,
         open_zenith_rgb=open_zenith,
@@ -303,16 +304,16 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
     )
 
 
-def _haze_m(state: WeatherState, eye_m: float) -> float:
+def _haze_m(state: WeatherState, eye_m: float, mixed_top_m: float) -> float:
     """Distance over which clouds fade into the horizon colour (the e-folding distance of
     their contrast). In the boundary layer Koschmieder's: the visibility is where a dark
     object's contrast has fallen to 2 %, exp(-3.912), so clouds 15-30 km off at 25 km
     visibility keep 2-10 % of theirs (issue 17; it was 3 times the visibility, and distant
     cumulus stood as crisp as cumulus overhead). The reported visibility is the surface's: haze
     and mist stay in the boundary layer, no higher than the top of the lowest cloud layer (an
-    inversion caps both), so an eye above it looks through clear air."""
+    inversion caps both; `mixed_top_m`, `_haze_top_m`), so an eye above it looks through clear
+    air."""
     surface_m = max(MIN_HAZE_M, state.visibility_m / KOSCHMIEDER)
-    mixed_top_m = _haze_top_m(state)
     aloft = _smoothstep(mixed_top_m, mixed_top_m + 500.0, eye_m)
     return surface_m + (max(surface_m, CLEAR_AIR_HAZE_M) - surface_m) * aloft
 

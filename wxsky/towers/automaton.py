@@ -153,7 +153,6 @@ def ellipsoid_weight(shape: tuple[int, int, int], ellipsoids: tuple[Ellipsoid, .
         r2 = ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 + ((z - cz) / rz) ** 2
         inside = np.sqrt(np.clip(1.0 - r2, 0.0, 1.0))  # full bodies: no seam between bubbles
         np.maximum(out, np.float32(e.strength) * inside, out=out)
-    out: F32 = np.clip(out, 0.0, 1.0)  # type: ignore[no-redef]
     return out
 
 
