@@ -166,6 +166,26 @@ def test_the_tower_grows_taller_as_it_matures() -> None:
     assert 0.0 < steps[0] < steps[1] < steps[2] and steps[0] < 0.05
 
 
+def test_a_cumulonimbus_spreads_an_anvil_at_its_top_as_it_matures() -> None:
+    shape = (64, 64, 64)
+
+    def widths(maturity: float, anvil: bool) -> np.ndarray:
+        w = ellipsoid_weight(shape, tower_ellipsoids(shape, maturity, anvil=anvil))
+        return (w > 0.0).sum(axis=2).max(axis=1)  # cells across, per level
+
+    young, grown = widths(0.6, True), widths(1.0, True)
+    top = int(np.flatnonzero(grown).max())
+    # Young, a column half a plain tower's width, no anvil; grown, its top is the widest.
+    assert young.max() <= 0.6 * widths(0.6, False).max() + 1
+    assert grown[top - 6 : top + 1].max() > 2.0 * grown[: top // 2].max()
+    assert grown[top - 6 : top + 1].max() >= 0.8 * 64
+    # Its box is twice as wide, for the same base.
+    plain = TowerSpec(weather_seed=1, block=(0, 0), cell=0)
+    cb = TowerSpec(weather_seed=1, block=(0, 0), cell=0, anvil=True)
+    assert cb.box_size_m[0] == pytest.approx(2.0 * plain.box_size_m[0])
+    assert cb.box_size_m[2] == plain.box_size_m[2]
+
+
 def test_a_volume_is_the_same_however_its_moment_is_reached() -> None:
     spec = TowerSpec(weather_seed=11, block=(-4, 7), cell=2, grid=64, mature_s=600.0)
     straight = TowerVolume(spec).density_at(455.0)

@@ -100,6 +100,7 @@ def tower_specs(
                 mature_s=mature_s,
                 p_hum=p_hum,
                 p_act=p_act,
+                anvil=layer.type == CloudType.CUMULONIMBUS,
             )
         )
     return tuple(out)

@@ -35,6 +35,8 @@ _TOWER_STREAM = 0x70_77_65_72  # "towr"
 # Dobashi's continuous density: the 0/1 cloud field under a small smoothing filter. A binomial
 # 5-tap kernel along each axis (a separable stand-in for his weighted sphere of radius 2).
 BUBBLES = 7  # levels of bubbles stacked up a full-grown tower
+ANVIL_COLUMN_SHARE = 0.5  # a cumulonimbus's column against its box, over a plain tower's
+ANVIL_FROM = 0.7  # the maturity at which its anvil starts to spread
 SMOOTH_KERNEL = (1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0)
 
 
@@ -150,9 +152,18 @@ def ellipsoid_weight(shape: tuple[int, int, int], ellipsoids: tuple[Ellipsoid, .
     out = np.zeros(shape, np.float32)
     for e in ellipsoids:
         (cx, cy, cz), (rx, ry, rz) = e.centre, e.radii
-        r2 = ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 + ((z - cz) / rz) ** 2
+        # Only the cells of its bounding box can be inside it (the same values, a fraction
+        # of the work: most bubbles are small against the grid).
+        zs, ys, xs = (
+            slice(max(0, math.floor(c - r)), min(n, math.ceil(c + r) + 1))
+            for c, r, n in ((cz, rz, nz), (cy, ry, ny), (cx, rx, nx))
+        )
+        if zs.start >= zs.stop or ys.start >= ys.stop or xs.start >= xs.stop:
+            continue
+        r2 = ((x[..., xs] - cx) / rx) ** 2 + ((y[:, ys] - cy) / ry) ** 2 + ((z[zs] - cz) / rz) ** 2
         inside = np.sqrt(np.clip(1.0 - r2, 0.0, 1.0))  # full bodies: no seam between bubbles
-        np.maximum(out, np.float32(e.strength) * inside, out=out)
+        part = out[zs, ys, xs]
+        np.maximum(part, np.float32(e.strength) * inside, out=part)
     return out
 
 
@@ -170,15 +181,21 @@ def tower_odds(
 
 
 def tower_ellipsoids(
-    shape: tuple[int, int, int], maturity: float, turrets: F32 | None = None
+    shape: tuple[int, int, int],
+    maturity: float,
+    turrets: F32 | None = None,
+    anvil: bool = False,
 ) -> tuple[Ellipsoid, ...]:
     """A tower's ellipsoids at `maturity` 0..1: a broad bubble at the base, then bubbles
     stacked upward, narrower and pushed a little sideways, each with a smaller one bulging
     from its flank (the turrets and cauliflower lumps), as many levels as maturity has grown;
     the newest grows in from nothing, so the odds never jump. `turrets`: (K, 4) in -1..1 from
     the cell's stream (per level: sideways lean x and y, size, the lump's bearing); none: a
-    plain column."""
+    plain column. `anvil` (a cumulonimbus): the column takes ANVIL_COLUMN_SHARE of the width
+    a plain tower does (its box is that much wider) and, from ANVIL_FROM of maturity on, a
+    broad flat bubble spreads at its top: the anvil under the tropopause."""
     nz, ny, nx = shape
+    column = ANVIL_COLUMN_SHARE if anvil else 1.0
     levels = BUBBLES if turrets is None else len(turrets)
     grown = min(max(maturity, 0.0), 1.0) * levels
     rise = 0.85 * nz / levels  # each level's share of the tower's height
@@ -189,13 +206,13 @@ def tower_ellipsoids(
             break
         dx, dy, size, bearing = (0.0, 0.0, 0.0, 0.0) if turrets is None else turrets[k]
         shrink = (1.0 - 0.45 * k / max(levels - 1, 1)) * (1.0 + 0.15 * float(size))
-        lean = 0.3 * k / levels  # levels wander off the column as they climb
+        lean = 0.3 * column * k / levels  # levels wander off the column as they climb
         cx = 0.5 * nx * (1.0 + float(dx) * lean)
         cy = 0.5 * ny * (1.0 + float(dy) * lean)
         # It grows up from inside the one below it, weak and small at first; grown, it
         # overlaps its neighbours by half, so the tower is one body.
         cz = 2.0 + (k + 0.5 * part) * rise
-        rx, ry = 0.3 * nx * shrink * part, 0.3 * ny * shrink * part
+        rx, ry = 0.3 * column * nx * shrink * part, 0.3 * column * ny * shrink * part
         rz = (0.85 * rise + 1.0) * part
         out.append(Ellipsoid(centre=(cx, cy, cz), radii=(rx, ry, rz), strength=part))
         if turrets is not None:
@@ -212,6 +229,15 @@ def tower_ellipsoids(
                     strength=part,
                 )
             )
+    if anvil and maturity > ANVIL_FROM:
+        spread = min(1.0, (maturity - ANVIL_FROM) / (1.0 - ANVIL_FROM))
+        out.append(
+            Ellipsoid(
+                centre=(0.5 * nx, 0.5 * ny, 0.86 * nz),
+                radii=(0.46 * nx * spread, 0.46 * ny * spread, 0.05 * nz + 1.5),
+                strength=spread,
+            )
+        )
     return tuple(out)
 
 

@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass
 
 from wxsky.towers.automaton import (
+    ANVIL_COLUMN_SHARE,
     BUBBLES,
     F32,
     Cells,
@@ -16,6 +17,7 @@ from wxsky.towers.automaton import (
     cell_rng,
     density_between,
     ellipsoid_weight,
+    smoothed,
     step,
     tower_ellipsoids,
     tower_odds,
@@ -24,6 +26,11 @@ from wxsky.towers.automaton import (
 STEP_S = 10.0  # sim seconds per automaton step: a 30-minute tower is 180 steps
 GRID = 64  # cells along each axis by default (128 is the option for big cells)
 GRIDS = (64, 128)
+# The grid's box around the tower: the ellipsoids fill about 0.6 of its width (radii 0.3 of
+# it) and 0.9 of its height, so a tower as wide as its cloud's base and as tall as its layer
+# has a box this much larger.
+BOX_WIDTH_PER_TOWER = 1.0 / 0.6
+BOX_HEIGHT_PER_TOWER = 1.0 / 0.9
 _TURRET_STREAM = 1  # the cell's stream for its shape (turret offsets), apart from the draws
 
 
@@ -55,10 +62,28 @@ class TowerSpec:
     p_ext_outside: float = 0.3
     p_ext_clearing: float = 0.03
     supplied_s: float = math.inf
+    anvil: bool = False  # a cumulonimbus: a narrower column in a wider box, an anvil on top
 
     @property
     def shape(self) -> tuple[int, int, int]:
         return (self.grid, self.grid, self.grid)
+
+    @property
+    def box_size_m(self) -> tuple[float, float, float]:
+        """East, north and up extent of the box the grid fills."""
+        across = self.width_m * BOX_WIDTH_PER_TOWER / (ANVIL_COLUMN_SHARE if self.anvil else 1.0)
+        return (across, across, self.height_m * BOX_HEIGHT_PER_TOWER)
+
+    @property
+    def box_centre_m(self) -> tuple[float, float, float]:
+        """The box's middle, in the layer's drifting frame (z MSL): over the axis, its floor
+        at the base."""
+        return (self.axis_m[0], self.axis_m[1], self.base_m + 0.5 * self.box_size_m[2])
+
+    def age_s(self, since_set_s: float) -> float:
+        """The tower's age `since_set_s` sim seconds after its weather was set (negative: not
+        born yet)."""
+        return since_set_s - self.born_s
 
 
 class TowerVolume:
@@ -84,7 +109,7 @@ class TowerVolume:
         s = self.spec
         age_s = step_n * STEP_S
         maturity = min(1.0, age_s / s.mature_s) if s.mature_s > 0.0 else 1.0
-        return tower_ellipsoids(s.shape, maturity, self._turrets)
+        return tower_ellipsoids(s.shape, maturity, self._turrets, s.anvil)
 
     def odds_at(self, step_n: int) -> Odds:
         """The odds of step `step_n`: the ellipsoids of the tower's maturity then, and no
@@ -112,6 +137,10 @@ class TowerVolume:
             self._previous = self._cells
             self._cells = step(self._cells, self.odds_at(self._cells.step), self._rng)
         return self._cells
+
+    def density_of_step(self, step_n: int) -> F32:
+        """(grid, grid, grid) smoothed density after `step_n` steps, z up."""
+        return smoothed(self.cells_at(step_n).cld)
 
     def density_at(self, age_s: float) -> F32:
         """(grid, grid, grid) density 0..1, z up, `age_s` sim seconds after the cell's birth:
