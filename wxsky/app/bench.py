@@ -241,6 +241,7 @@ def run_bench(
     seconds (which draw no far clouds); False times the frames from the daemon's start."""
     from wxsky.render.context import describe
     from wxsky.render.renderer import Renderer
+    from wxsky.render.towers import SLICE_TEXELS
 
     t_start = time.perf_counter() if started_s is None else started_s
     width, height = size
@@ -279,6 +280,8 @@ def run_bench(
         ) as engine,
     ):
         engine.time_ring_builds(build_s)
+        if ring_build == "async":
+            renderer.towers.slice_texels = SLICE_TEXELS  # as the daemon draws them
         first = engine.warm_up()
         if first is not None:
             renderer.warm_up(first)
@@ -323,7 +326,8 @@ def run_bench(
             t_lead = time.perf_counter()
             while True:
                 plan = draw(0.0, dt_s if drawn else 0.0)
-                if plan.rings.current is not None and plan.rings.incoming is None:
+                ring_shown = plan.rings.current is not None and plan.rings.incoming is None
+                if ring_shown and renderer.towers.behind == 0:
                     break
                 if time.perf_counter() - t_lead > LEAD_IN_LIMIT_S:
                     log.warning(

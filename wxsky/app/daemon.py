@@ -390,8 +390,11 @@ class Daemon:
     def _create_renderer(self) -> None:
         from wxsky.render.renderer import Renderer
         from wxsky.render.texture_export import probe
+        from wxsky.render.towers import SLICE_TEXELS
 
         self._renderer = Renderer(self.config.scene.ring_texture_px)
+        # Towers' images are marched a row band a frame, never a whole one in one frame.
+        self._renderer.towers.slice_texels = SLICE_TEXELS
         if self._first_frame is not None:
             self._renderer.warm_up(self._first_frame)
             self._first_frame = None

@@ -28,7 +28,9 @@ from datetime import date, datetime, timedelta
 
 from wxsky.engine.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
 from wxsky.engine.ring_worker import DEFAULT_NICE, BuildJob, RingWorker, run_job
+from wxsky.engine.tower_work import TowerWork
 from wxsky.scene.camera import Camera
+from wxsky.scene.clouds import layer_keys
 from wxsky.scene.gather import Drift, NearRing, advance_drift, carry_drift, zero_drift
 from wxsky.scene.in_cloud import NO_LOCKS, Locks
 from wxsky.scene.layout import (
@@ -42,6 +44,7 @@ from wxsky.scene.layout import (
     warm_near,
 )
 from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
+from wxsky.scene.tower_field import LayerEpoch, TowerClock
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
 from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
 from wxsky.weather.precedence import DEFAULT_CIGI_HOLD_S, DEFAULT_COCKPIT_HOLD_S, SourceStack
@@ -175,6 +178,11 @@ class SkyEngine:
         # A display channel's engine follows a sky master's (`follow`, `follow_time`): it
         # moves neither its weather nor its clock itself.
         self._following = False
+        # Per layer (by key): when its weather was set, for the towers' ages (tower_field).
+        self._epochs: dict[int, LayerEpoch] = {}
+        self._update_epochs()
+        self._towers = TowerWork("async" if ring_build == "async" else "immediate")
+        self._towers_capping = False
 
     @property
     def state(self) -> WeatherState:
@@ -272,6 +280,7 @@ class SkyEngine:
         cut = self._schedule.close(wait_s)
         if self._worker is not None:
             self._worker.close(max(wait_s, 0.5))
+        self._towers.close(max(wait_s, 0.5))
         return cut
 
     def __enter__(self) -> SkyEngine:
@@ -388,6 +397,7 @@ class SkyEngine:
         # A new site or cloud seed is a different sky, not a change of this one.
         if new_sky or self.rates == INSTANT:
             self.settle()
+        self._update_epochs()
 
     def _set_applied(self, new: WeatherState) -> None:
         if new == self._state:
@@ -398,6 +408,36 @@ class SkyEngine:
         self._state = new
         self._settled = settled(new, self._target)
         self.weather_version += 1
+        self._update_epochs()
+
+    def _update_epochs(self) -> None:
+        """Keep each applied layer's epoch: a layer new to the weather is set now; one whose
+        cover falls, or that the target thins or takes away, is clearing (its towers' supply
+        stops now, once); one back at the cover it was supplied at is supplied again."""
+        state, now = self._state, self._state.time_utc
+        goals = dict(zip(layer_keys(self._target.layers), self._target.layers, strict=True))
+        epochs: dict[int, LayerEpoch] = {}
+        for key, layer in zip(layer_keys(state.layers), state.layers, strict=True):
+            epoch = self._epochs.get(key)
+            if epoch is None:
+                epoch = LayerEpoch(now, _sun_elevation(state, now), None, layer.cover_oktas)
+            goal = goals.get(key)
+            supplied = epoch.cover_oktas - 1e-6
+            clearing = goal is None or min(goal.cover_oktas, layer.cover_oktas) < supplied
+            if clearing and epoch.cut_utc is None:
+                epoch = dataclasses.replace(epoch, cut_utc=now)
+            elif not clearing:
+                epoch = dataclasses.replace(
+                    epoch, cut_utc=None, cover_oktas=max(epoch.cover_oktas, layer.cover_oktas)
+                )
+            epochs[key] = epoch
+        self._epochs = epochs
+
+    @property
+    def towers_pending(self) -> int:
+        """Lit tower steps asked for by frames and not made yet (the bench's lead-in waits
+        for none)."""
+        return self._towers.pending
 
     def _transition(self, dt_wall_s: float) -> None:
         self._wall_s += dt_wall_s
@@ -426,6 +466,9 @@ class SkyEngine:
             self._step_weather(dt_wall_s)
             state, drift, camera = self._state, self._drift, self._camera
             aircraft_m = self._aircraft_m
+            towers = TowerClock(
+                tuple(self._epochs.get(k) for k in layer_keys(state.layers)), state.time_utc
+            )
             clock_jumped = self._clock_jumps != self._clock_jumps_seen
             self._clock_jumps_seen = self._clock_jumps
         if clock_jumped:
@@ -455,13 +498,23 @@ class SkyEngine:
             clock=clock,
             split_at_m=aircraft_m,
             lod=self.render_mode != "direct",
+            towers=towers,
         )
+        if frame.towers:
+            frame = dataclasses.replace(frame, towers=self._towers.fill(frame.towers, sky))
         self._locks = frame.locks
         events = rings.events
         if (frame.near_dropped > 0) != self._capping:
             self._capping = frame.near_dropped > 0
             name = "near_cap_start" if self._capping else "near_cap_end"
             fields = {"dropped": frame.near_dropped, "kept": len(frame.near)}
+            events = (*events, RingEvent(name, fields))
+        if (frame.towers_left_out > 0) != self._towers_capping:
+            # More convective cells than the budget: the nearest grow as volumes, the rest
+            # are sprite clouds (issue 17, bad input).
+            self._towers_capping = frame.towers_left_out > 0
+            name = "tower_cap_start" if self._towers_capping else "tower_cap_end"
+            fields = {"left_out": frame.towers_left_out, "towers": len(frame.towers)}
             events = (*events, RingEvent(name, fields))
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)
         return FramePlan(state, frame, shown, rings, events)
@@ -548,11 +601,23 @@ class SkyEngine:
             self._drift = self._drift_at(time_utc)
 
     def drift_for(self, seconds: float) -> None:
-        """Move every layer as the wind would have in `seconds` (negative: back), at once: a
-        picture at a later time than its weather's shows the clouds blown on."""
+        """Move every layer as the wind would have in `seconds` (negative: back), at once, and
+        age the towers as much: a picture at a later time than its weather's shows the clouds
+        blown on and the towers grown."""
         with self._lock:
             self._anchor_drift = advance_drift(self._state, self._anchor_drift, seconds)
             self._drift = self._drift_at(self._state.time_utc)
+            # The towers have grown for as long (their weather was set that much earlier).
+            back = timedelta(seconds=seconds)
+            self._epochs = {
+                k: dataclasses.replace(
+                    e,
+                    set_utc=e.set_utc - back,
+                    sun_elevation_deg=_sun_elevation(self._state, e.set_utc - back),
+                    cut_utc=None if e.cut_utc is None else e.cut_utc - back,
+                )
+                for k, e in self._epochs.items()
+            }
 
     def run_weather(self, duration_s: float) -> WeatherState:
         """Advance the weather stages only (sources, transition, clock, drift) by duration_s
@@ -583,3 +648,9 @@ class SkyEngine:
         """Where the applied weather's layers stand at `time_utc` (earlier: back upwind)."""
         since_s = (time_utc - self._anchor_utc).total_seconds()
         return advance_drift(self._state, self._anchor_drift, since_s)
+
+
+def _sun_elevation(state: WeatherState, time_utc: datetime) -> float:
+    """The sun's elevation over the state's site at `time_utc`: the heating a layer's towers
+    grow with from the moment its weather was set."""
+    return bodies_for(dataclasses.replace(state, time_utc=time_utc)).sun.elevation_deg

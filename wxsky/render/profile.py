@@ -31,6 +31,9 @@ LIMIT_OF_PASS = {
     "small_sprites": "bilinear_blend",
     "sky": "untextured",
     "upsample": "bilinear",
+    # A tower's impostor: up to MARCH_STEPS reads a texel (render/towers.py), against the
+    # limit for one.
+    "volume": "bilinear",
 }
 
 _FILL_SHADERS = {

@@ -22,11 +22,13 @@ from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import load_sheet, support_radii
+from wxsky.render.towers import TowerPass
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
 from wxsky.scene.ring import RING_SIZE, ring_target_name
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
+from wxsky.scene.tower_field import TowerShow
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +145,14 @@ class Renderer:
         self._finish_each_draw = any(cpu in renderer_name for cpu in ("llvmpipe", "softpipe"))
         self._profiler: PassProfiler | None = None
         self._sky_drawn: dict[str, sky_layer.SkyLayerState] = {}  # by layer: what it holds
+        self._towers = TowerPass(self.ctx, self.shaders)
         self._check("initialising the renderer")
+
+    @property
+    def towers(self) -> TowerPass:
+        """The convective towers' pass: its `budget` of impostors a frame (None: every one a
+        frame needs, as a snapshot wants; the daemon draws one a frame) and counts."""
+        return self._towers
 
     # -- public API -------------------------------------------------------------------
 
@@ -159,7 +168,15 @@ class Renderer:
         when the frame is split at the host's aircraft."""
         cam = frame.camera
         self._draw_sky("sky", cam, frame.sky)
-        self._draw_near("near", frame.near, cam, frame.veil_rgba, frame.near_far_count)
+        self._draw_near(
+            "near",
+            frame.near,
+            cam,
+            frame.veil_rgba,
+            frame.near_far_count,
+            frame.towers,
+            frame.sky,
+        )
         if frame.near_front is not None:
             self._draw_near("near_front", frame.near_front, cam, (0.0, 0.0, 0.0, 0.0))
         self._check("rendering a frame")
@@ -171,15 +188,25 @@ class Renderer:
         cam: Camera,
         clear_rgba: tuple[float, float, float, float],
         far_count: int = 0,
+        towers: tuple[TowerShow, ...] = (),
+        sky: SkyParams | None = None,
     ) -> None:
         """Near sprites into layer `name` at near_scale of the picture (fill rate is what
         near sprites cost; a host stretches the layer over its viewport, bilinearly, as it
         draws it). The first `far_count` sprites (the far band, drawn first as the draw is back
         to front) go at the ring impostors' texel density where that is coarser, and are
-        upsampled under the rest."""
+        upsampled under the rest. `towers` go between the sprites at their distances (the far
+        band ends at the farthest tower)."""
         view, proj = cam.view_matrix(), cam.projection_matrix()
-        target = self._target(name, *near_layer_size(cam, self.near_scale))
+        size = near_layer_size(cam, self.near_scale)
+        shown = []
+        if towers and sky is not None:
+            with self._pass("tower impostors", "volume"):
+                shown = self._towers.prepare(towers, cam, sky, size[0])
+        target = self._target(name, *size)
         far_count = min(far_count, len(draw))
+        if shown:
+            far_count = min(far_count, shown[0].tower.insert_at)
         w, h = target.size
         impostor_px_per_deg = self.ring_px / (360.0 / RING_SIZE)
         far_scale = impostor_px_per_deg / (w / cam.fov_deg)
@@ -197,11 +224,27 @@ class Renderer:
                 shape=FAR_BAND_SHAPE,
             )
             self._upsample(far, target)
-            self._draw_sprites(
-                target, draw.slice(far_count, len(draw)), cam.position_m, view, proj, None
-            )
+            start: int = far_count
         else:
-            self._draw_sprites(target, draw, cam.position_m, view, proj, clear_rgba=clear_rgba)
+            target.fbo.use()
+            target.fbo.clear(*clear_rgba)
+            start = 0
+        if not shown:
+            self._draw_sprites(
+                target, draw.slice(start, len(draw)), cam.position_m, view, proj, None
+            )
+            return
+        view_rot = np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes()
+        projection = np.ascontiguousarray(proj.T, dtype=np.float32).tobytes()
+        assert sky is not None
+        for item in shown:
+            stop = max(start, min(item.tower.insert_at, len(draw)))
+            self._draw_sprites(target, draw.slice(start, stop), cam.position_m, view, proj, None)
+            target.fbo.use()
+            with self._pass(_sprite_pass_name(target.name), "small_sprites"):
+                self._towers.draw(item, cam, view_rot, projection, sky)
+            start = stop
+        self._draw_sprites(target, draw.slice(start, len(draw)), cam.position_m, view, proj, None)
 
     def render_ring(
         self,
@@ -301,6 +344,7 @@ class Renderer:
         for vao in self._sprite_vaos.values():
             vao.release()
         self._sky.release()
+        self._towers.release()
         self._upsample_vao.release()
         self._instance_buf.release()
         self._corner_buf.release()

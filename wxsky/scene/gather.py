@@ -304,6 +304,7 @@ class NearBlocks:
     layer_rows: tuple[tuple[int, int, int], ...]  # (layer index, first row, end row)
     block_rows: npt.NDArray[np.intp]  # (B,) sprites of each block, in batch order
     members: npt.NDArray[np.bool_]  # (R, B) True where the block is within ring r's radius
+    block_keys: tuple[tuple[int, int, int], ...] = ()  # (B,) (layer index, east, north)
 
     def placed(
         self, drift: Drift, rings: tuple[NearRing, ...]
@@ -427,6 +428,7 @@ def _make_near_blocks(
     rows: list[int] = []
     members: list[list[bool]] = []
     layer_rows: list[tuple[int, int, int]] = []
+    keys: list[tuple[int, int, int]] = []
     start = 0
     for li, (key, layer, per_ring) in enumerate(
         zip(layer_keys(state.layers), state.layers, picks, strict=True)
@@ -441,6 +443,7 @@ def _make_near_blocks(
             batches.append(block)
             rows.append(len(block))
             members.append(member)
+            keys.append((li, bx, by))
             start += len(block)
         if start > first:
             layer_rows.append((li, first, start))
@@ -452,6 +455,7 @@ def _make_near_blocks(
         tuple(layer_rows),
         np.asarray(rows, np.intp),
         np.asarray(members, np.bool_).reshape(len(members), n_rings).T,
+        tuple(keys),
     )
 
 

@@ -10,6 +10,7 @@ LOD and cap options, and split at the host's aircraft.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import itertools
 import math
 import threading
@@ -47,6 +48,7 @@ from wxsky.scene.in_cloud import (
     in_cloud_fog,
     lock_facing,
 )
+from wxsky.scene.rain import is_shaft
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
 from wxsky.scene.shading import (
     DEFAULT_SHADING,
@@ -63,6 +65,15 @@ from wxsky.scene.shading_harris import (
 )
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
+from wxsky.scene.tower_field import (
+    NO_TOWERS,
+    TowerClock,
+    TowerShow,
+    candidates,
+    drop_mask,
+    insert_points,
+    place_towers,
+)
 from wxsky.weather.state import WeatherState
 
 
@@ -87,6 +98,8 @@ class SceneSettings:
     max_near_sprites: int = 20_000
     # Texels per side of the cloud-shadow map made with each ring (cloud_shadow; 0: none).
     shadow_map_px: int = SHADOW_MAP_PX
+    # At most this many convective cells of the near layer grow as volumes (tower_field).
+    max_towers: int = 6
 
 
 @dataclass(frozen=True)
@@ -149,6 +162,10 @@ class FrameScene:
     # resolution, as the ring's impostors are; 0: none.
     near_far_count: int = 0
     near_dropped: int = 0  # near sprites left out by the per-frame cap
+    # Convective cells drawn as volumes, each between the near sprites at its distance, and
+    # how many more the budget left as sprite clouds.
+    towers: tuple[TowerShow, ...] = ()
+    towers_left_out: int = 0
 
 
 class StageClock(Protocol):
@@ -308,6 +325,7 @@ def build_frame(
     clock: StageClock | None = None,
     split_at_m: tuple[float, float, float] | None = None,
     lod: bool = True,
+    towers: TowerClock | None = None,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
@@ -320,6 +338,17 @@ def build_frame(
     if blocks is not None and settings.shading == "harris":
         scattered = near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG)
     eye = camera.position_m
+    placed = NO_TOWERS
+    if towers is not None and blocks is not None and settings.max_towers > 0:
+        found = candidates(blocks, state, towers.epochs)
+        placed = place_towers(
+            found, drift, share, eye, towers, sky, settings.max_towers, settings.max_range_m
+        )
+        if len(placed.drop_ids):
+            keep = drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
+            near, share = near.take(keep), share[keep]
+            if scattered is not None:
+                scattered = scattered.take(np.flatnonzero(keep))
     with (clock or NO_CLOCK).stage("sort"):
         order = sort_order(near, eye)
     shaded = shade_for_eye(
@@ -354,9 +383,16 @@ def build_frame(
         split_m = math.dist(split_at_m, eye)
         draw, front = split_at_distance(draw, eye, split_m)
     far_count = 0
+    dist = np.linalg.norm(draw.sprites.centre_m - np.asarray(eye), axis=1)
     if lod and settings.far_band_m > 0.0 and len(draw):
-        dist = np.linalg.norm(draw.sprites.centre_m - np.asarray(eye), axis=1)
         far_count = int(np.count_nonzero(dist >= settings.far_band_m))
+    shows = placed.shows
+    if shows:
+        at = insert_points(dist, [t.distance_m for t in shows])
+        shows = tuple(
+            dataclasses.replace(t, insert_at=i)
+            for i, t in sorted(zip(at, shows, strict=True), key=lambda p: -p[1].distance_m)
+        )
     return FrameScene(
         camera=camera,
         sky=sky,
@@ -368,6 +404,8 @@ def build_frame(
         split_distance_m=split_m,
         near_far_count=far_count,
         near_dropped=dropped,
+        towers=shows,
+        towers_left_out=placed.left_out,
     )
 
 

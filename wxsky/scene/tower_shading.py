@@ -23,20 +23,47 @@ from wxsky.towers.lighting import slice_light
 F32 = npt.NDArray[np.float32]
 
 
+def tower_light(density: F32, sky: SkyParams) -> F32:
+    """(nz, ny, nx, L) light 0..1 reaching every cell of `density` (z up, x east, y north)
+    from each of the sky's L lights (`scene_lights`), multiple scattering included: what does
+    not depend on the eye, worked out once per volume and sky (the renderer keeps it in
+    textures and scatters it toward the eye per view, `view_weights`)."""
+    lights = scene_lights(sky)
+    reach = np.stack(
+        [slice_light(density, (float(x), float(y), float(z))) for x, y, z in lights.directions],
+        axis=-1,
+    )
+    out: F32 = multiple_scattering(reach.astype(np.float32))
+    return out
+
+
+def view_weights(
+    sky: SkyParams, view_dir: tuple[float, float, float]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(L, 3) what each light's reaching light (`tower_light`) adds to the radiance toward an
+    eye looking along `view_dir` (phase and albedo times the light's colour; the phase angle is
+    the same in every cell for a distant eye), and (3,) the ambient radiance."""
+    lights = scene_lights(sky)
+    view = np.asarray(view_dir, np.float64)
+    view = view / np.linalg.norm(view)
+    cos = lights.directions @ view
+    phase = (1.0 - DIFFUSE_SHARE) * 4.0 * np.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
+    weights = ALBEDO * phase[:, None] * np.asarray(lights.rgb, np.float64)
+    return weights, np.asarray(lights.ambient_rgb, np.float64)
+
+
 def tower_colours(density: F32, sky: SkyParams, view_dir: tuple[float, float, float]) -> F32:
     """(nz, ny, nx, 3) display colour 0..1 of every cell of `density` (z up, x east, y north),
     seen along `view_dir` (the direction from the eye into the volume; a distant eye)."""
-    lights = scene_lights(sky)
-    # The light reaching each cell from each of the model's lights: (L, nz, ny, nx).
-    reach = np.stack(
-        [slice_light(density, (float(x), float(y), float(z))) for x, y, z in lights.directions]
-    )
-    incident = multiple_scattering(np.moveaxis(reach, 0, -1).astype(np.float32))  # (..., L)
-    view = np.asarray(view_dir, np.float64)
-    view = view / np.linalg.norm(view)
-    cos = lights.directions @ view  # (L,): the phase angle is the same in every cell
-    phase = (1.0 - DIFFUSE_SHARE) * 4.0 * np.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
-    radiance = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb
+    return colours_of(tower_light(density, sky), *view_weights(sky, view_dir))
+
+
+def colours_of(
+    light: F32, weights: npt.NDArray[np.float64], ambient: npt.NDArray[np.float64]
+) -> F32:
+    """(..., 3) display colour of cells with `light` (..., L) reaching them (`tower_light`)
+    for `view_weights`: the same sum and exposure the tower shader does."""
+    radiance = light @ weights + ambient
     shape = radiance.shape
     out: F32 = exposed(radiance.reshape(-1, 3)).reshape(shape).astype(np.float32)
     return out

@@ -192,6 +192,9 @@ class SceneSection(_Section):
     # Texels per side of the cloud-shadow map over the ring's area (the segment's `shadow`
     # layer, made with each ring; 0: no map and no layer).
     shadow_map_px: int = _opt(SHADOW_MAP_PX, _int(0, 4096, "px"))
+    # At most this many convective cells a frame grow as volumes (the nearest; the rest stay
+    # sprite clouds; 0: none).
+    max_towers: int = _opt(6, _int(0, 64))
     block_size_m: float = _opt(
         BLOCK_SIZE_M, _fixed(BLOCK_SIZE_M, "the cloud field is generated in 4 km blocks by design")
     )
@@ -209,6 +212,7 @@ class SceneSection(_Section):
             impostor_lod_m=self.impostor_lod_m,
             max_near_sprites=self.max_near_sprites,
             shadow_map_px=self.shadow_map_px,
+            max_towers=self.max_towers,
         )
 
 

@@ -1,0 +1,106 @@
+"""The towering-cumulus preset's towers seen as a pilot sees them (issue 17, done-when): later
+pictures cover more sky, and a picture is the same bytes in two processes."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+from datetime import timedelta
+from pathlib import Path
+
+import numpy as np
+
+from wxsky.app.snapshot import LAYER_NAMES, picture
+from wxsky.engine.stages import SkyEngine
+from wxsky.host.compositor import composite, layers_from_images
+from wxsky.render.renderer import Renderer
+from wxsky.scene.camera import Camera
+from wxsky.scene.layout import SceneSettings
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import WeatherState
+
+HEADINGS = (14.0, 104.0, 194.0, 284.0)
+SIZE = (320, 180)
+
+
+def _cloud_cover(renderer: Renderer, engine: SkyEngine, heading: float) -> float:
+    """The share of the picture the clouds cover: the layers composited over a black and over
+    a white sky differ by what shows through the clouds (1 - their alpha)."""
+    state = engine.state
+    cam = Camera(
+        (0.0, 0.0, state.observer.alt_m + 2.0),
+        heading_deg=heading,
+        pitch_deg=15.0,
+        width_px=SIZE[0],
+        height_px=SIZE[1],
+    )
+    engine.set_camera(cam)
+    snap = picture(renderer, engine.advance(0.0))
+    seen = []
+    for sky in (0, 255):
+        images = {name: snap.layers[name] for name in LAYER_NAMES}
+        images["sky"] = np.full_like(images["sky"], sky)
+        images["sky"][..., 3] = 255
+        seen.append(composite(layers_from_images(images, snap.ring_quads_m), cam) / 255.0)
+    through = (seen[1] - seen[0])[..., :3].mean()
+    return float(1.0 - through)
+
+
+def _covers(
+    state: WeatherState, renderer: Renderer, minutes: tuple[int, ...] = (0, 10, 20)
+) -> list[float]:
+    """Cloud cover averaged over four headings at +0, +10 and +20 minutes, each picture as
+    `wxsky snapshot --time` takes it: the clock then, the weather set at the preset's time,
+    so the clouds have drifted and the towers grown since."""
+    covers = []
+    for m in minutes:
+        later = dataclasses.replace(state, time_utc=state.time_utc + timedelta(minutes=m))
+        with SkyEngine(later, Camera((0.0, 0.0, 500.0)), SceneSettings(), clock_rate=0.0) as e:
+            e.drift_for(60.0 * m)
+            covers.append(float(np.mean([_cloud_cover(renderer, e, h) for h in HEADINGS])))
+    return covers
+
+
+def test_towering_cumulus_covers_more_sky_as_its_towers_grow() -> None:
+    state = WeatherState().apply(load_preset("towering-cumulus"))
+    with Renderer(128) as renderer:
+        covers = _covers(state, renderer)
+        # In calm air the clouds stay where they are: what grows is the towers alone.
+        # (At +0 nothing has drifted yet: the same picture.)
+        calm = covers[:1] + _covers(dataclasses.replace(state, wind=()), renderer, (10, 20))
+        assert renderer.towers.drawn > 0
+    assert covers[0] < covers[1] < covers[2], covers
+    # Measured: 0.709, 0.713, 0.722 (the towers' share of a sky 70 % covered by cumulus).
+    assert calm[0] + 0.002 < calm[1] < calm[2] - 0.002, calm
+
+
+def test_a_tower_picture_is_the_same_bytes_in_two_processes(tmp_path: Path) -> None:
+    env = dict(os.environ)
+    procs = []
+    for i in (1, 2):
+        cmd = [
+            sys.executable,
+            "-m",
+            "wxsky",
+            "snapshot",
+            "--preset",
+            "towering-cumulus",
+            "--time",
+            "2026-07-15T13:50:00Z",
+            "--heading-deg",
+            "104",
+            "--pitch-deg",
+            "12",
+            "--size",
+            "320x180",
+            "--out",
+            str(tmp_path / f"{i}.png"),
+        ]
+        procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE))
+    for p in procs:
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err.decode()
+    first, second = ((tmp_path / f"{i}.png").read_bytes() for i in (1, 2))
+    assert first == second

@@ -1,0 +1,189 @@
+"""The towers' volumes and light, made off the frame path (issue 17; docs/towers.md).
+
+A frame's towers (`FrameScene.towers`) need the lit automaton steps around their ages
+(`tower_field.lit_volume`): an automaton step of a 64^3 tower costs about 2 ms and lighting it
+about 30 ms, once every STEP_S of sim time, and a tower seen for the first time may need
+minutes of steps at once. `TowerWork` keeps each tower's automaton and the lit steps, and
+makes what is missing either at once (`mode="immediate"`: a snapshot waits for its towers) or
+on its own thread (`"async"`: the daemon, whose frames must not wait): a frame then shows the
+newest lit step it has for each tower, and a tower never seen is left out until its first
+step is ready. The step after the one on show is asked for ahead of time, so a tower moves
+from step to step without waiting.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+from collections import OrderedDict
+
+from wxsky.scene.sky import SkyParams
+from wxsky.scene.tower_field import LitVolume, TowerShow, lights_key, lit_volume
+from wxsky.towers.volume import STEP_S, TowerSpec, TowerVolume
+
+log = logging.getLogger(__name__)
+
+MODES = ("immediate", "async")
+LIT_PER_TOWER = 4  # lit steps kept per tower: the pair on show, the next, one spare
+MIN_TOWERS_KEPT = 8
+
+LitKey = tuple[object, ...]
+
+# Every tower's automaton in this process, shared by the engines in it (a snapshot tool's
+# pictures at several times step the same towers on rather than from their births again); each
+# is stepped under its own lock.
+VOLUMES_KEPT = 64
+_volumes: OrderedDict[TowerSpec, tuple[TowerVolume, threading.Lock]] = OrderedDict()
+_volumes_lock = threading.Lock()
+
+
+def tower_volume(spec: TowerSpec) -> tuple[TowerVolume, threading.Lock]:
+    """The process's automaton of `spec` and the lock to hold while stepping it."""
+    with _volumes_lock:
+        found = _volumes.get(spec)
+        if found is None:
+            found = (TowerVolume(spec), threading.Lock())
+            _volumes[spec] = found
+            while len(_volumes) > VOLUMES_KEPT:
+                _volumes.popitem(last=False)
+        _volumes.move_to_end(spec)
+        return found
+
+
+class TowerWork:
+    """Lit tower steps for the frames; `close()` stops the thread (idempotent)."""
+
+    def __init__(self, mode: str = "immediate", towers_kept: int = MIN_TOWERS_KEPT) -> None:
+        if mode not in MODES:
+            raise ValueError(f"tower work mode must be one of {', '.join(MODES)}")
+        self.mode = mode
+        self._kept = max(MIN_TOWERS_KEPT, towers_kept)
+        self._lit: OrderedDict[LitKey, LitVolume] = OrderedDict()
+        self._shown: dict[TowerSpec, tuple[LitVolume, ...]] = {}  # the last pair on show
+        self._wanted: OrderedDict[LitKey, tuple[TowerSpec, int, SkyParams]] = OrderedDict()
+        self._lock = threading.Condition()
+        self._closed = False
+        self._thread: threading.Thread | None = None
+        self.made = 0  # lit steps made, for the bench and tests
+        if mode == "async":
+            self._thread = threading.Thread(target=self._run, name="wxsky-towers", daemon=True)
+            self._thread.start()
+
+    @property
+    def pending(self) -> int:
+        """Lit steps asked for and not made yet."""
+        with self._lock:
+            return len(self._wanted)
+
+    def fill(self, shows: tuple[TowerShow, ...], sky: SkyParams) -> tuple[TowerShow, ...]:
+        """The frame's towers with their lit steps (`TowerShow.volumes`, `frac`); in async
+        mode those not ready keep no volumes (the renderer leaves them out)."""
+        if not shows:
+            return shows
+        lights = lights_key(sky)
+        if self.mode == "async":
+            self._drop_unwanted({s.spec for s in shows})
+        out = []
+        for show in shows:
+            n = show.step
+            frac = show.age_s / STEP_S - n
+            keys: list[LitKey] = [(show.spec, n + k, lights) for k in range(3)]
+            pair: tuple[LitVolume, ...]
+            if self.mode == "immediate":
+                pair = (self._lit_now(keys[0], sky), self._lit_now(keys[1], sky))
+            else:
+                self._ask(keys, sky)
+                pair = self._ready(keys)
+            if len(pair) == 2:
+                chosen: tuple[LitVolume, ...] = pair
+            elif len(pair) == 1:
+                chosen, frac = pair, 0.0
+            else:
+                chosen, frac = self._shown.get(show.spec, ())[-1:], 0.0
+            if chosen:
+                self._shown[show.spec] = chosen
+            out.append(dataclasses.replace(show, volumes=chosen, frac=frac if chosen else 0.0))
+        self._forget_shown({s.spec for s in shows})
+        return tuple(out)
+
+    def close(self, wait_s: float = 1.0) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._wanted.clear()
+            self._lock.notify_all()
+        if self._thread is not None:
+            self._thread.join(wait_s)
+            if self._thread.is_alive():
+                log.warning("tower work still lighting a step after %.1f s; left to finish", wait_s)
+
+    def __enter__(self) -> TowerWork:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _ready(self, keys: list[LitKey]) -> tuple[LitVolume, ...]:
+        with self._lock:
+            first, second = self._lit.get(keys[0]), self._lit.get(keys[1])
+        if first is not None and second is not None:
+            return (first, second)
+        return (first,) if first is not None else ()
+
+    def _ask(self, keys: list[LitKey], sky: SkyParams) -> None:
+        with self._lock:
+            for key in keys:
+                if key not in self._lit and key not in self._wanted:
+                    spec, step = key[0], key[1]
+                    assert isinstance(spec, TowerSpec) and isinstance(step, int)
+                    self._wanted[key] = (spec, step, sky)
+                    self._lock.notify()
+
+    def _lit_now(self, key: LitKey, sky: SkyParams) -> LitVolume:
+        with self._lock:
+            found = self._lit.get(key)
+            if found is not None:
+                self._lit.move_to_end(key)
+        if found is not None:
+            return found
+        spec, step = key[0], key[1]
+        assert isinstance(spec, TowerSpec) and isinstance(step, int)
+        return self._make(spec, step, sky)
+
+    def _make(self, spec: TowerSpec, step: int, sky: SkyParams) -> LitVolume:
+        volume, stepping = tower_volume(spec)
+        with stepping:
+            made = lit_volume(volume, step, sky)
+        with self._lock:
+            self._lit[made.key] = made
+            while len(self._lit) > LIT_PER_TOWER * self._kept:
+                self._lit.popitem(last=False)
+            self.made += 1
+        return made
+
+    def _drop_unwanted(self, specs: set[TowerSpec]) -> None:
+        """Forget asks for towers no longer on show (the eye moved on, the weather changed)."""
+        with self._lock:
+            for key in [k for k in self._wanted if k[0] not in specs]:
+                del self._wanted[key]
+
+    def _forget_shown(self, specs: set[TowerSpec]) -> None:
+        for spec in [s for s in self._shown if s not in specs]:
+            del self._shown[spec]
+
+    def _run(self) -> None:
+        while True:
+            with self._lock:
+                while not self._wanted and not self._closed:
+                    self._lock.wait()
+                if self._closed:
+                    return
+                _, (spec, step, sky) = self._wanted.popitem(last=False)
+            try:
+                self._make(spec, step, sky)
+            except Exception:  # a bug here must not stop the towers for the daemon's life
+                log.exception("tower step %d of cell %s failed", step, spec.cell)

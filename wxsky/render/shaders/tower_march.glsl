@@ -1,0 +1,85 @@
+// A convective tower's volume drawn into its own impostor (Domański's volumes, issue 17): for
+// each texel of a quad through the box's middle, facing the eye, a ray from the eye through it
+// is marched through the box front to back. The light reaching each cell from each of the
+// sky's lights is in two 3D textures (scene/tower_field.py: lights 0-3; lights 4-5 and the
+// density); the eye's phase and the lights' colours come as one weight per light
+// (tower_shading.view_weights), and the radiance is exposed as the sprite clouds' is
+// (shading_harris.exposed), so numpy's tower colours and these agree.
+
+#if defined VERTEX_SHADER
+out vec2 v_uv;  // -1..1 across the quad
+void main() {
+    vec2 p = vec2(float(gl_VertexID & 1) * 2.0 - 1.0, float((gl_VertexID >> 1) & 1) * 2.0 - 1.0);
+    v_uv = p;
+    gl_Position = vec4(p, 0.0, 1.0);
+}
+#endif
+
+#if defined FRAGMENT_SHADER
+in vec2 v_uv;
+uniform sampler3D u_light0;
+uniform sampler3D u_light1;
+uniform sampler3D u_noise;  // tileable detail noise (towers.detail_noise)
+uniform vec3 u_eye;       // the eye minus the box's middle, metres (ENU)
+uniform vec3 u_centre;    // the quad's middle minus the box's middle
+uniform vec3 u_axis_u;    // the quad's half extent across, metres
+uniform vec3 u_axis_v;    // and up it
+uniform vec3 u_half;      // the box's half size
+uniform vec3 u_lo;        // the part of the box holding cloud, from its middle
+uniform vec3 u_hi;
+uniform float u_noise_per_m;
+uniform float u_erosion;  // how much of a thin cell's density the noise may take
+uniform float u_sharpen;
+uniform vec3 u_weights[6];
+uniform vec3 u_ambient;
+uniform float u_ext_per_m;  // extinction per metre at density 1
+out vec4 f_colour;
+
+vec3 exposed(vec3 r) {
+    float peak = max(max(r.r, r.g), max(r.b, 1e-6));
+    return r * ((1.0 - exp(-EXPOSURE * peak)) / peak);
+}
+
+void main() {
+    vec3 dir = normalize(u_centre + v_uv.x * u_axis_u + v_uv.y * u_axis_v - u_eye);
+    // Where the ray is inside the cloudy part of the box (slabs); a zero component of the
+    // direction never limits it.
+    vec3 safe = mix(dir, vec3(1e-9), lessThan(abs(dir), vec3(1e-9)));
+    vec3 t0 = (u_lo - u_eye) / safe;
+    vec3 t1 = (u_hi - u_eye) / safe;
+    vec3 lo = min(t0, t1);
+    vec3 hi = max(t0, t1);
+    float enter = max(max(lo.x, lo.y), max(lo.z, 0.0));
+    float leave = min(min(hi.x, hi.y), hi.z);
+    vec4 acc = vec4(0.0);
+    if (leave > enter) {
+        float dt = (leave - enter) / float(STEPS);
+        float keep = 1.0;
+        for (int i = 0; i < STEPS; ++i) {
+            vec3 p = u_eye + dir * (enter + (float(i) + 0.5) * dt);
+            vec3 tc = p / (2.0 * u_half) + 0.5;
+            vec4 b = texture(u_light1, tc);
+            if (b.b > DENSITY_FLOOR) {
+                // Billows finer than the automaton's cells: the noise eats thin cloud, the
+                // core keeps its density (a remap of the density by the noise).
+                float bite = u_erosion * texture(u_noise, (p + u_half) * u_noise_per_m).r;
+                float dens = clamp((b.b - bite) / max(1.0 - bite, 1e-3), 0.0, 1.0);
+                // A cumulus's edge is sharp: thin cloud firms up quickly (u_sharpen 0: as is).
+                dens = mix(dens, smoothstep(0.0, 0.5, dens), u_sharpen);
+                vec4 a = texture(u_light0, tc);
+                vec3 rad = a.r * u_weights[0] + a.g * u_weights[1] + a.b * u_weights[2]
+                         + a.a * u_weights[3] + b.r * u_weights[4] + b.g * u_weights[5]
+                         + u_ambient;
+                float alpha = 1.0 - exp(-u_ext_per_m * dens * dt);
+                acc.rgb += keep * alpha * exposed(rad);
+                keep *= 1.0 - alpha;
+                if (keep < 0.004) {
+                    break;
+                }
+            }
+        }
+        acc.a = 1.0 - keep;
+    }
+    f_colour = acc;  // premultiplied
+}
+#endif

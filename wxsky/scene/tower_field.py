@@ -1,0 +1,313 @@
+"""Which convective cells of the near layer are drawn as growing volumes this frame, how old
+each is, and the volumes' light (issue 17, items 2 and 4; docs/towers.md).
+
+A convective layer's cells (`convection.tower_specs`) are found once per near set, in the
+layers' drifting frames. Each frame places them with the drift and keeps the `max_towers`
+nearest the eye as towers; their clouds' sprites leave the near layer (their rain shafts
+stay). The rest stay sprite clouds, as do cells the eye is in or at (the in-cloud rules of
+the sprites then apply) and every cell beyond the near layer (the ring's impostors draw them).
+
+A tower's age is the sim time since its layer's weather was set (`LayerEpoch`, kept by the
+engine as it keeps the drift's anchor) less its birth: a picture at a later time shows the
+towers grown by then, as it shows the clouds drifted. When the air starts clearing the
+engine marks the moment (`cut_utc`) and the towers' supply stops there.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import weakref
+from dataclasses import dataclass, replace
+from datetime import datetime
+
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.convection import is_convective, tower_specs
+from wxsky.scene.footprints import footprints
+from wxsky.scene.gather import Drift, NearBlocks
+from wxsky.scene.rain import is_shaft
+from wxsky.scene.shading_harris import scene_lights
+from wxsky.scene.sky import SkyParams
+from wxsky.scene.tower_shading import tower_light
+from wxsky.towers.volume import STEP_S, TowerSpec, TowerVolume
+from wxsky.weather.state import WeatherState
+
+U8 = npt.NDArray[np.uint8]
+# The eye this close to a tower's box (as a share of the box's half size) sees its sprite
+# cloud instead: the in-cloud rules (fog, facing locks, visibility) are the sprites'.
+INSIDE_MARGIN = 1.1
+# Channels of the two textures of a lit volume: up to MAX_LIGHTS lights (Harris's key light,
+# zenith and skylights), then the density in channel DENSITY_CHANNEL.
+TEXTURES = 2
+MAX_LIGHTS = 6
+DENSITY_CHANNEL = 6
+# Density below this is not drawn as cloud (the smoothed field's faint fringe and the odd lone
+# cell): the impostor is fitted to the rest.
+OCCUPIED_FLOOR = 0.05
+
+
+@dataclass(frozen=True)
+class LayerEpoch:
+    """When a layer's weather was set, the sun's elevation then (its towers' heating), the
+    cover it was supplied at, and, once the air is clearing, when the supply stopped."""
+
+    set_utc: datetime
+    sun_elevation_deg: float
+    cut_utc: datetime | None = None
+    cover_oktas: float = 0.0
+
+
+@dataclass(frozen=True)
+class TowerClock:
+    """What a frame's towers are timed by: per layer of the frame's weather its epoch (None:
+    the layer makes no towers), and the frame's sim time."""
+
+    epochs: tuple[LayerEpoch | None, ...]
+    time_utc: datetime
+
+
+@dataclass(frozen=True, eq=False)
+class LitVolume:
+    """One automaton step of a tower, lit for one sky: (2, nz, ny, nx, 4) bytes, the light
+    from lights 0-3 in the first texture, lights 4-5 and the density in the second."""
+
+    key: tuple[object, ...]  # (spec, step, lights): equal keys hold equal bytes
+    texels: U8
+    # The part of the box holding cloud, as shares of the box from its low corner: (low,
+    # high) per axis (x, y, z), a cell wider than the cloud; ((0.5,)*3,)*2 when empty.
+    occupied: tuple[tuple[float, float, float], tuple[float, float, float]] = (
+        (0.5, 0.5, 0.5),
+        (0.5, 0.5, 0.5),
+    )
+
+    @property
+    def step(self) -> int:
+        step = self.key[1]
+        assert isinstance(step, int)
+        return step
+
+
+@dataclass(frozen=True)
+class TowerShow:
+    """One tower in a frame."""
+
+    spec: TowerSpec
+    layer: int
+    cloud_id: int
+    centre_m: tuple[float, float, float]  # the box's middle, ENU
+    age_s: float
+    distance_m: float
+    alpha: float  # the cloud's formation and the near layer's share
+    haze: float  # 0..1 aerial perspective toward SkyParams.haze_rgb
+    insert_at: int = 0  # drawn after this many of the near layer's sprites (back to front)
+    # Filled in by the engine: the lit steps around the tower's age, and how far between.
+    volumes: tuple[LitVolume, ...] = ()
+    frac: float = 0.0
+
+    @property
+    def step(self) -> int:
+        return int(self.age_s // STEP_S)
+
+    @property
+    def ready(self) -> bool:
+        return bool(self.volumes)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    spec: TowerSpec
+    layer: int
+    cloud_id: int
+    row: int  # one of the cloud's sprites in the near set's batch
+    formed: float
+
+
+@dataclass(frozen=True)
+class PlacedTowers:
+    shows: tuple[TowerShow, ...]
+    drop_ids: npt.NDArray[np.int64]  # clouds whose sprites the towers replace
+    left_out: int  # cells past the budget, drawn as sprite clouds
+    candidates: int = 0
+
+
+NO_TOWERS = PlacedTowers((), np.zeros(0, np.int64), 0)
+
+_found: weakref.WeakKeyDictionary[NearBlocks, dict[object, tuple[Candidate, ...]]] = (
+    weakref.WeakKeyDictionary()
+)
+_found_lock = threading.Lock()
+
+
+def candidates(
+    blocks: NearBlocks, state: WeatherState, epochs: tuple[LayerEpoch | None, ...]
+) -> tuple[Candidate, ...]:
+    """Every convective cell of the near set (kept with it: the same set gives the same cells
+    until the weather or the epochs change)."""
+    key = (epochs, state.temperature_c, state.dewpoint_c, state.layers)
+    with _found_lock:
+        found = _found.get(blocks, {}).get(key)
+    if found is not None:
+        return found
+    out: list[Candidate] = []
+    starts = np.concatenate([[0], np.cumsum(blocks.block_rows)])
+    for b, (li, bx, by) in enumerate(blocks.block_keys):
+        if li >= len(state.layers) or li >= len(epochs):
+            continue
+        layer, epoch = state.layers[li], epochs[li]
+        if epoch is None or not is_convective(layer):
+            continue
+        rows = np.arange(starts[b], starts[b + 1])
+        clouds = blocks.batch.take(rows)
+        cloud_rows = rows[~is_shaft(clouds)]
+        clouds = blocks.batch.take(cloud_rows)
+        if not len(clouds):
+            continue
+        feet = footprints(clouds)
+        first = np.full(len(feet.ids), -1)
+        first[feet.inverse[::-1]] = cloud_rows[::-1]
+        cut_s = (
+            math.inf if epoch.cut_utc is None else (epoch.cut_utc - epoch.set_utc).total_seconds()
+        )
+        for spec in tower_specs(state, layer, (bx, by), clouds, epoch.sun_elevation_deg):
+            supplied = cut_s - spec.born_s
+            if supplied <= 0.0:
+                continue  # the air cleared before it was born
+            out.append(
+                Candidate(
+                    spec=replace(spec, supplied_s=supplied),
+                    layer=li,
+                    cloud_id=int(feet.ids[spec.cell]),
+                    row=int(first[spec.cell]),
+                    formed=float(feet.formed[spec.cell]),
+                )
+            )
+    made = tuple(out)
+    with _found_lock:
+        _found.setdefault(blocks, {})[key] = made
+    return made
+
+
+def place_towers(
+    found: tuple[Candidate, ...],
+    drift: Drift,
+    share: npt.NDArray[np.float32],
+    eye_m: tuple[float, float, float],
+    clock: TowerClock,
+    sky: SkyParams,
+    budget: int,
+    max_range_m: float,
+) -> PlacedTowers:
+    """The `budget` cells nearest the eye, placed with the frame's drift: the born ones as
+    towers, their clouds' sprites (born or not: a cell not born yet is clear air) to drop.
+    Cells the eye is in or at stay sprite clouds and do not count."""
+    if budget <= 0 or not found:
+        return PlacedTowers((), np.zeros(0, np.int64), len(found), len(found))
+    eye = np.asarray(eye_m)
+    scored: list[tuple[float, int, Candidate, tuple[float, float, float]]] = []
+    for i, c in enumerate(found):
+        dx, dy = drift[c.layer] if c.layer < len(drift) else (0.0, 0.0)
+        cx, cy, cz = c.spec.box_centre_m
+        centre = (cx + dx, cy + dy, cz)
+        half = 0.5 * np.asarray(c.spec.box_size_m) * INSIDE_MARGIN
+        if np.all(np.abs(eye - np.asarray(centre)) < half):
+            continue
+        scored.append((math.dist(centre, eye_m), i, c, centre))
+    scored.sort(key=lambda s: (s[0], s[1]))
+    chosen = scored[:budget]
+    shows = []
+    for dist, _, c, centre in chosen:
+        since_s = (clock.time_utc - _set_utc(clock, c.layer)).total_seconds()
+        age = c.spec.age_s(since_s)
+        if age < 0.0:
+            continue
+        shows.append(
+            TowerShow(
+                spec=c.spec,
+                layer=c.layer,
+                cloud_id=c.cloud_id,
+                centre_m=centre,
+                age_s=age,
+                distance_m=dist,
+                alpha=float(
+                    min(1.0, c.formed)
+                    * (share[c.row] if c.row < len(share) else 1.0)
+                    * _edge(dist, max_range_m)
+                ),
+                haze=float(1.0 - math.exp(-dist / sky.haze_m)),
+            )
+        )
+    drop = np.asarray([c.cloud_id for _, _, c, _ in chosen], np.int64)
+    return PlacedTowers(tuple(shows), drop, len(scored) - len(chosen), len(found))
+
+
+def _set_utc(clock: TowerClock, layer: int) -> datetime:
+    epoch = clock.epochs[layer] if layer < len(clock.epochs) else None
+    return clock.time_utc if epoch is None else epoch.set_utc
+
+
+def _edge(dist_m: float, max_range_m: float) -> float:
+    """The fade before the edge of the generated range, as `layout.fade_by_range` fades a
+    sprite (it matters in direct mode, where towers reach that far)."""
+    edge = min(max((max_range_m - dist_m) / (0.25 * max_range_m), 0.0), 1.0)
+    return edge * edge * (3.0 - 2.0 * edge)
+
+
+def drop_mask(
+    cloud_id: npt.NDArray[np.int64], shaft: npt.NDArray[np.bool_], drop_ids: npt.NDArray[np.int64]
+) -> npt.NDArray[np.bool_]:
+    """(N,) True for the sprites to keep: not a tower's cloud, or its rain shaft."""
+    out: npt.NDArray[np.bool_] = ~np.isin(cloud_id, drop_ids) | shaft
+    return out
+
+
+def insert_points(dist_sorted_m: npt.NDArray[np.float64], towers_m: list[float]) -> list[int]:
+    """Where each tower goes in a back-to-front draw whose sprites lie at `dist_sorted_m`
+    (descending): after every sprite farther than it."""
+    neg = -np.asarray(dist_sorted_m)
+    return [int(np.searchsorted(neg, -d, side="left")) for d in towers_m]
+
+
+def lights_key(sky: SkyParams) -> tuple[object, ...]:
+    """What a tower's light depends on in the sky: the lights' (quantised) directions and
+    their colours to a hundredth."""
+    lights = scene_lights(sky)
+    return (
+        lights.directions.round(4).tobytes(),
+        np.round(np.asarray(lights.rgb), 2).tobytes(),
+    )
+
+
+def lit_volume(volume: TowerVolume, step_n: int, sky: SkyParams) -> LitVolume:
+    """Step `step_n` of a tower's volume lit for `sky`, as the renderer's textures take it."""
+    density = volume.density_of_step(step_n)
+    light = tower_light(density, sky)  # (nz, ny, nx, L)
+    if light.shape[-1] > MAX_LIGHTS:
+        raise ValueError(f"{light.shape[-1]} lights; a lit tower holds {MAX_LIGHTS}")
+    nz, ny, nx = density.shape
+    channels = np.zeros((nz, ny, nx, 4 * TEXTURES), np.float32)
+    channels[..., : light.shape[-1]] = light
+    channels[..., DENSITY_CHANNEL] = density
+    texels = np.clip(channels * 255.0 + 0.5, 0.0, 255.0).astype(np.uint8)
+    texels = np.ascontiguousarray(np.moveaxis(texels.reshape(nz, ny, nx, TEXTURES, 4), 3, 0))
+    texels.flags.writeable = False
+    return LitVolume((volume.spec, step_n, lights_key(sky)), texels, occupied_part(density))
+
+
+def occupied_part(
+    density: npt.NDArray[np.float32], floor: float = OCCUPIED_FLOOR
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(low, high) corners, x y z as shares of the box, of the cells whose density is above
+    `floor`, one cell wider on every side (the textures are read between cells)."""
+    nz, ny, nx = density.shape
+    found = density > floor
+    if not found.any():
+        return ((0.5, 0.5, 0.5), (0.5, 0.5, 0.5))
+    lo, hi = [], []
+    for axis, n in ((2, nx), (1, ny), (0, nz)):
+        other = tuple(a for a in range(3) if a != axis)
+        cells = np.flatnonzero(found.any(axis=other))
+        lo.append(max(0.0, (int(cells[0]) - 1) / n))
+        hi.append(min(1.0, (int(cells[-1]) + 2) / n))
+    return ((lo[0], lo[1], lo[2]), (hi[0], hi[1], hi[2]))
