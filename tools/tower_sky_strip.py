@@ -31,14 +31,20 @@ from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
 
+# Twice the default budget of towers, so that one 5 km off is among those drawn (the daemon's
+# own [scene] max_towers can be raised as far).
+SETTINGS = SceneSettings(max_towers=12)
+
 
 def watched_cell(state: WeatherState, eye: tuple[float, float, float], minutes: float):
-    """The tower to watch: the youngest of those 5-9 km from the eye at the first moment."""
-    with SkyEngine(state, Camera(eye), SceneSettings(max_towers=16), clock_rate=0.0) as e:
+    """The tower to watch: of those drawn at the first moment, the youngest 5 km or more
+    from the eye (nearer ones fill the picture)."""
+    later = dataclasses.replace(state, time_utc=state.time_utc + timedelta(minutes=minutes))
+    with SkyEngine(later, Camera(eye), SETTINGS, clock_rate=0.0) as e:
         e.drift_for(60.0 * minutes)
         towers = e.advance(0.0).frame.towers
-    near = [t for t in towers if 5000.0 <= t.distance_m <= 9000.0] or list(towers)
-    return min(near, key=lambda t: t.age_s)
+    far = [t for t in towers if t.distance_m >= 5000.0] or list(towers)
+    return min(far, key=lambda t: t.age_s)
 
 
 def main() -> int:
@@ -63,7 +69,7 @@ def main() -> int:
             clear_at = args.clear_at if args.clear_at is not None else math.inf
             start = min(minutes, clear_at)
             state = dataclasses.replace(base, time_utc=base.time_utc + timedelta(minutes=start))
-            with SkyEngine(state, Camera(eye0), SceneSettings(), clock_rate=1.0) as engine:
+            with SkyEngine(state, Camera(eye0), SETTINGS, clock_rate=1.0) as engine:
                 engine.drift_for(60.0 * start)
                 if minutes > start:
                     # The air starts clearing: the layer's cover falls by one okta.
@@ -82,8 +88,8 @@ def main() -> int:
                     Camera(
                         eye,
                         heading_deg=heading,
-                        pitch_deg=18.0,
-                        fov_deg=70.0,
+                        pitch_deg=20.0,
+                        fov_deg=60.0,
                         width_px=width,
                         height_px=height,
                     )
@@ -92,7 +98,10 @@ def main() -> int:
             panel = snap.image[..., :3].copy()
             panel[:, -3:] = 255  # a white gap between panels
             panels.append(panel)
-            print(f"{minutes:g} min: towers drawn {renderer.towers.drawn}")
+            print(
+                f"{minutes:g} min: watched cell {watch.spec.cell} of block {watch.spec.block},"
+                f" {(60.0 * minutes - watch.spec.born_s) / 60.0:.1f} min old, heading {heading:.0f}"
+            )
     image = np.concatenate(panels, axis=1)
     rgba = np.concatenate([image, np.full((*image.shape[:2], 1), 255, np.uint8)], axis=2)
     write_png(args.out, rgba)

@@ -13,13 +13,16 @@ from step to step without waiting.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
+import os
 import threading
 from collections import OrderedDict
 
+from wxsky.scene.shading_harris import Lights, scene_lights
 from wxsky.scene.sky import SkyParams
-from wxsky.scene.tower_field import LitVolume, TowerShow, lights_key, lit_volume
+from wxsky.scene.tower_field import LitVolume, TowerShow, lit_volume, still_lit
 from wxsky.towers.volume import STEP_S, TowerSpec, TowerVolume
 
 log = logging.getLogger(__name__)
@@ -27,8 +30,9 @@ log = logging.getLogger(__name__)
 MODES = ("immediate", "async")
 LIT_PER_TOWER = 4  # lit steps kept per tower: the pair on show, the next, one spare
 MIN_TOWERS_KEPT = 8
+THREAD_NICE = 10  # the lighting thread's nice value, over the daemon's
 
-LitKey = tuple[object, ...]
+StepKey = tuple[TowerSpec, int]  # a tower and an automaton step
 
 # Every tower's automaton in this process, shared by the engines in it (a snapshot tool's
 # pictures at several times step the same towers on rather than from their births again); each
@@ -52,16 +56,18 @@ def tower_volume(spec: TowerSpec) -> tuple[TowerVolume, threading.Lock]:
 
 
 class TowerWork:
-    """Lit tower steps for the frames; `close()` stops the thread (idempotent)."""
+    """Lit tower steps for the frames; `close()` stops the thread (idempotent). A lit step
+    serves until the sky's lights move away from those it was lit by (`still_lit`); it is
+    then lit again, and shown as it was meanwhile."""
 
     def __init__(self, mode: str = "immediate", towers_kept: int = MIN_TOWERS_KEPT) -> None:
         if mode not in MODES:
             raise ValueError(f"tower work mode must be one of {', '.join(MODES)}")
         self.mode = mode
         self._kept = max(MIN_TOWERS_KEPT, towers_kept)
-        self._lit: OrderedDict[LitKey, LitVolume] = OrderedDict()
+        self._lit: OrderedDict[StepKey, LitVolume] = OrderedDict()
         self._shown: dict[TowerSpec, tuple[LitVolume, ...]] = {}  # the last pair on show
-        self._wanted: OrderedDict[LitKey, tuple[TowerSpec, int, SkyParams]] = OrderedDict()
+        self._wanted: OrderedDict[StepKey, SkyParams] = OrderedDict()
         self._lock = threading.Condition()
         self._closed = False
         self._thread: threading.Thread | None = None
@@ -81,20 +87,19 @@ class TowerWork:
         mode those not ready keep no volumes (the renderer leaves them out)."""
         if not shows:
             return shows
-        lights = lights_key(sky)
         if self.mode == "async":
             self._drop_unwanted({s.spec for s in shows})
+        lights = scene_lights(sky)
         out = []
         for show in shows:
             n = show.step
             frac = show.age_s / STEP_S - n
-            keys: list[LitKey] = [(show.spec, n + k, lights) for k in range(3)]
+            keys = [(show.spec, n + k) for k in range(3)]
             pair: tuple[LitVolume, ...]
             if self.mode == "immediate":
-                pair = (self._lit_now(keys[0], sky), self._lit_now(keys[1], sky))
+                pair = (self._lit_now(keys[0], sky, lights), self._lit_now(keys[1], sky, lights))
             else:
-                self._ask(keys, sky)
-                pair = self._ready(keys)
+                pair = self._ready(keys, sky, lights)
             if len(pair) == 2:
                 chosen: tuple[LitVolume, ...] = pair
             elif len(pair) == 1:
@@ -104,7 +109,8 @@ class TowerWork:
             if chosen:
                 self._shown[show.spec] = chosen
             out.append(dataclasses.replace(show, volumes=chosen, frac=frac if chosen else 0.0))
-        self._forget_shown({s.spec for s in shows})
+        for spec in [s for s in self._shown if s not in {sh.spec for sh in shows}]:
+            del self._shown[spec]
         return tuple(out)
 
     def close(self, wait_s: float = 1.0) -> None:
@@ -127,39 +133,41 @@ class TowerWork:
 
     # -- internals ---------------------------------------------------------------------------
 
-    def _ready(self, keys: list[LitKey]) -> tuple[LitVolume, ...]:
+    def _ready(self, keys: list[StepKey], sky: SkyParams, lights: Lights) -> tuple[LitVolume, ...]:
+        """The lit steps of `keys[:2]` as far as made (asking for those missing or lit for
+        another sky, and for the step after them)."""
+        found = []
         with self._lock:
-            first, second = self._lit.get(keys[0]), self._lit.get(keys[1])
+            for key in keys:
+                lit = self._lit.get(key)
+                if (lit is None or not still_lit(lit, lights)) and key not in self._wanted:
+                    self._wanted[key] = sky
+                    self._lock.notify()
+                elif key in self._wanted:
+                    self._wanted[key] = sky  # light it for the latest sky
+                found.append(lit)
+        first, second = found[0], found[1]
         if first is not None and second is not None:
             return (first, second)
         return (first,) if first is not None else ()
 
-    def _ask(self, keys: list[LitKey], sky: SkyParams) -> None:
-        with self._lock:
-            for key in keys:
-                if key not in self._lit and key not in self._wanted:
-                    spec, step = key[0], key[1]
-                    assert isinstance(spec, TowerSpec) and isinstance(step, int)
-                    self._wanted[key] = (spec, step, sky)
-                    self._lock.notify()
-
-    def _lit_now(self, key: LitKey, sky: SkyParams) -> LitVolume:
+    def _lit_now(self, key: StepKey, sky: SkyParams, lights: Lights) -> LitVolume:
         with self._lock:
             found = self._lit.get(key)
             if found is not None:
                 self._lit.move_to_end(key)
-        if found is not None:
+        if found is not None and still_lit(found, lights):
             return found
-        spec, step = key[0], key[1]
-        assert isinstance(spec, TowerSpec) and isinstance(step, int)
-        return self._make(spec, step, sky)
+        return self._make(key, sky)
 
-    def _make(self, spec: TowerSpec, step: int, sky: SkyParams) -> LitVolume:
+    def _make(self, key: StepKey, sky: SkyParams) -> LitVolume:
+        spec, step = key
         volume, stepping = tower_volume(spec)
         with stepping:
             made = lit_volume(volume, step, sky)
         with self._lock:
-            self._lit[made.key] = made
+            self._lit[key] = made
+            self._lit.move_to_end(key)
             while len(self._lit) > LIT_PER_TOWER * self._kept:
                 self._lit.popitem(last=False)
             self.made += 1
@@ -171,19 +179,19 @@ class TowerWork:
             for key in [k for k in self._wanted if k[0] not in specs]:
                 del self._wanted[key]
 
-    def _forget_shown(self, specs: set[TowerSpec]) -> None:
-        for spec in [s for s in self._shown if s not in specs]:
-            del self._shown[spec]
-
     def _run(self) -> None:
+        # Below the frames, as the ring's worker process runs: on Linux a thread has its own
+        # nice value. Where it cannot be set the work runs at the daemon's priority.
+        with contextlib.suppress(AttributeError, OSError):
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), THREAD_NICE)
         while True:
             with self._lock:
                 while not self._wanted and not self._closed:
                     self._lock.wait()
                 if self._closed:
                     return
-                _, (spec, step, sky) = self._wanted.popitem(last=False)
+                key, sky = self._wanted.popitem(last=False)
             try:
-                self._make(spec, step, sky)
+                self._make(key, sky)
             except Exception:  # a bug here must not stop the towers for the daemon's life
-                log.exception("tower step %d of cell %s failed", step, spec.cell)
+                log.exception("tower step %d of cell %s failed", key[1], key[0].cell)

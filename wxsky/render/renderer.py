@@ -22,7 +22,7 @@ from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import load_sheet, support_radii
-from wxsky.render.towers import TowerPass
+from wxsky.render.towers import Drawable, TowerPass
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
 from wxsky.scene.ring import RING_SIZE, ring_target_name
@@ -195,56 +195,66 @@ class Renderer:
         near sprites cost; a host stretches the layer over its viewport, bilinearly, as it
         draws it). The first `far_count` sprites (the far band, drawn first as the draw is back
         to front) go at the ring impostors' texel density where that is coarser, and are
-        upsampled under the rest. `towers` go between the sprites at their distances (the far
-        band ends at the farthest tower)."""
-        view, proj = cam.view_matrix(), cam.projection_matrix()
+        upsampled under the rest. `towers` go between the sprites at their distances, those in
+        the far band into it."""
         size = near_layer_size(cam, self.near_scale)
-        shown = []
+        shown: list[Drawable] = []
         if towers and sky is not None:
             with self._pass("tower impostors", "volume"):
                 shown = self._towers.prepare(towers, cam, sky, size[0])
         target = self._target(name, *size)
         far_count = min(far_count, len(draw))
-        if shown:
-            far_count = min(far_count, shown[0].tower.insert_at)
         w, h = target.size
         impostor_px_per_deg = self.ring_px / (360.0 / RING_SIZE)
         far_scale = impostor_px_per_deg / (w / cam.fov_deg)
+        rest = shown
         if far_count > 0 and far_scale <= FAR_BAND_MAX_SCALE:
             far = self._target(
                 f"{name}_far", max(1, round(w * far_scale)), max(1, round(h * far_scale))
             )
-            self._draw_sprites(
-                far,
-                draw.slice(0, far_count),
-                cam.position_m,
-                view,
-                proj,
-                clear_rgba=clear_rgba,
-                shape=FAR_BAND_SHAPE,
-            )
+            far.fbo.use()
+            far.fbo.clear(*clear_rgba)
+            # Towers as far as the far band go into it, at its resolution, as its sprites do.
+            in_far = [item for item in shown if item.tower.insert_at <= far_count]
+            rest = shown[len(in_far) :]
+            self._draw_run(far, draw, 0, far_count, in_far, cam, sky, FAR_BAND_SHAPE)
             self._upsample(far, target)
-            start: int = far_count
+            start = far_count
         else:
             target.fbo.use()
             target.fbo.clear(*clear_rgba)
             start = 0
-        if not shown:
-            self._draw_sprites(
-                target, draw.slice(start, len(draw)), cam.position_m, view, proj, None
-            )
+        self._draw_run(target, draw, start, len(draw), rest, cam, sky, "octagon")
+
+    def _draw_run(
+        self,
+        target: _Target,
+        draw: SpriteDraw,
+        start: int,
+        stop: int,
+        towers: list[Drawable],
+        cam: Camera,
+        sky: SkyParams | None,
+        shape: str,
+    ) -> None:
+        """Sprites start..stop of `draw` over what `target` holds, each of `towers` (back to
+        front) after the sprites farther than it."""
+        view, proj = cam.view_matrix(), cam.projection_matrix()
+        eye = cam.position_m
+        if not towers or sky is None:
+            part = draw if (start, stop) == (0, len(draw)) else draw.slice(start, stop)
+            self._draw_sprites(target, part, eye, view, proj, None, shape=shape)
             return
         view_rot = np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes()
         projection = np.ascontiguousarray(proj.T, dtype=np.float32).tobytes()
-        assert sky is not None
-        for item in shown:
-            stop = max(start, min(item.tower.insert_at, len(draw)))
-            self._draw_sprites(target, draw.slice(start, stop), cam.position_m, view, proj, None)
+        for item in towers:
+            cut = max(start, min(item.tower.insert_at, stop))
+            self._draw_sprites(target, draw.slice(start, cut), eye, view, proj, None, shape=shape)
             target.fbo.use()
-            with self._pass(_sprite_pass_name(target.name), "small_sprites"):
+            with self._pass(f"towers {_sprite_pass_name(target.name)}", "small_sprites"):
                 self._towers.draw(item, cam, view_rot, projection, sky)
-            start = stop
-        self._draw_sprites(target, draw.slice(start, len(draw)), cam.position_m, view, proj, None)
+            start = cut
+        self._draw_sprites(target, draw.slice(start, stop), eye, view, proj, None, shape=shape)
 
     def render_ring(
         self,

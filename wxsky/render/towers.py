@@ -32,10 +32,11 @@ from wxsky.scene.tower_shading import view_weights
 from wxsky.towers.lighting import EXTINCTION_PER_CELL
 from wxsky.towers.volume import STEP_S, TowerSpec
 
-MARCH_STEPS = 64  # samples along a ray through the cloudy part of the box: about one a cell
-VIEW_TOLERANCE_DEG = 3.0
+MARCH_STEPS = 40  # samples along a ray through the cloudy part of the box: one in 1-2 cells
+VIEW_TOLERANCE_DEG = 10.0
 SIZE_TOLERANCE = 1.5  # texels wanted over texels drawn (or under) before drawing it again
 IMPOSTOR_MIN_PX = 16
+TEXEL_SHARE = 0.6
 IMPOSTOR_MAX_PX = 256
 VOLUMES_KEPT = 32  # lit steps kept as textures (2 MiB each at 64^3)
 NOISE_TEXELS = 32
@@ -47,7 +48,7 @@ SHARPEN = 1.0
 # so a growing tower keeps its quad (and the image of the step before) for a while.
 GROWTH_ROOM = 0.1
 # Texels a frame marches in the daemon: about 2-3 ms of a 2-core CPU renderer's time.
-SLICE_TEXELS = 8192
+SLICE_TEXELS = 4096
 
 F64 = npt.NDArray[np.float64]
 
@@ -120,7 +121,6 @@ class TowerPass:
         self._march = shaders.program(
             "tower_march.glsl",
             {
-                "STEPS": str(MARCH_STEPS),
                 "EXPOSURE": repr(EXPOSURE),
                 "DENSITY_FLOOR": repr(OCCUPIED_FLOOR),
             },
@@ -143,9 +143,10 @@ class TowerPass:
         # its light is soft (1: the same, as numpy's tower colours composite).
         self.view_extinction = VIEW_EXTINCTION
         self.sharpen = SHARPEN  # 0..1: how much thin cloud firms up toward the eye
+        self.march_steps = MARCH_STEPS
         self.drawn = 0  # images completed, for tests and the bench
-        # Towers of the last frame not yet drawn as asked: no lit step yet, or images of the
-        # steps wanted still being marched (the bench's lead-in waits for none).
+        # Towers of the last frame that could not be drawn: no lit step yet, or their first
+        # image still being marched (the bench's lead-in waits for none).
         self.behind = 0
 
     def prepare(
@@ -157,7 +158,9 @@ class TowerPass:
         left = math.inf if self.slice_texels is None else float(self.slice_texels)
         eye = np.asarray(cam.position_m, np.float64)
         px_per_rad = layer_width_px / math.radians(cam.fov_deg)
-        for tower in sorted(towers, key=lambda t: t.distance_m):
+        # Towers with nothing to show first, then the rest; the nearest first in each.
+        order = sorted(towers, key=lambda t: (t.spec in self._shown, t.distance_m))
+        for tower in order:
             if tower.ready and left > 0:
                 left = self._work(tower, eye, sky, px_per_rad, left)
         out = []
@@ -166,8 +169,7 @@ class TowerPass:
             drawable = self._drawable(tower)
             if drawable is not None:
                 out.append(drawable)
-            imp = self._next.get(tower.spec) or self._shown.get(tower.spec)
-            if not tower.ready or imp is None or any(not im.complete for im in imp.images):
+            else:
                 self.behind += 1
         shown = {t.spec for t in towers}
         for table in (self._shown, self._next):
@@ -319,15 +321,19 @@ class TowerPass:
         _set(prog, "u_centre", _vec(quad.centre_m))
         _set(prog, "u_axis_u", _vec(quad.axis_u))
         _set(prog, "u_axis_v", _vec(quad.axis_v))
-        _set(prog, "u_half", _vec(0.5 * np.asarray(spec.box_size_m)))
-        _set(prog, "u_lo", _vec(quad.lo))
-        _set(prog, "u_hi", _vec(quad.hi))
+        half = 0.5 * np.asarray(spec.box_size_m)
+        _set(prog, "u_half", _vec(half))
+        # The rays are marched inside the box only: beyond it the textures' clamped edge
+        # would hang the floor's cloud down to the ground.
+        _set(prog, "u_lo", _vec(np.maximum(quad.lo, -half)))
+        _set(prog, "u_hi", _vec(np.minimum(quad.hi, half)))
         _write(prog, "u_weights", padded.tobytes())
         _set(prog, "u_ambient", _vec(ambient))
         _set(prog, "u_ext_per_m", self.view_extinction * EXTINCTION_PER_CELL / cell_m)
         _set(prog, "u_noise_per_m", 1.0 / NOISE_TILE_M)
         _set(prog, "u_erosion", float(self.erosion))
         _set(prog, "u_sharpen", float(self.sharpen))
+        _set(prog, "u_steps", int(self.march_steps))
         light0, light1 = self._textures(image.volume)
         light0.use(0)
         light1.use(1)
@@ -410,8 +416,9 @@ def _quad_for(eye_rel: F64, lo: F64, hi: F64, px_per_rad: float) -> _Quad:
 
 
 def _texels(half_m: float, dist_m: float, px_per_rad: float) -> int:
-    """Impostor texels along a side: about the layer's own resolution, a multiple of 16."""
-    px = 2.0 * half_m / max(dist_m, 1.0) * px_per_rad
+    """Impostor texels along a side: TEXEL_SHARE of the layer's own resolution (a soft volume
+    loses nothing to it), a multiple of 16."""
+    px = 2.0 * half_m / max(dist_m, 1.0) * px_per_rad * TEXEL_SHARE
     return int(min(IMPOSTOR_MAX_PX, max(IMPOSTOR_MIN_PX, 16 * math.ceil(px / 16.0))))
 
 

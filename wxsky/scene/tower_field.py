@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import threading
 import weakref
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 
 import numpy as np
@@ -28,7 +28,7 @@ from wxsky.scene.convection import is_convective, tower_specs
 from wxsky.scene.footprints import footprints
 from wxsky.scene.gather import Drift, NearBlocks
 from wxsky.scene.rain import is_shaft
-from wxsky.scene.shading_harris import scene_lights
+from wxsky.scene.shading_harris import Lights, close_directions, scene_lights
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.tower_shading import tower_light
 from wxsky.towers.volume import STEP_S, TowerSpec, TowerVolume
@@ -75,6 +75,9 @@ class LitVolume:
 
     key: tuple[object, ...]  # (spec, step, lights): equal keys hold equal bytes
     texels: U8
+    # The lights it was lit by (`scene_lights`): directions (L, 3) and colours (L, 3).
+    light_dirs: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    light_rgb: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
     # The part of the box holding cloud, as shares of the box from its low corner: (low,
     # high) per axis (x, y, z), a cell wider than the cloud; ((0.5,)*3,)*2 when empty.
     occupied: tuple[tuple[float, float, float], tuple[float, float, float]] = (
@@ -204,16 +207,21 @@ def place_towers(
     Cells the eye is in or at stay sprite clouds and do not count."""
     if budget <= 0 or not found:
         return PlacedTowers((), np.zeros(0, np.int64), len(found), len(found))
-    eye = np.asarray(eye_m)
-    scored: list[tuple[float, int, Candidate, tuple[float, float, float]]] = []
-    for i, c in enumerate(found):
-        dx, dy = drift[c.layer] if c.layer < len(drift) else (0.0, 0.0)
-        cx, cy, cz = c.spec.box_centre_m
-        centre = (cx + dx, cy + dy, cz)
-        half = 0.5 * np.asarray(c.spec.box_size_m) * INSIDE_MARGIN
-        if np.all(np.abs(eye - np.asarray(centre)) < half):
-            continue
-        scored.append((math.dist(centre, eye_m), i, c, centre))
+    eye = np.asarray(eye_m, np.float64)
+    boxes = _boxes(found)
+    layers = boxes.layers
+    shift = np.zeros((len(found), 3))
+    for li in np.unique(layers):
+        if li < len(drift):
+            shift[layers == li, :2] = drift[li]
+    centres = boxes.centres + shift
+    inside = np.all(np.abs(eye - centres) < boxes.halves * INSIDE_MARGIN, axis=1)
+    dists = np.linalg.norm(centres - eye, axis=1)
+    scored: list[tuple[float, int, Candidate, tuple[float, float, float]]] = [
+        (float(dists[i]), i, found[i], (float(x), float(y), float(z)))
+        for i, (x, y, z) in enumerate(centres)
+        if not inside[i]
+    ]
     scored.sort(key=lambda s: (s[0], s[1]))
     chosen = scored[:budget]
     shows = []
@@ -240,6 +248,33 @@ def place_towers(
         )
     drop = np.asarray([c.cloud_id for _, _, c, _ in chosen], np.int64)
     return PlacedTowers(tuple(shows), drop, len(scored) - len(chosen), len(found))
+
+
+@dataclass(frozen=True)
+class _Boxes:
+    centres: npt.NDArray[np.float64]  # (C, 3) in the layers' drifting frames
+    halves: npt.NDArray[np.float64]  # (C, 3)
+    layers: npt.NDArray[np.intp]  # (C,)
+
+
+_boxes_memo: dict[int, tuple[tuple[Candidate, ...], _Boxes]] = {}
+
+
+def _boxes(found: tuple[Candidate, ...]) -> _Boxes:
+    """The candidates' boxes as arrays (kept for the last few candidate sets: a frame asks
+    for the same set as the one before)."""
+    memo = _boxes_memo.get(id(found))
+    if memo is not None and memo[0] is found:
+        return memo[1]
+    made = _Boxes(
+        np.asarray([c.spec.box_centre_m for c in found], np.float64).reshape(-1, 3),
+        0.5 * np.asarray([c.spec.box_size_m for c in found], np.float64).reshape(-1, 3),
+        np.asarray([c.layer for c in found], np.intp),
+    )
+    if len(_boxes_memo) > 8:
+        _boxes_memo.clear()
+    _boxes_memo[id(found)] = (found, made)
+    return made
 
 
 def _set_utc(clock: TowerClock, layer: int) -> datetime:
@@ -269,6 +304,23 @@ def insert_points(dist_sorted_m: npt.NDArray[np.float64], towers_m: list[float])
     return [int(np.searchsorted(neg, -d, side="left")) for d in towers_m]
 
 
+# A lit step serves while the sky's lights stay this close to those it was lit by: the sun
+# takes some 8 minutes to move 2 degrees, and relighting every tower costs 30 ms each.
+RELIGHT_DEG = 2.0
+RELIGHT_RGB = 0.03
+
+
+def still_lit(lit: LitVolume, lights: Lights) -> bool:
+    """Whether `lit` is lit closely enough for a sky with these lights (`scene_lights`;
+    RELIGHT_DEG, RELIGHT_RGB)."""
+    rgb = np.asarray(lights.rgb)
+    if lit.light_rgb.shape != rgb.shape:
+        return False
+    return close_directions(lit.light_dirs, lights.directions, RELIGHT_DEG) and bool(
+        np.abs(lit.light_rgb - rgb).max() <= RELIGHT_RGB
+    )
+
+
 def lights_key(sky: SkyParams) -> tuple[object, ...]:
     """What a tower's light depends on in the sky: the lights' (quantised) directions and
     their colours to a hundredth."""
@@ -292,7 +344,14 @@ def lit_volume(volume: TowerVolume, step_n: int, sky: SkyParams) -> LitVolume:
     texels = np.clip(channels * 255.0 + 0.5, 0.0, 255.0).astype(np.uint8)
     texels = np.ascontiguousarray(np.moveaxis(texels.reshape(nz, ny, nx, TEXTURES, 4), 3, 0))
     texels.flags.writeable = False
-    return LitVolume((volume.spec, step_n, lights_key(sky)), texels, occupied_part(density))
+    lights = scene_lights(sky)
+    return LitVolume(
+        key=(volume.spec, step_n, lights_key(sky)),
+        texels=texels,
+        occupied=occupied_part(density),
+        light_dirs=np.asarray(lights.directions, np.float64),
+        light_rgb=np.asarray(lights.rgb, np.float64),
+    )
 
 
 def occupied_part(

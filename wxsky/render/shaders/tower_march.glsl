@@ -30,6 +30,7 @@ uniform vec3 u_hi;
 uniform float u_noise_per_m;
 uniform float u_erosion;  // how much of a thin cell's density the noise may take
 uniform float u_sharpen;
+uniform int u_steps;       // samples along a ray through the cloudy part
 uniform vec3 u_weights[6];
 uniform vec3 u_ambient;
 uniform float u_ext_per_m;  // extinction per metre at density 1
@@ -53,9 +54,9 @@ void main() {
     float leave = min(min(hi.x, hi.y), hi.z);
     vec4 acc = vec4(0.0);
     if (leave > enter) {
-        float dt = (leave - enter) / float(STEPS);
+        float dt = (leave - enter) / float(u_steps);
         float keep = 1.0;
-        for (int i = 0; i < STEPS; ++i) {
+        for (int i = 0; i < u_steps; ++i) {
             vec3 p = u_eye + dir * (enter + (float(i) + 0.5) * dt);
             vec3 tc = p / (2.0 * u_half) + 0.5;
             vec4 b = texture(u_light1, tc);
