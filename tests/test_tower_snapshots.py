@@ -48,28 +48,27 @@ def _cloud_cover(renderer: Renderer, engine: SkyEngine, heading: float) -> float
     return float(1.0 - through)
 
 
-def _covers(
-    state: WeatherState, renderer: Renderer, minutes: tuple[int, ...] = (0, 10, 20)
-) -> list[float]:
-    """Cloud cover averaged over four headings at +0, +10 and +20 minutes, each picture as
-    `wxsky snapshot --time` takes it: the clock then, the weather set at the preset's time,
-    so the clouds have drifted and the towers grown since."""
-    covers = []
-    for m in minutes:
-        later = dataclasses.replace(state, time_utc=state.time_utc + timedelta(minutes=m))
-        with SkyEngine(later, Camera((0.0, 0.0, 500.0)), SceneSettings(), clock_rate=0.0) as e:
-            e.drift_for(60.0 * m)
-            covers.append(float(np.mean([_cloud_cover(renderer, e, h) for h in HEADINGS])))
-    return covers
+def _cover_at(state: WeatherState, renderer: Renderer, minutes: int) -> float:
+    """Cloud cover averaged over four headings `minutes` after the preset's time, as `wxsky
+    snapshot --time` takes it: the clock then, the weather set at the preset's time, so the
+    clouds have drifted and the towers grown since."""
+    later = dataclasses.replace(state, time_utc=state.time_utc + timedelta(minutes=minutes))
+    with SkyEngine(later, Camera((0.0, 0.0, 500.0)), SceneSettings(), clock_rate=0.0) as e:
+        e.drift_for(60.0 * minutes)
+        return float(np.mean([_cloud_cover(renderer, e, h) for h in HEADINGS]))
 
 
 def test_towering_cumulus_covers_more_sky_as_its_towers_grow() -> None:
     state = WeatherState().apply(load_preset("towering-cumulus"))
+    # In calm air the clouds stay where they are: what grows is the towers alone. (At +0
+    # nothing has drifted yet: the same picture. Calm and windy in turn, so each sky's
+    # towers are stepped on from the last picture, not from their births again.)
+    calm_state = dataclasses.replace(state, wind=())
+    covers, calm = [], []
     with Renderer(128) as renderer:
-        covers = _covers(state, renderer)
-        # In calm air the clouds stay where they are: what grows is the towers alone.
-        # (At +0 nothing has drifted yet: the same picture.)
-        calm = covers[:1] + _covers(dataclasses.replace(state, wind=()), renderer, (10, 20))
+        for minutes in (0, 10, 20):
+            covers.append(_cover_at(state, renderer, minutes))
+            calm.append(covers[0] if minutes == 0 else _cover_at(calm_state, renderer, minutes))
         assert renderer.towers.drawn > 0
     assert covers[0] < covers[1] < covers[2], covers
     # Measured: 0.709, 0.713, 0.722 (the towers' share of a sky 70 % covered by cumulus).

@@ -22,7 +22,7 @@ from collections import OrderedDict
 
 from wxsky.scene.shading_harris import Lights, scene_lights
 from wxsky.scene.sky import SkyParams
-from wxsky.scene.tower_field import LitVolume, TowerShow, lit_volume, still_lit
+from wxsky.scene.tower_field import LitVolume, TowerShow, lights_key, lit_volume, still_lit
 from wxsky.towers.volume import STEP_S, TowerSpec, TowerVolume
 
 log = logging.getLogger(__name__)
@@ -40,6 +40,27 @@ StepKey = tuple[TowerSpec, int]  # a tower and an automaton step
 VOLUMES_KEPT = 64
 _volumes: OrderedDict[TowerSpec, tuple[TowerVolume, threading.Lock]] = OrderedDict()
 _volumes_lock = threading.Lock()
+
+
+# Lit steps made in this process, shared too: engines for the same weather at the same time
+# (a snapshot tool's headings, its calm and windy skies) light each step once. 2 MiB each.
+LIT_SHARED = 32
+_shared_lit: OrderedDict[tuple[object, ...], LitVolume] = OrderedDict()
+
+
+def shared_lit(key: tuple[object, ...]) -> LitVolume | None:
+    with _volumes_lock:
+        found = _shared_lit.get(key)
+        if found is not None:
+            _shared_lit.move_to_end(key)
+        return found
+
+
+def share_lit(lit: LitVolume) -> None:
+    with _volumes_lock:
+        _shared_lit[lit.key] = lit
+        while len(_shared_lit) > LIT_SHARED:
+            _shared_lit.popitem(last=False)
 
 
 def tower_volume(spec: TowerSpec) -> tuple[TowerVolume, threading.Lock]:
@@ -162,9 +183,12 @@ class TowerWork:
 
     def _make(self, key: StepKey, sky: SkyParams) -> LitVolume:
         spec, step = key
-        volume, stepping = tower_volume(spec)
-        with stepping:
-            made = lit_volume(volume, step, sky)
+        made = shared_lit((spec, step, lights_key(sky)))
+        if made is None:
+            volume, stepping = tower_volume(spec)
+            with stepping:
+                made = lit_volume(volume, step, sky)
+            share_lit(made)
         with self._lock:
             self._lit[key] = made
             self._lit.move_to_end(key)
