@@ -3,6 +3,11 @@
 20 km, and the same storm shedding snow, for docs/gallery/.
 
     .venv/bin/python tools/storm_gallery.py [--out docs/gallery/cb-rain-shaft.png]
+    .venv/bin/python tools/storm_gallery.py --ring-radius-m 24000 \
+        --out docs/gallery/cb-tower-rain-shaft.png
+
+With `--ring-radius-m 24000` the storms 20 km off are in the near layer, so the nearest grow as
+cumulonimbus towers (docs/towers.md) instead of the ring's sprite clouds.
 
 The thunderstorm preset's cumulonimbus layer alone at 1/8, in clear air (80 km visibility, so
 a storm 20 km off is not lost in the haze), from 2,500 m looking a little down: the shafts
@@ -43,6 +48,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("docs/gallery/cb-rain-shaft.png"))
     parser.add_argument("--size", default="640x360")
+    parser.add_argument("--ring-radius-m", type=float, default=SceneSettings().ring_radius_m)
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     camera = Camera(
@@ -56,7 +62,8 @@ def main() -> int:
     tiles = []
     with Renderer(SceneSettings().ring_texture_px) as renderer:
         for weather in (("+TSRA",), ("+SHSN",), ()):
-            tiles.append(take_snapshot(storm(weather), camera, SceneSettings(), renderer).image)
+            settings = SceneSettings(ring_radius_m=args.ring_radius_m)
+            tiles.append(take_snapshot(storm(weather), camera, settings, renderer).image)
     gap = np.full((height, 4, 4), 255, np.uint8)
     image = np.concatenate([tiles[0], gap, tiles[1], gap, tiles[2]], axis=1)
     args.out.parent.mkdir(parents=True, exist_ok=True)

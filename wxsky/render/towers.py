@@ -29,7 +29,6 @@ from wxsky.scene.shading_harris import EXPOSURE
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.tower_field import MAX_LIGHTS, OCCUPIED_FLOOR, LitVolume, TowerShow
 from wxsky.scene.tower_shading import view_weights
-from wxsky.towers.lighting import EXTINCTION_PER_CELL
 from wxsky.towers.volume import STEP_S, TowerSpec
 
 MARCH_STEPS = 40  # samples along a ray through the cloudy part of the box: one in 1-2 cells
@@ -40,7 +39,9 @@ TEXEL_SHARE = 0.6
 IMPOSTOR_MAX_PX = 256
 VOLUMES_KEPT = 32  # lit steps kept as textures (2 MiB each at 64^3)
 NOISE_TEXELS = 32
-NOISE_TILE_M = 500.0  # the detail noise repeats this often: billows of 15-60 m
+# The detail noise repeats every this many of the tower's cells (500 m for a congestus's
+# 60 m cells): billows a quarter to an eighth of that; a cumulonimbus's are as much larger.
+NOISE_TILE_CELLS = 8.0
 EROSION = 0.6
 VIEW_EXTINCTION = 6.0
 SHARPEN = 1.0
@@ -329,9 +330,14 @@ class TowerPass:
         _set(prog, "u_hi", _vec(np.minimum(quad.hi, half)))
         _write(prog, "u_weights", padded.tobytes())
         _set(prog, "u_ambient", _vec(ambient))
-        _set(prog, "u_ext_per_m", self.view_extinction * EXTINCTION_PER_CELL / cell_m)
-        _set(prog, "u_noise_per_m", 1.0 / NOISE_TILE_M)
-        _set(prog, "u_erosion", float(self.erosion))
+        _set(prog, "u_ext_per_m", self.view_extinction * spec.extinction_per_cell / cell_m)
+        tile_m = NOISE_TILE_CELLS * spec.cell_m
+        _set(prog, "u_noise_per_m", 1.0 / tile_m)
+        # Billows finer than two texels of the image would alias into a pattern: the detail
+        # fades out as the tower's image gets coarser than an eighth of the tile.
+        texel_m = 2.0 * float(np.linalg.norm(quad.axis_u)) / quad.size[0]
+        detail = min(1.0, max(0.0, 2.0 - texel_m / (tile_m / 8.0)))
+        _set(prog, "u_erosion", float(self.erosion) * detail)
         _set(prog, "u_sharpen", float(self.sharpen))
         _set(prog, "u_steps", int(self.march_steps))
         light0, light1 = self._textures(image.volume)

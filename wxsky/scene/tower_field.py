@@ -334,7 +334,7 @@ def lights_key(sky: SkyParams) -> tuple[object, ...]:
 def lit_volume(volume: TowerVolume, step_n: int, sky: SkyParams) -> LitVolume:
     """Step `step_n` of a tower's volume lit for `sky`, as the renderer's textures take it."""
     density = volume.density_of_step(step_n)
-    light = tower_light(density, sky)  # (nz, ny, nx, L)
+    light = tower_light(density, sky, volume.spec.extinction_per_cell)  # (nz, ny, nx, L)
     if light.shape[-1] > MAX_LIGHTS:
         raise ValueError(f"{light.shape[-1]} lights; a lit tower holds {MAX_LIGHTS}")
     nz, ny, nx = density.shape

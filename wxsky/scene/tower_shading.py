@@ -18,19 +18,23 @@ from wxsky.scene.shading_harris import (
     scene_lights,
 )
 from wxsky.scene.sky import SkyParams
-from wxsky.towers.lighting import slice_light
+from wxsky.towers.lighting import EXTINCTION_PER_CELL, slice_light
 
 F32 = npt.NDArray[np.float32]
 
 
-def tower_light(density: F32, sky: SkyParams) -> F32:
+def tower_light(density: F32, sky: SkyParams, extinction: float = EXTINCTION_PER_CELL) -> F32:
     """(nz, ny, nx, L) light 0..1 reaching every cell of `density` (z up, x east, y north)
     from each of the sky's L lights (`scene_lights`), multiple scattering included: what does
     not depend on the eye, worked out once per volume and sky (the renderer keeps it in
-    textures and scatters it toward the eye per view, `view_weights`)."""
+    textures and scatters it toward the eye per view, `view_weights`). `extinction`: per
+    cell at density 1 (`TowerSpec.extinction_per_cell`)."""
     lights = scene_lights(sky)
     reach = np.stack(
-        [slice_light(density, (float(x), float(y), float(z))) for x, y, z in lights.directions],
+        [
+            slice_light(density, (float(x), float(y), float(z)), extinction)
+            for x, y, z in lights.directions
+        ],
         axis=-1,
     )
     out: F32 = multiple_scattering(reach.astype(np.float32))

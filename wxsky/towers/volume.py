@@ -31,6 +31,9 @@ GRIDS = (64, 128)
 # has a box this much larger.
 BOX_WIDTH_PER_TOWER = 1.0 / 0.6
 BOX_HEIGHT_PER_TOWER = 1.0 / 0.9
+# Extinction per metre at density 1: a congestus's cells (about 60 m) take the slice light's
+# 0.35 a cell (towers.lighting.EXTINCTION_PER_CELL).
+EXTINCTION_PER_M = 0.35 / 60.0
 _TURRET_STREAM = 1  # the cell's stream for its shape (turret offsets), apart from the draws
 
 
@@ -79,6 +82,18 @@ class TowerSpec:
         """The box's middle, in the layer's drifting frame (z MSL): over the axis, its floor
         at the base."""
         return (self.axis_m[0], self.axis_m[1], self.base_m + 0.5 * self.box_size_m[2])
+
+    @property
+    def cell_m(self) -> float:
+        """The mean edge of a grid cell."""
+        return sum(self.box_size_m) / (3.0 * self.grid)
+
+    @property
+    def extinction_per_cell(self) -> float:
+        """Light's extinction through a cell of density 1: cloud's extinction per metre
+        (EXTINCTION_PER_M) over the cell's size, so a cumulonimbus's bigger cells (its box
+        is kilometres wider and taller) shadow more than a congestus's do."""
+        return EXTINCTION_PER_M * self.cell_m
 
     def age_s(self, since_set_s: float) -> float:
         """The tower's age `since_set_s` sim seconds after its weather was set (negative: not
