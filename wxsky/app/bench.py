@@ -98,6 +98,11 @@ class BenchResult:
     # Untimed frames before the timed ones, until the first ring was shown (`lead_in`).
     lead_in_frames: int = 0
     lead_in_s: float = 0.0
+    # Convective towers: how many a frame drew (median), and the tower thread's work (the
+    # automaton, smoothing and lighting of lit steps) during the timed frames.
+    towers: list[int] = field(default_factory=list)
+    tower_work_s: float = 0.0
+    tower_steps_lit: int = 0
 
     @property
     def frames(self) -> int:
@@ -125,6 +130,12 @@ class BenchResult:
             },
             "ring_events": dict(self.events),
             "ring_build_ms": _summary(self.build_s),
+            "towers": {
+                "median": statistics.median(self.towers) if self.towers else 0,
+                "steps_lit": self.tower_steps_lit,
+                "work_ms_per_frame": 1000.0 * self.tower_work_s / max(1, self.frames),
+                "work_ms_per_step": 1000.0 * self.tower_work_s / max(1, self.tower_steps_lit),
+            },
             **(
                 {
                     "order_check": {
@@ -169,6 +180,13 @@ class BenchResult:
                 f"{self.events.get('impostor_rendered', 0)} impostors rendered, "
                 f"{self.events.get('crossfade_done', 0)} fades done; builds on the worker "
                 f"median {b['median']:.0f} ms"
+            )
+        t = d["towers"]
+        if t["median"]:
+            lines.append(
+                f"towers: median {t['median']:.0f} a frame; {t['steps_lit']} steps lit on their "
+                f"thread ({t['work_ms_per_step']:.0f} ms of CPU each), "
+                f"{t['work_ms_per_frame']:.2f} ms of that work a frame"
             )
         if self.order_diff:
             o = d["order_check"]
@@ -327,7 +345,9 @@ def run_bench(
             while True:
                 plan = draw(0.0, dt_s if drawn else 0.0)
                 ring_shown = plan.rings.current is not None and plan.rings.incoming is None
-                if ring_shown and renderer.towers.behind == 0:
+                # ... and every tower drawn, with no lit step still owed to it (the steady state
+                # lights a step per tower every 10 s of sim time, not minutes of them at once).
+                if ring_shown and renderer.towers.behind == 0 and engine.towers_pending == 0:
                     break
                 if time.perf_counter() - t_lead > LEAD_IN_LIMIT_S:
                     log.warning(
@@ -339,6 +359,7 @@ def run_bench(
             result.lead_in_s = time.perf_counter() - t_lead
         previous_keys: npt.NDArray[np.uint64] | None = None
         profiler = renderer.start_profile() if profile else None
+        work_before, lit_before = engine.tower_work_s, engine.tower_steps_lit
         loop_start = time.perf_counter()
         for k in range(frames):
             plan = draw(k * dt_s, dt_s if drawn else 0.0)
@@ -348,6 +369,7 @@ def run_bench(
             for name in STAGES:
                 result.stage_s[name].append(times.frame.get(name, 0.0))
             result.sprites.append(len(plan.frame.near))
+            result.towers.append(len(plan.frame.towers))
             for e in plan.events:
                 result.events[e.event] = result.events.get(e.event, 0) + 1
             result.dropped.append(plan.frame.near_dropped)
@@ -359,6 +381,8 @@ def run_bench(
                     result.order_diff.append(diff)
                 previous_keys = keys
         result.frames_s = time.perf_counter() - loop_start
+        result.tower_work_s = engine.tower_work_s - work_before
+        result.tower_steps_lit = engine.tower_steps_lit - lit_before
         result.build_s = list(build_s)
         if profiler is not None:
             from wxsky.render.profile import measure_fill_limits

@@ -434,6 +434,15 @@ class SkyEngine:
         self._epochs = epochs
 
     @property
+    def tower_work_s(self) -> float:
+        """Seconds the towers' lit steps have taken to make (automaton, smoothing, light)."""
+        return self._towers.busy_s
+
+    @property
+    def tower_steps_lit(self) -> int:
+        return self._towers.lit_count
+
+    @property
     def towers_pending(self) -> int:
         """Lit tower steps asked for by frames and not made yet (the bench's lead-in waits
         for none)."""

@@ -18,6 +18,7 @@ import dataclasses
 import logging
 import os
 import threading
+import time
 from collections import OrderedDict
 
 from wxsky.scene.shading_harris import Lights, scene_lights
@@ -92,7 +93,9 @@ class TowerWork:
         self._lock = threading.Condition()
         self._closed = False
         self._thread: threading.Thread | None = None
-        self.made = 0  # lit steps made, for the bench and tests
+        self.made = 0  # lit steps handed out, for the bench and tests
+        self.lit_count = 0  # of which lit here (not found made by another engine)
+        self.busy_s = 0.0  # the CPU time that lighting took
         if mode == "async":
             self._thread = threading.Thread(target=self._run, name="wxsky-towers", daemon=True)
             self._thread.start()
@@ -185,10 +188,14 @@ class TowerWork:
         spec, step = key
         made = shared_lit((spec, step, lights_key(sky)))
         if made is None:
+            t0 = time.thread_time()  # CPU time: the thread waits behind the frames at nice 10
             volume, stepping = tower_volume(spec)
             with stepping:
                 made = lit_volume(volume, step, sky)
             share_lit(made)
+            with self._lock:
+                self.busy_s += time.thread_time() - t0
+                self.lit_count += 1
         with self._lock:
             self._lit[key] = made
             self._lit.move_to_end(key)
