@@ -13,6 +13,7 @@ import pytest
 
 from wxsky.output.wire import WireError, pack_data, unpack_data
 from wxsky.scene.camera import Camera
+from wxsky.scene.tower_field import LayerEpoch
 from wxsky.settings.presets import load_preset
 from wxsky.share.messages import (
     ClockTick,
@@ -40,7 +41,14 @@ WHEN = datetime(2026, 6, 21, 13, 0, 0, 123456, tzinfo=UTC)
 def _state(preset: str = "thunderstorm", **changes: Any) -> SkyState:
     weather = dataclasses.replace(WeatherState().apply(load_preset(preset)), time_utc=WHEN)
     drift = tuple((0.1 + i / 3.0, -7.25 * i) for i in range(len(weather.layers)))
-    base = SkyState("default", MASTER, 12, 5, weather, weather, WHEN, drift, 1.0)
+    # The storm's stratus and stratocumulus make no towers; its cumulonimbus was set 25
+    # minutes ago and has been clearing for 2.
+    epochs = (
+        None,
+        None,
+        LayerEpoch(WHEN - timedelta(minutes=25), 52.5, WHEN - timedelta(minutes=2), 6.0),
+    )
+    base = SkyState("default", MASTER, 12, 5, weather, weather, WHEN, drift, 1.0, epochs)
     return dataclasses.replace(base, **changes)
 
 
@@ -60,6 +68,13 @@ def test_a_state_decodes_to_what_the_master_sent_to_the_microsecond() -> None:
     assert got == sent
     assert got.applied.time_utc == WHEN and got.anchor_utc == sent.anchor_utc
     assert sky_id(got) == sky_id(sent)
+
+
+def test_a_state_from_a_master_without_towers_keeps_the_channels_own_epochs() -> None:
+    message = encode_state(_state())
+    assert len(message["tower_epochs"]) == 3 and message["tower_epochs"][0] is None
+    del message["tower_epochs"]
+    assert decode_state(_over_the_wire(message), "default").tower_epochs == ()
 
 
 def test_the_sky_id_names_what_makes_the_cloud_field() -> None:
@@ -126,6 +141,13 @@ def _with(message: dict[str, Any], path: tuple[Any, ...], value: object) -> dict
         (("applied", "visibility_m"), -5.0, "applied"),
         (("applied", "observer"), KeyError, "applied: missing 'observer'"),
         (("target", "layers", 0, "type"), "kumulus", "target"),
+        (("tower_epochs",), [None], "tower_epochs has 1 entries for 3 layers"),
+        (("tower_epochs", 2), [1, 2], "tower_epochs[2] must be [set_us"),
+        (("tower_epochs", 2, 0), -5, "tower_epochs[2]: set_us = -5 is outside"),
+        (("tower_epochs", 2, 1), 95.0, "sun_elevation_deg = 95.0 is outside"),
+        (("tower_epochs", 2, 2), "soon", "cut_us must be an integer"),
+        (("tower_epochs", 2, 3), float("nan"), "cover_oktas = nan is outside"),
+        (("tower_epochs",), "all", "tower_epochs must be a list"),
         (("applied", "seed"), "seven", "applied"),
     ],
 )

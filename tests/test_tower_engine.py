@@ -89,6 +89,20 @@ def test_clearing_air_cuts_the_supply_once_and_a_return_restores_it() -> None:
         assert e._epochs[key].cut_utc is None
 
 
+def test_a_display_channel_shows_the_masters_towers_at_the_masters_ages() -> None:
+    state = _tc()
+    settings = SceneSettings(max_towers=3)
+    with (
+        SkyEngine(state, _camera(state), settings, clock_rate=0.0) as master,
+        SkyEngine(state, _camera(state), settings, clock_rate=0.0) as channel,
+    ):
+        master.drift_for(300.0)  # its towers five minutes older than the channel's own
+        channel.follow(master.shared())
+        mine = {t.spec: t.age_s for t in master.advance(0.0).frame.towers}
+        theirs = {t.spec: t.age_s for t in channel.advance(0.0).frame.towers}
+    assert mine and mine == theirs
+
+
 def test_more_cells_than_the_budget_is_a_trace_event_not_a_collapse() -> None:
     state = _tc()
     with SkyEngine(state, _camera(state), SceneSettings(max_towers=2), clock_rate=0.0) as e:

@@ -336,6 +336,7 @@ class SharePart:
                 weather_version=state.weather_version,
                 camera=self.engine.camera,
                 aircraft_m=None,
+                tower_epochs=state.tower_epochs,
             )
         )
 
@@ -441,6 +442,7 @@ def _sky_state(site: str, master_id: str, sequence: int, sky: SharedSky) -> SkyS
         anchor_utc=sky.anchor_utc,
         anchor_drift=sky.anchor_drift,
         clock_rate=sky.clock_rate,
+        tower_epochs=sky.tower_epochs,
     )
 
 

@@ -99,6 +99,8 @@ class SharedSky:
     weather_version: int
     camera: Camera
     aircraft_m: tuple[float, float, float] | None
+    # Per applied layer, its towers' epoch (None: no towers); empty: the follower keeps its own.
+    tower_epochs: tuple[LayerEpoch | None, ...] = ()
 
 
 class SkyEngine:
@@ -568,6 +570,7 @@ class SkyEngine:
                 weather_version=self.weather_version,
                 camera=self._camera,
                 aircraft_m=self._aircraft_m,
+                tower_epochs=tuple(self._epochs.get(k) for k in layer_keys(self._state.layers)),
             )
 
     @property
@@ -595,6 +598,15 @@ class SkyEngine:
             self.clock_rate = sky.clock_rate
             self._settled = settled(applied, target)
             self._drift = self._drift_at(now)
+            # The master's towers' ages, so every channel shows the same towers; a master
+            # that sends none leaves the channel timing them from what it has seen.
+            if len(sky.tower_epochs) == len(applied.layers):
+                keys = layer_keys(applied.layers)
+                self._epochs = {
+                    k: e for k, e in zip(keys, sky.tower_epochs, strict=True) if e is not None
+                }
+            else:
+                self._update_epochs()
             if changed or anchored:
                 self.weather_version += 1
                 self.target_version += 1

@@ -24,6 +24,7 @@ from typing import Any
 from wxsky.errors import ProtocolError
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift
+from wxsky.scene.tower_field import LayerEpoch
 from wxsky.weather.state import WeatherState, weather_from_dict, weather_to_dict
 
 SHARE_VERSION = 1
@@ -62,6 +63,9 @@ class SkyState:
     anchor_utc: datetime  # the drift is anchor_drift, moved by each layer's wind since then
     anchor_drift: Drift
     clock_rate: float
+    # Per applied layer, when its weather was set (the towers' ages, scene/tower_field.py);
+    # empty from a master that sends none: the channel then times its towers itself.
+    tower_epochs: tuple[LayerEpoch | None, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -102,7 +106,33 @@ def encode_state(s: SkyState) -> dict[str, Any]:
         "anchor_us": time_to_us(s.anchor_utc),
         "anchor_drift": [[dx, dy] for dx, dy in s.anchor_drift],
         "clock_rate": s.clock_rate,
+        "tower_epochs": [_encode_epoch(e) for e in s.tower_epochs],
     }
+
+
+def _encode_epoch(e: LayerEpoch | None) -> list[float | int] | None:
+    if e is None:
+        return None
+    cut = -1 if e.cut_utc is None else time_to_us(e.cut_utc)
+    return [time_to_us(e.set_utc), e.sun_elevation_deg, cut, e.cover_oktas]
+
+
+def _decode_epoch(value: object, where: str) -> LayerEpoch | None:
+    if value is None:
+        return None
+    shape = f"state: {where} must be [set_us, sun_elevation_deg, cut_us or -1, cover_oktas]"
+    if not isinstance(value, list) or len(value) != 4:
+        raise ShareError(shape)
+    m = dict(zip(("set_us", "sun_elevation_deg", "cut_us", "cover_oktas"), value, strict=True))
+    m["kind"] = f"state: {where}"
+    set_us = _int(m, "set_us", 0, _MAX_US)
+    cut_us = _int(m, "cut_us", -1, _MAX_US)
+    return LayerEpoch(
+        set_utc=time_from_us(set_us),
+        sun_elevation_deg=_float(m, "sun_elevation_deg", -90.0, 90.0),
+        cut_utc=None if cut_us < 0 else time_from_us(cut_us),
+        cover_oktas=_float(m, "cover_oktas", 0.0, 8.0),
+    )
 
 
 def decode_state(data: object, site: str) -> SkyState:
@@ -117,6 +147,14 @@ def decode_state(data: object, site: str) -> SkyState:
         raise ShareError(
             f"state: anchor_drift has {len(drift)} entries for {len(applied.layers)} layers"
         )
+    epochs: tuple[LayerEpoch | None, ...] = ()
+    if "tower_epochs" in m:  # a master from before the towers sends none
+        items = _list(m, "tower_epochs", _MAX_LAYERS)
+        epochs = tuple(_decode_epoch(v, f"tower_epochs[{i}]") for i, v in enumerate(items))
+        if len(epochs) != len(applied.layers):
+            raise ShareError(
+                f"state: tower_epochs has {len(epochs)} entries for {len(applied.layers)} layers"
+            )
     return SkyState(
         site=site,
         master_id=_text(m, "master_id", r"[0-9a-f]{8,64}"),
@@ -127,6 +165,7 @@ def decode_state(data: object, site: str) -> SkyState:
         anchor_utc=time_from_us(_int(m, "anchor_us", 0, _MAX_US)),
         anchor_drift=drift,
         clock_rate=_float(m, "clock_rate", 0.0, 10_000.0),
+        tower_epochs=epochs,
     )
 
 
