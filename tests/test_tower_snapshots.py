@@ -71,7 +71,7 @@ def test_towering_cumulus_covers_more_sky_as_its_towers_grow() -> None:
             calm.append(covers[0] if minutes == 0 else _cover_at(calm_state, renderer, minutes))
         assert renderer.towers.drawn > 0
     assert covers[0] < covers[1] < covers[2], covers
-    # Measured: 0.709, 0.713, 0.722 (the towers' share of a sky 70 % covered by cumulus).
+    # Measured: 0.708, 0.712, 0.719 (the towers' share of a sky 70 % covered by cumulus).
     assert calm[0] + 0.002 < calm[1] < calm[2] - 0.002, calm
 
 
