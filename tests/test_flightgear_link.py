@@ -1,0 +1,161 @@
+"""The sockets to FlightGear (wxsky/inputs/flightgear_link.py; issue 18), over real loopback
+sockets: pose lines in on UDP, counted and dropped as they deserve; the weather out to a
+props server as `set` lines, only what changed, everything again after a reconnect, and a
+FlightGear that is not there yet (or stops answering) never holding up the caller. The peer
+here is a plain socket that records what it is sent; the FlightGear end to end test runs fgfs
+itself (tests/test_flightgear_fgfs.py, when it is installed)."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+import pytest
+
+from wxsky.inputs.flightgear_link import FlightGearPose, FlightGearWeather
+from wxsky.protocols.flightgear import FgPose, weather_properties
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import WeatherState
+
+GOOD = "21.3245000,-157.9251000,1500.00,90.000,2.500,-1.000,90.000,-5.000,55.00,2026-07-15T13:30:00"
+
+
+def _until(check: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not check():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.02)
+
+
+def test_pose_lines_arrive_and_bad_ones_are_counted() -> None:
+    got: list[FgPose] = []
+    with FlightGearPose("127.0.0.1", 0, got.append) as pose:
+        out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            out.sendto(GOOD.encode() + b"\n", pose.address)
+            out.sendto(GOOD.replace("21.3245000", "nan").encode(), pose.address)
+            out.sendto(b"\x00\xff garbage", pose.address)
+            # Two lines in one datagram (FlightGear's frames bunched up).
+            later = GOOD.replace("13:30:00", "13:30:01")
+            out.sendto(f"{GOOD}\n{later}\n".encode(), pose.address)
+            _until(lambda: pose.stats.messages == 3 and pose.stats.errors == 2)
+        finally:
+            out.close()
+        assert [p.time_utc.second for p in got] == [0, 0, 1]
+        assert pose.last_pose == got[-1]
+        status = pose.stats.to_dict()
+        assert status["kind"] == "flightgear" and status["ok"] is True
+        assert status["last_pose"]["view_heading_deg"] == 0.0
+        assert "not ASCII" in pose.stats.last_error or "fields" in pose.stats.last_error
+    pose.close()  # idempotent
+
+
+class _PropsPeer:
+    """A listening TCP socket that records the lines each connection sends."""
+
+    def __init__(self) -> None:
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.port = self.server.getsockname()[1]
+        self.lines: list[list[str]] = []
+        self._conn: socket.socket | None = None
+        self._thread = threading.Thread(target=self._accept, daemon=True)
+        self._thread.start()
+
+    def _accept(self) -> None:
+        try:
+            conn, _ = self.server.accept()
+        except OSError:
+            return
+        self._conn = conn
+        mine: list[str] = []
+        self.lines.append(mine)
+        buf = b""
+        while True:
+            try:
+                data = conn.recv(65536)
+            except OSError:
+                return
+            if not data:
+                return
+            buf += data
+            *done, buf = buf.split(b"\r\n")
+            mine.extend(d.decode() for d in done)
+
+    def drop(self) -> None:
+        """The connection goes, as when FlightGear quits; a new one is then accepted."""
+        assert self._conn is not None
+        self._conn.shutdown(socket.SHUT_RDWR)  # the FIN FlightGear's exit sends
+        self._conn.close()
+        self._thread.join(2.0)
+        self._thread = threading.Thread(target=self._accept, daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self.server.close()
+        if self._conn is not None:
+            with contextlib.suppress(OSError):
+                self._conn.shutdown(socket.SHUT_RDWR)
+            self._conn.close()
+
+
+@pytest.fixture
+def peer():
+    p = _PropsPeer()
+    yield p
+    p.close()
+
+
+def test_the_weather_is_written_then_only_what_changes(peer: _PropsPeer) -> None:
+    state = WeatherState().apply(load_preset("thunderstorm"))
+    props = weather_properties(state)
+    with FlightGearWeather("127.0.0.1", peer.port, min_interval_s=0.05) as fg:
+        fg.offer(state)
+        _until(lambda: bool(peer.lines) and len(peer.lines[0]) >= 3 + len(props))
+        first = peer.lines[0]
+        assert first[:3] == [
+            "data",
+            "set /environment/params/metar-updates-environment 0",
+            "set /environment/config/enabled 0",
+        ]
+        assert first[3:] == [f"set {p} {v}" for p, v in props]
+        assert fg.stats.ok and fg.stats.messages == len(props)
+        fg.offer(state)  # the same weather: nothing to write
+        clearer = dataclasses.replace(state, visibility_m=9000.0)
+        fg.offer(clearer)
+        _until(lambda: any("9000" in line for line in first[3 + len(props) :]))
+        written = first[3 + len(props) :]
+        assert all("visibility-m 9000" in line for line in written)
+        assert len(written) == 1 + 1 + 3  # the layer's, the boundary's and three aloft
+        # FlightGear restarts: the writer reconnects and writes everything again.
+        peer.drop()
+        fg.offer(clearer)
+        _until(lambda: len(peer.lines) == 2 and len(peer.lines[1]) >= 3 + len(props))
+        assert peer.lines[1][0] == "data"
+        assert fg.stats.ok
+    assert fg.stats.detail["last_write"]["properties"] == len(props)
+
+
+def test_a_flightgear_not_there_is_retried_and_never_holds_up_the_caller() -> None:
+    with socket.socket() as probe:  # a port nothing listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    state = WeatherState().apply(load_preset("thunderstorm"))
+    fg = FlightGearWeather("127.0.0.1", port, min_interval_s=0.05)
+    try:
+        t0 = time.monotonic()
+        for _ in range(100):
+            fg.offer(state)
+        assert time.monotonic() - t0 < 0.5
+        _until(lambda: fg.stats.errors >= 2)  # tried, backed off, tried again
+        assert not fg.stats.ok
+        assert f"127.0.0.1:{port}" in fg.stats.last_error
+        assert "\n" not in fg.stats.last_error
+    finally:
+        t0 = time.monotonic()
+        fg.close()
+        assert time.monotonic() - t0 < 1.5
+    fg.close()

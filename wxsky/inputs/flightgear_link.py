@@ -1,0 +1,227 @@
+"""The sockets to FlightGear (issue 18; the one module that owns them): its pose stream in (the
+generic protocol over UDP, `plugins/flightgear/Protocol/wxsky.xml`) and wxsky's weather out to
+its telnet/props server.
+
+Both run on threads of their own and never hold up the daemon's tick: FlightGear's props
+server stalls for seconds when its frames are slow, and FlightGear may restart at any time.
+The writer keeps only the latest weather offered, writes the properties that changed (all of
+them after a connect, as a restarted FlightGear has forgotten them), at most every
+`min_interval_s`, and reconnects with back-off while FlightGear is away (`ok` false then).
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+from wxsky.inputs.stats import InputStats
+from wxsky.protocols.flightgear import TAKE_OVER, FgPose, parse_pose, weather_properties
+from wxsky.weather.state import WeatherState
+
+log = logging.getLogger(__name__)
+
+MAX_DATAGRAM = 2048
+BACKOFF_S = (0.5, 10.0)  # first and longest wait between connection attempts
+CONNECT_TIMEOUT_S = 2.0
+SEND_TIMEOUT_S = 5.0  # a props server stalled this long is treated as gone
+
+
+class FlightGearPose:
+    """Receives FlightGear's pose lines on a UDP socket and hands each good pose to
+    `on_pose` (on this object's thread); bad lines are counted, with the last reason."""
+
+    def __init__(
+        self, host: str, port: int, on_pose: Callable[[FgPose], None], name: str = "flightgear"
+    ) -> None:
+        self.stats = InputStats(f"{name}:pose", "flightgear")
+        self._on_pose = on_pose
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind((host, port))
+        self._sock.settimeout(0.2)
+        self.address = self._sock.getsockname()
+        self.last_pose: FgPose | None = None
+        self._closed = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="wxsky-fg-pose", daemon=True)
+        self._thread.start()
+
+    def close(self, wait_s: float = 1.0) -> None:
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        self._thread.join(wait_s)
+        self._sock.close()
+
+    def __enter__(self) -> FlightGearPose:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _run(self) -> None:
+        while not self._closed.is_set():
+            try:
+                data = self._sock.recv(MAX_DATAGRAM)
+            except TimeoutError:
+                continue
+            except OSError:
+                if self._closed.is_set():
+                    return
+                raise
+            # A datagram holds one line, or a few if FlightGear's frames bunched up.
+            for line in data.splitlines():
+                if not line.strip():
+                    continue
+                got = parse_pose(line)
+                if got.pose is None:
+                    self.stats.error(got.error)
+                    continue
+                self.stats.message()
+                self.last_pose = got.pose
+                self.stats.detail["last_pose"] = {
+                    "lat_deg": got.pose.lat_deg,
+                    "lon_deg": got.pose.lon_deg,
+                    "alt_m": round(got.pose.alt_m, 2),
+                    "view_heading_deg": round(got.pose.view_heading_deg, 3),
+                    "time_utc": got.pose.time_utc.isoformat(),
+                }
+                try:
+                    self._on_pose(got.pose)
+                except Exception:  # a bug downstream must not end the stream
+                    log.exception("flightgear pose handler failed")
+
+
+class FlightGearWeather:
+    """Writes wxsky's applied weather into FlightGear through its props server."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        min_interval_s: float = 2.0,
+        name: str = "flightgear",
+    ) -> None:
+        self.host, self.port = host, port
+        self.min_interval_s = min_interval_s
+        self.stats = InputStats(f"{name}:weather", "flightgear", ok=False)
+        self._latest: WeatherState | None = None
+        self._offered = 0  # bumped by every offer
+        self._sent: dict[str, str] = {}
+        self._wake = threading.Condition()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="wxsky-fg-weather", daemon=True)
+        self._thread.start()
+
+    def offer(self, state: WeatherState) -> None:
+        """The weather to write next (never blocks; only the latest offered is written)."""
+        with self._wake:
+            self._latest = state
+            self._offered += 1
+            self._wake.notify()
+
+    def close(self, wait_s: float = 1.0) -> None:
+        with self._wake:
+            if self._closed:
+                return
+            self._closed = True
+            self._wake.notify_all()
+        self._thread.join(wait_s)
+        if self._thread.is_alive():
+            log.warning("flightgear: the props server did not let go within %.1f s", wait_s)
+
+    def __enter__(self) -> FlightGearWeather:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _run(self) -> None:
+        wait_s = BACKOFF_S[0]
+        while not self._is_closed():
+            try:
+                conn = socket.create_connection((self.host, self.port), CONNECT_TIMEOUT_S)
+            except OSError as exc:
+                self._gone(
+                    f"cannot reach FlightGear's props server at {self.host}:{self.port}: "
+                    f"{exc.strerror or exc}"
+                )
+                if self._sleep(wait_s):
+                    return
+                wait_s = min(BACKOFF_S[1], wait_s * 2.0)
+                continue
+            wait_s = BACKOFF_S[0]
+            try:
+                with conn:
+                    conn.settimeout(SEND_TIMEOUT_S)
+                    self._serve(conn)
+            except OSError as exc:
+                self._gone(f"FlightGear's props server went away: {exc.strerror or exc}")
+                if self._sleep(wait_s):
+                    return
+
+    def _serve(self, conn: socket.socket) -> None:
+        """One connection: take FlightGear's weather over, then write what changes."""
+        self._sent = {}  # a new connection: FlightGear may have restarted
+        conn.sendall(b"data\r\n" + b"".join(_set(p, v) for p, v in TAKE_OVER))
+        self.stats.ok = True
+        self.stats.detail["connected"] = f"{self.host}:{self.port}"
+        written = -1  # the latest weather offered is written whole on a new connection
+        while True:
+            with self._wake:
+                while (self._latest is None or self._offered == written) and not self._closed:
+                    self._wake.wait(0.5)
+                    _check_open(conn)  # a FlightGear that quit while nothing changed
+                if self._closed:
+                    return
+                state, written = self._latest, self._offered
+            assert state is not None
+            _check_open(conn)
+            changed = [(p, v) for p, v in weather_properties(state) if self._sent.get(p) != v]
+            if changed:
+                conn.sendall(b"".join(_set(p, v) for p, v in changed))
+                self._sent.update(changed)
+                self.stats.message(len(changed))
+                self.stats.detail["last_write"] = {
+                    "properties": len(changed),
+                    "time_utc": state.time_utc.isoformat(),
+                }
+            if self._sleep(self.min_interval_s):
+                return
+
+    def _gone(self, why: str) -> None:
+        if self.stats.ok or self.stats.last_error != why:
+            log.warning("flightgear: %s", why)
+        self.stats.ok = False
+        self.stats.error(why)
+
+    def _is_closed(self) -> bool:
+        with self._wake:
+            return self._closed
+
+    def _sleep(self, seconds: float) -> bool:
+        """Wait `seconds` or until closed; True when closed."""
+        deadline = time.monotonic() + seconds
+        with self._wake:
+            while not self._closed:
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    return False
+                self._wake.wait(left)
+            return True
+
+
+def _check_open(conn: socket.socket) -> None:
+    """Raise ConnectionResetError if the props server has closed the connection; drop what it
+    said (in data mode it says nothing, but an error message is not worth keeping)."""
+    readable, _, _ = select.select([conn], [], [], 0.0)
+    if not readable:
+        return
+    if not conn.recv(65536):
+        raise ConnectionResetError("FlightGear closed the connection")
+
+
+def _set(path: str, value: str) -> bytes:
+    return f"set {path} {value}\r\n".encode("ascii")
