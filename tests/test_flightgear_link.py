@@ -13,6 +13,8 @@ import socket
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -159,3 +161,58 @@ def test_a_flightgear_not_there_is_retried_and_never_holds_up_the_caller() -> No
         fg.close()
         assert time.monotonic() - t0 < 1.5
     fg.close()
+
+
+def test_a_daemon_follows_flightgears_pose_and_writes_it_the_weather(
+    tmp_path: Path, peer: _PropsPeer
+) -> None:
+    """`wxsky run --flightgear-pose ... --flightgear ...`: pose lines move the camera (the
+    place, the view's direction and field of view), bad ones are counted in the status, and
+    the applied weather reaches the props server."""
+    from daemon_harness import running_daemon
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        pose_port = probe.getsockname()[1]
+    args = (
+        "--preset",
+        "thunderstorm",
+        "--flightgear-pose",
+        f"udp:127.0.0.1:{pose_port}",
+        "--flightgear",
+        f"tcp:127.0.0.1:{peer.port}",
+    )
+    with running_daemon(tmp_path, args=args) as d:
+        site = WeatherState().apply(load_preset("thunderstorm")).observer
+        # 0.01 degrees north of the site, 1,500 ft, heading 090 with the view 90 left: north.
+        line = (
+            f"{site.lat_deg + 0.01:.7f},{site.lon_deg:.7f},1500.00,90.000,0.000,0.000,"
+            "90.000,-5.000,55.00,2026-07-22T15:00:00\n"
+        )
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+
+            def status() -> dict[str, Any]:
+                with d.client() as c:
+                    return c.call("status")
+
+            def moved() -> bool:
+                out.sendto(line.encode(), ("127.0.0.1", pose_port))
+                out.sendto(b"nan,1,2\n", ("127.0.0.1", pose_port))
+                cam = status()["camera"]
+                return abs(cam["position_m"][1] - 1112.0) < 20.0
+
+            _until(moved, 30.0)
+        s = status()
+        cam = s["camera"]
+        assert cam["heading_deg"] == pytest.approx(0.0, abs=1e-6)
+        assert cam["pitch_deg"] == pytest.approx(-5.0)
+        assert cam["fov_deg"] == pytest.approx(55.0)
+        assert cam["position_m"][2] == pytest.approx(1500.0 * 0.3048, abs=0.01)
+        inputs = {i["name"]: i for i in s["inputs"]}
+        pose = inputs["flightgear:pose"]
+        assert pose["kind"] == "flightgear" and pose["messages"] >= 1 and pose["errors"] >= 1
+        assert "fields" in pose["last_error"]
+        _until(lambda: bool(peer.lines) and len(peer.lines[0]) > 10, 30.0)
+        assert peer.lines[0][0] == "data"
+        assert "set /environment/clouds/layer[2]/coverage broken" in peer.lines[0]
+        _until(lambda: {i["name"]: i for i in status()["inputs"]}["flightgear:weather"]["ok"])

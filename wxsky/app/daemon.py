@@ -37,6 +37,7 @@ from wxsky.app.control import (
     set_aircraft,
     set_time,
 )
+from wxsky.app.flightgear_part import FlightGearPart
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.share_part import SharePart
 from wxsky.app.trace import TraceWriter
@@ -107,6 +108,8 @@ class Daemon:
         trace_path: Path | None = None,
         cigi: Sequence[str] = (),
         cigi_send: Sequence[str] = (),
+        flightgear: str | None = None,
+        flightgear_pose: str | None = None,
     ) -> None:
         self.config = config
         self._trace_path = trace_path
@@ -185,6 +188,15 @@ class Daemon:
         for name, stats in self._cigi.stats():
             if name in self.inputs:
                 raise ConfigError(f"two inputs are named {name!r}")
+            self.inputs[name] = stats
+        self._flightgear = FlightGearPart(
+            self.engine,
+            config.flightgear,
+            set_camera=self._set_camera,
+            props=flightgear,
+            pose=flightgear_pose,
+        )
+        for name, stats in self._flightgear.stats():
             self.inputs[name] = stats
         self._share = SharePart(self.engine, config)
         if self._share.role == "channel":
@@ -279,6 +291,7 @@ class Daemon:
             self._feed_tasks.append(asyncio.create_task(feed.run_supervised(self._stop)))
             log.info("METAR feed %s", feed.source.name)
         await self._cigi.start()
+        await self._flightgear.start()
         await self._share.start(self.fps)
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
@@ -308,6 +321,7 @@ class Daemon:
             self._count_frame()
             self._broadcast_frame(plan, meta)
             self._cigi.frame_published(meta.frame_number, host_frames, plan.state)
+            self._flightgear.frame_published(plan.state)
             # The frame's sim time is the clock's at the frame's start (`now`, the loop's
             # monotonic clock): a master ticks that pair, not the later moment of publishing.
             self._share.after_frame(plan.state.time_utc, now)  # a master: its tick and state
@@ -351,6 +365,7 @@ class Daemon:
         for feed in self._feeds:
             feed.close()
         self._cigi.close()
+        self._flightgear.close()
         if self._links:
             await self._close_links(max(0.05, timeout / 4))
         if self._server is not None:

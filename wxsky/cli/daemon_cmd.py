@@ -90,6 +90,20 @@ def add_commands(sub: Subparsers) -> None:
         help="send the applied weather to a CIGI image generator there each frame "
         "(repeatable; adds to [cigi] send_to in the config)",
     )
+    run.add_argument(
+        "--flightgear",
+        type=Checked("--flightgear", _tcp_spec),
+        metavar="tcp:HOST:PORT",
+        help="write the applied weather to a FlightGear's telnet/props server there, e.g. "
+        "tcp:127.0.0.1:5501 (plugins/flightgear/README.md; over [flightgear] props)",
+    )
+    run.add_argument(
+        "--flightgear-pose",
+        type=Checked("--flightgear-pose", _udp_spec),
+        metavar="udp:HOST:PORT",
+        help="take the camera from a FlightGear's pose stream arriving there, e.g. "
+        "udp:127.0.0.1:5505 (over [flightgear] pose)",
+    )
     share = run.add_argument_group(
         "one sky on several daemons (docs/channels.md)",
     )
@@ -263,6 +277,13 @@ def _udp_spec(spec: str) -> str:
     return spec
 
 
+def _tcp_spec(spec: str) -> str:
+    from wxsky.app.flightgear_part import parse_tcp
+
+    parse_tcp(spec, "--flightgear")
+    return spec
+
+
 def _can_spec(spec: str) -> Any:
     from wxsky.settings.config import CanInputSection
 
@@ -330,6 +351,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         can=args.can,
         cigi=args.cigi,
         cigi_send=args.cigi_send,
+        flightgear=args.flightgear,
+        flightgear_pose=args.flightgear_pose,
         trace_path=args.trace,
     )
     return asyncio.run(daemon.run())

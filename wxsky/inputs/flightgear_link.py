@@ -35,9 +35,14 @@ class FlightGearPose:
     `on_pose` (on this object's thread); bad lines are counted, with the last reason."""
 
     def __init__(
-        self, host: str, port: int, on_pose: Callable[[FgPose], None], name: str = "flightgear"
+        self,
+        host: str,
+        port: int,
+        on_pose: Callable[[FgPose], None],
+        name: str = "flightgear",
+        stats: InputStats | None = None,
     ) -> None:
-        self.stats = InputStats(f"{name}:pose", "flightgear")
+        self.stats = stats or InputStats(f"{name}:pose", "flightgear")
         self._on_pose = on_pose
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind((host, port))
@@ -103,10 +108,11 @@ class FlightGearWeather:
         port: int,
         min_interval_s: float = 2.0,
         name: str = "flightgear",
+        stats: InputStats | None = None,
     ) -> None:
         self.host, self.port = host, port
         self.min_interval_s = min_interval_s
-        self.stats = InputStats(f"{name}:weather", "flightgear", ok=False)
+        self.stats = stats or InputStats(f"{name}:weather", "flightgear", ok=False)
         self._latest: WeatherState | None = None
         self._offered = 0  # bumped by every offer
         self._sent: dict[str, str] = {}

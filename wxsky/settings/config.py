@@ -384,6 +384,27 @@ class CigiSection(_Section):
     send_byte_order: str = _opt("big", Text(choices=("big", "little")))
 
 
+_TCP = r"tcp:(\[[0-9A-Fa-f:.]+\]|[^:\[\]\s]+):[0-9]{1,5}"
+
+
+@dataclass(frozen=True)
+class FlightGearSection(_Section):
+    """`[flightgear]`: a FlightGear coupled to wxsky (plugins/flightgear/README.md)."""
+
+    SECTION: ClassVar[str] = "flightgear"
+
+    # FlightGear's telnet/props server, tcp:HOST:PORT, to write the applied weather to (also
+    # `wxsky run --flightgear`); empty: none.
+    props: str = _opt("", Text(pattern=rf"({_TCP})?", pattern_desc="empty or tcp:HOST:PORT"))
+    # Where FlightGear's generic-protocol pose stream arrives, udp:HOST:PORT (also
+    # `wxsky run --flightgear-pose`); empty: none. Its aircraft and view move the camera.
+    pose: str = _opt("", Text(pattern=rf"({_UDP})?", pattern_desc="empty or udp:HOST:PORT"))
+    # Which side owns the sim clock: wxsky's own, or FlightGear's UTC from the pose stream.
+    clock: str = _opt("wxsky", Text(choices=("wxsky", "flightgear")))
+    # The weather is written at most this often (FlightGear's props server is slow).
+    write_interval_s: float = _opt(2.0, _num(0.1, 60.0, "s"))
+
+
 _ZENOH = r"(tcp|udp|quic|tls|unixsock-stream)/[^\s]{1,200}"
 ZENOH_ENDPOINT = Text(
     pattern=rf"({_ZENOH})?", pattern_desc="empty or a Zenoh locator such as tcp/127.0.0.1:7447"
@@ -438,6 +459,7 @@ class DaemonConfig:
     serial: tuple[SerialInputSection, ...] = ()  # [[serial]] tables
     can: tuple[CanInputSection, ...] = ()  # [[can]] tables
     cigi: CigiSection = field(default_factory=CigiSection)
+    flightgear: FlightGearSection = field(default_factory=FlightGearSection)
     share: ShareSection = field(default_factory=ShareSection)
     channel: ChannelSection = field(default_factory=ChannelSection)
 
