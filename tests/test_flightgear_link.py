@@ -23,7 +23,10 @@ from wxsky.protocols.flightgear import FgPose, weather_properties
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
-GOOD = "21.3245000,-157.9251000,1500.00,90.000,2.500,-1.000,90.000,-5.000,55.00,2026-07-15T13:30:00"
+GOOD = (
+    "21.3245000,-157.9251000,1500.00,90.000,2.500,-1.000,90.000,-5.000,55.00,12.0,"
+    "2026-07-15T13:30:00"
+)
 
 
 def _until(check: Callable[[], bool], timeout_s: float = 10.0) -> None:
@@ -187,7 +190,7 @@ def test_a_daemon_follows_flightgears_pose_and_writes_it_the_weather(
         # 0.01 degrees north of the site, 1,500 ft, heading 090 with the view 90 left: north.
         line = (
             f"{site.lat_deg + 0.01:.7f},{site.lon_deg:.7f},1500.00,90.000,0.000,0.000,"
-            "90.000,-5.000,55.00,2026-07-22T15:00:00\n"
+            "90.000,-5.000,55.00,1400.0,2026-07-22T15:00:00\n"
         )
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
 
@@ -216,3 +219,36 @@ def test_a_daemon_follows_flightgears_pose_and_writes_it_the_weather(
         assert peer.lines[0][0] == "data"
         assert "set /environment/clouds/layer[2]/coverage broken" in peer.lines[0]
         _until(lambda: {i["name"]: i for i in status()["inputs"]}["flightgear:weather"]["ok"])
+
+
+def test_a_far_pose_makes_a_new_site_on_flightgears_ground_and_its_clock_can_rule() -> None:
+    """The part's handling of one pose, in process: Honolulu, far from the preset's Zurich,
+    becomes the site at FlightGear's terrain height (not Zurich's 432 m: a descent over the
+    sea would go below wxsky's ground), the camera where FlightGear's view is, and with
+    clock = flightgear, FlightGear's UTC."""
+    from wxsky.app.control import camera_from_params
+    from wxsky.app.flightgear_part import FlightGearPart
+    from wxsky.engine.stages import SkyEngine
+    from wxsky.protocols.flightgear import parse_pose
+    from wxsky.scene.camera import Camera
+    from wxsky.scene.layout import SceneSettings
+    from wxsky.settings.config import FlightGearSection
+
+    state = WeatherState().apply(load_preset("fair-cumulus"))
+    with SkyEngine(state, Camera((0.0, 0.0, 500.0)), SceneSettings(), clock_rate=0.0) as e:
+
+        def set_camera(params: dict[str, Any]) -> None:
+            e.set_camera(camera_from_params(e, params, (960, 540)))
+
+        part = FlightGearPart(e, FlightGearSection(clock="flightgear"), set_camera=set_camera)
+        pose = parse_pose(GOOD).pose
+        assert pose is not None
+        part._on_pose(pose)
+        obs = e.target.observer
+        assert (obs.lat_deg, obs.lon_deg) == (pose.lat_deg, pose.lon_deg)
+        assert obs.alt_m == pytest.approx(12.0 * 0.3048)
+        cam = e.camera
+        assert cam.position_m[2] == pytest.approx(1500.0 * 0.3048)
+        assert (cam.heading_deg, cam.fov_deg) == (pytest.approx(0.0), 55.0)
+        assert e.state.time_utc == pose.time_utc
+        assert part.stats() == []  # no sockets asked for: no inputs to list

@@ -26,7 +26,10 @@ from wxsky.units import FT_TO_M
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState, WindLayer
 
 PROTOCOL = Path(__file__).resolve().parents[1] / "plugins" / "flightgear" / "Protocol" / "wxsky.xml"
-GOOD = "21.3245000,-157.9251000,1500.00,90.000,2.500,-1.000,90.000,-5.000,55.00,2026-07-15T13:30:00"
+GOOD = (
+    "21.3245000,-157.9251000,1500.00,90.000,2.500,-1.000,90.000,-5.000,55.00,12.0,"
+    "2026-07-15T13:30:00"
+)
 
 
 def test_the_protocol_file_writes_the_fields_the_parser_reads_in_its_order() -> None:
@@ -48,6 +51,7 @@ def test_a_pose_line_is_the_aircraft_the_view_and_the_time() -> None:
     assert (p.lat_deg, p.lon_deg) == (21.3245, -157.9251)
     assert p.alt_m == pytest.approx(1500.0 * FT_TO_M)
     assert (p.heading_deg, p.pitch_deg, p.roll_deg, p.fov_deg) == (90.0, 2.5, -1.0, 55.0)
+    assert p.ground_m == pytest.approx(12.0 * FT_TO_M)
     # The view turned 90 degrees left of an eastbound aircraft looks north, 5 degrees down
     # from the aircraft's 2.5 up.
     assert p.view_heading_deg == pytest.approx(0.0)
@@ -59,9 +63,10 @@ def test_a_pose_line_is_the_aircraft_the_view_and_the_time() -> None:
 @pytest.mark.parametrize(
     ("line", "reason"),
     [
-        ("", "has 1 fields, expected 10"),
-        (GOOD.rsplit(",", 1)[0], "has 9 fields"),
-        (GOOD + ",1", "has 11 fields"),
+        ("", "has 1 fields, expected 11"),
+        (GOOD.rsplit(",", 1)[0], "has 10 fields"),
+        (GOOD + ",1", "has 12 fields"),
+        (GOOD.replace(",12.0,", ",-9999.0,"), "ground-elev-ft = -9999 is outside"),
         (GOOD.replace("21.3245000", "nan"), "latitude-deg is nan (FlightGear resetting?)"),
         (GOOD.replace("1500.00", "-9999.00"), "altitude-ft = -9999 is outside"),
         (GOOD.replace("1500.00", "inf"), "altitude-ft is inf"),

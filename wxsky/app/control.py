@@ -18,6 +18,7 @@ from wxsky.logs import clip
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX, Camera
 from wxsky.schema import (
     REQUIRED,
+    Bool,
     Custom,
     Field,
     Invalid,
@@ -90,7 +91,7 @@ def _camera_table(max_size: tuple[int, int]) -> Table:
 SET_TIME = Table(
     {"time_utc": Field(Custom(_iso_time, "an ISO 8601 time")), "rate": Field(CLOCK_RATE)}
 )
-APPLY_PRESET = Table({"name": Field(PRESET_NAME)})
+APPLY_PRESET = Table({"name": Field(PRESET_NAME), "keep_site": Field(Bool())})
 RELEASE = Table({"source": Field(Text(choices=("control", "cockpit")), "control")})
 APPLY_METAR = Table(
     {
@@ -179,7 +180,14 @@ def set_time(engine: SkyEngine, params: dict[str, Any]) -> None:
         engine.clock_rate = rate
 
 
-def apply_preset(engine: SkyEngine, params: dict[str, Any], preset_dirs: Sequence[Path]) -> str:
+def apply_preset(
+    engine: SkyEngine,
+    params: dict[str, Any],
+    preset_dirs: Sequence[Path],
+    keep_site: bool = False,
+) -> str:
+    """`keep_site` (or the request's): the preset's weather where the camera is, not its own
+    site (the default while a simulator's pose places the camera, e.g. FlightGear's)."""
     from wxsky.settings.presets import load_preset
 
     v = checked_params("apply_preset", APPLY_PRESET, params)
@@ -188,6 +196,8 @@ def apply_preset(engine: SkyEngine, params: dict[str, Any], preset_dirs: Sequenc
     # A preset applied at run time is an instructor's override: it beats the METAR feed
     # until released. The clock is the one thing it does not hold.
     patch = dataclasses.replace(load_preset(v["name"], preset_dirs), source=Source.CONTROL)
+    if v.get("keep_site", keep_site):
+        patch = dataclasses.replace(patch, observer=None)
     engine.apply(patch)
     name: str = v["name"]
     return name

@@ -238,7 +238,9 @@ class Daemon:
             "set_camera": self._set_camera,
             "set_aircraft": lambda p: set_aircraft(self.engine, p),
             "set_time": lambda p: set_time(self.engine, p),
-            "apply_preset": lambda p: apply_preset(self.engine, p, config.presets.dirs),
+            "apply_preset": lambda p: apply_preset(
+                self.engine, p, config.presets.dirs, keep_site=self._flightgear.follows_pose
+            ),
             "release": lambda p: release(self.engine, p),
             "apply_metar": lambda p: apply_metar(self.engine, p),
             "export_textures": self._export_textures,

@@ -53,6 +53,12 @@ class FlightGearPart:
         self._weather_stats = InputStats("flightgear:weather", "flightgear", ok=False)
 
     @property
+    def follows_pose(self) -> bool:
+        """FlightGear's aircraft places the camera: a preset applied at run time brings its
+        weather here rather than moving the site to its own place."""
+        return self._pose_addr is not None
+
+    @property
     def enabled(self) -> bool:
         return self._props_addr is not None or self._pose_addr is not None
 
@@ -100,10 +106,12 @@ class FlightGearPart:
 
     def _on_pose(self, pose: FgPose) -> None:
         try:
+            # The place first: a far one becomes a new site on FlightGear's terrain height
+            # (a preset's site would keep its own, and a descent over the sea would go below
+            # wxsky's ground); then the camera there.
+            self.engine.move_observer(pose.lat_deg, pose.lon_deg, ground_m=pose.ground_m)
             self._set_camera(
                 {
-                    "lat_deg": pose.lat_deg,
-                    "lon_deg": pose.lon_deg,
                     "alt_m": pose.alt_m,
                     "heading_deg": pose.view_heading_deg,
                     "pitch_deg": pose.view_pitch_deg,

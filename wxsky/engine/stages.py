@@ -326,16 +326,17 @@ class SkyEngine:
                 self.move_observer(*update.position_deg)
             return self._target
 
-    def move_observer(self, lat_deg: float, lon_deg: float) -> None:
+    def move_observer(self, lat_deg: float, lon_deg: float, ground_m: float | None = None) -> None:
         """Put the camera over a geodetic position: within `REORIGIN_M` of the observer the
         camera moves in the local frame (same sky); beyond it the position becomes the
-        observer of a new site."""
+        observer of a new site, on the ground at `ground_m` MSL where the caller knows it
+        (a simulator's terrain), else at the old site's height."""
         with self._lock:
             obs = self._stack.base.observer
             east_m, north_m, _ = enu_from_geodetic(obs.lat_deg, obs.lon_deg, lat_deg, lon_deg, 0.0)
             up_m = self._camera.position_m[2]
             if math.hypot(east_m, north_m) > REORIGIN_M:
-                site = Observer(lat_deg, lon_deg, obs.alt_m)
+                site = Observer(lat_deg, lon_deg, obs.alt_m if ground_m is None else ground_m)
                 self.apply(WeatherPatch(source=Source.PRESET, observer=site))
                 east_m = north_m = 0.0
             self._camera = dataclasses.replace(self._camera, position_m=(east_m, north_m, up_m))

@@ -30,11 +30,13 @@ POSE_FIELDS = (
     "view-heading-offset-deg",
     "view-pitch-offset-deg",
     "field-of-view",
+    "ground-elev-ft",
     "gmt",
 )
 MAX_LINE = 512  # characters: a pose line is about 120
 ALT_FT = (-1500.0, 100_000.0)  # FlightGear writes -9999 and nan while it resets
 FOV_DEG = (1.0, 170.0)
+GROUND_FT = (-1500.0, 30_000.0)
 MAX_LAYERS = 5  # /environment/clouds/layer[0..4]
 MAX_ALOFT = 3  # /environment/config/aloft/entry[0..2]
 
@@ -52,6 +54,7 @@ class FgPose:
     view_heading_offset_deg: float  # FlightGear's: positive turns the view left
     view_pitch_offset_deg: float  # positive up
     fov_deg: float  # horizontal
+    ground_m: float  # the terrain under the aircraft, MSL
     time_utc: datetime
 
     @property
@@ -95,7 +98,7 @@ def parse_pose(line: str | bytes) -> PoseLine:
         if not math.isfinite(v):
             return PoseLine(error=f"pose {name} is {raw.strip()[:24]} (FlightGear resetting?)")
         values.append(v)
-    lat, lon, alt_ft, hdg, pitch, roll, v_hdg, v_pitch, fov = values
+    lat, lon, alt_ft, hdg, pitch, roll, v_hdg, v_pitch, fov, ground_ft = values
     checks = (
         ("latitude-deg", lat, -90.0, 90.0),
         ("longitude-deg", lon, -180.0, 180.0),
@@ -106,6 +109,7 @@ def parse_pose(line: str | bytes) -> PoseLine:
         ("view-heading-offset-deg", v_hdg, -360.0, 720.0),
         ("view-pitch-offset-deg", v_pitch, -90.0, 90.0),
         ("field-of-view", fov, *FOV_DEG),
+        ("ground-elev-ft", ground_ft, *GROUND_FT),
     )
     for name, v, lo, hi in checks:
         if not lo <= v <= hi:
@@ -124,6 +128,7 @@ def parse_pose(line: str | bytes) -> PoseLine:
             view_heading_offset_deg=v_hdg,
             view_pitch_offset_deg=v_pitch,
             fov_deg=fov,
+            ground_m=ground_ft * FT_TO_M,
             time_utc=when,
         )
     )
