@@ -186,7 +186,7 @@ class TowerWork:
 
     def _make(self, key: StepKey, sky: SkyParams) -> LitVolume:
         spec, step = key
-        made = shared_lit((spec, step, lights_key(sky)))
+        made = shared_lit((spec, step, lights_key(scene_lights(sky))))
         if made is None:
             t0 = time.thread_time()  # CPU time: the thread waits behind the frames at nice 10
             volume, stepping = tower_volume(spec)

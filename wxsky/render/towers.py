@@ -313,7 +313,6 @@ class TowerPass:
         weights, ambient = view_weights(sky, (vx, vy, vz))
         padded = np.zeros((MAX_LIGHTS, 3), np.float32)  # lights a sky lacks add nothing
         padded[: len(weights)] = weights
-        cell_m = float(np.mean(np.asarray(spec.box_size_m) / spec.grid))
         prog = self._march
         _set(prog, "u_light0", 0)
         _set(prog, "u_light1", 1)
@@ -330,7 +329,7 @@ class TowerPass:
         _set(prog, "u_hi", _vec(np.minimum(quad.hi, half)))
         _write(prog, "u_weights", padded.tobytes())
         _set(prog, "u_ambient", _vec(ambient))
-        _set(prog, "u_ext_per_m", self.view_extinction * spec.extinction_per_cell / cell_m)
+        _set(prog, "u_ext_per_m", self.view_extinction * spec.extinction_per_cell / spec.cell_m)
         tile_m = NOISE_TILE_CELLS * spec.cell_m
         _set(prog, "u_noise_per_m", 1.0 / tile_m)
         # Billows finer than two texels of the image would alias into a pattern: the detail

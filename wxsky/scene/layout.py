@@ -383,10 +383,12 @@ def build_frame(
         split_m = math.dist(split_at_m, eye)
         draw, front = split_at_distance(draw, eye, split_m)
     far_count = 0
-    dist = np.linalg.norm(draw.sprites.centre_m - np.asarray(eye), axis=1)
-    if lod and settings.far_band_m > 0.0 and len(draw):
-        far_count = int(np.count_nonzero(dist >= settings.far_band_m))
     shows = placed.shows
+    far_band = lod and settings.far_band_m > 0.0 and len(draw) > 0
+    if far_band or shows:
+        dist = np.linalg.norm(draw.sprites.centre_m - np.asarray(eye), axis=1)
+    if far_band:
+        far_count = int(np.count_nonzero(dist >= settings.far_band_m))
     if shows:
         at = insert_points(dist, [t.distance_m for t in shows])
         shows = tuple(

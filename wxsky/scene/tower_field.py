@@ -321,10 +321,9 @@ def still_lit(lit: LitVolume, lights: Lights) -> bool:
     )
 
 
-def lights_key(sky: SkyParams) -> tuple[object, ...]:
-    """What a tower's light depends on in the sky: the lights' (quantised) directions and
-    their colours to a hundredth."""
-    lights = scene_lights(sky)
+def lights_key(lights: Lights) -> tuple[object, ...]:
+    """What a tower's light depends on in the sky's lights (`scene_lights`): their
+    (quantised) directions and their colours to a hundredth."""
     return (
         lights.directions.round(4).tobytes(),
         np.round(np.asarray(lights.rgb), 2).tobytes(),
@@ -346,7 +345,7 @@ def lit_volume(volume: TowerVolume, step_n: int, sky: SkyParams) -> LitVolume:
     texels.flags.writeable = False
     lights = scene_lights(sky)
     return LitVolume(
-        key=(volume.spec, step_n, lights_key(sky)),
+        key=(volume.spec, step_n, lights_key(lights)),
         texels=texels,
         occupied=occupied_part(density),
         light_dirs=np.asarray(lights.directions, np.float64),
