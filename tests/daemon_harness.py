@@ -41,11 +41,13 @@ class RunningDaemon:
         return code, time.monotonic() - start
 
 
-def write_config(path: Path, shm_name: str, extra: str = "") -> Path:
+def write_config(path: Path, shm_name: str, extra: str = "", daemon: str = "") -> Path:
+    """The test config: `extra` appended (tables of its own), `daemon` inside [daemon]."""
     path.write_text(
         f"""
 [daemon]
 status_interval_s = 1.0
+{daemon}
 [output]
 shm_name = "{shm_name}"
 max_width = 960
@@ -56,23 +58,57 @@ max_height = 540
     return path
 
 
+@dataclass(frozen=True)
+class DaemonSpec:
+    """A daemon to start: `running_daemon`'s arguments."""
+
+    tmp_path: Path
+    extra_config: str = ""
+    args: tuple[str, ...] = ()
+    prefix: tuple[str, ...] = ()
+    daemon_config: str = ""
+
+
 @contextlib.contextmanager
 def running_daemon(
     tmp_path: Path,
     extra_config: str = "",
     args: tuple[str, ...] = (),
     prefix: tuple[str, ...] = (),
+    daemon_config: str = "",
 ) -> Iterator[RunningDaemon]:
     """`wxsky run` with the config and args; `prefix`: a command it runs under (`ip netns exec
-    NS` for a daemon in a network namespace)."""
+    NS` for a daemon in a network namespace); `daemon_config`: lines for its [daemon] table."""
+    spec = DaemonSpec(tmp_path, extra_config, args, prefix, daemon_config)
+    with running_daemons([spec]) as (daemon,):
+        yield daemon
+
+
+@contextlib.contextmanager
+def running_daemons(specs: list[DaemonSpec]) -> Iterator[tuple[RunningDaemon, ...]]:
+    """Several daemons, all started before any is waited for: their start-ups overlap."""
+    daemons: list[RunningDaemon] = []
+    try:
+        for spec in specs:
+            daemons.append(_start_daemon(spec))
+        for daemon in daemons:
+            _wait_started(daemon)
+        yield tuple(daemons)
+    finally:
+        for daemon in reversed(daemons):
+            _kill(daemon)
+
+
+def _start_daemon(spec: DaemonSpec) -> RunningDaemon:
     shm_name = f"wxsky-test-{uuid.uuid4().hex[:10]}"
-    config = write_config(tmp_path / "wxsky.toml", shm_name, extra_config)
+    tmp_path = spec.tmp_path
+    config = write_config(tmp_path / "wxsky.toml", shm_name, spec.extra_config, spec.daemon_config)
     sock = tmp_path / "wx.sock"
     log_path = tmp_path / "daemon.log"
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(
             [
-                *prefix,
+                *spec.prefix,
                 sys.executable,
                 "-m",
                 "wxsky",
@@ -81,33 +117,39 @@ def running_daemon(
                 str(config),
                 "--control",
                 f"unix:{sock}",
-                *args,
+                *spec.args,
             ],
             stdout=log,
             stderr=subprocess.STDOUT,
             start_new_session=True,
         )
-    daemon = RunningDaemon(proc, sock, shm_name, log_path)
-    try:
-        deadline = time.monotonic() + 60.0
-        while True:
-            if proc.poll() is not None:
-                raise AssertionError(f"daemon exited early ({proc.returncode}):\n{daemon.log()}")
-            if sock.exists():
-                try:
-                    with daemon.client() as c:
-                        if c.call("status")["frames_published"] > 0:
-                            break
-                except Exception:
-                    pass
-            if time.monotonic() > deadline:
-                raise AssertionError(f"daemon did not start:\n{daemon.log()}")
-            time.sleep(0.1)
-        yield daemon
-    finally:
-        if proc.poll() is None:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(f"/dev/shm/{shm_name}")
+    return RunningDaemon(proc, sock, shm_name, log_path)
+
+
+def _wait_started(daemon: RunningDaemon) -> None:
+    """Until the daemon has published a frame (60 s from now at most)."""
+    proc, sock = daemon.proc, daemon.socket_path
+    deadline = time.monotonic() + 60.0
+    while True:
+        if proc.poll() is not None:
+            raise AssertionError(f"daemon exited early ({proc.returncode}):\n{daemon.log()}")
+        if sock.exists():
+            try:
+                with daemon.client() as c:
+                    if c.call("status")["frames_published"] > 0:
+                        return
+            except Exception:
+                pass
+        if time.monotonic() > deadline:
+            raise AssertionError(f"daemon did not start:\n{daemon.log()}")
+        time.sleep(0.1)
+
+
+def _kill(daemon: RunningDaemon) -> None:
+    proc = daemon.proc
+    if proc.poll() is None:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(f"/dev/shm/{daemon.shm_name}")
