@@ -21,7 +21,8 @@ pytestmark = pytest.mark.gl
 # The default preset's observer is Zurich airport, LSZH; LSZH's position comes from the
 # shipped station table, since plain-line feeds carry none.
 STEP_S = 0.2
-COVER_PER_MIN = 30.0  # 0.1 okta per 0.2 s step
+# 0.4 okta per 0.2 s step: a new overcast layer takes 20 steps (4 s) to come in.
+COVER_PER_MIN = 120.0
 
 CONFIG = f"""
 [camera]
@@ -123,10 +124,10 @@ def test_preset_apply_holds_against_the_feed_until_released(tmp_path: Path) -> N
         status = _wait(daemon, lambda s: s["target"]["sources"]["layers"] == "control", "preset")
         assert _covers(status["target"]) == [("stratus", 8.0)]
         assert status["overrides"]["layers"]["source"] == "control"
+        polls = _metar_input(status)["fetches"]
         _write(feed, _report("SCT050"))
-        time.sleep(1.0)  # five polls
+        status = _wait(daemon, lambda s: _metar_input(s)["fetches"] >= polls + 3, "three polls")
         with daemon.client() as c:
-            status = c.call("status")
             assert _covers(status["target"]) == [("stratus", 8.0)]
             released = c.call("release", {})
         assert "layers" in released["released"]
