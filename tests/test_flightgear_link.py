@@ -25,7 +25,7 @@ from wxsky.weather.state import WeatherState
 
 GOOD = (
     "21.3245000,-157.9251000,1500.00,90.000,2.500,-1.000,90.000,-5.000,55.00,12.0,"
-    "2026-07-15T13:30:00"
+    "21.3245000,-157.9251000,1504.00,1,2026-07-15T13:30:00"
 )
 
 
@@ -190,7 +190,8 @@ def test_a_daemon_follows_flightgears_pose_and_writes_it_the_weather(
         # 0.01 degrees north of the site, 1,500 ft, heading 090 with the view 90 left: north.
         line = (
             f"{site.lat_deg + 0.01:.7f},{site.lon_deg:.7f},1500.00,90.000,0.000,0.000,"
-            "90.000,-5.000,55.00,1400.0,2026-07-22T15:00:00\n"
+            f"90.000,-5.000,55.00,1400.0,{site.lat_deg + 0.01:.7f},{site.lon_deg:.7f},"
+            "1500.00,1,2026-07-22T15:00:00\n"
         )
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
 
@@ -248,7 +249,51 @@ def test_a_far_pose_makes_a_new_site_on_flightgears_ground_and_its_clock_can_rul
         assert (obs.lat_deg, obs.lon_deg) == (pose.lat_deg, pose.lon_deg)
         assert obs.alt_m == pytest.approx(12.0 * 0.3048)
         cam = e.camera
-        assert cam.position_m[2] == pytest.approx(1500.0 * 0.3048)
+        assert cam.position_m[2] == pytest.approx(1504.0 * 0.3048)  # the pilot's eye
         assert (cam.heading_deg, cam.fov_deg) == (pytest.approx(0.0), 55.0)
         assert e.state.time_utc == pose.time_utc
+        assert e.shared().aircraft_m is None  # the pilot's eye: no split
         assert part.stats() == []  # no sockets asked for: no inputs to list
+        # A chase view 100 m south of the aircraft and 100 ft below: the camera there, looking
+        # at the aircraft, which is where the near layer is split.
+        chase = GOOD.replace(
+            "21.3245000,-157.9251000,1504.00,1,", "21.3235954,-157.9251000,1400.00,0,"
+        )
+        pose = parse_pose(chase).pose
+        assert pose is not None
+        part._on_pose(pose)
+        cam = e.camera
+        assert cam.position_m[1] == pytest.approx(-100.0, abs=0.1)
+        assert cam.position_m[2] == pytest.approx(1400.0 * 0.3048)
+        assert cam.heading_deg == pytest.approx(0.0, abs=0.01) and cam.roll_deg == 0.0
+        aircraft = e.shared().aircraft_m
+        assert aircraft is not None
+        assert aircraft == pytest.approx((0.0, 0.0, 1500.0 * 0.3048), abs=0.01)
+
+
+def test_a_preset_kept_at_the_site_comes_through_the_transition() -> None:
+    """`apply_preset` with keep_site (the default while FlightGear places the camera): the
+    preset's weather here, in this sky's cloud field, reached through the transition; without
+    it, the preset's own site and seed, a different sky at once."""
+    from wxsky.app.control import apply_preset
+    from wxsky.engine.stages import SkyEngine
+    from wxsky.scene.camera import Camera
+    from wxsky.scene.layout import SceneSettings
+    from wxsky.weather.transition import TransitionRates
+
+    start = WeatherState().apply(load_preset("fair-cumulus"))
+    here = dataclasses.replace(start.observer, lat_deg=21.3245, lon_deg=-157.9251, alt_m=4.0)
+    with SkyEngine(
+        dataclasses.replace(start, observer=here),
+        Camera((0.0, 0.0, 500.0)),
+        SceneSettings(),
+        rates=TransitionRates(),  # the daemon's defaults
+    ) as e:
+        apply_preset(e, {"name": "overcast-stratus"}, (), keep_site=True)
+        stratus = load_preset("overcast-stratus")
+        assert e.target.observer == here and e.target.seed == start.seed
+        assert [lay.type for lay in e.target.layers] == [lay.type for lay in stratus.layers or ()]
+        assert not e.settled and e.state.layers == start.layers  # on its way, not there
+        apply_preset(e, {"name": "overcast-stratus", "keep_site": False}, ())
+        assert e.target.observer == stratus.observer and e.target.seed == stratus.seed
+        assert e.settled and e.state.layers == e.target.layers  # a new sky: at once

@@ -28,8 +28,10 @@ from wxsky.weather.state import CloudLayer, CloudType, WeatherState, WindLayer
 PROTOCOL = Path(__file__).resolve().parents[1] / "plugins" / "flightgear" / "Protocol" / "wxsky.xml"
 GOOD = (
     "21.3245000,-157.9251000,1500.00,90.000,2.500,-1.000,90.000,-5.000,55.00,12.0,"
-    "2026-07-15T13:30:00"
+    "21.3245000,-157.9251000,1504.00,1,2026-07-15T13:30:00"
 )
+# The same aircraft seen from a chase camera 100 m south of it and 100 ft lower.
+CHASE = GOOD.replace("21.3245000,-157.9251000,1504.00,1,", "21.3235954,-157.9251000,1400.00,0,")
 
 
 def test_the_protocol_file_writes_the_fields_the_parser_reads_in_its_order() -> None:
@@ -56,16 +58,37 @@ def test_a_pose_line_is_the_aircraft_the_view_and_the_time() -> None:
     # from the aircraft's 2.5 up.
     assert p.view_heading_deg == pytest.approx(0.0)
     assert p.view_pitch_deg == pytest.approx(-2.5)
+    assert p.view_roll_deg == -1.0  # from inside, the view rolls with the aircraft
+    assert p.internal and p.viewer_alt_m == pytest.approx(1504.0 * FT_TO_M)
     assert p.time_utc == datetime(2026, 7, 15, 13, 30, tzinfo=UTC)
     assert parse_pose(GOOD.encode() + b"\r\n").pose == p  # bytes, a CR LF end
+
+
+def test_a_view_from_outside_looks_at_the_aircraft_level() -> None:
+    p = parse_pose(CHASE).pose
+    assert p is not None and not p.internal
+    # From 100 m south and 100 ft (30.48 m) below: north, up by atan(30.48 / 100); the
+    # aircraft's heading and the view's offsets no longer say where the eye looks.
+    assert p.view_heading_deg == pytest.approx(0.0, abs=0.01)
+    assert p.view_pitch_deg == pytest.approx(16.95, abs=0.05)
+    assert p.view_roll_deg == 0.0
+    # An outside eye at the aircraft itself (a view being switched) looks where it heads.
+    at = parse_pose(
+        CHASE.replace("21.3235954,-157.9251000,1400.00", "21.3245000,-157.9251000,1500.00")
+    )
+    assert at.pose is not None and at.pose.view_heading_deg == pytest.approx(0.0)
+    assert at.pose.view_pitch_deg == pytest.approx(-2.5)
 
 
 @pytest.mark.parametrize(
     ("line", "reason"),
     [
-        ("", "has 1 fields, expected 11"),
-        (GOOD.rsplit(",", 1)[0], "has 10 fields"),
-        (GOOD + ",1", "has 12 fields"),
+        ("", "has 1 fields, expected 15"),
+        (GOOD.rsplit(",", 1)[0], "has 14 fields"),
+        (GOOD + ",1", "has 16 fields"),
+        (GOOD.replace("21.3245000,-157.9251000,1504.00,1,", ""), "(an older Protocol/wxsky.xml?)"),
+        (GOOD.replace(",1,2026", ",2,2026"), "view-internal = 2 is outside 0..1"),
+        (GOOD.replace("1504.00", "nan"), "viewer-elev-ft is nan"),
         (GOOD.replace(",12.0,", ",-9999.0,"), "ground-elev-ft = -9999 is outside"),
         (GOOD.replace("21.3245000", "nan"), "latitude-deg is nan (FlightGear resetting?)"),
         (GOOD.replace("1500.00", "-9999.00"), "altitude-ft = -9999 is outside"),

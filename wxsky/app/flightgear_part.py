@@ -1,5 +1,6 @@
 """The daemon's FlightGear side (issue 18; plugins/flightgear/README.md): FlightGear's pose
-stream moves the camera (its aircraft's place, the view's direction and field of view) and,
+stream moves the camera (the view's eye, direction and field of view; from a chase view, the
+aircraft is where the near layer splits for the host to draw it between clouds) and,
 when it owns the clock, sets the sim time; each published frame's applied weather is offered
 to FlightGear's props server, so FlightGear sees wxsky's transitions as they happen.
 
@@ -22,6 +23,7 @@ from wxsky.inputs.flightgear_link import FlightGearPose, FlightGearWeather
 from wxsky.inputs.stats import InputStats
 from wxsky.protocols.flightgear import FgPose
 from wxsky.settings.config import FlightGearSection
+from wxsky.weather.geo import enu_from_geodetic
 from wxsky.weather.state import Source, WeatherState
 
 log = logging.getLogger("wxsky.app.flightgear")
@@ -106,22 +108,34 @@ class FlightGearPart:
 
     def _on_pose(self, pose: FgPose) -> None:
         try:
-            # The place first: a far one becomes a new site on FlightGear's terrain height
-            # (a preset's site would keep its own, and a descent over the sea would go below
-            # wxsky's ground); then the camera there.
-            self.engine.move_observer(pose.lat_deg, pose.lon_deg, ground_m=pose.ground_m)
+            # The eye's place first: a far one becomes a new site on FlightGear's terrain
+            # height (a preset's site would keep its own, and a descent over the sea would go
+            # below wxsky's ground); then the camera there, looking where FlightGear's view
+            # looks.
+            self.engine.move_observer(
+                pose.viewer_lat_deg, pose.viewer_lon_deg, ground_m=pose.ground_m
+            )
             self._set_camera(
                 {
-                    "alt_m": pose.alt_m,
+                    "alt_m": pose.viewer_alt_m,
                     "heading_deg": pose.view_heading_deg,
                     "pitch_deg": pose.view_pitch_deg,
-                    "roll_deg": pose.roll_deg,
+                    "roll_deg": pose.view_roll_deg,
                     "fov_deg": pose.fov_deg,
                 }
             )
         except Exception as exc:  # a pose the camera refuses is counted, not fatal
             self._pose_stats.error(f"pose refused by the camera: {exc}")
             return
+        if pose.internal:
+            # The pilot's eye: no aircraft between the clouds to draw, and a split would cost
+            # a near_front layer every frame for nothing.
+            self.engine.set_aircraft(None)
+        else:
+            obs = self.engine.state.observer
+            self.engine.set_aircraft(
+                enu_from_geodetic(obs.lat_deg, obs.lon_deg, pose.lat_deg, pose.lon_deg, pose.alt_m)
+            )
         if self.section.clock == "flightgear":
             ahead = (pose.time_utc - self.engine.state.time_utc).total_seconds()
             if abs(ahead) > CLOCK_SLACK_S:

@@ -91,6 +91,7 @@ class FlightGearPose:
                     "lon_deg": got.pose.lon_deg,
                     "alt_m": round(got.pose.alt_m, 2),
                     "view_heading_deg": round(got.pose.view_heading_deg, 3),
+                    "internal": got.pose.internal,
                     "time_utc": got.pose.time_utc.isoformat(),
                 }
                 try:

@@ -17,9 +17,11 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 
 from wxsky.units import FT_TO_M, INHG_TO_HPA, KT_TO_MPS
+from wxsky.weather.geo import enu_from_geodetic
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState, dir_from_deg
 
 # The generic protocol's chunks, in the order Protocol/wxsky.xml writes them.
+OLD_FIELDS = 11  # before the viewer's place and view-internal
 POSE_FIELDS = (
     "latitude-deg",
     "longitude-deg",
@@ -31,12 +33,17 @@ POSE_FIELDS = (
     "view-pitch-offset-deg",
     "field-of-view",
     "ground-elev-ft",
+    "viewer-lat-deg",
+    "viewer-lon-deg",
+    "viewer-elev-ft",
+    "view-internal",
     "gmt",
 )
-MAX_LINE = 512  # characters: a pose line is about 120
+MAX_LINE = 512  # characters: a pose line is about 160
 ALT_FT = (-1500.0, 100_000.0)  # FlightGear writes -9999 and nan while it resets
 FOV_DEG = (1.0, 170.0)
 GROUND_FT = (-1500.0, 30_000.0)
+MIN_CHASE_M = 0.5  # an outside eye nearer the aircraft than this looks where it heads
 MAX_LAYERS = 5  # /environment/clouds/layer[0..4]
 MAX_ALOFT = 3  # /environment/config/aloft/entry[0..2]
 
@@ -55,17 +62,49 @@ class FgPose:
     view_pitch_offset_deg: float  # positive up
     fov_deg: float  # horizontal
     ground_m: float  # the terrain under the aircraft, MSL
+    viewer_lat_deg: float  # where the view's eye is: the pilot's seat, or a chase camera's
+    viewer_lon_deg: float
+    viewer_alt_m: float  # MSL
+    internal: bool  # a view from inside the aircraft (FlightGear's /sim/current-view/internal)
     time_utc: datetime
 
     @property
     def view_heading_deg(self) -> float:
-        """Where the pilot looks, true: the aircraft's heading less the view's offset (a view
-        turned 90 degrees left from a northbound aircraft looks west)."""
+        """Where the eye looks, true. From inside: the aircraft's heading less the view's
+        offset (FlightGear's offset turns the view left: 90 from a northbound aircraft looks
+        west, measured against its view quaternion). From outside: toward the aircraft, as
+        FlightGear's chase and tower views look."""
+        toward = self._toward_aircraft()
+        if toward is not None:
+            return toward[0]
         return (self.heading_deg - self.view_heading_offset_deg) % 360.0
 
     @property
     def view_pitch_deg(self) -> float:
+        toward = self._toward_aircraft()
+        if toward is not None:
+            return toward[1]
         return max(-90.0, min(90.0, self.pitch_deg + self.view_pitch_offset_deg))
+
+    @property
+    def view_roll_deg(self) -> float:
+        """A view from outside is level; one from inside rolls with the aircraft."""
+        return self.roll_deg if self._toward_aircraft() is None else 0.0
+
+    def _toward_aircraft(self) -> tuple[float, float] | None:
+        """(heading, pitch) from an outside eye to the aircraft; None from inside, or from
+        an eye so near the aircraft that the direction means nothing."""
+        if self.internal:
+            return None
+        east_m, north_m, up_m = enu_from_geodetic(
+            self.viewer_lat_deg, self.viewer_lon_deg, self.lat_deg, self.lon_deg, self.alt_m
+        )
+        up_m -= self.viewer_alt_m
+        level_m = math.hypot(east_m, north_m)
+        if math.hypot(level_m, up_m) < MIN_CHASE_M:
+            return None
+        heading = math.degrees(math.atan2(east_m, north_m)) % 360.0
+        return heading, math.degrees(math.atan2(up_m, level_m))
 
 
 @dataclass(frozen=True)
@@ -88,7 +127,10 @@ def parse_pose(line: str | bytes) -> PoseLine:
         return PoseLine(error=f"pose line of {len(text)} characters (at most {MAX_LINE})")
     parts = text.split(",")
     if len(parts) != len(POSE_FIELDS):
-        return PoseLine(error=f"pose line has {len(parts)} fields, expected {len(POSE_FIELDS)}")
+        older = " (an older Protocol/wxsky.xml?)" if len(parts) == OLD_FIELDS else ""
+        return PoseLine(
+            error=f"pose line has {len(parts)} fields, expected {len(POSE_FIELDS)}{older}"
+        )
     values: list[float] = []
     for name, raw in zip(POSE_FIELDS[:-1], parts[:-1], strict=True):
         try:
@@ -98,7 +140,8 @@ def parse_pose(line: str | bytes) -> PoseLine:
         if not math.isfinite(v):
             return PoseLine(error=f"pose {name} is {raw.strip()[:24]} (FlightGear resetting?)")
         values.append(v)
-    lat, lon, alt_ft, hdg, pitch, roll, v_hdg, v_pitch, fov, ground_ft = values
+    lat, lon, alt_ft, hdg, pitch, roll, v_hdg, v_pitch, fov, ground_ft = values[:10]
+    v_lat, v_lon, v_alt_ft, internal = values[10:]
     checks = (
         ("latitude-deg", lat, -90.0, 90.0),
         ("longitude-deg", lon, -180.0, 180.0),
@@ -110,6 +153,10 @@ def parse_pose(line: str | bytes) -> PoseLine:
         ("view-pitch-offset-deg", v_pitch, -90.0, 90.0),
         ("field-of-view", fov, *FOV_DEG),
         ("ground-elev-ft", ground_ft, *GROUND_FT),
+        ("viewer-lat-deg", v_lat, -90.0, 90.0),
+        ("viewer-lon-deg", v_lon, -180.0, 180.0),
+        ("viewer-elev-ft", v_alt_ft, *ALT_FT),
+        ("view-internal", internal, 0.0, 1.0),
     )
     for name, v, lo, hi in checks:
         if not lo <= v <= hi:
@@ -129,6 +176,10 @@ def parse_pose(line: str | bytes) -> PoseLine:
             view_pitch_offset_deg=v_pitch,
             fov_deg=fov,
             ground_m=ground_ft * FT_TO_M,
+            viewer_lat_deg=v_lat,
+            viewer_lon_deg=v_lon,
+            viewer_alt_m=v_alt_ft * FT_TO_M,
+            internal=internal >= 0.5,
             time_utc=when,
         )
     )
