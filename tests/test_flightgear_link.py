@@ -292,8 +292,11 @@ def test_a_preset_kept_at_the_site_comes_through_the_transition() -> None:
         apply_preset(e, {"name": "overcast-stratus"}, (), keep_site=True)
         stratus = load_preset("overcast-stratus")
         assert e.target.observer == here and e.target.seed == start.seed
+        # Nor its clock: overcast-stratus's 11:00Z would be 1 a.m. here.
+        assert e.state.time_utc == start.time_utc
         assert [lay.type for lay in e.target.layers] == [lay.type for lay in stratus.layers or ()]
         assert not e.settled and e.state.layers == start.layers  # on its way, not there
         apply_preset(e, {"name": "overcast-stratus", "keep_site": False}, ())
         assert e.target.observer == stratus.observer and e.target.seed == stratus.seed
         assert e.settled and e.state.layers == e.target.layers  # a new sky: at once
+        assert e.state.time_utc == stratus.time_utc

@@ -187,9 +187,10 @@ def apply_preset(
     keep_site: bool = False,
 ) -> str:
     """`keep_site` (or the request's): the preset's weather where the camera is, not its own
-    site (the default while a simulator's pose places the camera, e.g. FlightGear's), in the
-    sky's own cloud field: without the preset's seed too it is a change of this sky, made
-    through the transition, not a different sky swapped in at once."""
+    site (the default while a simulator's pose places the camera, e.g. FlightGear's): not its
+    site, its seed or its time. Its time is its own site's hour (overcast-stratus's 11:00Z is
+    late morning at Zurich and 1 a.m. at Honolulu), and without its seed it is a change of
+    this sky, made through the transition, not a different sky swapped in at once."""
     from wxsky.settings.presets import load_preset
 
     v = checked_params("apply_preset", APPLY_PRESET, params)
@@ -199,7 +200,7 @@ def apply_preset(
     # until released. The clock is the one thing it does not hold.
     patch = dataclasses.replace(load_preset(v["name"], preset_dirs), source=Source.CONTROL)
     if v.get("keep_site", keep_site):
-        patch = dataclasses.replace(patch, observer=None, seed=None)
+        patch = dataclasses.replace(patch, observer=None, seed=None, time_utc=None)
     engine.apply(patch)
     name: str = v["name"]
     return name
