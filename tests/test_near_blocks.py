@@ -16,11 +16,13 @@ from wxsky.engine.stages import SkyEngine
 from wxsky.scene import gather as gather_module
 from wxsky.scene import layout as layout_module
 from wxsky.scene.camera import Camera
+from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.gather import (
     NearRing,
     _gather_near,
     advance_drift,
     clear_near_blocks,
+    gather_blocks,
     gather_near,
     gather_near_blocks,
     near_blocks,
@@ -224,3 +226,28 @@ def test_kept_light_serves_a_sun_that_moved_less_than_the_reuse_angle() -> None:
             assert np.abs(got.rgba - want.rgba).max() < 4.0 / 255.0
     # The cases cover both sides of the angle.
     assert min(moved_deg) < LIGHT_REUSE_DEG < max(moved_deg)
+
+
+def test_after_a_clock_set_the_near_layer_shows_the_clouds_around_the_eye() -> None:
+    """A clock set moves the clouds by months of wind (about 1e8 m); until a ring for the new
+    time arrives, the near layer complements the old one. Its blocks are then chosen as the
+    clouds stand now: chosen as they stood, they would be placed 1e8 m off and none shown."""
+    state = _state("fair-cumulus")
+    radius_m = SceneSettings().ring_radius_m
+    centre = (0.0, 0.0, 1500.0)
+    old = zero_drift(state)
+    now = advance_drift(state, old, 150 * 86_400.0)  # five months of a 4 m/s wind
+    moved_m = float(np.hypot(*np.subtract(now[0], old[0])))
+    assert moved_m > 1e7
+    near, share, _ = gather_near_blocks(state, now, (NearRing(centre, old, 1.0),), radius_m)
+    dist = np.hypot(near.centre_m[:, 0] - centre[0], near.centre_m[:, 1] - centre[1])
+    assert len(near) > 1000 and (share == 1.0).all()
+    assert dist.max() < radius_m + BLOCK_SIZE_M * 2**0.5  # blocks reaching into the radius
+    # The same as a ring built at the new time would have it complement.
+    fresh, _, _ = gather_near_blocks(state, now, (NearRing(centre, now, 1.0),), radius_m)
+    _same_batch(near, fresh)
+    # A drift within the radius still chooses the blocks as they stood (no block both in the
+    # ring and the near layer, nor in neither).
+    nudged = advance_drift(state, old, 60.0)
+    kept, _, _ = gather_near_blocks(state, nudged, (NearRing(centre, old, 1.0),), radius_m)
+    _same_batch(kept, gather_blocks(state, nudged, centre, 0.0, radius_m, select_drift=old))

@@ -100,11 +100,31 @@ def gather_near_blocks(
     them anew): the same set, frame after frame, holds the same sprites."""
     if len(drift) != len(state.layers):
         drift = zero_drift(state)
+    rings = selecting_now(rings, drift, radius_m)
     blocks = near_blocks(state, drift, rings, radius_m, max_range_m)
     placed = None if blocks is None else blocks.placed(drift, rings)
     if placed is None:
         return (*_gather_near(state, drift, rings, radius_m, max_range_m), None)
     return (*placed, blocks)
+
+
+def selecting_now(
+    rings: tuple[NearRing, ...], drift: Drift, radius_m: float
+) -> tuple[NearRing, ...]:
+    """The rings, each choosing its blocks with `drift` where the clouds have moved more than
+    `radius_m` since it was built (a clock set: months of wind move them a hundred thousand
+    kilometres). Blocks chosen as they stood would be placed that far from the eye, and until
+    a ring for the new time arrived the near layer would show nothing; chosen as they stand,
+    it shows the clouds around the eye, and the old ring's impostors stay beyond them."""
+    out = []
+    for ring in rings:
+        if len(ring.select_drift) == len(drift) and any(
+            math.hypot(a[0] - b[0], a[1] - b[1]) > radius_m
+            for a, b in zip(ring.select_drift, drift, strict=True)
+        ):
+            ring = ring._replace(select_drift=drift)
+        out.append(ring)
+    return tuple(out)
 
 
 def _gather_near(
