@@ -77,6 +77,9 @@ def main() -> int:
     (work / "wxsky.toml").write_text(
         "[preview]\ninterval_s = 1.0\n[output]\nmax_width = 960\nmax_height = 540\n"
         '[flightgear]\nclock = "flightgear"\n'  # FlightGear's time of day, wxsky's sun
+        # The change comes through wxsky's transition; eight times the default cover rate
+        # lets the sheet's half minute show all of it.
+        "[transition]\ncover_oktas_per_min = 16.0\n"
     )
     sock = work / "wx.sock"
     daemon = subprocess.Popen(
