@@ -4,6 +4,7 @@ pictures cover more sky, and a picture is the same bytes in two processes."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import subprocess
 import sys
@@ -22,6 +23,7 @@ from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 HEADINGS = (14.0, 104.0, 194.0, 284.0)
+CALM_MINUTES = (10, 20)
 SIZE = (320, 180)
 
 
@@ -58,18 +60,44 @@ def _cover_at(state: WeatherState, renderer: Renderer, minutes: int) -> float:
         return float(np.mean([_cloud_cover(renderer, e, h) for h in HEADINGS]))
 
 
-def test_towering_cumulus_covers_more_sky_as_its_towers_grow() -> None:
+def _series(calm: bool, minutes: tuple[int, ...]) -> tuple[list[float], int]:
+    """The covers at those minutes, windy (the preset's wind) or calm (no wind: the clouds
+    stay where they are, and what grows is the towers alone), each sky's towers stepped on
+    from the last picture, not from their births again; and how many towers were drawn."""
     state = WeatherState().apply(load_preset("towering-cumulus"))
-    # In calm air the clouds stay where they are: what grows is the towers alone. (At +0
-    # nothing has drifted yet: the same picture. Calm and windy in turn, so each sky's
-    # towers are stepped on from the last picture, not from their births again.)
-    calm_state = dataclasses.replace(state, wind=())
-    covers, calm = [], []
+    if calm:
+        state = dataclasses.replace(state, wind=())
     with Renderer(128) as renderer:
-        for minutes in (0, 10, 20):
-            covers.append(_cover_at(state, renderer, minutes))
-            calm.append(covers[0] if minutes == 0 else _cover_at(calm_state, renderer, minutes))
-        assert renderer.towers.drawn > 0
+        covers = [_cover_at(state, renderer, m) for m in minutes]
+        return covers, renderer.towers.drawn
+
+
+def test_towering_cumulus_covers_more_sky_as_its_towers_grow() -> None:
+    # The calm sky in a second process while this one makes the windy one: they share little
+    # work (22 s of CPU apart, 20 s in one process), so on two cores they take 14 s side by
+    # side, not 20 s one after the other. At +0 nothing has drifted yet: the same picture.
+    code = (
+        "import json, test_tower_snapshots as t; "
+        f"print(json.dumps(t._series(True, {CALM_MINUTES!r})))"
+    )
+    calm_proc = subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=Path(__file__).parent,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        covers, drawn = _series(False, (0, *CALM_MINUTES))
+        out, err = calm_proc.communicate(timeout=300)
+    finally:
+        if calm_proc.poll() is None:
+            calm_proc.kill()
+            calm_proc.communicate()
+    assert calm_proc.returncode == 0, err
+    calm_later, calm_drawn = json.loads(out.splitlines()[-1])
+    calm = [covers[0], *calm_later]
+    assert drawn > 0 and calm_drawn > 0
     assert covers[0] < covers[1] < covers[2], covers
     # Measured: 0.708, 0.712, 0.719 (the towers' share of a sky 70 % covered by cumulus).
     assert calm[0] + 0.002 < calm[1] < calm[2] - 0.002, calm
