@@ -230,14 +230,13 @@ def shade_for_eye(
     each sprite of the batch (`near_scattered_light`)."""
     if order is None:
         order = sort_order(batch, eye_m)
-    ordered = batch.take(order)
-    if scattered is not None:
-        scattered = scattered.take(order)
-    colours = sprite_colours(ordered, sky, eye_m, shading, light, scattered)
-    rgba = fade_by_range(colours, ordered, eye_m, sky, max_range_m)
+    # Shaded in the batch's own order, then put in the draw's: a near set is shaded the same
+    # way frame after frame (`shading._split_of` keeps how), and `order` may leave some out.
+    colours = sprite_colours(batch, sky, eye_m, shading, light, scattered)
+    rgba = fade_by_range(colours, batch, eye_m, sky, max_range_m)
     if share is not None and len(share) and share.min() < 1.0:
-        rgba[:, 3] *= share[order]
-    return SpriteDraw(ordered, rgba)
+        rgba[:, 3] *= share
+    return SpriteDraw(batch.take(order), rgba[order])
 
 
 def oriented(
@@ -344,13 +343,13 @@ def build_frame(
         placed = place_towers(
             found, drift, share, eye, towers, sky, settings.max_towers, settings.max_range_m
         )
-        if len(placed.drop_ids):
-            keep = drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
-            near, share = near.take(keep), share[keep]
-            if scattered is not None:
-                scattered = scattered.take(np.flatnonzero(keep))
     with (clock or NO_CLOCK).stage("sort"):
         order = sort_order(near, eye)
+        if len(placed.drop_ids):
+            # Left out of the order, not cut from the set: the set stays the one shaded
+            # frame after frame.
+            keep = drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
+            order = order[keep[order]]
     shaded = shade_for_eye(
         near,
         eye,

@@ -108,10 +108,25 @@ def scattered_light(batch: SpriteBatch, lights: Lights) -> Scattered:
     return Scattered(lights.directions, multiple_scattering(incident))
 
 
+# The last lights made for each side (below or above the clouds), with their sky: a frame asks
+# three times for its sky's (the near layer's light, its particles and its slabs), 0.2 ms each.
+# Lights are frozen and never written to.
+_last_lights: dict[bool, tuple[SkyParams, Lights]] = {}
+
+
 def scene_lights(sky: SkyParams, above_cloud: bool = False) -> Lights:
     """The key light, four skylights and the ambient term for this sky; `above_cloud`: the
     skylights of the open sky over every layer (what lights the top of a deck), not the sky
     the eye sees."""
+    last = _last_lights.get(above_cloud)  # one read: another thread may replace it
+    if last is not None and last[0] is sky:
+        return last[1]
+    made = _scene_lights(sky, above_cloud)
+    _last_lights[above_cloud] = (sky, made)
+    return made
+
+
+def _scene_lights(sky: SkyParams, above_cloud: bool) -> Lights:
     sun_el = sky.sun.elevation_deg
     if sun_el > MOON_TAKES_OVER_DEG:
         key_dir, key_rgb = np.asarray(sky.sun.direction_enu), np.asarray(sky.sun_rgb)

@@ -105,6 +105,23 @@ def slab_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
     }
 
 
+# The last thicknesses' diffuse energy: a frame's slab sprites have the thicknesses the last
+# frame's had (the near layer's set), and it depends on nothing else.
+_last_diffuse: tuple[F64, dict[str, F64]] | None = None
+
+
+def diffuse_energy(thickness_m: F64) -> dict[str, F64]:
+    """`slab_energy` at DIFFUSE_ANGLE_DEG, kept for the last thicknesses asked for."""
+    global _last_diffuse
+    h = np.asarray(thickness_m, np.float64)
+    last = _last_diffuse  # one read: another thread may replace it
+    if last is not None and last[0].shape == h.shape and np.array_equal(last[0], h):
+        return last[1]
+    made = slab_energy(h, DIFFUSE_ANGLE_DEG)
+    _last_diffuse = (h.copy(), made)
+    return made
+
+
 def limb(mu_v: F64) -> F64:
     """Eddington's angular spread of light leaving a thick scattering layer, per Lambertian
     radiance: 1.25 along the normal, 0.5 edge-on, and the same flux as a Lambertian surface."""
@@ -149,7 +166,7 @@ def slab_radiance(
     # Sky and ground light arrive from a whole hemisphere: the slab passes it as it passes a
     # beam at DIFFUSE_ANGLE_DEG, not at the sun's angle (at dawn the sun grazes the deck, the
     # sky does not).
-    d = slab_energy(h, DIFFUSE_ANGLE_DEG)
+    d = diffuse_energy(h)
     # Ground and base light each other: irradiance on the ground from the key light and the
     # sky through the deck, multiplied by the series of bounces between the two planes.
     bounce = GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * d["r_ms"])
