@@ -99,12 +99,16 @@ def lock_facing(
 
 
 def in_cloud(
-    batch: SpriteBatch, eye_m: tuple[float, float, float], weather_visibility_m: float
+    batch: SpriteBatch,
+    eye_m: tuple[float, float, float],
+    weather_visibility_m: float,
+    dist_m: npt.NDArray[np.float64] | None = None,
 ) -> InCloud:
-    """Whether the eye is inside a cloud's dense part, and the visibility there."""
+    """Whether the eye is inside a cloud's dense part, and the visibility there (`dist_m`:
+    the sprites' distances from the eye, if known)."""
     if len(batch) == 0:
         return OUTSIDE
-    deepest = float(sprite_depths(batch, eye_m).max())
+    deepest = float(sprite_depths(batch, eye_m, dist_m).max())
     if deepest <= 0.0:
         return OUTSIDE
     depth_frac = min(1.0, deepest)
@@ -140,9 +144,15 @@ def in_cloud_fog(
     return out, (r, g, b, strength)
 
 
-def sprite_depths(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDArray[np.float64]:
+def sprite_depths(
+    batch: SpriteBatch,
+    eye_m: tuple[float, float, float],
+    dist_m: npt.NDArray[np.float64] | None = None,
+) -> npt.NDArray[np.float64]:
     """(N,) how deep the eye is in each sprite's dense part: > 0 inside, 1 at its centre."""
-    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+    if dist_m is None:
+        dist_m = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+    dist = dist_m
     reach = INSIDE_FRAC * batch.size_m.astype(np.float64)
     out: npt.NDArray[np.float64] = (1.0 - dist / reach) * batch.opacity.astype(np.float64)
     return out

@@ -65,6 +65,7 @@ from wxsky.scene.shading_harris import (
 )
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
+from wxsky.scene.sprites import F64
 from wxsky.scene.tower_field import (
     NO_TOWERS,
     TowerClock,
@@ -188,7 +189,18 @@ def sort_back_to_front(batch: SpriteBatch, eye_m: tuple[float, float, float]) ->
 
 def sort_order(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDArray[np.intp]:
     """(N,) indices that put the sprites back to front from the eye."""
-    d2 = np.sum((batch.centre_m - np.asarray(eye_m)) ** 2, axis=1)
+    return back_to_front(squared_distances(batch, eye_m))
+
+
+def squared_distances(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> F64:
+    """(N,) each sprite's squared distance from the eye (its square root is what
+    `np.linalg.norm` gives, to the bit)."""
+    rel = batch.centre_m - np.asarray(eye_m, np.float64)
+    out: F64 = np.sum(rel * rel, axis=1)
+    return out
+
+
+def back_to_front(d2: F64) -> npt.NDArray[np.intp]:
     # Stable sort on distance so equal distances keep their generation order on every machine.
     out: npt.NDArray[np.intp] = np.argsort(-d2, kind="stable")
     return out
@@ -200,11 +212,12 @@ def fade_by_range(
     eye_m: tuple[float, float, float],
     sky: SkyParams,
     max_range_m: float,
+    dist_m: F64 | None = None,
 ) -> npt.NDArray[np.float32]:
     """Aerial perspective: distant clouds take the haze's colour (`SkyParams.haze_rgb`) and
     fade out before the edge of the generated range, so the range limit never shows as a
-    hard line."""
-    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1)
+    hard line. `dist_m`: (N,) the sprites' distances from the eye, if known."""
+    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1) if dist_m is None else dist_m
     haze = (1.0 - np.exp(-dist / sky.haze_m)).astype(np.float32)
     out = rgba.copy()
     out[:, :3] = rgba[:, :3] * (1.0 - haze[:, None]) + np.asarray(sky.haze_rgb) * haze[:, None]
@@ -223,6 +236,7 @@ def shade_for_eye(
     share: npt.NDArray[np.float32] | None = None,
     order: npt.NDArray[np.intp] | None = None,
     scattered: Scattered | None = None,
+    dist_m: F64 | None = None,
 ) -> SpriteDraw:
     """`light`: a precompute (`prepare_lighting`) of a batch holding these sprites; `share`:
     (N,) a factor on each sprite's alpha after shading (see `gather_near`); `order`: the
@@ -232,8 +246,8 @@ def shade_for_eye(
         order = sort_order(batch, eye_m)
     # Shaded in the batch's own order, then put in the draw's: a near set is shaded the same
     # way frame after frame (`shading._split_of` keeps how), and `order` may leave some out.
-    colours = sprite_colours(batch, sky, eye_m, shading, light, scattered)
-    rgba = fade_by_range(colours, batch, eye_m, sky, max_range_m)
+    colours = sprite_colours(batch, sky, eye_m, shading, light, scattered, dist_m)
+    rgba = fade_by_range(colours, batch, eye_m, sky, max_range_m, dist_m)
     if share is not None and len(share) and share.min() < 1.0:
         rgba[:, 3] *= share
     return SpriteDraw(batch.take(order), rgba[order])
@@ -344,12 +358,14 @@ def build_frame(
             found, drift, share, eye, towers, sky, settings.max_towers, settings.max_range_m
         )
     with (clock or NO_CLOCK).stage("sort"):
-        order = sort_order(near, eye)
+        d2 = squared_distances(near, eye)
+        order = back_to_front(d2)
         if len(placed.drop_ids):
             # Left out of the order, not cut from the set: the set stays the one shaded
             # frame after frame.
             keep = drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
             order = order[keep[order]]
+    dist = np.sqrt(d2)
     shaded = shade_for_eye(
         near,
         eye,
@@ -359,6 +375,7 @@ def build_frame(
         share=share,
         order=order,
         scattered=scattered,
+        dist_m=dist,
     )
     if lod and settings.lod_start_m > 0.0:
         collapsed = collapse_far_clouds(
@@ -373,7 +390,7 @@ def build_frame(
         budget = cap_sprites(shaded.sprites, shaded.rgba, eye, settings.max_near_sprites)
         if budget.dropped:
             shaded, dropped = SpriteDraw(budget.sprites, budget.rgba), budget.dropped
-    cloud = in_cloud(near, eye, state.visibility_m)
+    cloud = in_cloud(near, eye, state.visibility_m, dist)
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)
     front: SpriteDraw | None = None

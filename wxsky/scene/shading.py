@@ -30,7 +30,7 @@ from wxsky.scene.shading_harris import (
 from wxsky.scene.shading_slab import slab_colours, slab_rgba
 from wxsky.scene.shading_wang import wang_colours
 from wxsky.scene.sky import SkyParams
-from wxsky.scene.sprites import F32, SpriteBatch
+from wxsky.scene.sprites import F32, F64, SpriteBatch
 
 SHADING_MODELS = ("wang", "harris")
 # Harris by default: self-shadowed cumulus with grey bases and silver-lined rims, at a few
@@ -65,11 +65,13 @@ def sprite_colours(
     model: str = DEFAULT_SHADING,
     light: ParticleLight | None = None,
     scattered: Scattered | None = None,
+    dist_m: F64 | None = None,
 ) -> F32:
     """(N, 4) straight-alpha RGBA for each sprite seen from eye_m. `light` is a precompute
     from `prepare_lighting` over these sprites or a batch holding them; `scattered`, for
     Harris, `shading_harris.scattered_light` of these sprites' particles, a row per sprite
-    (slab sprites' rows unused)."""
+    (slab sprites' rows unused); `dist_m`, (N,) each sprite's distance from eye_m where the
+    caller has it (a frame's near layer)."""
     _check(model)
     slab = batch.slab
     if slab.all() and len(batch):
@@ -90,11 +92,18 @@ def sprite_colours(
         # half reads are cut, not every field of the batch (which was a third of the stage);
         # the set's sprites are cut the same way frame after frame, so the cut is kept.
         split = _split_of(batch, scattered)
+        p_dist = None if dist_m is None else dist_m[split.particle]
+        s_dist = None if dist_m is None else dist_m[split.slab]
         out[split.particle] = harris_rgba(
-            batch.centre_m[split.particle], split.particle_opacity, split.rows, lights, eye_m
+            batch.centre_m[split.particle],
+            split.particle_opacity,
+            split.rows,
+            lights,
+            eye_m,
+            p_dist,
         )
         out[split.slab] = slab_rgba(
-            batch.centre_m[split.slab], split.slab_m, split.slab_opacity, sky, eye_m
+            batch.centre_m[split.slab], split.slab_m, split.slab_opacity, sky, eye_m, s_dist
         )
         return out
     particles = batch.take(particle)

@@ -224,12 +224,18 @@ def harris_colours(
 
 
 def harris_rgba(
-    centre_m: F64, opacity: F32, incident: F32, lights: Lights, eye_m: tuple[float, float, float]
+    centre_m: F64,
+    opacity: F32,
+    incident: F32,
+    lights: Lights,
+    eye_m: tuple[float, float, float],
+    dist_m: F64 | None = None,
 ) -> F32:
     """`harris_colours` from the light reaching each sprite (`incident`, (N, L) for the L
-    `lights`): the eye-dependent half, on the few arrays it reads."""
+    `lights`): the eye-dependent half, on the few arrays it reads. `dist_m`: (N,) each
+    sprite's distance from the eye, where the caller has it."""
     view = centre_m - np.asarray(eye_m, np.float64)  # (N, 3)
-    dist = np.linalg.norm(view, axis=1, keepdims=True)
+    dist = np.linalg.norm(view, axis=1, keepdims=True) if dist_m is None else dist_m[:, None]
     view = np.divide(view, dist, out=np.zeros_like(view), where=dist > 1e-6)
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.

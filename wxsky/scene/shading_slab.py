@@ -188,10 +188,15 @@ def slab_colours(batch: SpriteBatch, sky: SkyParams, eye_m: tuple[float, float, 
 
 
 def slab_rgba(
-    centre_m: F64, slab_m: F32, opacity: F32, sky: SkyParams, eye_m: tuple[float, float, float]
+    centre_m: F64,
+    slab_m: F32,
+    opacity: F32,
+    sky: SkyParams,
+    eye_m: tuple[float, float, float],
+    dist_m: F64 | None = None,
 ) -> F32:
     """`slab_colours` on the three arrays it reads (a frame's slab sprites among others need
-    no sub-batch of every field)."""
+    no sub-batch of every field); `dist_m`: (N,) their distances from the eye, if known."""
     # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
     lights = scene_lights(sky, above_cloud=True)
     key_dir, key_rgb = lights.directions[0], lights.rgb[0]
@@ -200,7 +205,7 @@ def slab_rgba(
     top_m = slab_m[:, 1].astype(np.float64)
     eye = np.asarray(eye_m, np.float64)
     ray = centre_m - eye  # (N, 3) eye to sprite
-    dist = np.linalg.norm(ray, axis=1, keepdims=True)
+    dist = np.linalg.norm(ray, axis=1, keepdims=True) if dist_m is None else dist_m[:, None]
     ray = np.divide(ray, dist, out=np.zeros_like(ray), where=dist > 1e-6)
     eye_above = np.where(
         eye[2] >= top_m, True, np.where(eye[2] <= base_m, False, centre_m[:, 2] <= eye[2])
