@@ -47,7 +47,11 @@ def _processes_naming(text: str) -> list[str]:
 @pytest.mark.gl
 def test_a_short_soak_reports_every_metric(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    cmd = [sys.executable, str(SOAK), "--seconds", "12", "--cycle-s", "4", "--bomb-mib", "2"]
+    # 4 s of baseline (two 1 s frame-rate samples after its first 2 s), 6 s of soak in 3 s
+    # cycles: each fault at least once; a control action every 0.5 s, so that all four kinds
+    # come round with room to spare (at 1 s the 7 s soak before this ran just the four).
+    cmd = [sys.executable, str(SOAK), "--seconds", "10", "--baseline-s", "4", "--cycle-s", "3"]
+    cmd += ["--control-period-s", "0.5", "--bomb-mib", "2"]
     proc = subprocess.run(
         [*cmd, "--out", str(out)], capture_output=True, text=True, timeout=120, cwd=ROOT
     )
