@@ -323,6 +323,7 @@ def test_near_and_ring_partition_the_clouds_while_they_drift() -> None:
     """Between ring rebuilds the near layer keeps the ring's choice of blocks: a drifting
     block is never drawn both as sprites and in an impostor, nor dropped from both."""
     from wxsky.scene.gather import gather_blocks
+    from wxsky.scene.layout import in_view
 
     eng = _engine(rate=1.0, wind_mps=20.0)
     first = eng.advance(0.0)
@@ -347,7 +348,13 @@ def test_near_and_ring_partition_the_clouds_while_they_drift() -> None:
         settings.max_range_m,
         select_drift=ring.drift,
     )
-    assert len(near_set | far_set) == len({tuple(np.round(p, 3)) for p in everything.centre_m})
+    every_key = [tuple(np.round(p, 3)) for p in everything.centre_m]
+    assert far_set <= set(every_key)
+    # The near layer is the rest, less what is out of view (culled, never drawn).
+    rest = everything.take(np.array([k not in far_set for k in every_key]))
+    seen = rest.take(in_view(rest, plan.frame.camera))
+    assert 0 < len(seen) < len(rest)
+    assert near_set == {tuple(np.round(p, 3)) for p in seen.centre_m}
     assert first.ring is ring
 
 

@@ -30,7 +30,9 @@ from wxsky.scene.gather import (
 )
 from wxsky.scene.layout import (
     SceneSettings,
+    SpriteDraw,
     empty_ring,
+    in_view,
     near_scattered_light,
     prepare_near,
     shade_for_eye,
@@ -142,6 +144,8 @@ def test_frames_along_a_flight_through_rebuilds_match_a_fresh_gather_and_shade()
             near, share = _gather_near(plan.state, engine.drift, rings, 8000.0, 40_000.0)
             sky = plan.frame.sky
             want = shade_for_eye(near, eye, sky, 40_000.0, settings.shading, share=share)
+            seen = np.flatnonzero(in_view(want.sprites, plan.frame.camera))  # the rest: culled
+            want = SpriteDraw(want.sprites.take(seen), want.rgba[seen])
             got = plan.frame.near
             _same_batch(got.sprites, want.sprites)
             # The kept light is the light of lights within LIGHT_REUSE_DEG of this sky's

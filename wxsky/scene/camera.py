@@ -144,3 +144,22 @@ def turned(camera: Camera, yaw_deg: float, pitch_deg: float, roll_deg: float) ->
     return dataclasses.replace(
         camera, heading_deg=heading % 360.0, pitch_deg=max(-90.0, min(90.0, pitch)), roll_deg=roll
     )
+
+
+def spheres_in_view(
+    camera: Camera, centre_m: npt.NDArray[np.float64], radius_m: npt.NDArray[np.float64]
+) -> npt.NDArray[np.bool_]:
+    """(N,) whether each sphere (centre, radius) reaches into the camera's view: not wholly
+    behind the eye, nor wholly beyond one of the four sides of the view. Conservative: a
+    sphere near a corner may pass though it shows nothing."""
+    right, up, fwd = camera.basis()
+    rel = centre_m - np.asarray(camera.position_m, np.float64)
+    x, y, z = rel @ right, rel @ up, rel @ fwd
+    tx, ty = camera.tan_half_fov_x, camera.tan_half_fov_y
+    # Distances to the side planes through the eye, positive outside: (|x| - z tan) / |n|.
+    out: npt.NDArray[np.bool_] = (
+        (z > -radius_m)
+        & ((np.abs(x) - z * tx) < radius_m * math.sqrt(1.0 + tx * tx))
+        & ((np.abs(y) - z * ty) < radius_m * math.sqrt(1.0 + ty * ty))
+    )
+    return out

@@ -23,7 +23,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.scene.camera import Camera
+from wxsky.scene.camera import Camera, spheres_in_view
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
@@ -240,12 +240,25 @@ def shade_for_eye(
 ) -> SpriteDraw:
     """`light`: a precompute (`prepare_lighting`) of a batch holding these sprites; `share`:
     (N,) a factor on each sprite's alpha after shading (see `gather_near`); `order`: the
-    back-to-front order if already known (`sort_order`); `scattered`: Harris's light on
-    each sprite of the batch (`near_scattered_light`)."""
+    back-to-front order if already known (`sort_order`), of all or some of the sprites (those
+    it leaves out, out of view or drawn as towers, are neither shaded nor drawn);
+    `scattered`: Harris's light on each sprite of the batch (`near_scattered_light`);
+    `dist_m`: (N,) each sprite's distance from the eye, if known."""
     if order is None:
         order = sort_order(batch, eye_m)
-    # Shaded in the batch's own order, then put in the draw's: a near set is shaded the same
-    # way frame after frame (`shading._split_of` keeps how), and `order` may leave some out.
+    if 2 * len(order) < len(batch):
+        # The view holds a few of the set's sprites (a sixth at 60 degrees): shade just those.
+        drawn = batch.take(order)
+        if scattered is not None:
+            scattered = scattered.take(order)
+        dist = None if dist_m is None else dist_m[order]
+        colours = sprite_colours(drawn, sky, eye_m, shading, light, scattered, dist)
+        rgba = fade_by_range(colours, drawn, eye_m, sky, max_range_m, dist)
+        if share is not None and len(share) and share.min() < 1.0:
+            rgba[:, 3] *= share[order]
+        return SpriteDraw(drawn, rgba)
+    # Most of the set is drawn (a wide view, or every cloud for the one-sprite LOD): shaded
+    # in its own order, the same way frame after frame (`shading._split_of` keeps how).
     colours = sprite_colours(batch, sky, eye_m, shading, light, scattered, dist_m)
     rgba = fade_by_range(colours, batch, eye_m, sky, max_range_m, dist_m)
     if share is not None and len(share) and share.min() < 1.0:
@@ -365,6 +378,11 @@ def build_frame(
             # frame after frame.
             keep = drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
             order = order[keep[order]]
+        collapsing = lod and settings.lod_start_m > 0.0
+        if not collapsing:
+            # Sprites wholly outside the view draw nothing: two thirds of the near layer at
+            # 60 degrees, left out before they are put in order, packed and drawn.
+            order = order[in_view(near, camera)[order]]
     dist = np.sqrt(d2)
     shaded = shade_for_eye(
         near,
@@ -385,6 +403,10 @@ def build_frame(
             with (clock or NO_CLOCK).stage("sort"):
                 again = sort_order(collapsed.sprites, eye)
             shaded = SpriteDraw(collapsed.sprites.take(again), collapsed.rgba[again])
+        # A cloud collapses from all its sprites, in view or not; the view is cut after.
+        seen = np.flatnonzero(in_view(shaded.sprites, camera))
+        if len(seen) < len(shaded):
+            shaded = SpriteDraw(shaded.sprites.take(seen), shaded.rgba[seen])
     dropped = 0
     if lod and settings.max_near_sprites > 0:
         budget = cap_sprites(shaded.sprites, shaded.rgba, eye, settings.max_near_sprites)
@@ -530,6 +552,18 @@ def install_near(prepared: tuple[PreparedNear, ...]) -> None:
         if item.light is not None:
             with _near_light_lock:
                 _near_light[item.blocks] = item.light
+
+
+# A sprite's quad reaches 0.71 of its edge from its centre (a corner of the octagon's square):
+# the sphere it is culled by is a little larger. It holds every sprite the eye is in or locked
+# to (in_cloud's INSIDE_FRAC, UNLOCK_FRAC), so culling never drops the in-cloud fog's colour
+# nor a lock.
+VIEW_REACH = 0.75
+
+
+def in_view(batch: SpriteBatch, camera: Camera) -> npt.NDArray[np.bool_]:
+    """(N,) whether each sprite of the batch may show in the camera's picture."""
+    return spheres_in_view(camera, batch.centre_m, VIEW_REACH * batch.size_m.astype(np.float64))
 
 
 def split_at_distance(
