@@ -372,17 +372,20 @@ def build_frame(
         )
     with (clock or NO_CLOCK).stage("sort"):
         d2 = squared_distances(near, eye)
-        order = back_to_front(d2)
+        # Left out of the order, not cut from the set (the set stays the one shaded frame
+        # after frame): the towers' clouds, and sprites wholly outside the view, which draw
+        # nothing (two thirds of the near layer at 60 degrees). A cloud collapses to one
+        # sprite from all its sprites, in view or not: with the one-sprite LOD, the view is
+        # cut after it.
+        drawn = np.ones(len(near), np.bool_)
         if len(placed.drop_ids):
-            # Left out of the order, not cut from the set: the set stays the one shaded
-            # frame after frame.
-            keep = drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
-            order = order[keep[order]]
+            drawn &= drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
         collapsing = lod and settings.lod_start_m > 0.0
         if not collapsing:
-            # Sprites wholly outside the view draw nothing: two thirds of the near layer at
-            # 60 degrees, left out before they are put in order, packed and drawn.
-            order = order[in_view(near, camera)[order]]
+            drawn &= in_view(near, camera)
+        # Sorted as the whole set would be: a stable sort of the kept sprites in set order.
+        shown = np.flatnonzero(drawn)
+        order = shown[back_to_front(d2[shown])]
     dist = np.sqrt(d2)
     shaded = shade_for_eye(
         near,
