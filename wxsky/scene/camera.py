@@ -152,9 +152,8 @@ def spheres_in_view(
     """(N,) whether each sphere (centre, radius) reaches into the camera's view: not wholly
     behind the eye, nor wholly beyond one of the four sides of the view. Conservative: a
     sphere near a corner may pass though it shows nothing."""
-    right, up, fwd = camera.basis()
     rel = centre_m - np.asarray(camera.position_m, np.float64)
-    x, y, z = rel @ right, rel @ up, rel @ fwd
+    x, y, z = (rel @ np.stack(camera.basis(), axis=1)).T  # right, up, forward
     tx, ty = camera.tan_half_fov_x, camera.tan_half_fov_y
     # Distances to the side planes through the eye, positive outside: (|x| - z tan) / |n|.
     out: npt.NDArray[np.bool_] = (
