@@ -150,9 +150,11 @@ def sprite_depths(
     dist_m: npt.NDArray[np.float64] | None = None,
 ) -> npt.NDArray[np.float64]:
     """(N,) how deep the eye is in each sprite's dense part: > 0 inside, 1 at its centre."""
-    if dist_m is None:
-        dist_m = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
-    dist = dist_m
+    dist = (
+        np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+        if dist_m is None
+        else dist_m
+    )
     reach = INSIDE_FRAC * batch.size_m.astype(np.float64)
     out: npt.NDArray[np.float64] = (1.0 - dist / reach) * batch.opacity.astype(np.float64)
     return out

@@ -246,24 +246,16 @@ def shade_for_eye(
     `dist_m`: (N,) each sprite's distance from the eye, if known."""
     if order is None:
         order = sort_order(batch, eye_m)
-    if 2 * len(order) < len(batch):
-        # The view holds a few of the set's sprites (a sixth at 60 degrees): shade just those.
-        drawn = batch.take(order)
-        if scattered is not None:
-            scattered = scattered.take(order)
-        dist = None if dist_m is None else dist_m[order]
-        colours = sprite_colours(drawn, sky, eye_m, shading, light, scattered, dist)
-        rgba = fade_by_range(colours, drawn, eye_m, sky, max_range_m, dist)
-        if share is not None and len(share) and share.min() < 1.0:
-            rgba[:, 3] *= share[order]
-        return SpriteDraw(drawn, rgba)
-    # Most of the set is drawn (a wide view, or every cloud for the one-sprite LOD): shaded
-    # in its own order, the same way frame after frame (`shading._split_of` keeps how).
-    colours = sprite_colours(batch, sky, eye_m, shading, light, scattered, dist_m)
-    rgba = fade_by_range(colours, batch, eye_m, sky, max_range_m, dist_m)
+    # Only the sprites drawn are shaded (a sixth of a near set at 60 degrees).
+    drawn = batch.take(order)
+    if scattered is not None:
+        scattered = scattered.take(order)
+    dist = None if dist_m is None else dist_m[order]
+    colours = sprite_colours(drawn, sky, eye_m, shading, light, scattered, dist)
+    rgba = fade_by_range(colours, drawn, eye_m, sky, max_range_m, dist)
     if share is not None and len(share) and share.min() < 1.0:
-        rgba[:, 3] *= share
-    return SpriteDraw(batch.take(order), rgba[order])
+        rgba[:, 3] *= share[order]
+    return SpriteDraw(drawn, rgba)
 
 
 def oriented(
@@ -372,11 +364,11 @@ def build_frame(
         )
     with (clock or NO_CLOCK).stage("sort"):
         d2 = squared_distances(near, eye)
-        # Left out of the order, not cut from the set (the set stays the one shaded frame
-        # after frame): the towers' clouds, and sprites wholly outside the view, which draw
-        # nothing (two thirds of the near layer at 60 degrees). A cloud collapses to one
-        # sprite from all its sprites, in view or not: with the one-sprite LOD, the view is
-        # cut after it.
+        # Left out of the order, not cut from the set (the set and its light stay the ones
+        # kept from frame to frame): the towers' clouds, and sprites wholly outside the view,
+        # which draw nothing (five sixths of the near layer at 60 degrees). A cloud collapses
+        # to one sprite from all its sprites, in view or not: with the one-sprite LOD, the
+        # view is cut after it.
         drawn = np.ones(len(near), np.bool_)
         if len(placed.drop_ids):
             drawn &= drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
@@ -398,7 +390,7 @@ def build_frame(
         scattered=scattered,
         dist_m=dist,
     )
-    if lod and settings.lod_start_m > 0.0:
+    if collapsing:
         collapsed = collapse_far_clouds(
             shaded.sprites, shaded.rgba, eye, settings.lod_start_m, settings.lod_band_m
         )

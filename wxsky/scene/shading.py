@@ -11,12 +11,7 @@ impostor bins, so a cloud straddling two impostors is shaded as one cloud in bot
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
-from dataclasses import dataclass
-
 import numpy as np
-import numpy.typing as npt
 
 from wxsky.scene.shading_harris import (
     ParticleLight,
@@ -89,21 +84,22 @@ def sprite_colours(
         and close_directions(scattered.directions, lights.directions)
     ):
         # A frame's near layer: the light is known, and only the arrays the eye-dependent
-        # half reads are cut, not every field of the batch (which was a third of the stage);
-        # the set's sprites are cut the same way frame after frame, so the cut is kept.
-        split = _split_of(batch, scattered)
-        p_dist = None if dist_m is None else dist_m[split.particle]
-        s_dist = None if dist_m is None else dist_m[split.slab]
-        out[split.particle] = harris_rgba(
-            batch.centre_m[split.particle],
-            split.particle_opacity,
-            split.rows,
+        # half reads are cut, not every field of the batch (which was a third of the stage).
+        out[particle] = harris_rgba(
+            batch.centre_m[particle],
+            batch.opacity[particle],
+            scattered.rows[particle],
             lights,
             eye_m,
-            p_dist,
+            None if dist_m is None else dist_m[particle],
         )
-        out[split.slab] = slab_rgba(
-            batch.centre_m[split.slab], split.slab_m, split.slab_opacity, sky, eye_m, s_dist
+        out[slab] = slab_rgba(
+            batch.centre_m[slab],
+            batch.slab_m[slab],
+            batch.opacity[slab],
+            sky,
+            eye_m,
+            None if dist_m is None else dist_m[slab],
         )
         return out
     particles = batch.take(particle)
@@ -115,59 +111,6 @@ def sprite_colours(
         out[particle] = wang_colours(particles, sky)
     out[slab] = slab_rgba(batch.centre_m[slab], batch.slab_m[slab], batch.opacity[slab], sky, eye_m)
     return out
-
-
-@dataclass(frozen=True)
-class _Split:
-    """A mixed batch's particle and slab sprites, as indices, and the eye-independent arrays
-    each model reads of them. The near layer shades the sprites of one set, with one
-    Scattered light, frame after frame, in the set's order; only their centres move."""
-
-    slab_m_of: F32  # the batch's arrays it was cut from (kept to be compared by identity)
-    opacity_of: F32
-    rows_of: F32
-    particle: npt.NDArray[np.intp]
-    slab: npt.NDArray[np.intp]
-    particle_opacity: F32
-    rows: F32
-    slab_m: F32
-    slab_opacity: F32
-
-
-_SPLITS = 4  # a frame's set, and those of a cross-fade
-_splits: OrderedDict[tuple[int, int, int], _Split] = OrderedDict()
-_splits_lock = threading.Lock()
-
-
-def _split_of(batch: SpriteBatch, scattered: Scattered) -> _Split:
-    key = (id(batch.slab_m), id(batch.opacity), id(scattered.rows))
-    with _splits_lock:
-        found = _splits.get(key)
-    if (
-        found is not None
-        and found.slab_m_of is batch.slab_m
-        and found.opacity_of is batch.opacity
-        and found.rows_of is scattered.rows
-    ):
-        return found
-    slab = batch.slab
-    particle, slabs = np.flatnonzero(~slab), np.flatnonzero(slab)
-    made = _Split(
-        slab_m_of=batch.slab_m,
-        opacity_of=batch.opacity,
-        rows_of=scattered.rows,
-        particle=particle,
-        slab=slabs,
-        particle_opacity=batch.opacity[particle],
-        rows=scattered.rows[particle],
-        slab_m=batch.slab_m[slabs],
-        slab_opacity=batch.opacity[slabs],
-    )
-    with _splits_lock:
-        _splits[key] = made
-        while len(_splits) > _SPLITS:
-            _splits.popitem(last=False)
-    return made
 
 
 def _check(model: str) -> None:

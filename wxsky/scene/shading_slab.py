@@ -105,8 +105,9 @@ def slab_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
     }
 
 
-# The last thicknesses' diffuse energy: a frame's slab sprites have the thicknesses the last
-# frame's had (the near layer's set), and it depends on nothing else.
+# The last thicknesses' diffuse energy, which depends on nothing else: a deck's slab sprites
+# share its thickness, so a frame's drawn slab sprites of one deck (as many as the last frame's)
+# ask for what the last frame asked for.
 _last_diffuse: tuple[F64, dict[str, F64]] | None = None
 
 
