@@ -6,20 +6,27 @@ sky layer, which the renderer keeps while nothing it shows moves, is kept the sa
 
 from __future__ import annotations
 
+import dataclasses
 import uuid
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 import pytest
 
 from wxsky.app.camera_path import straight_and_level
-from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_layer, publish_plan
 from wxsky.engine.stages import SkyEngine
 from wxsky.output.shm import FrameReader, FrameWriter
+from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import RingScene, SceneSettings
+from wxsky.scene.layout import FrameScene, RingScene, SceneSettings, SpriteDraw
 from wxsky.scene.ring import RING_SIZE, ring_target_name
+from wxsky.scene.sky import sky_params
+from wxsky.scene.sprites import SpriteBatch
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
+NO_SPRITES = SpriteDraw(SpriteBatch.empty(), np.zeros((0, 4), np.float32))
 PX = 8  # ring images: small, each filled with one value per drawing
 SIZE = (16, 8)
 
@@ -41,8 +48,8 @@ class FakeRenderer:
                 SIZE[0] * SIZE[1] * 4
             )
 
-    def layer_version(self, name: str) -> int | None:
-        return self.sky_version if name == "sky" else None
+    def layer_bands(self, name: str) -> tuple[tuple[int, int, int], ...] | None:
+        return ((0, SIZE[1], self.sky_version),) if name == "sky" else None
 
     def _draw(self, name: str, px: int) -> None:
         self.drawings += 1
@@ -65,7 +72,8 @@ class FakeRenderer:
     def layer_size(self, name: str) -> tuple[int, int]:
         return SIZE
 
-    def read_into(self, name: str, buffer: memoryview) -> None:
+    def read_into(self, name: str, buffer: memoryview, rows: tuple[int, int] | None = None) -> None:
+        assert rows in (None, (0, SIZE[1]))  # one band: read whole or kept
         self.reads.append(name)
         data = self.images.get(name, bytes(len(buffer)))
         buffer[:] = data[: len(buffer)]
@@ -157,3 +165,65 @@ def test_a_layer_written_again_is_not_kept_and_each_slot_keeps_only_its_own() ->
         # A layer not kept nor written is absent, as before.
         writer.publish(6)
         assert reader.read().layers["ring_0"].size == 0
+
+
+class CountingReads:
+    """The real renderer, counting the rows each read copies (publish_layer's reads)."""
+
+    def __init__(self, renderer: Renderer) -> None:
+        self.renderer = renderer
+        self.rows = 0
+
+    def layer_size(self, name: str) -> tuple[int, int]:
+        return self.renderer.layer_size(name)
+
+    def layer_bands(self, name: str) -> tuple[tuple[int, int, int], ...] | None:
+        return self.renderer.layer_bands(name)
+
+    def read_into(self, name: str, buffer: memoryview, rows: tuple[int, int] | None = None) -> None:
+        first, stop = (0, self.layer_size(name)[1]) if rows is None else rows
+        self.rows += stop - first
+        self.renderer.read_into(name, buffer, rows)
+
+
+@pytest.mark.parametrize("height_px", [360, 357])  # strips of whole rows, and not
+def test_a_drifting_sky_is_published_exactly_while_only_its_redrawn_strips_are_read(
+    renderer: Renderer, height_px: int
+) -> None:
+    """The dome's band above the horizon drifts with the wind and the sun moves, so the
+    renderer draws a strip or so of the sky layer again every frame or two: every frame a
+    host reads from either slot must be the layer to the byte, while a slot holding an
+    earlier drawing reads only the strips drawn since (rows counted from the real reads)."""
+    state = WeatherState().apply(load_preset("fair-cumulus"))
+    state = dataclasses.replace(state, time_utc=datetime(2026, 6, 21, 13, 0, tzinfo=UTC))
+    cam = Camera(
+        position_m=(0.0, 0.0, 1500.0),
+        heading_deg=90.0,
+        pitch_deg=0.0,
+        width_px=640,
+        height_px=height_px,
+    )
+    counting = CountingReads(renderer)
+    name = f"wxsky-keep-{uuid.uuid4().hex[:10]}"
+    specs = frame_layer_specs(640, height_px, PX, 0)
+    partial = 0
+    with FrameWriter.create(name, specs) as writer, FrameReader.open(name) as reader:
+        for k in range(60):
+            moment = state.time_utc + timedelta(seconds=k / 30.0)
+            sky = sky_params(dataclasses.replace(state, time_utc=moment))
+            if k == 40:  # a turn: the layer is drawn whole, and read whole into each slot
+                cam = dataclasses.replace(cam, heading_deg=cam.heading_deg + 1.0)
+            renderer.render_frame(FrameScene(cam, sky, NO_SPRITES))
+            before = counting.rows
+            publish_layer(counting, writer, "sky")
+            writer.publish(k + 1)
+            read = counting.rows - before
+            partial += 0 < read < height_px
+            got = reader.read().layers["sky"]
+            assert got.shape == (height_px, 640, 4)
+            assert np.array_equal(got, renderer.read("sky")), f"frame {k}"
+            if k in (40, 41):
+                assert read == height_px
+    # Most frames read a strip or two, not the layer (a frame with nothing drawn reads none).
+    assert partial > 20
+    assert counting.rows < 0.5 * 60 * height_px

@@ -34,11 +34,13 @@ class RingRenderer(Protocol):
         self, ring: RingScene, index: int, start: int, stop: int, ring_set: int
     ) -> None: ...
 
-    def read_into(self, name: str, buffer: memoryview) -> None: ...
+    def read_into(
+        self, name: str, buffer: memoryview, rows: tuple[int, int] | None = None
+    ) -> None: ...
 
     def layer_size(self, name: str) -> tuple[int, int]: ...
 
-    def layer_version(self, name: str) -> int | None: ...
+    def layer_bands(self, name: str) -> tuple[tuple[int, int, int], ...] | None: ...
 
 
 class LayerExport(Protocol):
@@ -58,6 +60,8 @@ class LayerSink(Protocol):
     ) -> memoryview: ...
 
     def keep_layer(self, layer: str, width: int, height: int, content: Hashable) -> bool: ...
+
+    def held_layer(self, layer: str, width: int, height: int) -> Hashable | None: ...
 
     def publish(self, frame_number: int, meta: bytes = b"") -> None: ...
 
@@ -113,15 +117,7 @@ def publish_plan(
     names = ("sky", "near", "near_front") if plan.frame.near_front is not None else ("sky", "near")
     copies: list[tuple[str, str]] = [(name, name) for name in names]
     for name in names:
-        # The near layers are smaller than the picture (Renderer.near_scale): hosts stretch.
-        width, height = renderer.layer_size(name)
-        # A layer the renderer kept from an earlier frame (the sky of a steady view) is kept
-        # by a slot that already holds it too: 3.7 MB not read at 1280x720.
-        version = renderer.layer_version(name)
-        content = None if version is None else ("layer", name, version)
-        if content is not None and sink.keep_layer(name, width, height, content):
-            continue
-        renderer.read_into(name, sink.layer_buffer(name, width, height, content))
+        publish_layer(renderer, sink, name)
     # A complete ring's images never change while it is on show or fading in (a new ring
     # draws into the other set), so a slot that holds them from an earlier frame keeps them:
     # they are read twice per ring, once into each slot, not 2 MB every frame.
@@ -170,6 +166,44 @@ def publish_plan(
     )
     sink.publish(frame_number, meta.pack())
     return meta
+
+
+def publish_layer(renderer: RingRenderer, sink: LayerSink, name: str) -> None:
+    """Layer `name` (sky, near, near_front) of the renderer into the slot being filled: read
+    whole where it is drawn every frame, kept or read in part where the renderer keeps it."""
+    # The near layers are smaller than the picture (Renderer.near_scale): hosts stretch.
+    width, height = renderer.layer_size(name)
+    bands = renderer.layer_bands(name)
+    if bands is None:
+        renderer.read_into(name, sink.layer_buffer(name, width, height))
+        return
+    # A layer the renderer kept from an earlier frame (the sky of a steady view) is kept by a
+    # slot that already holds it too (3.7 MB not read at 1280x720), and of one drawn again in
+    # bands (a drifting sky: a strip a frame or so), a slot that holds an earlier drawing
+    # takes only the bands drawn since (0.3 of 0.7 ms of publishing a frame here).
+    content = ("layer", name, bands)
+    if sink.keep_layer(name, width, height, content):
+        return
+    held = sink.held_layer(name, width, height)
+    buffer = sink.layer_buffer(name, width, height, content)
+    old = held[2] if isinstance(held, tuple) and held[:2] == ("layer", name) else None
+    if (
+        old is None
+        or len(old) != len(bands)
+        or any(a[:2] != b[:2] for a, b in zip(old, bands, strict=True))
+    ):
+        renderer.read_into(name, buffer)
+        return
+    runs: list[list[int]] = []  # the bands drawn since, touching ones as one read
+    for band, was in zip(bands, old, strict=True):
+        if band == was:
+            continue
+        if runs and band[0] <= runs[-1][1]:
+            runs[-1][1] = max(runs[-1][1], band[1])
+        else:
+            runs.append([band[0], band[1]])
+    for first, stop in runs:
+        renderer.read_into(name, buffer, (first, stop))
 
 
 def _publish_ring(

@@ -558,6 +558,17 @@ class FrameWriter:
         self._dims[index] = (width, height)
         return True
 
+    def held_layer(self, layer: str, width: int, height: int) -> Hashable | None:
+        """The content (`layer_buffer`'s name for it) the slot being filled holds in `layer`
+        at width x height, written in an earlier frame published in this slot and not handed
+        out for writing since; None when unknown. A caller that writes only what changed
+        since then (`publish_plan`, the sky's strips) starts from it."""
+        index = self._layer_index(layer, width, height)
+        held = self._held[self._target].get(index)
+        if held is None or held[1:] != (width, height):
+            return None
+        return held[0]
+
     def _layer_index(self, layer: str, width: int, height: int) -> int:
         self._check_open()
         index = self._index.get(layer)

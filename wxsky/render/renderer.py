@@ -327,10 +327,18 @@ class Renderer:
     def layer_size(self, name: str) -> tuple[int, int]:
         return self._targets[name].size
 
-    def read_into(self, name: str, buffer: memoryview) -> None:
-        """Copy a layer's pixels, top row first, into a writable buffer of w*h*4 bytes."""
+    def read_into(self, name: str, buffer: memoryview, rows: tuple[int, int] | None = None) -> None:
+        """Copy a layer's pixels, top row first, into a writable buffer of w*h*4 bytes;
+        `rows` (first, stop): only those rows, into their place in the buffer."""
         self._finish()  # wait for the drawing GIL-free, so the read itself only copies
-        self._targets[name].fbo.read_into(buffer, components=4, alignment=1)
+        fbo = self._targets[name].fbo
+        if rows is None:
+            fbo.read_into(buffer, components=4, alignment=1)
+            return
+        width = self.layer_size(name)[0]
+        first, stop = rows
+        part = buffer[first * width * 4 : stop * width * 4]
+        fbo.read_into(part, viewport=(0, first, width, stop - first), components=4, alignment=1)
 
     def target_framebuffer(self, name: str) -> moderngl.Framebuffer:
         """The framebuffer of a drawn layer, exactly its size (for the zero-copy slot copies,
@@ -413,12 +421,20 @@ class Renderer:
         for part, rect in draws:
             self._sky_draw(part.pass_name, part.feats, part.uniforms | {"u_rect": rect})
 
-    def layer_version(self, name: str) -> int | None:
-        """A number that changes whenever layer `name` is drawn again, for layers kept from
-        frame to frame while nothing they show moves (the sky); None for layers drawn every
-        frame. A publisher names the layer's pixels by it (`FrameWriter.keep_layer`)."""
+    def layer_bands(self, name: str) -> tuple[tuple[int, int, int], ...] | None:
+        """For layers kept from frame to frame while nothing they show moves (the sky), the
+        bands of rows they are drawn in, each (first row, stop row, serial; row 0 the top as
+        the layer is read) with a serial that changes whenever the band is drawn again: a
+        publisher names a band's pixels by it (`FrameWriter.keep_layer`) and copies only the
+        bands drawn since its copy. Bands may share a row. None for layers drawn every frame."""
         drawn = self._sky_drawn.get(name)
-        return None if drawn is None else drawn.serial
+        if drawn is None:
+            return None
+        height = self.layer_size(name)[1]
+        return tuple(
+            (*sky_layer.strip_rows(i, height), serial)
+            for i, serial in enumerate(drawn.strip_serials)
+        )
 
     def _sky_uniforms(
         self,

@@ -117,13 +117,16 @@ class SkyPart:
 class SkyLayerState:
     """What a sky layer holds: the texture drawn into, its parts' layout, the numbers each
     part was drawn from in each strip, the numbers of the latest frame (drawn or not: how
-    fast things drift), and a serial that changes with every drawing into the layer."""
+    fast things drift), and a serial that changes with every drawing into the layer, and
+    one per strip that changes with every drawing into that strip (a publisher copies only
+    the strips drawn since its copy: `strip_rows`)."""
 
     texture: int
     layout: tuple[tuple[str, SkyFeatures, Rect], ...]
     strips: tuple[tuple[F64, ...], ...]  # by part, by strip
     latest: tuple[F64, ...]  # by part
     serial: int
+    strip_serials: tuple[int, ...]
 
 
 def plan_sky(
@@ -143,12 +146,14 @@ def plan_sky(
         or kept.layout != layout
         or any(s[0].shape != p.values.shape for s, p in zip(kept.strips, parts, strict=True))
     ):
+        serial = next(_serials)
         return [(p, p.rect) for p in parts], SkyLayerState(
             texture,
             layout,
             tuple((p.values,) * SKY_STRIPS for p in parts),
             tuple(p.values for p in parts),
-            next(_serials),
+            serial,
+            (serial,) * SKY_STRIPS,
         )
     draws: list[tuple[SkyPart, Rect]] = []
     redrawn: set[int] = set()  # strips an earlier part was drawn in again
@@ -176,7 +181,13 @@ def plan_sky(
     latest_values = tuple(p.values for p in parts)
     if not draws:
         return [], dataclasses.replace(kept, latest=latest_values)
-    return draws, SkyLayerState(texture, layout, tuple(strips), latest_values, next(_serials))
+    serial = next(_serials)
+    strip_serials = tuple(
+        serial if i in redrawn else held for i, held in enumerate(kept.strip_serials)
+    )
+    return draws, SkyLayerState(
+        texture, layout, tuple(strips), latest_values, serial, strip_serials
+    )
 
 
 def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
@@ -195,6 +206,17 @@ def strip_rect(index: int) -> Rect:
     y0 = -1.0 + 2.0 * index / SKY_STRIPS
     y1 = -1.0 + 2.0 * (index + 1) / SKY_STRIPS
     return (-1.0, y0, 1.0, y1)
+
+
+def strip_rows(index: int, height_px: int) -> tuple[int, int]:
+    """The rows (first, stop; 0 the top of the picture, as the layer is read) that strip
+    `index` draws into at a picture height_px tall, or a row more at either end where the
+    height is not a multiple of SKY_STRIPS: every row the strip's rectangle rasterises to."""
+    first = (index * height_px) // SKY_STRIPS
+    stop = -((-(index + 1) * height_px) // SKY_STRIPS)
+    if height_px % SKY_STRIPS:
+        first, stop = max(0, first - 1), min(height_px, stop + 1)
+    return first, stop
 
 
 def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) -> float:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -89,7 +90,12 @@ class RingGeometry:
 
     def corners_m(self) -> npt.NDArray[np.float64]:
         """(8, 4, 3) world corners of each quad: top-left, top-right, bottom-right, bottom-left
-        as seen from the centre (texture row 0 is the quad's top edge)."""
+        as seen from the centre (texture row 0 is the quad's top edge). Read-only: made once
+        per ring, and every published frame carries them."""
+        return self._corners_m
+
+    @cached_property
+    def _corners_m(self) -> npt.NDArray[np.float64]:
         out = np.zeros((RING_SIZE, 4, 3))
         c = np.asarray(self.centre_m)
         w = self.half_width_m
@@ -103,6 +109,7 @@ class RingGeometry:
                 mid + right * w + up * bottom,
                 mid - right * w + up * bottom,
             ]
+        out.setflags(write=False)
         return out
 
     def view_matrix(self, i: int) -> Mat4:
