@@ -12,6 +12,7 @@ framebuffer back gives rows in the order a host uploads them.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -85,15 +86,20 @@ class Camera:
         return rays
 
 
+@functools.lru_cache(maxsize=16)
 def camera_basis(
     heading_deg: float, pitch_deg: float, roll_deg: float
 ) -> tuple[npt.NDArray[np.float64], ...]:
+    """(right, up, forward), read-only: kept for the last few orientations, which a frame
+    asks for a dozen times and a steady flight holds for many frames."""
     h, p, r = (math.radians(v) for v in (heading_deg, pitch_deg, roll_deg))
     fwd = np.array([math.sin(h) * math.cos(p), math.cos(h) * math.cos(p), math.sin(p)])
     right0 = np.array([math.cos(h), -math.sin(h), 0.0])
     up0 = np.cross(right0, fwd)
     right = right0 * math.cos(r) - up0 * math.sin(r)
     up = up0 * math.cos(r) + right0 * math.sin(r)
+    for axis in (right, up, fwd):
+        axis.setflags(write=False)
     return right, up, fwd
 
 
@@ -147,13 +153,23 @@ def turned(camera: Camera, yaw_deg: float, pitch_deg: float, roll_deg: float) ->
 
 
 def spheres_in_view(
-    camera: Camera, centre_m: npt.NDArray[np.float64], radius_m: npt.NDArray[np.float64]
+    camera: Camera,
+    centre_m: npt.NDArray[np.float64],
+    radius_m: npt.NDArray[np.float64],
+    offsets_m: tuple[npt.NDArray[np.float64], ...] | None = None,
 ) -> npt.NDArray[np.bool_]:
     """(N,) whether each sphere (centre, radius) reaches into the camera's view: not wholly
     behind the eye, nor wholly beyond one of the four sides of the view. Conservative: a
-    sphere near a corner may pass though it shows nothing."""
-    rel = centre_m - np.asarray(camera.position_m, np.float64)
-    x, y, z = (rel @ np.stack(camera.basis(), axis=1)).T  # right, up, forward
+    sphere near a corner may pass though it shows nothing. `offsets_m`: (east, north, up)
+    columns of the centres less the eye, where the caller has them."""
+    if offsets_m is None:
+        eye = camera.position_m
+        offsets_m = (centre_m[:, 0] - eye[0], centre_m[:, 1] - eye[1], centre_m[:, 2] - eye[2])
+    dx, dy, dz = offsets_m
+    right, up, fwd = camera.basis()
+    x = right[0] * dx + right[1] * dy + right[2] * dz
+    y = up[0] * dx + up[1] * dy + up[2] * dz
+    z = fwd[0] * dx + fwd[1] * dy + fwd[2] * dz
     tx, ty = camera.tan_half_fov_x, camera.tan_half_fov_y
     # Distances to the side planes through the eye, positive outside: (|x| - z tan) / |n|.
     out: npt.NDArray[np.bool_] = (

@@ -31,6 +31,7 @@ Everything works on numpy arrays (broadcasting Julian days against latitudes and
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -571,9 +572,11 @@ def moon_position(
     return sun_and_moon(time_utc, lat_deg, lon_deg, height_m, refract=refract)[1]
 
 
+@functools.lru_cache(maxsize=8)
 def celestial_from_enu(time_utc: datetime, lat_deg: float, lon_deg: float) -> Matrix3:
     """The rotation taking east-north-up vectors to the equatorial frame of date at a time and
-    place, as row tuples: what turns the star field with the sky."""
+    place, as row tuples: what turns the star field with the sky. Kept for the last few: the
+    sky asks for it every frame at the whole second."""
     theta = apparent_sidereal_deg(julian_day_ut(time_utc), lon_deg)
     m = equatorial_from_enu_matrix(lat_deg, theta)
     r0, r1, r2 = (tuple(float(v) for v in row) for row in m)

@@ -195,8 +195,21 @@ def sort_order(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDA
 def squared_distances(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> F64:
     """(N,) each sprite's squared distance from the eye (its square root is what
     `np.linalg.norm` gives, to the bit)."""
-    rel = batch.centre_m - np.asarray(eye_m, np.float64)
-    out: F64 = np.sum(rel * rel, axis=1)
+    return squares(eye_offsets(batch, eye_m))
+
+
+def eye_offsets(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> tuple[F64, F64, F64]:
+    """(east, north, up): (N,) columns of the sprites' centres less the eye. Column by column
+    is a quarter of the time of the (N, 3) difference for a near set of thousands."""
+    c = batch.centre_m
+    return c[:, 0] - eye_m[0], c[:, 1] - eye_m[1], c[:, 2] - eye_m[2]
+
+
+def squares(offsets: tuple[F64, F64, F64]) -> F64:
+    """(N,) squared lengths of `eye_offsets`: the sums np.sum makes over rows of three, in
+    its order, so their square roots are np.linalg.norm's to the bit."""
+    x, y, z = offsets
+    out: F64 = x * x + y * y + z * z
     return out
 
 
@@ -363,7 +376,8 @@ def build_frame(
             found, drift, share, eye, towers, sky, settings.max_towers, settings.max_range_m
         )
     with (clock or NO_CLOCK).stage("sort"):
-        d2 = squared_distances(near, eye)
+        offsets = eye_offsets(near, eye)
+        d2 = squares(offsets)
         # Left out of the order, not cut from the set (the set and its light stay the ones
         # kept from frame to frame): the towers' clouds, and sprites wholly outside the view,
         # which draw nothing (five sixths of the near layer at 60 degrees). A cloud collapses
@@ -374,7 +388,7 @@ def build_frame(
             drawn &= drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
         collapsing = lod and settings.lod_start_m > 0.0
         if not collapsing:
-            drawn &= in_view(near, camera)
+            drawn &= in_view(near, camera, offsets)
         # Sorted as the whole set would be: a stable sort of the kept sprites in set order.
         shown = np.flatnonzero(drawn)
         order = shown[back_to_front(d2[shown])]
@@ -556,9 +570,13 @@ def install_near(prepared: tuple[PreparedNear, ...]) -> None:
 VIEW_REACH = 0.75
 
 
-def in_view(batch: SpriteBatch, camera: Camera) -> npt.NDArray[np.bool_]:
-    """(N,) whether each sprite of the batch may show in the camera's picture."""
-    return spheres_in_view(camera, batch.centre_m, VIEW_REACH * batch.size_m.astype(np.float64))
+def in_view(
+    batch: SpriteBatch, camera: Camera, offsets_m: tuple[F64, F64, F64] | None = None
+) -> npt.NDArray[np.bool_]:
+    """(N,) whether each sprite of the batch may show in the camera's picture (`offsets_m`:
+    `eye_offsets` from the camera, if known)."""
+    radius_m = VIEW_REACH * batch.size_m.astype(np.float64)
+    return spheres_in_view(camera, batch.centre_m, radius_m, offsets_m)
 
 
 def split_at_distance(

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.scattering import ALBEDO, HG_G, hg_phase, incident_light
-from wxsky.scene.sky import SkyParams
+from wxsky.scene.sky import SkyParams, smoothstep
 from wxsky.scene.sprites import F32, F64, SpriteBatch
 
 U64 = npt.NDArray[np.uint64]
@@ -133,7 +133,7 @@ def _scene_lights(sky: SkyParams, above_cloud: bool) -> Lights:
     else:
         # The sky pass's moon colour is for a disc seen in the sky; fade it in as the sun's
         # light has gone (sun_rgb is 0 below -2°), so the key light never jumps.
-        night = _smoothstep(MOON_TAKES_OVER_DEG, MOON_TAKES_OVER_DEG - 5.0, sun_el)
+        night = smoothstep(MOON_TAKES_OVER_DEG, MOON_TAKES_OVER_DEG - 5.0, sun_el)
         key_dir = np.asarray(sky.moon.direction_enu)
         gain = MOONLIGHT_GAIN * sky.moon.illuminated_fraction * night
         key_rgb = np.asarray(sky.moon_rgb) * gain
@@ -304,11 +304,6 @@ def _quantised(dirs: F64) -> F64:
     q = np.round(dirs / _QUANTUM) * _QUANTUM
     out: F64 = q / np.linalg.norm(q, axis=1, keepdims=True)
     return out
-
-
-def _smoothstep(lo: float, hi: float, x: float) -> float:
-    t = min(1.0, max(0.0, (x - lo) / (hi - lo)))
-    return t * t * (3.0 - 2.0 * t)
 
 
 _CACHE: OrderedDict[bytes, ParticleLight] = OrderedDict()

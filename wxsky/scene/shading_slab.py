@@ -32,8 +32,11 @@ pass behind the sprites. Pure numpy, vectorised over sprites.
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 
 import numpy as np
+import numpy.typing as npt
 
 from wxsky.scene.scattering import ALBEDO, hg_phase
 from wxsky.scene.shading_harris import NIGHT_FLOOR_RGB, exposed, scene_lights
@@ -105,22 +108,48 @@ def slab_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
     }
 
 
-# The last thicknesses' diffuse energy, which depends on nothing else: a deck's slab sprites
-# share its thickness, so a frame's drawn slab sprites of one deck (as many as the last frame's)
-# ask for what the last frame asked for.
-_last_diffuse: tuple[F64, dict[str, F64]] | None = None
+# The energies of the last few (thicknesses, angle) asked for: a frame's slab sprites are of
+# a deck or two, and the key light's direction is quantised (shading_harris.scene_lights), so
+# frame after frame asks for the same few, and working them out was a fifth of a deck's
+# shading.
+_ENERGY_KEPT = 8
+_energies: OrderedDict[tuple[bytes, float], dict[str, F64]] = OrderedDict()
+_energies_lock = threading.Lock()
+
+
+def kept_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
+    """`slab_energy`, kept for the last few thicknesses and angles asked for (read-only)."""
+    h = np.asarray(thickness_m, np.float64)
+    key = (h.tobytes(), light_angle_deg)
+    with _energies_lock:
+        found = _energies.get(key)
+        if found is not None:
+            _energies.move_to_end(key)
+            return found
+    made = slab_energy(h, light_angle_deg)
+    for value in made.values():
+        value.flags.writeable = False
+    with _energies_lock:
+        _energies[key] = made
+        while len(_energies) > _ENERGY_KEPT:
+            _energies.popitem(last=False)
+    return made
 
 
 def diffuse_energy(thickness_m: F64) -> dict[str, F64]:
-    """`slab_energy` at DIFFUSE_ANGLE_DEG, kept for the last thicknesses asked for."""
-    global _last_diffuse
-    h = np.asarray(thickness_m, np.float64)
-    last = _last_diffuse  # one read: another thread may replace it
-    if last is not None and last[0].shape == h.shape and np.array_equal(last[0], h):
-        return last[1]
-    made = slab_energy(h, DIFFUSE_ANGLE_DEG)
-    _last_diffuse = (h.copy(), made)
-    return made
+    """`slab_energy` at DIFFUSE_ANGLE_DEG, kept as `kept_energy` keeps it."""
+    return kept_energy(thickness_m, DIFFUSE_ANGLE_DEG)
+
+
+def distinct(values: F64) -> tuple[F64, npt.NDArray[np.intp] | None]:
+    """(K,) the distinct values and (N,) where each value is among them, or None where all N
+    are one value (then the (1,) array broadcasts as they would). A frame's slab sprites are
+    of a deck or two, each of one thickness: what depends on the thickness alone is worked
+    out once a deck, to the bit what it would be sprite by sprite."""
+    if len(values) == 0 or bool(np.all(values == values[0])):
+        return values[:1], None
+    found, where = np.unique(values, return_inverse=True)
+    return found, where
 
 
 def limb(mu_v: F64) -> F64:
@@ -142,42 +171,57 @@ def slab_radiance(
     light is below the slab's plane), mu_v the view's, cos_phase the cosine between the view ray
     (eye to slab) and the direction to the light; `reflected` is True where the eye is on the
     lit side."""
-    h = np.asarray(thickness_m, np.float64)
+    h_all = np.asarray(thickness_m, np.float64)
+    h, where = distinct(h_all)  # what depends on the thickness alone: once per deck
+
+    def each(per_deck: F64) -> F64:
+        return per_deck if where is None else per_deck[where]
+
     mu_v = np.maximum(np.asarray(mu_v, np.float64), MIN_MU)
     lit = mu_l > 0.0
     mu_light = max(mu_l, MIN_MU)
-    e = slab_energy(h, math.degrees(math.acos(min(mu_light, 1.0))))
+    e = kept_energy(h, math.degrees(math.acos(min(mu_light, 1.0))))
     p_1 = 4.0 * math.pi * hg_phase(cos_phase, G_S)
     p_2 = 4.0 * math.pi * hg_phase(cos_phase, G_S * G_S)
     k = KAPPA_S_PER_M
-    h_l, h_v = h / mu_light, h / mu_v
+    spread = limb(mu_v)
+    on_lit_side, on_far_side = bool(reflected.any()), not bool(reflected.all())
     # Single scattering reflected / transmitted along the ray (Bouthors 4.3), in units where
-    # the Lambertian white is 1: I = a P mu_l / (4 (mu_v +- mu_l)) (1 - tau ...).
-    refl_geo = mu_light / (4.0 * (mu_v + mu_light)) * (1.0 - np.exp(-k * (h_l + h_v)))
-    trans_geo = mu_light / 4.0 * _exp_difference(k * h, mu_v, mu_light)
-    ratio_r = np.divide(e["r_2"], e["r_1"], out=np.zeros_like(h), where=e["r_1"] > 1e-12)
-    ratio_t = np.divide(e["t_2"], e["t_1"], out=np.zeros_like(h), where=e["t_1"] > 1e-12)
-    directional = np.where(
-        reflected,
-        ALBEDO * (p_1 + ratio_r * p_2) * refl_geo,
-        ALBEDO * (p_1 + ratio_t * p_2) * trans_geo,
-    )
-    diffuse = np.where(reflected, e["r_3"], e["t_3"]) * mu_light * limb(mu_v)
+    # the Lambertian white is 1: I = a P mu_l / (4 (mu_v +- mu_l)) (1 - tau ...). Each side
+    # is worked out only for the sprites on it: a deck is mostly seen from one side.
+    refl = trans = np.zeros(0)
+    if on_lit_side:
+        ratio_r = each(np.divide(e["r_2"], e["r_1"], out=np.zeros_like(h), where=e["r_1"] > 1e-12))
+        h_l, h_v = each(h / mu_light), each(h) / mu_v
+        refl_geo = mu_light / (4.0 * (mu_v + mu_light)) * (1.0 - np.exp(-k * (h_l + h_v)))
+        refl = ALBEDO * (p_1 + ratio_r * p_2) * refl_geo
+    if on_far_side:
+        ratio_t = each(np.divide(e["t_2"], e["t_1"], out=np.zeros_like(h), where=e["t_1"] > 1e-12))
+        kh = k * h
+        beam = each(np.exp(-kh / mu_light))  # along the light's path: once per deck
+        trans_geo = mu_light / 4.0 * _exp_difference(each(kh), mu_v, mu_light, beam)
+        trans = ALBEDO * (p_1 + ratio_t * p_2) * trans_geo
+    if on_lit_side and on_far_side:
+        directional = np.where(reflected, refl, trans)
+    else:
+        directional = refl if on_lit_side else trans
+    diffuse = np.where(reflected, each(e["r_3"]), each(e["t_3"])) * mu_light * spread
     key = np.where(lit, directional + diffuse, 0.0)
     # Sky and ground light arrive from a whole hemisphere: the slab passes it as it passes a
     # beam at DIFFUSE_ANGLE_DEG, not at the sun's angle (at dawn the sun grazes the deck, the
     # sky does not).
     d = diffuse_energy(h)
+    r_ms, t_ms = each(d["r_ms"]), each(d["t_ms"])
     # Ground and base light each other: irradiance on the ground from the key light and the
     # sky through the deck, multiplied by the series of bounces between the two planes.
-    bounce = GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * d["r_ms"])
-    t_key = np.where(lit, e["t_ms"] * mu_light, 0.0)
+    bounce = each(GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * d["r_ms"]))
+    t_key = np.where(lit, each(e["t_ms"]) * mu_light, 0.0)
     # Light the ground sends up leaves the deck on the ground's side by reflection and on the
     # far side by transmission: the opposite of the light from above.
-    up_share = np.where(reflected, d["t_ms"], d["r_ms"]) * limb(mu_v)
-    from_above = np.where(reflected, d["r_ms"], d["t_ms"]) * limb(mu_v)
+    up_share = np.where(reflected, t_ms, r_ms) * spread
+    from_above = np.where(reflected, r_ms, t_ms) * spread
     key_total: F64 = key + t_key * bounce * up_share
-    sky_total: F64 = from_above + d["t_ms"] * bounce * up_share
+    sky_total: F64 = from_above + t_ms * bounce * up_share
     return key_total, sky_total
 
 
@@ -222,13 +266,18 @@ def slab_rgba(
     return np.concatenate([exposed(radiance), opacity[:, None]], axis=1).astype(np.float32)
 
 
-def _exp_difference(kh: F64, mu_v: F64, mu_l: float) -> F64:
+def _exp_difference(kh: F64, mu_v: F64, mu_l: float, beam: F64 | None = None) -> F64:
     """(exp(-kh / mu_v) - exp(-kh / mu_l)) / (mu_v - mu_l), and its limit kh / mu^2 exp(-kh/mu)
-    where the two cosines meet (Bouthors' I_1^t with the view along the light's path)."""
+    where the two cosines meet (Bouthors' I_1^t with the view along the light's path).
+    `beam`: exp(-kh / mu_l), where the caller has it."""
     diff = mu_v - mu_l
     near = np.abs(diff) < 1e-4
     safe = np.where(near, 1.0, diff)
-    far: F64 = (np.exp(-kh / mu_v) - np.exp(-kh / mu_l)) / safe
+    if beam is None:
+        beam = np.exp(-kh / mu_l)
+    far: F64 = (np.exp(-kh / mu_v) - beam) / safe
+    if not near.any():
+        return far
     mid = 0.5 * (mu_v + mu_l)
     limit = kh / (mid * mid) * np.exp(-kh / mid)
     out: F64 = np.where(near, limit, far)

@@ -137,7 +137,7 @@ class SkyParams:
         not by the dawn glow the sky's horizon keeps a touch of."""
         r, g, b = self.horizon_rgb
         luma = 0.2126 * r + 0.7152 * g + 0.0722 * b
-        return _mix(self.horizon_rgb, (luma, luma, luma), _smoothstep(0.6, 1.0, self.cover))
+        return _mix(self.horizon_rgb, (luma, luma, luma), smoothstep(0.6, 1.0, self.cover))
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -206,8 +206,8 @@ def sky_params(
     known = bodies_for(state, bodies)
     sun, moon = known.sun, known.moon
     el = sun.elevation_deg
-    day = _smoothstep(-6.0, 10.0, el)  # civil twilight to well-lit day
-    sunset = _smoothstep(-8.0, 0.0, el) * (1.0 - _smoothstep(2.0, 18.0, el))
+    day = smoothstep(-6.0, 10.0, el)  # civil twilight to well-lit day
+    sunset = smoothstep(-8.0, 0.0, el) * (1.0 - smoothstep(2.0, 18.0, el))
     # Layers overlap at random (the usual assumption for total cloud amount): two 4/8 layers
     # hide 3/4 of the sky, not all of it, so a forming layer darkens the sky gradually.
     eye_m = obs.alt_m if eye_alt_m is None else eye_alt_m
@@ -215,7 +215,7 @@ def sky_params(
         1.0 - min(1.0, lay.cover_oktas / 8.0) * _share_above(lay, eye_m) for lay in state.layers
     )
     cover = 1.0 - clear
-    overcast_dim = 1.0 - 0.45 * _smoothstep(0.6, 1.0, cover)
+    overcast_dim = 1.0 - 0.45 * smoothstep(0.6, 1.0, cover)
 
     night_zenith, night_horizon = (0.008, 0.012, 0.035), (0.025, 0.035, 0.07)
     day_zenith, day_horizon = (0.20, 0.40, 0.78), (0.68, 0.80, 0.94)
@@ -225,24 +225,24 @@ def sky_params(
     zenith = _mix(zenith, (0.28, 0.30, 0.52), sunset * 0.4)
     open_zenith, open_horizon = zenith, horizon
     grey = (0.55, 0.57, 0.60)
-    zenith = _mix(zenith, _scale(grey, day + 0.05), _smoothstep(0.6, 1.0, cover) * 0.8)
-    horizon = _mix(horizon, _scale(grey, day + 0.05), _smoothstep(0.6, 1.0, cover) * 0.6)
+    zenith = _mix(zenith, _scale(grey, day + 0.05), smoothstep(0.6, 1.0, cover) * 0.8)
+    horizon = _mix(horizon, _scale(grey, day + 0.05), smoothstep(0.6, 1.0, cover) * 0.6)
     zenith, horizon = _scale(zenith, overcast_dim), _scale(horizon, overcast_dim)
     ground = _scale((0.30, 0.31, 0.28), 0.08 + 0.92 * day)
     sun_rgb = _mix((1.0, 0.98, 0.92), (1.0, 0.55, 0.25), sunset)
-    sun_rgb = _scale(sun_rgb, _smoothstep(-2.0, 4.0, el))
+    sun_rgb = _scale(sun_rgb, smoothstep(-2.0, 4.0, el))
 
     # The first stars show at the end of civil twilight, all of them by astronomical night;
     # cloud thins them with the share of sky it hides.
-    dark = 1.0 - _smoothstep(-15.0, -4.0, el)
+    dark = 1.0 - smoothstep(-15.0, -4.0, el)
     stars = dark * math.sqrt(max(0.0, 1.0 - cover))
     # By day the moon is a pale disc a little brighter than the blue around it; near the
     # horizon the long path through the air reddens and dims it.
-    low = 1.0 - _smoothstep(0.0, 12.0, moon.elevation_deg)
+    low = 1.0 - smoothstep(0.0, 12.0, moon.elevation_deg)
     moon_rgb = _mix((0.96, 0.94, 0.88), (1.0, 0.72, 0.48), low * 0.8)
     moon_gain = (0.95 - 0.65 * day) * (1.0 - 0.35 * low)
-    moon_gain *= 1.0 - 0.85 * _smoothstep(0.6, 1.0, cover)
-    moon_rgb = _scale(moon_rgb, moon_gain * _smoothstep(-1.0, 0.0, moon.elevation_deg))
+    moon_gain *= 1.0 - 0.85 * smoothstep(0.6, 1.0, cover)
+    moon_rgb = _scale(moon_rgb, moon_gain * smoothstep(-1.0, 0.0, moon.elevation_deg))
 
     haze_top_m = _haze_top_m(state)
     whole_second = state.time_utc.replace(microsecond=0)
@@ -314,7 +314,7 @@ def _haze_m(state: WeatherState, eye_m: float, mixed_top_m: float) -> float:
     inversion caps both; `mixed_top_m`, `_haze_top_m`), so an eye above it looks through clear
     air."""
     surface_m = max(MIN_HAZE_M, state.visibility_m / KOSCHMIEDER)
-    aloft = _smoothstep(mixed_top_m, mixed_top_m + 500.0, eye_m)
+    aloft = smoothstep(mixed_top_m, mixed_top_m + 500.0, eye_m)
     return surface_m + (max(surface_m, CLEAR_AIR_HAZE_M) - surface_m) * aloft
 
 
@@ -338,8 +338,9 @@ def _is_high(layer: CloudLayer) -> bool:
     return layer.type in HIGH_TYPES or layer.base_m >= HIGH_BASE_M
 
 
-def _smoothstep(lo: float, hi: float, x: float) -> float:
-    t = float(np.clip((x - lo) / (hi - lo), 0.0, 1.0))
+def smoothstep(lo: float, hi: float, x: float) -> float:
+    """0 below lo, 1 above hi, Hermite between (on plain floats: a frame makes a dozen)."""
+    t = min(1.0, max(0.0, (x - lo) / (hi - lo)))
     return t * t * (3.0 - 2.0 * t)
 
 
