@@ -29,6 +29,7 @@ see by `DOME_REUSE_PX` of a pixel (`dome_offset_tolerance`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
 from collections.abc import Mapping, Sequence
@@ -78,7 +79,36 @@ class SkyPart:
     def drift_from(self, drawn: F64) -> float:
         """The largest change of any number since `drawn`, in its tolerances (any change of
         one with none is a jump), the short way round for the periodic ones."""
-        return _drift(self.values, drawn, self.tolerance, self.period)
+        return float(self.drifts_from(drawn[None, :])[0])
+
+    def drifts_from(self, drawn: F64) -> F64:
+        """`drift_from` for each row of `drawn` (S, K) at once: (S,)."""
+        if self.values.size == 0:
+            return np.zeros(len(drawn))
+        change = np.abs(self.values - drawn)
+        wraps, period, tolerated, tolerance = self._masks
+        if wraps is not None:
+            wrapped = np.mod(change, period)
+            change = np.where(wraps, np.minimum(wrapped, self.period - wrapped), change)
+        ratio = change / tolerance
+        if tolerated is not None:
+            ratio = np.where(tolerated, ratio, np.where(change > 0.0, np.inf, 0.0))
+        out: F64 = ratio.max(axis=1)
+        return out
+
+    @functools.cached_property
+    def _masks(self) -> tuple[npt.NDArray[np.bool_] | None, F64, npt.NDArray[np.bool_] | None, F64]:
+        """(which numbers wrap, or None; their periods, inf for the rest; which have a
+        tolerance, or None when all do; the tolerances, 1 for those without): made once a
+        part, for the strips' drifts."""
+        wraps = self.period > 0.0
+        tolerated = self.tolerance > 0.0
+        return (
+            wraps if wraps.any() else None,
+            np.where(wraps, self.period, np.inf),
+            None if tolerated.all() else tolerated,
+            np.where(tolerated, self.tolerance, 1.0),
+        )
 
     @staticmethod
     def of(
@@ -160,7 +190,8 @@ def plan_sky(
     strips: list[tuple[F64, ...]] = []
     for part, held, latest in zip(parts, kept.strips, kept.latest, strict=True):
         mine = [i for i in range(SKY_STRIPS) if _intersect(part.rect, strip_rect(i))]
-        drift = {i: part.drift_from(held[i]) for i in mine}
+        drifts = part.drifts_from(np.stack([held[i] for i in mine])) if mine else []
+        drift = dict(zip(mine, (float(d) for d in drifts), strict=True))
         stale = [i for i in sorted(mine, key=lambda i: -drift[i]) if drift[i] > 1.0]
         if stale and drift[stale[0]] > SKY_CATCH_UP:
             chosen = set(mine)
@@ -231,22 +262,6 @@ def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) ->
     # A texture offset of 1 moves the dome by at most a (stretched) tile.
     tile_m = max(1.0 / min(math.hypot(m[0], m[2]), math.hypot(m[1], m[3])) for m in frame.matrices)
     return DOME_REUSE_PX * pixel_rad * nearest_m / tile_m
-
-
-def _drift(values: F64, drawn: F64, tolerance: F64, period: F64) -> float:
-    """The largest change of any number, in its tolerances (any change of one with none is
-    a jump), the short way round for the periodic ones."""
-    if values.size == 0:
-        return 0.0
-    change = np.abs(values - drawn)
-    wrapped = np.mod(change, np.where(period > 0.0, period, np.inf))
-    change = np.where(period > 0.0, np.minimum(wrapped, period - wrapped), change)
-    ratio = np.where(
-        tolerance > 0.0,
-        change / np.where(tolerance > 0.0, tolerance, 1.0),
-        np.where(change > 0.0, np.inf, 0.0),
-    )
-    return float(ratio.max())
 
 
 def _intersect(a: Rect, b: Rect) -> Rect | None:

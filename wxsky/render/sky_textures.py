@@ -289,9 +289,27 @@ def dome_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
 
     Elevation across the picture is smooth: it is sampled on a grid of cells about 10 pixels
     wide, a cell is in when its corners reach into the range, and one cell of margin on every
-    side stands for what lies between the corners."""
-    lo_z = 0.0
+    side stands for what lies between the corners. Kept for the last few views: a view held
+    steady (a straight flight) asks for the same every frame, and a grid of 9,000 rays was a
+    third of the sky's planning."""
     hi_z = 1.0 if sky.dome.high_cover > 0.0 else dome_band(sky)[1]
+    return _dome_rect(
+        cam.heading_deg, cam.pitch_deg, cam.roll_deg, cam.fov_deg, cam.width_px, cam.height_px, hi_z
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def _dome_rect(
+    heading_deg: float,
+    pitch_deg: float,
+    roll_deg: float,
+    fov_deg: float,
+    width_px: int,
+    height_px: int,
+    hi_z: float,
+) -> Rect | None:
+    cam = Camera((0.0, 0.0, 0.0), heading_deg, pitch_deg, roll_deg, fov_deg, width_px, height_px)
+    lo_z = 0.0
     right, up, fwd = cam.basis()
     nx = max(2, round(cam.width_px / 10.0) + 1)
     ny = max(2, round(cam.height_px / 10.0) + 1)
@@ -391,11 +409,26 @@ class DomeFrame:
     offsets: tuple[tuple[float, float], ...]  # 3 layers, wrapped into 0..1
 
 
+# The last frame's dome, by its sky (identity) and eye altitude: a frame asks for it four
+# times (features, uniforms of two parts, the reuse tolerance).
+_last_dome: tuple[SkyParams, float, DomeFrame] | None = None
+
+
 def dome_frame(sky: SkyParams, eye_alt_m: float) -> DomeFrame:
     """Roden & Parberry's "height" and "speed" controls turned into texture coordinates: the
     two shape layers drift with the wind aloft in slightly different directions and at
     slightly different speeds, so the clouds change shape as they go; thin ice cloud is
     stretched along the wind into streaks."""
+    global _last_dome
+    last = _last_dome  # one read: another thread's renderer may replace it
+    if last is not None and last[0] is sky and last[1] == eye_alt_m:
+        return last[2]
+    made = _dome_frame(sky, eye_alt_m)
+    _last_dome = (sky, eye_alt_m, made)
+    return made
+
+
+def _dome_frame(sky: SkyParams, eye_alt_m: float) -> DomeFrame:
     dome = sky.dome
     clearance_m = dome.height * DOME_TOP_M - eye_alt_m
     visible = dome.cover > 0.0 and clearance_m >= DOME_MIN_CLEARANCE_M
