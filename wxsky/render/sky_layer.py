@@ -190,8 +190,8 @@ def plan_sky(
     strips: list[tuple[F64, ...]] = []
     for part, held, latest in zip(parts, kept.strips, kept.latest, strict=True):
         mine = [i for i in range(SKY_STRIPS) if _intersect(part.rect, strip_rect(i))]
-        drifts = part.drifts_from(np.stack([held[i] for i in mine])) if mine else []
-        drift = dict(zip(mine, (float(d) for d in drifts), strict=True))
+        drifts = part.drifts_from(np.stack([held[i] for i in mine])) if mine else np.zeros(0)
+        drift = dict(zip(mine, drifts.tolist(), strict=True))
         stale = [i for i in sorted(mine, key=lambda i: -drift[i]) if drift[i] > 1.0]
         if stale and drift[stale[0]] > SKY_CATCH_UP:
             chosen = set(mine)
