@@ -430,11 +430,8 @@ class Renderer:
         drawn = self._sky_drawn.get(name)
         if drawn is None:
             return None
-        height = self.layer_size(name)[1]
-        return tuple(
-            (*sky_layer.strip_rows(i, height), serial)
-            for i, serial in enumerate(drawn.strip_serials)
-        )
+        rows = drawn.strip_rows(self.layer_size(name)[1])
+        return tuple((*r, serial) for r, serial in zip(rows, drawn.strip_serials, strict=True))
 
     def _sky_uniforms(
         self,

@@ -4,8 +4,10 @@ the same every frame.
 The sky is drawn in parts (sky.glsl): the plain sky over the whole picture, then the dome's
 variant over its band and the moon's over its disc, each part's colour a function of the
 pixel and the uniforms only, so any part may be drawn over any sub-rectangle and agree with
-the rest to the bit. The layer is kept in `SKY_STRIPS` horizontal strips, and each part
-remembers, strip by strip, the numbers it was drawn there with:
+the rest to the bit. The layer is kept in horizontal strips (`strip_edges`: about
+`SKY_STRIPS`, with edges on those of the dome's band where it spans the picture's width, so
+that the dearest part redraws whole strips of its own, one a frame or so at an even cost),
+and each part remembers, strip by strip, the numbers it was drawn there with:
 
 - what the layer shows changed in kind (another texture, another feature or rectangle):
   everything is drawn;
@@ -19,7 +21,9 @@ remembers, strip by strip, the numbers it was drawn there with:
 
 Drawing a part over a strip again means drawing the parts after it there too (each part
 overwrites its rectangle), not the ones before it: a drifting dome does not redraw the plain
-sky under it.
+sky under it. A part is never drawn in a strip a later part covers whole: the plain sky under
+the dome's band would be drawn only to be drawn over (before, a plain-sky strip redrawn for
+the sun's motion redrew the dome in it as well, and a frame's dome cost 20 to 110 rows).
 
 Tolerances are in the uniforms' own units: `SKY_REUSE_TOLERANCE` for directions (radians),
 colours and the like; for the dome's texture offsets, what moves the nearest dome the eye can
@@ -48,6 +52,8 @@ F64 = npt.NDArray[np.float64]
 # few frames, by steps a hundredth of a pixel and a hundredth of a colour level wide.
 SKY_REUSE_TOLERANCE = 2e-5
 SKY_STRIPS = 8
+# Strips at least in the dome's band (`strip_edges`): as it drifts, a strip of it a frame.
+DOME_STRIPS = 3
 # Beyond this many tolerances a change is a jump, not a drift: drawn whole at once.
 SKY_CATCH_UP = 3.0
 # The dome drifts with the wind aloft: redrawn once it has moved this share of a pixel where
@@ -157,6 +163,15 @@ class SkyLayerState:
     latest: tuple[F64, ...]  # by part
     serial: int
     strip_serials: tuple[int, ...]
+    # NDC y of the strips' edges, top to bottom (`strip_edges`): strips + 1 of them.
+    edges: tuple[float, ...] = ()
+
+    def strip_rows(self, height_px: int) -> tuple[tuple[int, int], ...]:
+        """Each strip's rows at a picture height_px tall (`strip_rows`)."""
+        return tuple(
+            strip_rows(self.edges[i], self.edges[i + 1], height_px)
+            for i in range(len(self.edges) - 1)
+        )
 
 
 def plan_sky(
@@ -170,26 +185,38 @@ def plan_sky(
     past it), and with them every strip an earlier part was drawn again in (a part
     overwrites what lies under its rectangle, not what lies over it)."""
     layout = tuple((p.pass_name, p.feats, p.rect) for p in parts)
+    edges = strip_edges(parts)
+    count = len(edges) - 1
     if (
         kept is None
         or kept.texture != texture
         or kept.layout != layout
+        or kept.edges != edges
         or any(s[0].shape != p.values.shape for s, p in zip(kept.strips, parts, strict=True))
     ):
         serial = next(_serials)
         return [(p, p.rect) for p in parts], SkyLayerState(
             texture,
             layout,
-            tuple((p.values,) * SKY_STRIPS for p in parts),
+            tuple((p.values,) * count for p in parts),
             tuple(p.values for p in parts),
             serial,
-            (serial,) * SKY_STRIPS,
+            (serial,) * count,
+            edges,
         )
+    rects = [(-1.0, edges[i], 1.0, edges[i + 1]) for i in range(count)]
     draws: list[tuple[SkyPart, Rect]] = []
     redrawn: set[int] = set()  # strips an earlier part was drawn in again
     strips: list[tuple[F64, ...]] = []
-    for part, held, latest in zip(parts, kept.strips, kept.latest, strict=True):
-        mine = [i for i in range(SKY_STRIPS) if _intersect(part.rect, strip_rect(i))]
+    for k, (part, held, latest) in enumerate(zip(parts, kept.strips, kept.latest, strict=True)):
+        # Strips a later part covers whole (the dome's band, full width) show none of this
+        # part: it is not drawn there, and its numbers there are not kept up.
+        mine = [
+            i
+            for i in range(count)
+            if _intersect(part.rect, rects[i])
+            and not any(_covers(later.rect, rects[i]) for later in parts[k + 1 :])
+        ]
         drifts = part.drifts_from(np.stack([held[i] for i in mine])) if mine else np.zeros(0)
         drift = dict(zip(mine, drifts.tolist(), strict=True))
         stale = [i for i in sorted(mine, key=lambda i: -drift[i]) if drift[i] > 1.0]
@@ -197,13 +224,13 @@ def plan_sky(
             chosen = set(mine)
         elif stale:
             rate = part.drift_from(latest)
-            count = max(1, math.ceil(len(mine) * rate / (SKY_CATCH_UP - 1.0)))
-            chosen = set(stale[:count])
+            many = max(1, math.ceil(len(mine) * rate / (SKY_CATCH_UP - 1.0)))
+            chosen = set(stale[:many])
         else:
             chosen = set()
         redo = sorted(chosen | (redrawn & set(mine)))
         for first, last in _runs(redo):
-            band = (-1.0, strip_rect(first)[1], 1.0, strip_rect(last)[3])
+            band = (-1.0, edges[first], 1.0, edges[last + 1])
             clipped = _intersect(part.rect, band)
             if clipped is not None:
                 draws.append((part, clipped))
@@ -217,8 +244,34 @@ def plan_sky(
         serial if i in redrawn else held for i, held in enumerate(kept.strip_serials)
     )
     return draws, SkyLayerState(
-        texture, layout, tuple(strips), latest_values, serial, strip_serials
+        texture, layout, tuple(strips), latest_values, serial, strip_serials, edges
     )
+
+
+def strip_edges(parts: Sequence[SkyPart]) -> tuple[float, ...]:
+    """The strips' edges (NDC y, top -1 to bottom 1) for these parts: SKY_STRIPS even strips,
+    or, where a later part spans the picture's width over a band (the dome's, the dearest
+    part), strips that meet that band's edges: at least DOME_STRIPS in the band, and the rest
+    of the picture in strips about as tall as even ones. A band's strips are drawn whole by
+    its part, at an even cost a frame, and the parts under it are not drawn there at all."""
+    band = next(
+        (
+            p.rect
+            for p in parts[1:]
+            if p.rect[0] <= -1.0 and p.rect[2] >= 1.0 and (p.rect[1] > -1.0 or p.rect[3] < 1.0)
+        ),
+        None,
+    )
+    if band is None:
+        return tuple(-1.0 + 2.0 * i / SKY_STRIPS for i in range(SKY_STRIPS + 1))
+    edges: list[float] = [-1.0]
+    for lo, hi, least in ((-1.0, band[1], 1), (band[1], band[3], DOME_STRIPS), (band[3], 1.0, 1)):
+        if hi <= lo:
+            continue
+        n = max(least, round(SKY_STRIPS * (hi - lo) / 2.0))
+        edges.extend(lo + (hi - lo) * j / n for j in range(1, n))
+        edges.append(hi)
+    return tuple(edges)
 
 
 def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
@@ -232,22 +285,17 @@ def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
     return runs
 
 
-def strip_rect(index: int) -> Rect:
-    """Strip `index` of SKY_STRIPS, top (NDC y -1, as the sky shader's quad) to bottom."""
-    y0 = -1.0 + 2.0 * index / SKY_STRIPS
-    y1 = -1.0 + 2.0 * (index + 1) / SKY_STRIPS
-    return (-1.0, y0, 1.0, y1)
-
-
-def strip_rows(index: int, height_px: int) -> tuple[int, int]:
-    """The rows (first, stop; 0 the top of the picture, as the layer is read) that strip
-    `index` draws into at a picture height_px tall, or a row more at either end where the
-    height is not a multiple of SKY_STRIPS: every row the strip's rectangle rasterises to."""
-    first = (index * height_px) // SKY_STRIPS
-    stop = -((-(index + 1) * height_px) // SKY_STRIPS)
-    if height_px % SKY_STRIPS:
-        first, stop = max(0, first - 1), min(height_px, stop + 1)
-    return first, stop
+def strip_rows(top_ndc: float, bottom_ndc: float, height_px: int) -> tuple[int, int]:
+    """The rows (first, stop; 0 the top of the picture, as the layer is read) that a strip
+    from top_ndc to bottom_ndc draws into at a picture height_px tall, with a row more at
+    either end where an edge is not on a row boundary: every row its rectangle rasterises to."""
+    top, bottom = (top_ndc + 1.0) * 0.5 * height_px, (bottom_ndc + 1.0) * 0.5 * height_px
+    first, stop = math.floor(top), math.ceil(bottom)
+    if first != top:
+        first -= 1
+    if stop != bottom:
+        stop += 1
+    return max(0, first), min(height_px, stop)
 
 
 def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) -> float:
@@ -262,6 +310,10 @@ def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) ->
     # A texture offset of 1 moves the dome by at most a (stretched) tile.
     tile_m = max(1.0 / min(math.hypot(m[0], m[2]), math.hypot(m[1], m[3])) for m in frame.matrices)
     return DOME_REUSE_PX * pixel_rad * nearest_m / tile_m
+
+
+def _covers(a: Rect, b: Rect) -> bool:
+    return a[0] <= b[0] and a[1] <= b[1] and a[2] >= b[2] and a[3] >= b[3]
 
 
 def _intersect(a: Rect, b: Rect) -> Rect | None:
