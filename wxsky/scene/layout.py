@@ -42,6 +42,7 @@ from wxsky.scene.in_cloud import (
     NO_LOCKS,
     NO_VEIL,
     OUTSIDE,
+    UNLOCK_FRAC,
     InCloud,
     Locks,
     in_cloud,
@@ -272,14 +273,23 @@ def shade_for_eye(
 
 
 def oriented(
-    draw: SpriteDraw, eye_m: tuple[float, float, float], locks: Locks = NO_LOCKS
+    draw: SpriteDraw,
+    eye_m: tuple[float, float, float],
+    locks: Locks = NO_LOCKS,
+    dist_m: F64 | None = None,
 ) -> tuple[SpriteDraw, Locks]:
     """The draw with each sprite's normal: flat ones lie in their layer (normal up), sprites
-    the eye is inside keep the facing they locked with, the rest face the camera."""
+    the eye is inside keep the facing they locked with, the rest face the camera. `dist_m`:
+    (N,) the sprites' distances from the eye, if known."""
     sprites = draw.sprites
     flat = sprites.flat
-    standing = sprites.take(~flat) if flat.any() else sprites
-    lock_normals, kept = lock_facing(standing, eye_m, locks)
+    if dist_m is not None and not np.any((dist_m < UNLOCK_FRAC * sprites.size_m) & ~flat):
+        # The eye is near no standing sprite (most frames): nothing locks, as lock_facing
+        # would find, without cutting the batch.
+        lock_normals, kept = None, NO_LOCKS
+    else:
+        standing = sprites.take(~flat) if flat.any() else sprites
+        lock_normals, kept = lock_facing(standing, eye_m, locks)
     if not flat.any() and lock_normals is None:
         return draw, kept
     normals = np.zeros((len(sprites), 3), np.float32)
@@ -404,7 +414,9 @@ def build_frame(
         scattered=scattered,
         dist_m=dist,
     )
+    drawn_dist: F64 | None = dist[order]  # of the sprites drawn, while they are these
     if collapsing:
+        drawn_dist = None
         collapsed = collapse_far_clouds(
             shaded.sprites, shaded.rgba, eye, settings.lod_start_m, settings.lod_band_m
         )
@@ -421,9 +433,10 @@ def build_frame(
         budget = cap_sprites(shaded.sprites, shaded.rgba, eye, settings.max_near_sprites)
         if budget.dropped:
             shaded, dropped = SpriteDraw(budget.sprites, budget.rgba), budget.dropped
+            drawn_dist = None
     cloud = in_cloud(near, eye, state.visibility_m, dist)
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
-    draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks)
+    draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks, drawn_dist)
     front: SpriteDraw | None = None
     split_m: float | None = None
     if split_at_m is not None:
