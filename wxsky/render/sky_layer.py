@@ -51,7 +51,10 @@ F64 = npt.NDArray[np.float64]
 # again: by day the sun moves 2.4e-6 rad a frame at 30 fps, so a strip is drawn again every
 # few frames, by steps a hundredth of a pixel and a hundredth of a colour level wide.
 SKY_REUSE_TOLERANCE = 2e-5
-SKY_STRIPS = 8
+# Thin strips (22 rows at 720): a drifting part redraws a strip or two of them every frame,
+# where 8 strips of 90 rows came one frame in two or three, and a frame with one cost a
+# millisecond or more than a frame without (clear: p95 / median 1.4-1.6 -> 1.2-1.3).
+SKY_STRIPS = 32
 # Strips at least in the dome's band (`strip_edges`): as it drifts, a strip of it a frame.
 DOME_STRIPS = 3
 # Beyond this many tolerances a change is a jump, not a drift: drawn whole at once.
@@ -168,10 +171,7 @@ class SkyLayerState:
 
     def strip_rows(self, height_px: int) -> tuple[tuple[int, int], ...]:
         """Each strip's rows at a picture height_px tall (`strip_rows`)."""
-        return tuple(
-            strip_rows(self.edges[i], self.edges[i + 1], height_px)
-            for i in range(len(self.edges) - 1)
-        )
+        return _strips_rows(self.edges, height_px)
 
 
 def plan_sky(
@@ -204,18 +204,23 @@ def plan_sky(
             (serial,) * count,
             edges,
         )
-    rects = [(-1.0, edges[i], 1.0, edges[i + 1]) for i in range(count)]
     draws: list[tuple[SkyPart, Rect]] = []
     redrawn: set[int] = set()  # strips an earlier part was drawn in again
     strips: list[tuple[F64, ...]] = []
     for k, (part, held, latest) in enumerate(zip(parts, kept.strips, kept.latest, strict=True)):
         # Strips a later part covers whole (the dome's band, full width) show none of this
         # part: it is not drawn there, and its numbers there are not kept up.
+        bands = [
+            (r[1], r[3]) for r in (p.rect for p in parts[k + 1 :]) if r[0] <= -1.0 and r[2] >= 1.0
+        ]
+        x0, y0, x1, y1 = part.rect
         mine = [
             i
             for i in range(count)
-            if _intersect(part.rect, rects[i])
-            and not any(_covers(later.rect, rects[i]) for later in parts[k + 1 :])
+            if x0 < x1
+            and y0 < edges[i + 1]
+            and edges[i] < y1
+            and not any(lo <= edges[i] and edges[i + 1] <= hi for lo, hi in bands)
         ]
         drifts = part.drifts_from(np.stack([held[i] for i in mine])) if mine else np.zeros(0)
         drift = dict(zip(mine, drifts.tolist(), strict=True))
@@ -234,8 +239,9 @@ def plan_sky(
             clipped = _intersect(part.rect, band)
             if clipped is not None:
                 draws.append((part, clipped))
-        redrawn |= set(redo)
-        strips.append(tuple(part.values if i in redo else v for i, v in enumerate(held)))
+        again = set(redo)
+        redrawn |= again
+        strips.append(tuple(part.values if i in again else v for i, v in enumerate(held)))
     latest_values = tuple(p.values for p in parts)
     if not draws:
         return [], dataclasses.replace(kept, latest=latest_values)
@@ -285,6 +291,12 @@ def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
     return runs
 
 
+@functools.lru_cache(maxsize=8)
+def _strips_rows(edges: tuple[float, ...], height_px: int) -> tuple[tuple[int, int], ...]:
+    # Asked for every frame by the publisher; the edges change only with the layout.
+    return tuple(strip_rows(edges[i], edges[i + 1], height_px) for i in range(len(edges) - 1))
+
+
 def strip_rows(top_ndc: float, bottom_ndc: float, height_px: int) -> tuple[int, int]:
     """The rows (first, stop; 0 the top of the picture, as the layer is read) that a strip
     from top_ndc to bottom_ndc draws into at a picture height_px tall, with a row more at
@@ -310,10 +322,6 @@ def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) ->
     # A texture offset of 1 moves the dome by at most a (stretched) tile.
     tile_m = max(1.0 / min(math.hypot(m[0], m[2]), math.hypot(m[1], m[3])) for m in frame.matrices)
     return DOME_REUSE_PX * pixel_rad * nearest_m / tile_m
-
-
-def _covers(a: Rect, b: Rect) -> bool:
-    return a[0] <= b[0] and a[1] <= b[1] and a[2] >= b[2] and a[3] >= b[3]
 
 
 def _intersect(a: Rect, b: Rect) -> Rect | None:
