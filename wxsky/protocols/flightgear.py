@@ -12,6 +12,7 @@ Units at this edge are FlightGear's (feet, knots, inHg, degrees); wxsky's inside
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -74,14 +75,14 @@ class FgPose:
         offset (FlightGear's offset turns the view left: 90 from a northbound aircraft looks
         west, measured against its view quaternion). From outside: toward the aircraft, as
         FlightGear's chase and tower views look."""
-        toward = self._toward_aircraft()
+        toward = self._toward_aircraft
         if toward is not None:
             return toward[0]
         return (self.heading_deg - self.view_heading_offset_deg) % 360.0
 
     @property
     def view_pitch_deg(self) -> float:
-        toward = self._toward_aircraft()
+        toward = self._toward_aircraft
         if toward is not None:
             return toward[1]
         return max(-90.0, min(90.0, self.pitch_deg + self.view_pitch_offset_deg))
@@ -89,11 +90,13 @@ class FgPose:
     @property
     def view_roll_deg(self) -> float:
         """A view from outside is level; one from inside rolls with the aircraft."""
-        return self.roll_deg if self._toward_aircraft() is None else 0.0
+        return self.roll_deg if self._toward_aircraft is None else 0.0
 
+    @functools.cached_property
     def _toward_aircraft(self) -> tuple[float, float] | None:
         """(heading, pitch) from an outside eye to the aircraft; None from inside, or from
-        an eye so near the aircraft that the direction means nothing."""
+        an eye so near the aircraft that the direction means nothing. Made once a pose: the
+        view's heading, pitch and roll each ask."""
         if self.internal:
             return None
         east_m, north_m, up_m = enu_from_geodetic(

@@ -156,18 +156,16 @@ class SkyPart:
 class SkyLayerState:
     """What a sky layer holds: the texture drawn into, its parts' layout, the numbers each
     part was drawn from in each strip, the numbers of the latest frame (drawn or not: how
-    fast things drift), and a serial that changes with every drawing into the layer, and
-    one per strip that changes with every drawing into that strip (a publisher copies only
-    the strips drawn since its copy: `strip_rows`)."""
+    fast things drift), and per strip a serial that changes with every drawing into it (a
+    publisher copies only the strips drawn since its copy: `strip_rows`)."""
 
     texture: int
     layout: tuple[tuple[str, SkyFeatures, Rect], ...]
     strips: tuple[tuple[F64, ...], ...]  # by part, by strip
     latest: tuple[F64, ...]  # by part
-    serial: int
     strip_serials: tuple[int, ...]
     # NDC y of the strips' edges, top to bottom (`strip_edges`): strips + 1 of them.
-    edges: tuple[float, ...] = ()
+    edges: tuple[float, ...]
 
     def strip_rows(self, height_px: int) -> tuple[tuple[int, int], ...]:
         """Each strip's rows at a picture height_px tall (`strip_rows`)."""
@@ -200,7 +198,6 @@ def plan_sky(
             layout,
             tuple((p.values,) * count for p in parts),
             tuple(p.values for p in parts),
-            serial,
             (serial,) * count,
             edges,
         )
@@ -210,9 +207,7 @@ def plan_sky(
     for k, (part, held, latest) in enumerate(zip(parts, kept.strips, kept.latest, strict=True)):
         # Strips a later part covers whole (the dome's band, full width) show none of this
         # part: it is not drawn there, and its numbers there are not kept up.
-        bands = [
-            (r[1], r[3]) for r in (p.rect for p in parts[k + 1 :]) if r[0] <= -1.0 and r[2] >= 1.0
-        ]
+        bands = [(p.rect[1], p.rect[3]) for p in parts[k + 1 :] if _spans_width(p.rect)]
         x0, y0, x1, y1 = part.rect
         mine = [
             i
@@ -249,9 +244,7 @@ def plan_sky(
     strip_serials = tuple(
         serial if i in redrawn else held for i, held in enumerate(kept.strip_serials)
     )
-    return draws, SkyLayerState(
-        texture, layout, tuple(strips), latest_values, serial, strip_serials, edges
-    )
+    return draws, SkyLayerState(texture, layout, tuple(strips), latest_values, strip_serials, edges)
 
 
 def strip_edges(parts: Sequence[SkyPart]) -> tuple[float, ...]:
@@ -261,11 +254,7 @@ def strip_edges(parts: Sequence[SkyPart]) -> tuple[float, ...]:
     of the picture in strips about as tall as even ones. A band's strips are drawn whole by
     its part, at an even cost a frame, and the parts under it are not drawn there at all."""
     band = next(
-        (
-            p.rect
-            for p in parts[1:]
-            if p.rect[0] <= -1.0 and p.rect[2] >= 1.0 and (p.rect[1] > -1.0 or p.rect[3] < 1.0)
-        ),
+        (r for r in (p.rect for p in parts[1:]) if _spans_width(r) and (r[1] > -1.0 or r[3] < 1.0)),
         None,
     )
     if band is None:
@@ -322,6 +311,10 @@ def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) ->
     # A texture offset of 1 moves the dome by at most a (stretched) tile.
     tile_m = max(1.0 / min(math.hypot(m[0], m[2]), math.hypot(m[1], m[3])) for m in frame.matrices)
     return DOME_REUSE_PX * pixel_rad * nearest_m / tile_m
+
+
+def _spans_width(rect: Rect) -> bool:
+    return rect[0] <= -1.0 and rect[2] >= 1.0
 
 
 def _intersect(a: Rect, b: Rect) -> Rect | None:

@@ -190,13 +190,7 @@ def sort_back_to_front(batch: SpriteBatch, eye_m: tuple[float, float, float]) ->
 
 def sort_order(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDArray[np.intp]:
     """(N,) indices that put the sprites back to front from the eye."""
-    return back_to_front(squared_distances(batch, eye_m))
-
-
-def squared_distances(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> F64:
-    """(N,) each sprite's squared distance from the eye (its square root is what
-    `np.linalg.norm` gives, to the bit)."""
-    return squares(eye_offsets(batch, eye_m))
+    return back_to_front(squares(eye_offsets(batch, eye_m)))
 
 
 def eye_offsets(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> tuple[F64, F64, F64]:

@@ -22,7 +22,7 @@ from wxsky.scene.shading_harris import (
     particle_light,
     scene_lights,
 )
-from wxsky.scene.shading_slab import slab_colours, slab_rgba
+from wxsky.scene.shading_slab import slab_rgba
 from wxsky.scene.shading_wang import wang_colours
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, SpriteBatch
@@ -70,10 +70,10 @@ def sprite_colours(
     _check(model)
     slab = batch.slab
     if slab.all() and len(batch):
-        return slab_colours(batch, sky, eye_m)
+        return slab_rgba(batch.centre_m, batch.slab_m, batch.opacity, sky, eye_m, dist_m)
     if not slab.any():
         if model == "harris":
-            return harris_colours(batch, sky, eye_m, light, scattered)
+            return harris_colours(batch, sky, eye_m, light, scattered, dist_m)
         return wang_colours(batch, sky)
     out = np.empty((len(batch), 4), np.float32)
     particle = ~slab
@@ -93,23 +93,29 @@ def sprite_colours(
             eye_m,
             None if dist_m is None else dist_m[particle],
         )
-        out[slab] = slab_rgba(
-            batch.centre_m[slab],
-            batch.slab_m[slab],
-            batch.opacity[slab],
-            sky,
-            eye_m,
-            None if dist_m is None else dist_m[slab],
-        )
-        return out
-    particles = batch.take(particle)
-    if model == "harris":
-        if scattered is not None:
-            scattered = scattered.take(particle)
-        out[particle] = harris_colours(particles, sky, eye_m, light, scattered)
     else:
-        out[particle] = wang_colours(particles, sky)
-    out[slab] = slab_rgba(batch.centre_m[slab], batch.slab_m[slab], batch.opacity[slab], sky, eye_m)
+        particles = batch.take(particle)
+        if model == "harris":
+            if scattered is not None:
+                scattered = scattered.take(particle)
+            out[particle] = harris_colours(
+                particles,
+                sky,
+                eye_m,
+                light,
+                scattered,
+                None if dist_m is None else dist_m[particle],
+            )
+        else:
+            out[particle] = wang_colours(particles, sky)
+    out[slab] = slab_rgba(
+        batch.centre_m[slab],
+        batch.slab_m[slab],
+        batch.opacity[slab],
+        sky,
+        eye_m,
+        None if dist_m is None else dist_m[slab],
+    )
     return out
 
 

@@ -204,11 +204,12 @@ def harris_colours(
     eye_m: tuple[float, float, float],
     light: ParticleLight | None = None,
     scattered: Scattered | None = None,
+    dist_m: F64 | None = None,
 ) -> F32:
     """(N, 4) straight-alpha RGBA: each sprite's light scattered toward the eye (eq. 9). The
     renderer's back-to-front blending is eq. 9's recurrence, with alpha as 1 - T.
     `scattered`: `scattered_light` of these sprites, used where its directions are this
-    sky's within LIGHT_REUSE_DEG."""
+    sky's within LIGHT_REUSE_DEG; `dist_m`: (N,) their distances from the eye, if known."""
     lights = scene_lights(sky)
     if scattered is not None and close_directions(scattered.directions, lights.directions):
         incident = scattered.rows
@@ -220,7 +221,7 @@ def harris_colours(
             found = particle_light(batch, lights).lookup(batch)
             assert found is not None  # the batch's own precompute holds every sprite
         incident = multiple_scattering(found)
-    return harris_rgba(batch.centre_m, batch.opacity, incident, lights, eye_m)
+    return harris_rgba(batch.centre_m, batch.opacity, incident, lights, eye_m, dist_m)
 
 
 def harris_rgba(
@@ -234,15 +235,22 @@ def harris_rgba(
     """`harris_colours` from the light reaching each sprite (`incident`, (N, L) for the L
     `lights`): the eye-dependent half, on the few arrays it reads. `dist_m`: (N,) each
     sprite's distance from the eye, where the caller has it."""
-    view = centre_m - np.asarray(eye_m, np.float64)  # (N, 3)
-    dist = np.linalg.norm(view, axis=1, keepdims=True) if dist_m is None else dist_m[:, None]
-    view = np.divide(view, dist, out=np.zeros_like(view), where=dist > 1e-6)
+    view = view_rays(centre_m, eye_m, dist_m)
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.
     cos = view @ lights.directions.T  # (N, L)
     phase = (1.0 - DIFFUSE_SHARE) * 4.0 * math.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
     radiance = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb  # (N, 3)
     return np.concatenate([exposed(radiance), opacity[:, None]], axis=1).astype(np.float32)
+
+
+def view_rays(centre_m: F64, eye_m: tuple[float, float, float], dist_m: F64 | None = None) -> F64:
+    """(N, 3) unit rays from the eye to each sprite (zero for one at the eye); `dist_m`: (N,)
+    their lengths, where the caller has them."""
+    ray = centre_m - np.asarray(eye_m, np.float64)
+    dist = np.linalg.norm(ray, axis=1, keepdims=True) if dist_m is None else dist_m[:, None]
+    out: F64 = np.divide(ray, dist, out=np.zeros_like(ray), where=dist > 1e-6)
+    return out
 
 
 def exposed(radiance: F64) -> F64:

@@ -39,9 +39,9 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.scattering import ALBEDO, hg_phase
-from wxsky.scene.shading_harris import NIGHT_FLOOR_RGB, exposed, scene_lights
+from wxsky.scene.shading_harris import NIGHT_FLOOR_RGB, exposed, scene_lights, view_rays
 from wxsky.scene.sky import SkyParams
-from wxsky.scene.sprites import F32, F64, B, SpriteBatch
+from wxsky.scene.sprites import F32, F64, B
 
 # Bouthors' droplet size distribution (Appendix B): N0 = 300 cm^-3, r_e = 7 um.
 DROPLETS_PER_M3 = 300e6
@@ -136,11 +136,6 @@ def kept_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
     return made
 
 
-def diffuse_energy(thickness_m: F64) -> dict[str, F64]:
-    """`slab_energy` at DIFFUSE_ANGLE_DEG, kept as `kept_energy` keeps it."""
-    return kept_energy(thickness_m, DIFFUSE_ANGLE_DEG)
-
-
 def distinct(values: F64) -> tuple[F64, npt.NDArray[np.intp] | None]:
     """(K,) the distinct values and (N,) where each value is among them, or None where all N
     are one value (then the (1,) array broadcasts as they would). A frame's slab sprites are
@@ -210,7 +205,7 @@ def slab_radiance(
     # Sky and ground light arrive from a whole hemisphere: the slab passes it as it passes a
     # beam at DIFFUSE_ANGLE_DEG, not at the sun's angle (at dawn the sun grazes the deck, the
     # sky does not).
-    d = diffuse_energy(h)
+    d = kept_energy(h, DIFFUSE_ANGLE_DEG)
     r_ms, t_ms = each(d["r_ms"]), each(d["t_ms"])
     # Ground and base light each other: irradiance on the ground from the key light and the
     # sky through the deck, multiplied by the series of bounces between the two planes.
@@ -225,13 +220,6 @@ def slab_radiance(
     return key_total, sky_total
 
 
-def slab_colours(batch: SpriteBatch, sky: SkyParams, eye_m: tuple[float, float, float]) -> F32:
-    """(N, 4) straight-alpha RGBA for sprites of stratiform layers (`batch.slab_m` set), seen
-    from eye_m. The eye is above a sprite's slab above its top, below it under its base, and
-    inside it on the side of the sprite it looks at."""
-    return slab_rgba(batch.centre_m, batch.slab_m, batch.opacity, sky, eye_m)
-
-
 def slab_rgba(
     centre_m: F64,
     slab_m: F32,
@@ -240,8 +228,11 @@ def slab_rgba(
     eye_m: tuple[float, float, float],
     dist_m: F64 | None = None,
 ) -> F32:
-    """`slab_colours` on the three arrays it reads (a frame's slab sprites among others need
-    no sub-batch of every field); `dist_m`: (N,) their distances from the eye, if known."""
+    """(N, 4) straight-alpha RGBA for sprites of stratiform layers (their `slab_m`: base and
+    top MSL), seen from eye_m. The eye is above a sprite's slab above its top, below it under
+    its base, and inside it on the side of the sprite it looks at. Only the arrays it reads,
+    so a frame's slab sprites among others need no sub-batch of every field; `dist_m`: (N,)
+    their distances from the eye, if known."""
     # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
     lights = scene_lights(sky, above_cloud=True)
     key_dir, key_rgb = lights.directions[0], lights.rgb[0]
@@ -249,9 +240,7 @@ def slab_rgba(
     base_m = slab_m[:, 0].astype(np.float64)
     top_m = slab_m[:, 1].astype(np.float64)
     eye = np.asarray(eye_m, np.float64)
-    ray = centre_m - eye  # (N, 3) eye to sprite
-    dist = np.linalg.norm(ray, axis=1, keepdims=True) if dist_m is None else dist_m[:, None]
-    ray = np.divide(ray, dist, out=np.zeros_like(ray), where=dist > 1e-6)
+    ray = view_rays(centre_m, eye_m, dist_m)
     eye_above = np.where(
         eye[2] >= top_m, True, np.where(eye[2] <= base_m, False, centre_m[:, 2] <= eye[2])
     )
@@ -266,15 +255,13 @@ def slab_rgba(
     return np.concatenate([exposed(radiance), opacity[:, None]], axis=1).astype(np.float32)
 
 
-def _exp_difference(kh: F64, mu_v: F64, mu_l: float, beam: F64 | None = None) -> F64:
+def _exp_difference(kh: F64, mu_v: F64, mu_l: float, beam: F64) -> F64:
     """(exp(-kh / mu_v) - exp(-kh / mu_l)) / (mu_v - mu_l), and its limit kh / mu^2 exp(-kh/mu)
-    where the two cosines meet (Bouthors' I_1^t with the view along the light's path).
-    `beam`: exp(-kh / mu_l), where the caller has it."""
+    where the two cosines meet (Bouthors' I_1^t with the view along the light's path);
+    `beam` is exp(-kh / mu_l), which the caller works out once a deck."""
     diff = mu_v - mu_l
     near = np.abs(diff) < 1e-4
     safe = np.where(near, 1.0, diff)
-    if beam is None:
-        beam = np.exp(-kh / mu_l)
     far: F64 = (np.exp(-kh / mu_v) - beam) / safe
     if not near.any():
         return far
