@@ -1,6 +1,6 @@
 """What keeps the near layer's fill rate down without changing its look: sprites drawn as
-octagons around their texture's support, the far band at the impostors' texel density, and
-(as an option) Wang's single-sprite LOD for far near clouds."""
+the convex polygon around their texture's support, the far band at the impostors' texel
+density, and (as an option) Wang's single-sprite LOD for far near clouds."""
 
 from __future__ import annotations
 
@@ -12,13 +12,20 @@ import pytest
 from sprite_helpers import sprite_batch
 
 from wxsky.render.renderer import Renderer
-from wxsky.render.sprite_sheet import CELL_PX, load_sheet, support_radii
+from wxsky.render.sprite_sheet import (
+    CELL_PX,
+    MIP_LEVELS,
+    SUPPORT_LEVELS,
+    load_sheet,
+    support_polygons,
+    support_radii,
+)
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.layout import FrameScene, SpriteDraw
 from wxsky.scene.sky import sky_params
 from wxsky.scene.sprites import SpriteBatch
-from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FOG, TEX_PUFFY
+from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG, TEX_PUFFY, TEX_WISPY
 from wxsky.weather.state import WeatherState
 
 SKY = sky_params(WeatherState())
@@ -41,10 +48,94 @@ def test_support_radius_holds_every_visible_texel() -> None:
         assert radii[slot] < 1.0  # every shipped texture saves fill: none reaches the corners
 
 
+TURNING = (TEX_FLAT_BOTTOM[0], TEX_FOG[0])
+
+
+def _cell(level: np.ndarray, slot: int) -> np.ndarray:
+    cell = level.shape[0] // SHEET_CELLS
+    row, col = divmod(slot, SHEET_CELLS)
+    return level[row * cell : (row + 1) * cell, col * cell : (col + 1) * cell]
+
+
+def _ring(strip: np.ndarray) -> np.ndarray:
+    return strip[[0, 1, 3, 5, 7, 6, 4, 2]]  # the strip's zig-zag back to going round
+
+
+def _area(strip: np.ndarray) -> float:
+    x, y = _ring(strip).T.astype(np.float64)
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+@pytest.mark.parametrize("depth", [SUPPORT_LEVELS, MIP_LEVELS])
+def test_a_support_polygon_holds_every_texel_a_sprite_can_read(depth: int) -> None:
+    # Every corner of every shown texel's square on the levels read, with the bilinear
+    # filter's half texel beyond it, lies within the polygon, but where the octagon the
+    # sprites used to be drawn as (around the support disc of the full-size level) or the cell
+    # cuts it: the polygon is never larger than those.
+    levels = load_sheet()
+    polygons = support_polygons(levels, TURNING, depth)
+    slots = SHEET_CELLS * SHEET_CELLS
+    assert polygons.shape == (slots + 1, 8, 2)
+    radii = [*support_radii(levels), max(support_radii(levels)[s] for s in TURNING)]
+    angles = np.radians(45.0 * np.arange(8))
+    normals = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    along_axis = np.arange(8) % 2 == 0
+    for k, strip in enumerate(polygons):
+        ring = _ring(strip).astype(np.float64)
+        assert _area(strip) > 0.0, k  # counter-clockwise, and not empty
+        reach = (ring @ normals.T).max(axis=0)  # how far the polygon goes each way
+        cap = np.where(along_axis, min(radii[k], 1.0), radii[k])
+        assert np.all(reach <= cap + 1e-5), k
+        for level in levels[:depth]:
+            cell = level.shape[0] // SHEET_CELLS
+            if k < slots:
+                shown = _cell(level, k)[..., 3] > 0
+            else:
+                shown = (_cell(level, TURNING[0])[..., 3] > 0) | (
+                    _cell(level, TURNING[1])[..., 3] > 0
+                )
+            yy, xx = np.nonzero(shown)
+            texel = 2.0 / cell
+            centres = np.stack([(xx + 0.5) * texel - 1.0, 1.0 - (yy + 0.5) * texel], axis=1)
+            for corner in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                along = (centres + np.asarray(corner) * texel) @ normals.T
+                inside = (along <= reach + 1e-5) | (along > cap - 1e-5)
+                assert inside.all(), (k, level.shape, np.argwhere(~inside)[:3])
+
+
+def test_support_polygons_save_fill_where_a_texture_is_not_round() -> None:
+    polygons = support_polygons(None, TURNING)
+    radii = support_radii()
+    octagon = [8.0 * math.tan(math.radians(22.5)) * r * r for r in radii]
+    share = [_area(p) / o for p, o in zip(polygons[:-1], octagon, strict=True)]
+    assert share[TEX_FLAT_BOTTOM[0]] < 0.75  # the flat base's empty half
+    assert max(share[s] for s in TEX_WISPY) < 0.65
+    assert np.mean([share[s] for s in TEX_PUFFY]) < 0.85
+    assert all(s <= 1.0 + 1e-6 for s in share)
+    # The turning sprite's polygon holds both of its textures'.
+    assert _area(polygons[-1]) >= max(_area(polygons[s]) for s in TURNING) - 1e-6
+
+
+def _drawn_alpha(renderer: Renderer, cam: Camera, draw: SpriteDraw) -> float:
+    old = renderer.near_scale
+    renderer.near_scale = 1.0
+    try:
+        renderer.render_frame(FrameScene(cam, SKY, draw))
+        return float(renderer.read("near")[..., 3].astype(np.float64).sum())
+    finally:
+        renderer.near_scale = old
+
+
+def _texture_alpha(slot: int) -> float:
+    return float(_cell(load_sheet()[0], slot)[..., 3].astype(np.float64).sum())
+
+
 @pytest.mark.gl
-@pytest.mark.parametrize("slot", [TEX_FOG[0], TEX_PUFFY[2], 12])
+@pytest.mark.parametrize(
+    "slot", [TEX_FLAT_BOTTOM[0], TEX_FOG[0], TEX_PUFFY[2], TEX_PUFFY[4], 12, TEX_WISPY[3]]
+)
 @pytest.mark.parametrize("rotation", [0.0, 0.7])
-def test_an_octagon_sprite_loses_none_of_its_texture(
+def test_a_polygon_sprite_loses_none_of_its_texture(
     renderer: Renderer, slot: int, rotation: float
 ) -> None:
     # A sprite one texel per pixel: its drawn alpha adds up to its texture's.
@@ -53,16 +144,24 @@ def test_an_octagon_sprite_loses_none_of_its_texture(
     draw = SpriteDraw(
         _batch([(0, 1000, 0)], [size_m], [1], slot, rotation), np.ones((1, 4), np.float32)
     )
-    old = renderer.near_scale
-    renderer.near_scale = 1.0
-    try:
-        renderer.render_frame(FrameScene(cam, SKY, draw))
-        drawn = renderer.read("near")[..., 3].astype(np.float64).sum()
-    finally:
-        renderer.near_scale = old
-    row, col = divmod(slot, SHEET_CELLS)
-    cell = load_sheet()[0][row * CELL_PX : (row + 1) * CELL_PX, col * CELL_PX : (col + 1) * CELL_PX]
-    assert drawn == pytest.approx(cell[..., 3].astype(np.float64).sum(), rel=0.02)
+    assert _drawn_alpha(renderer, cam, draw) == pytest.approx(_texture_alpha(slot), rel=0.02)
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("rotation", [0.0, 0.7])
+def test_a_flat_bottomed_sprite_turning_round_loses_neither_texture(
+    renderer: Renderer, rotation: float
+) -> None:
+    # Seen 36.87° up (sine 0.6), half-way through its turn (ROUND_FROM 0.45, ROUND_TO 0.75):
+    # it shows half of each texture, from the union of their polygons.
+    cam = Camera((0.0, 0.0, 0.0), 0.0, math.degrees(math.asin(0.6)), 0.0, 90.0, 257, 257)
+    size_m = 1000.0 * CELL_PX / 128.5
+    draw = SpriteDraw(
+        _batch([(0, 800, 600)], [size_m], [1], TEX_FLAT_BOTTOM[0], rotation),
+        np.ones((1, 4), np.float32),
+    )
+    both = 0.5 * (_texture_alpha(TURNING[0]) + _texture_alpha(TURNING[1]))
+    assert _drawn_alpha(renderer, cam, draw) == pytest.approx(both, rel=0.02)
 
 
 @pytest.mark.gl

@@ -658,7 +658,7 @@ def test_compile_error_names_the_file(renderer: Renderer, shader_dir: Path) -> N
 def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -> None:
     lib = ShaderLibrary(renderer.ctx)
     with pytest.raises(RenderError, match=r"shaders/sprites\.glsl"):
-        lib.program("sprites.glsl")  # needs SHEET_CELLS, the two slots and the turn
+        lib.program("sprites.glsl")  # needs SHEET_CELLS, the two slots, the turn, the size
     defines = {
         "SHEET_CELLS": "4",
         "FLAT_BOTTOM_SLOT": "0",
@@ -666,6 +666,7 @@ def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -
         "ROUND_FROM": "0.45",
         "ROUND_TO": "0.75",
         "ROUND_MIX": "1",
+        "FINE_MIN_PX": "48.0",
     }
     prog = lib.program("sprites.glsl", defines)
     assert lib.program("sprites.glsl", dict(defines)) is prog  # compiled once

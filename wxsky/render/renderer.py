@@ -21,7 +21,7 @@ from wxsky.render import sky_layer, sky_textures
 from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
-from wxsky.render.sprite_sheet import load_sheet, support_radii
+from wxsky.render.sprite_sheet import CELL_PX, SUPPORT_LEVELS, load_sheet, support_polygons
 from wxsky.render.towers import Drawable, TowerPass
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
@@ -53,6 +53,10 @@ ROUND_FROM = 0.45
 ROUND_TO = 0.75
 # Turns this close to none or complete are drawn as such: at most 1/40 of a colour level.
 ROUND_SNAP = 1e-4
+# Sprites at least this many pixels across read no level coarser than the support polygons'
+# fine set holds (trilinear filtering reads level log2(CELL_PX / pixels) and the next), with
+# half as much again to spare; smaller ones are drawn as the polygons that hold every level.
+FINE_MIN_PX = 1.5 * CELL_PX / 2.0 ** (SUPPORT_LEVELS - 1)
 # centre (3) + size + rotation + texture + rgba (4) + normal (3), float32
 _INSTANCE_FLOATS = 13
 _INSTANCE_LAYOUT = (
@@ -106,6 +110,7 @@ class Renderer:
             "ROUND_SLOT": str(TEX_FOG[0]),
             "ROUND_FROM": repr(ROUND_FROM),
             "ROUND_TO": repr(ROUND_TO),
+            "FINE_MIN_PX": repr(FINE_MIN_PX),
         }
         self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
         # One read of the sheet per fragment, and two for the sprites turning round.
@@ -125,11 +130,15 @@ class Renderer:
         self._sheet.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self._sheet.repeat_x = self._sheet.repeat_y = False
         self._corner_buf = self.ctx.buffer(
-            np.concatenate([_octagon_strip(), _QUAD_STRIP]).astype(np.float32).tobytes()
+            np.concatenate([np.zeros((8, 2), np.float32), _QUAD_STRIP]).tobytes()
         )
-        extent = np.asarray(support_radii(levels), np.float32).tobytes()
+        turning = (TEX_FLAT_BOTTOM[0], TEX_FOG[0])
+        fine = support_polygons(levels, turning)
+        coarse = support_polygons(levels, turning, depth=len(levels))
+        boxes = np.concatenate([coarse.min(axis=1), coarse.max(axis=1)], axis=1)
         for prog in self._sprite_progs.values():
-            _write(prog, "u_extent", extent)
+            _write(prog, "u_polygon", np.concatenate([fine, coarse]).tobytes())
+            _write(prog, "u_box", boxes.astype(np.float32).tobytes())
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
         self._sprite_vaos = {
             mixing: self._make_sprite_vao(prog) for mixing, prog in self._sprite_progs.items()
@@ -224,7 +233,7 @@ class Renderer:
             target.fbo.use()
             target.fbo.clear(*clear_rgba)
             start = 0
-        self._draw_run(target, draw, start, len(draw), rest, cam, sky, "octagon")
+        self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
 
     def _draw_run(
         self,
@@ -487,10 +496,10 @@ class Renderer:
         view: npt.NDArray[np.float64],
         proj: npt.NDArray[np.float64],
         clear_rgba: tuple[float, float, float, float] | None = (0.0, 0.0, 0.0, 0.0),
-        shape: str = "octagon",
+        shape: str = "polygon",
     ) -> None:
         """`clear_rgba`: premultiplied colour under the sprites (the in-cloud fog veil); None
-        draws over what the target holds. `shape`: "octagon" (fewest fragments) or "quad"
+        draws over what the target holds. `shape`: "polygon" (fewest fragments) or "quad"
         (fewest triangles, for sprites a few pixels wide)."""
         target.fbo.use()
         if clear_rgba is not None:
@@ -518,11 +527,12 @@ class Renderer:
             _write(prog, "u_view_rot", view_rot)
             _write(prog, "u_proj", projection)
             _set(prog, "u_sheet", 0)
+            _set(prog, "u_viewport_px", float(target.size[0]))
         self._sheet.filter = (_SHAPES[shape][2], moderngl.LINEAR)
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
-        kind = "sprites" if shape == "octagon" else "small_sprites"
+        kind = "sprites" if shape == "polygon" else "small_sprites"
         with self._pass(_sprite_pass_name(target.name), kind):
             # In order, each run of sprites with the variant it needs (back to front holds).
             for start, stop, mixing in _mix_runs(turning_round(draw, eye_m)):
@@ -645,28 +655,18 @@ def _sprite_pass_name(target: str) -> str:
     return target
 
 
-# A square around the unit disc as a triangle strip, after the octagon in the corner buffer.
+# The corner buffer: 8 vertices for a texture's support polygon (sprites.glsl takes their
+# corners from its u_polygon by gl_VertexID), then the corners of its bounding box as a
+# triangle strip.
 _QUAD_STRIP = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]], np.float32)
 # Per sprite shape: (first vertex, vertices) in the corner buffer, and how the sheet is read.
-# Octagons are for sprites many pixels wide, read trilinearly; quads for sprites a few pixels
+# Polygons are for sprites many pixels wide, read trilinearly; quads for sprites a few pixels
 # wide (the far band, impostors), read from one mip level bilinearly: about a fifth less time
 # for those passes, and no difference to the eye side by side (tools/compare_frames.py).
 _SHAPES = {
-    "octagon": (0, 8, moderngl.LINEAR_MIPMAP_LINEAR),
+    "polygon": (0, 8, moderngl.LINEAR_MIPMAP_LINEAR),
     "quad": (8, 4, moderngl.LINEAR_MIPMAP_NEAREST),
 }
-
-
-def _octagon_strip() -> npt.NDArray[np.float32]:
-    """(8, 2) a regular octagon around the unit disc, as a triangle strip: a sprite drawn as
-    this, scaled to its texture's support radius, covers every texel that is not transparent
-    for any in-plane rotation, and 17 % less area than the square around the same disc."""
-    k = np.arange(8)
-    angle = np.radians(22.5 + 45.0 * k)
-    ring = np.stack([np.cos(angle), np.sin(angle)], axis=1) / math.cos(math.radians(22.5))
-    strip = ring[[0, 1, 7, 2, 6, 3, 5, 4]]  # zig-zag across the convex polygon
-    out: npt.NDArray[np.float32] = strip.astype(np.float32)
-    return out
 
 
 def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:

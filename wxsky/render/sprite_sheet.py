@@ -38,6 +38,15 @@ DATA_PACKAGE = "wxsky.render"
 DATA_DIR = "data"
 
 U8 = npt.NDArray[np.uint8]
+F32 = npt.NDArray[np.float32]
+# The fine support polygons hold every texel that is not transparent on the first this many
+# levels (a cell 128, 64 and 32 texels across): all that sprites 32 px across or more read.
+# Smaller sprites read coarser levels, whose halo reaches further: the renderer draws them
+# as the polygons that hold every level (sprites.glsl).
+SUPPORT_LEVELS = 3
+# The polygons' sides face these directions (degrees, from the cell's x axis), as the sides
+# of the octagon around the support disc do.
+SUPPORT_SIDES_DEG = tuple(45.0 * k for k in range(8))
 
 
 def level_size(level: int) -> int:
@@ -93,3 +102,80 @@ def support_radii(levels: list[U8] | None = None) -> tuple[float, ...]:
             if alpha.any():
                 out[slot] = max(out[slot], float(radius[alpha > 0].max()))
     return tuple(float(r) for r in out)
+
+
+def support_polygons(
+    levels: list[U8] | None, turning: tuple[int, int], depth: int = SUPPORT_LEVELS
+) -> F32:
+    """For each slot, and after them for the union of the two slots of `turning` (a sprite
+    part-way from one texture to the other), the convex polygon outside which its texture is
+    transparent on the first `depth` levels, half a texel of each level's bilinear reach
+    included, within the octagon around its support disc (`support_radii`), which the
+    sprites were drawn as before: (slots + 1, 8, 2) corners in the cell's units (1 = half
+    the cell, y up the sprite), in triangle-strip order. A sprite drawn as its polygon shows
+    what it showed as the octagon: the round textures are about that octagon, a
+    flat-bottomed or puffy one 0.6-0.9 of it, a wisp 0.4-0.6."""
+    chain = (levels if levels is not None else load_sheet())[:depth]
+    cells = chain[0].shape[0] // CELL_PX
+    normals = np.array([[np.cos(np.radians(a)), np.sin(np.radians(a))] for a in SUPPORT_SIDES_DEG])
+    reach = np.abs(normals).sum(axis=1)  # a square's half-width along each normal
+    slots = cells * cells
+    extents = np.full((slots + 1, len(normals)), -np.inf)
+    for level in chain:
+        cell = level.shape[0] // cells
+        texel = 2.0 / cell
+        yy, xx = np.mgrid[0:cell, 0:cell]
+        # Texel centres in the cell's units, y up (row 0 is the top of the sprite).
+        at = np.stack([(xx + 0.5) * texel - 1.0, 1.0 - (yy + 0.5) * texel], axis=-1)
+        shown = []
+        for slot in range(slots):
+            row, col = divmod(slot, cells)
+            alpha = level[row * cell : (row + 1) * cell, col * cell : (col + 1) * cell, 3]
+            shown.append(alpha > 0)
+        shown.append(shown[turning[0]] | shown[turning[1]])
+        for k, mask in enumerate(shown):
+            if mask.any():
+                # Each texel's square (half a texel) and the filter's reach (half more).
+                far = (at[mask] @ normals.T).max(axis=0) + texel * reach
+                extents[k] = np.maximum(extents[k], far)
+    # No larger than the octagon around the disc the sprites were drawn as before: what
+    # coarse levels spread beyond it, sprites never showed.
+    radii = support_radii(levels)
+    disc = [*radii, max(radii[turning[0]], radii[turning[1]])]
+    polygons = np.zeros((slots + 1, len(normals), 2), np.float32)
+    for k in range(slots + 1):
+        limit = np.minimum(extents[k], disc[k])
+        limit[0::2] = np.minimum(limit[0::2], 1.0)  # the axis sides: within the cell
+        polygons[k] = _strip(_clip_square(normals, limit))
+    return polygons
+
+
+F64 = npt.NDArray[np.float64]
+
+
+def _clip_square(normals: F64, limits: F64) -> list[F64]:
+    """The convex polygon {p : normals @ p <= limits} (counter-clockwise corners), cut from
+    the square [-1, 1]^2 one side at a time."""
+    poly = [np.array(c, float) for c in ((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0))]
+    for n, limit in zip(normals, limits, strict=True):
+        cut = []
+        for i, a in enumerate(poly):
+            b = poly[(i + 1) % len(poly)]
+            da, db = float(n @ a) - limit, float(n @ b) - limit
+            if da <= 0.0:
+                cut.append(a)
+            if (da < 0.0 < db) or (db < 0.0 < da):  # the side crosses the edge between
+                cut.append(a + (b - a) * (da / (da - db)))
+        poly = cut
+    return poly
+
+
+def _strip(corners: list[F64]) -> F32:
+    """Up to 8 counter-clockwise corners of a convex polygon as 8 triangle-strip vertices
+    (zig-zag across it; a polygon of fewer corners repeats its last, adding only empty
+    triangles)."""
+    ring = list(corners)
+    if not ring or len(ring) > 8:
+        raise ValueError(f"a support polygon has {len(ring)} corners; 1 to 8 fit the strip")
+    ring += [ring[-1]] * (8 - len(ring))
+    return np.asarray([ring[i] for i in (0, 1, 7, 2, 6, 3, 5, 4)], np.float32)

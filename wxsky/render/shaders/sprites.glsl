@@ -9,7 +9,7 @@
 // others with ROUND_MIX 0: one read, of the round texture where the turn is complete.
 
 #if defined VERTEX_SHADER
-in vec2 in_corner;        // per vertex: an octagon around the unit disc
+in vec2 in_corner;        // per vertex: 8 unused (the polygon's), then a quad's corners
 in vec3 in_centre;        // per instance: centre minus eye, metres (ENU)
 in float in_size;
 in float in_rotation;
@@ -18,9 +18,18 @@ in vec4 in_rgba;
 in vec3 in_normal;        // ENU unit normal, or zero: face the camera
 uniform mat3 u_view_rot;
 uniform mat4 u_proj;
-// Per sheet slot, the radius (1 = half a cell) outside which its texture is transparent: the
-// octagon shrinks to it, so no fragment is spent on empty texels.
-uniform float u_extent[SHEET_CELLS * SHEET_CELLS];
+// Per sheet slot, and last for a flat-bottomed sprite part-way to the round one, the convex
+// polygon (8 corners as a triangle strip, 1 = half a cell, two to a vec4) outside which its
+// texture is transparent, and its bounding box: a sprite covers only that, so no fragment is
+// spent on empty texels (sprite_sheet.support_polygons). The polygons come in two sets: for
+// sprites at least FINE_MIN_PX across, which read the finer levels, and for smaller ones,
+// holding the halo of every level. Vertices 0-7 of a draw are the polygon's, 8-11 (in_corner)
+// its box's.
+#define TURNING_POLYGON (SHEET_CELLS * SHEET_CELLS)
+#define POLYGONS (TURNING_POLYGON + 1)
+uniform vec4 u_polygon[POLYGONS * 8];  // fine set, then coarse
+uniform vec4 u_box[POLYGONS];  // of the coarse set: quads are for small sprites
+uniform float u_viewport_px;  // the target's width
 out vec2 v_uv;
 #if ROUND_MIX
 out vec2 v_round_uv;
@@ -43,19 +52,39 @@ void quad_axes(vec3 n, out vec3 u, out vec3 v) {
 }
 
 void main() {
-    float round_mix = 0.0;
     int slot = int(in_texture + 0.5);
-    float extent = u_extent[slot];
-    if (slot == FLAT_BOTTOM_SLOT) {
-        extent = max(extent, u_extent[ROUND_SLOT]);  // it may turn into the round one
+    bool facing = dot(in_normal, in_normal) <= 0.25;
+    // A flat-bottomed sprite paints a cloud's base seen from the side. Seen steeply from
+    // below its straight edge is no base at all but a grey bar across the cloud, so it
+    // turns into a round soft one (ROUND_SLOT) that still closes the base.
+    float round_mix = 0.0;
+    int polygon = slot;
+    if (facing && slot == FLAT_BOTTOM_SLOT) {
+        round_mix = smoothstep(ROUND_FROM, ROUND_TO,
+                               abs(in_centre.z) / max(length(in_centre), 1e-3));
+        // Turned at all, it is drawn as both textures' polygon (the round one alone would
+        // cut what the flat one's larger disc let the coarse levels show).
+        polygon = round_mix > 0.0 ? TURNING_POLYGON : slot;
     }
-    // A texture reaching into its cell's corners (radius > 1) is clipped to its own cell.
-    vec2 local = clamp(in_corner * extent, -1.0, 1.0);
+    vec2 local;
+    if (gl_VertexID < 8) {
+        // Across the picture, the sprite is this many pixels (less, seen obliquely).
+        float across = 0.5 * u_viewport_px * u_proj[0][0] * in_size / max(length(in_centre), 1.0);
+        if (!facing) {
+            across *= abs(dot(normalize(in_normal), normalize(in_centre)));
+        }
+        int corner = (across >= FINE_MIN_PX ? 0 : POLYGONS * 8) + polygon * 8 + gl_VertexID;
+        vec4 pair = u_polygon[corner / 2];
+        local = (corner % 2 == 0) ? pair.xy : pair.zw;
+    } else {
+        vec4 box = u_box[polygon];
+        local = mix(box.xy, box.zw, in_corner * 0.5 + 0.5);
+    }
     float s = sin(in_rotation), k = cos(in_rotation);
     vec2 corner = mat2(k, s, -s, k) * local;
     vec3 c;
     float alpha = in_rgba.a;
-    if (dot(in_normal, in_normal) > 0.25) {
+    if (!facing) {
         // Spanned across the normal as a facing sprite is (quad_axes), so a sprite whose
         // facing locks with the eye straight along its normal does not move.
         vec3 n = normalize(in_normal);
@@ -75,13 +104,6 @@ void main() {
         // Sprites the eye is about to pass through fade out instead of filling the screen.
         float dist = length(u_view_rot * in_centre);
         alpha *= smoothstep(0.1 * in_size, 0.6 * in_size, dist);
-        // A flat-bottomed sprite paints a cloud's base seen from the side. Seen steeply from
-        // below its straight edge is no base at all but a grey bar across the cloud, so it
-        // turns into a round soft one (ROUND_SLOT) that still closes the base.
-        if (abs(in_texture - float(FLAT_BOTTOM_SLOT)) < 0.5) {
-            round_mix = smoothstep(ROUND_FROM, ROUND_TO,
-                                   abs(in_centre.z) / max(length(in_centre), 1e-3));
-        }
     }
     gl_Position = u_proj * vec4(c, 1.0);
 #if ROUND_MIX
