@@ -133,8 +133,8 @@ class Renderer:
             np.concatenate([np.zeros((8, 2), np.float32), _QUAD_STRIP]).tobytes()
         )
         turning = (TEX_FLAT_BOTTOM[0], TEX_FOG[0])
-        fine = support_polygons(levels, turning)
-        coarse = support_polygons(levels, turning, depth=len(levels))
+        fine = support_polygons(None, turning)  # of the shipped sheet, as `levels` is
+        coarse = support_polygons(None, turning, depth=len(levels))
         boxes = np.concatenate([coarse.min(axis=1), coarse.max(axis=1)], axis=1)
         for prog in self._sprite_progs.values():
             _write(prog, "u_polygon", np.concatenate([fine, coarse]).tobytes())

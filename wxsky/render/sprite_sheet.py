@@ -114,8 +114,24 @@ def support_polygons(
     sprites were drawn as before: (slots + 1, 8, 2) corners in the cell's units (1 = half
     the cell, y up the sprite), in triangle-strip order. A sprite drawn as its polygon shows
     what it showed as the octagon: the round textures are about that octagon, a
-    flat-bottomed or puffy one 0.6-0.9 of it, a wisp 0.4-0.6."""
-    chain = (levels if levels is not None else load_sheet())[:depth]
+    flat-bottomed or puffy one 0.6-0.9 of it, a wisp 0.4-0.6.
+    The shipped sheet's (`levels` None) are worked out once a process (30 ms) and shared,
+    read-only."""
+    if levels is None:
+        return _shipped_support_polygons(turning, depth)
+    return _support_polygons(levels, turning, depth)
+
+
+@functools.cache
+def _shipped_support_polygons(turning: tuple[int, int], depth: int) -> F32:
+    out = _support_polygons(load_sheet(), turning, depth)
+    out.flags.writeable = False
+    return out
+
+
+def _support_polygons(levels: list[U8], turning: tuple[int, int], depth: int) -> F32:
+    """`support_polygons` of these levels."""
+    chain = levels[:depth]
     cells = chain[0].shape[0] // CELL_PX
     normals = np.array([[np.cos(np.radians(a)), np.sin(np.radians(a))] for a in SUPPORT_SIDES_DEG])
     reach = np.abs(normals).sum(axis=1)  # a square's half-width along each normal
