@@ -17,6 +17,8 @@ from wxsky.render.sprite_sheet import (
     MIP_LEVELS,
     SUPPORT_LEVELS,
     load_sheet,
+    polygon_area,
+    polygon_corners,
     support_polygons,
     support_radii,
 )
@@ -57,15 +59,6 @@ def _cell(level: np.ndarray, slot: int) -> np.ndarray:
     return level[row * cell : (row + 1) * cell, col * cell : (col + 1) * cell]
 
 
-def _ring(strip: np.ndarray) -> np.ndarray:
-    return strip[[0, 1, 3, 5, 7, 6, 4, 2]]  # the strip's zig-zag back to going round
-
-
-def _area(strip: np.ndarray) -> float:
-    x, y = _ring(strip).T.astype(np.float64)
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
-
-
 @pytest.mark.parametrize("depth", [SUPPORT_LEVELS, MIP_LEVELS])
 def test_a_support_polygon_holds_every_texel_a_sprite_can_read(depth: int) -> None:
     # Every corner of every shown texel's square on the levels read, with the bilinear
@@ -81,8 +74,8 @@ def test_a_support_polygon_holds_every_texel_a_sprite_can_read(depth: int) -> No
     normals = np.stack([np.cos(angles), np.sin(angles)], axis=1)
     along_axis = np.arange(8) % 2 == 0
     for k, strip in enumerate(polygons):
-        ring = _ring(strip).astype(np.float64)
-        assert _area(strip) > 0.0, k  # counter-clockwise, and not empty
+        ring = polygon_corners(strip)
+        assert polygon_area(ring) > 0.0, k  # counter-clockwise, and not empty
         reach = (ring @ normals.T).max(axis=0)  # how far the polygon goes each way
         cap = np.where(along_axis, min(radii[k], 1.0), radii[k])
         assert np.all(reach <= cap + 1e-5), k
@@ -107,13 +100,14 @@ def test_support_polygons_save_fill_where_a_texture_is_not_round() -> None:
     polygons = support_polygons(None, TURNING)
     radii = support_radii()
     octagon = [8.0 * math.tan(math.radians(22.5)) * r * r for r in radii]
-    share = [_area(p) / o for p, o in zip(polygons[:-1], octagon, strict=True)]
+    areas = [polygon_area(polygon_corners(p)) for p in polygons]
+    share = [a / o for a, o in zip(areas[:-1], octagon, strict=True)]
     assert share[TEX_FLAT_BOTTOM[0]] < 0.75  # the flat base's empty half
     assert max(share[s] for s in TEX_WISPY) < 0.65
     assert np.mean([share[s] for s in TEX_PUFFY]) < 0.85
     assert all(s <= 1.0 + 1e-6 for s in share)
     # The turning sprite's polygon holds both of its textures'.
-    assert _area(polygons[-1]) >= max(_area(polygons[s]) for s in TURNING) - 1e-6
+    assert areas[-1] >= max(areas[s] for s in TURNING) - 1e-6
 
 
 def _drawn_alpha(renderer: Renderer, cam: Camera, draw: SpriteDraw) -> float:

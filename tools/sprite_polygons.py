@@ -28,6 +28,8 @@ from wxsky.png import write_png  # noqa: E402
 from wxsky.render.sprite_sheet import (  # noqa: E402
     CELL_PX,
     load_sheet,
+    polygon_area,
+    polygon_corners,
     support_polygons,
     support_radii,
 )
@@ -54,16 +56,6 @@ _DIGITS = {
     "9": "111101111001111",
     ".": "000000000000010",
 }
-
-
-def _ring(strip: npt.NDArray[np.float32]) -> npt.NDArray[np.float64]:
-    """The strip's zig-zag (0, 1, 7, 2, 6, 3, 5, 4) back to going round the polygon."""
-    return np.asarray(strip, np.float64)[[0, 1, 3, 5, 7, 6, 4, 2]]
-
-
-def _area(ring: npt.NDArray[np.float64]) -> float:
-    x, y = ring.T
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 def _octagon(radius: float) -> npt.NDArray[np.float64]:
@@ -129,9 +121,9 @@ def render() -> npt.NDArray[np.uint8]:
         img[y0 : y0 + size, x0 : x0 + size, :3] = big.clip(0, 255).astype(np.uint8)
         octagon = _octagon(radii[slot])
         _outline(img, octagon, x0, y0, OCTAGON)
-        _outline(img, _ring(coarse[slot]), x0, y0, COARSE)
-        _outline(img, _ring(fine[slot]), x0, y0, FINE)
-        share = _area(_ring(fine[slot])) / _area(octagon)
+        _outline(img, polygon_corners(coarse[slot]), x0, y0, COARSE)
+        _outline(img, polygon_corners(fine[slot]), x0, y0, FINE)
+        share = polygon_area(polygon_corners(fine[slot])) / polygon_area(octagon)
         _text(img, f"{share:.2f}", x0, y0 + size + 3)
     return img
 

@@ -138,7 +138,7 @@ class Renderer:
         boxes = np.concatenate([coarse.min(axis=1), coarse.max(axis=1)], axis=1)
         for prog in self._sprite_progs.values():
             _write(prog, "u_polygon", np.concatenate([fine, coarse]).tobytes())
-            _write(prog, "u_box", boxes.astype(np.float32).tobytes())
+            _write(prog, "u_box", boxes.tobytes())
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
         self._sprite_vaos = {
             mixing: self._make_sprite_vao(prog) for mixing, prog in self._sprite_progs.items()

@@ -39,6 +39,7 @@ DATA_DIR = "data"
 
 U8 = npt.NDArray[np.uint8]
 F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
 # The fine support polygons hold every texel that is not transparent on the first this many
 # levels (a cell 128, 64 and 32 texels across): all that sprites 32 px across or more read.
 # Smaller sprites read coarser levels, whose halo reaches further: the renderer draws them
@@ -166,9 +167,6 @@ def _support_polygons(levels: list[U8], turning: tuple[int, int], depth: int) ->
     return polygons
 
 
-F64 = npt.NDArray[np.float64]
-
-
 def _clip_square(normals: F64, limits: F64) -> list[F64]:
     """The convex polygon {p : normals @ p <= limits} (counter-clockwise corners), cut from
     the square [-1, 1]^2 one side at a time."""
@@ -194,4 +192,21 @@ def _strip(corners: list[F64]) -> F32:
     if not ring or len(ring) > 8:
         raise ValueError(f"a support polygon has {len(ring)} corners; 1 to 8 fit the strip")
     ring += [ring[-1]] * (8 - len(ring))
-    return np.asarray([ring[i] for i in (0, 1, 7, 2, 6, 3, 5, 4)], np.float32)
+    return np.asarray([ring[i] for i in _STRIP_ORDER], np.float32)
+
+
+def polygon_corners(strip: F32) -> F64:
+    """A support polygon's 8 strip vertices (`support_polygons`) back in order round it,
+    counter-clockwise."""
+    return np.asarray(strip, np.float64)[np.argsort(_STRIP_ORDER)]
+
+
+def polygon_area(corners: F64) -> float:
+    """The area of a polygon from its corners in order round it (`polygon_corners`),
+    positive counter-clockwise."""
+    x, y = np.asarray(corners, np.float64).T
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+# Corners round a convex polygon, in the order a triangle strip zig-zags across it.
+_STRIP_ORDER = (0, 1, 7, 2, 6, 3, 5, 4)
