@@ -91,7 +91,7 @@ class SceneSettings:
     lod_band_m: float = 1000.0
     # Near sprites this far from the eye are drawn at the ring impostors' resolution rather
     # than the near layer's (0: never); see Renderer._draw_near.
-    far_band_m: float = 3000.0
+    far_band_m: float = 2000.0
     # Clouds in the ring this far from its centre go into the impostors as one sprite each
     # (0: never): halves an impostor's drawing time, but doubles the picture's difference
     # from drawing every sprite (docs/performance.md), so it is off unless asked for.

@@ -182,7 +182,7 @@ class SceneSection(_Section):
     # How far below the frames the worker process runs (0..19, as `nice`).
     ring_worker_nice: int = _opt(19, _int(0, 19))
     # Near sprites this far away are drawn at the ring impostors' texel density (0: never).
-    far_band_m: float = _opt(3000.0, _num(0.0, 200_000.0, "m"))
+    far_band_m: float = _opt(2000.0, _num(0.0, 200_000.0, "m"))
     # Near clouds this far away are drawn as one sprite each (Wang's LOD; 0: never).
     lod_start_m: float = _opt(0.0, _num(0.0, 200_000.0, "m"))
     # Clouds in the ring this far from its centre go into impostors as one sprite (0: never).
