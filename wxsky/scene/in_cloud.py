@@ -121,11 +121,13 @@ def in_cloud_fog(
     rgba: F32,
     eye_m: tuple[float, float, float],
     cloud: InCloud,
+    dist_m: npt.NDArray[np.float64] | None = None,
 ) -> tuple[F32, tuple[float, float, float, float]]:
     """The sprites' (N, 4) straight-alpha colours fogged by the cloud the eye is in, and the
     premultiplied veil over everything behind them (ring and sky). The fog is the colour of
     the sprite the eye is deepest in, thickening with distance at the in-cloud visibility
-    (Koschmieder), and with depth into the cloud (VEIL_FULL_DEPTH)."""
+    (Koschmieder), and with depth into the cloud (VEIL_FULL_DEPTH). `dist_m`: (N,) the
+    sprites' distances from the eye, if known."""
     if not cloud.inside or cloud.visibility_m is None or len(batch) == 0:
         return rgba, NO_VEIL
     depth_frac = math.log(cloud.visibility_m / VISIBILITY_EDGE_M) / math.log(
@@ -135,8 +137,12 @@ def in_cloud_fog(
     strength = t * t * (3.0 - 2.0 * t)
     if strength <= 0.0:
         return rgba, NO_VEIL
-    fog_rgb = rgba[int(np.argmax(sprite_depths(batch, eye_m))), :3].astype(np.float64)
-    dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+    dist = (
+        np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
+        if dist_m is None
+        else dist_m
+    )
+    fog_rgb = rgba[int(np.argmax(sprite_depths(batch, eye_m, dist))), :3].astype(np.float64)
     f = strength * (1.0 - np.exp(-KOSCHMIEDER * dist / cloud.visibility_m))  # (N,)
     out = rgba.copy()
     out[:, :3] = (rgba[:, :3] * (1.0 - f[:, None]) + fog_rgb * f[:, None]).astype(np.float32)

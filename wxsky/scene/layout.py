@@ -429,7 +429,7 @@ def build_frame(
             shaded, dropped = SpriteDraw(budget.sprites, budget.rgba), budget.dropped
             drawn_dist = None
     cloud = in_cloud(near, eye, state.visibility_m, dist)
-    fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud)
+    fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud, drawn_dist)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks, drawn_dist)
     front: SpriteDraw | None = None
     split_m: float | None = None

@@ -127,32 +127,35 @@ def scene_lights(sky: SkyParams, above_cloud: bool = False) -> Lights:
 
 
 def _scene_lights(sky: SkyParams, above_cloud: bool) -> Lights:
+    # On plain floats, as sky_params is: a frame makes these anew (the sun moves), and on
+    # (3,) arrays the numpy calls cost 0.1 ms a set, twice a frame.
     sun_el = sky.sun.elevation_deg
+    key_dir: tuple[float, ...]
+    key_rgb: tuple[float, ...]
     if sun_el > MOON_TAKES_OVER_DEG:
-        key_dir, key_rgb = np.asarray(sky.sun.direction_enu), np.asarray(sky.sun_rgb)
+        key_dir, key_rgb = sky.sun.direction_enu, sky.sun_rgb
     else:
         # The sky pass's moon colour is for a disc seen in the sky; fade it in as the sun's
         # light has gone (sun_rgb is 0 below -2°), so the key light never jumps.
         night = smoothstep(MOON_TAKES_OVER_DEG, MOON_TAKES_OVER_DEG - 5.0, sun_el)
-        key_dir = np.asarray(sky.moon.direction_enu)
+        key_dir = sky.moon.direction_enu
         gain = MOONLIGHT_GAIN * sky.moon.illuminated_fraction * night
-        key_rgb = np.asarray(sky.moon_rgb) * gain
+        key_rgb = tuple(c * gain for c in sky.moon_rgb)
     zenith_rgb, horizon_rgb = sky.zenith_rgb, sky.horizon_rgb
     if above_cloud:
         zenith_rgb = sky.open_zenith_rgb or zenith_rgb
         horizon_rgb = sky.open_horizon_rgb or horizon_rgb
-    zenith, horizon = _greyer(np.asarray(zenith_rgb)), _greyer(np.asarray(horizon_rgb))
-    low = zenith + (horizon - zenith) * SKY_HORIZON_MIX
-    dirs = [key_dir, np.array([0.0, 0.0, 1.0])]
-    rgbs = [key_rgb, zenith * SKY_GAIN[0]]
+    zenith, horizon = _greyer(zenith_rgb), _greyer(horizon_rgb)
+    low = [z + (h - z) * SKY_HORIZON_MIX for z, h in zip(zenith, horizon, strict=True)]
+    dirs = [tuple(key_dir), (0.0, 0.0, 1.0)]
+    rgbs = [tuple(key_rgb), tuple(z * SKY_GAIN[0] for z in zenith)]
     el = math.radians(SKY_ELEVATION_DEG)
     for offset, gain in zip(SKY_AZIMUTHS_DEG, SKY_GAIN[1:], strict=True):
         az = math.radians(sky.sun.azimuth_deg + offset)
-        horizontal = np.array([math.sin(az), math.cos(az), 0.0]) * math.cos(el)
-        dirs.append(horizontal + np.array([0.0, 0.0, math.sin(el)]))
-        rgbs.append(low * gain)
-    ambient = NIGHT_FLOOR_RGB + AMBIENT_SHARE * 0.5 * (zenith + horizon)
-    return Lights(_quantised(np.stack(dirs)), np.stack(rgbs), ambient)
+        dirs.append((math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)))
+        rgbs.append(tuple(c * gain for c in low))
+    ambient = NIGHT_FLOOR_RGB + AMBIENT_SHARE * 0.5 * (np.asarray(zenith) + np.asarray(horizon))
+    return Lights(_quantised(dirs), np.array(rgbs), ambient)
 
 
 def particle_light(batch: SpriteBatch, lights: Lights) -> ParticleLight:
@@ -300,18 +303,20 @@ def particle_keys(batch: SpriteBatch) -> U64:
     return out
 
 
-def _greyer(rgb: F64) -> F64:
+def _greyer(rgb: tuple[float, ...]) -> tuple[float, ...]:
     """Sky colour as it lights a cloud: light scattered many times inside the cloud mixes
     sky and sun, so the blue of the sky tints shadow sides less than it colours the sky."""
-    grey = float(rgb @ np.array([0.2126, 0.7152, 0.0722]))
-    out: F64 = grey + (rgb - grey) * SKY_SATURATION
-    return out
+    grey = rgb[0] * 0.2126 + rgb[1] * 0.7152 + rgb[2] * 0.0722
+    return tuple(grey + (c - grey) * SKY_SATURATION for c in rgb)
 
 
-def _quantised(dirs: F64) -> F64:
-    q = np.round(dirs / _QUANTUM) * _QUANTUM
-    out: F64 = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return out
+def _quantised(dirs: list[tuple[float, ...]]) -> F64:
+    out = []
+    for d in dirs:
+        q = [round(c / _QUANTUM) * _QUANTUM for c in d]
+        norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+        out.append([c / norm for c in q])
+    return np.array(out)
 
 
 _CACHE: OrderedDict[bytes, ParticleLight] = OrderedDict()
