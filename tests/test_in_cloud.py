@@ -19,7 +19,7 @@ from wxsky.scene.in_cloud import (
     in_cloud_fog,
     lock_facing,
 )
-from wxsky.scene.layout import FrameScene, SceneSettings, build_frame
+from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw, build_frame, oriented
 from wxsky.scene.sky import sky_params
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
 
@@ -63,6 +63,25 @@ def test_entering_the_unlock_zone_from_outside_does_not_lock_yet() -> None:
     normals, locks = lock_facing(b, (0.0, 0.0, 0.0), NO_LOCKS)
     assert normals is None and not locks
     assert LOCK_FRAC * 400.0 < 150.0
+
+
+def test_the_frames_lock_shortcut_agrees_with_lock_facing_between_the_two_radii() -> None:
+    # 150 m from a 400 m sprite: beyond where a lock is taken (100 m), within where a held
+    # one is kept (200 m). `oriented` skips lock_facing when nothing can lock: it must still
+    # keep a lock held, and take none anew.
+    b = batch([(0, 1000, 0), (0, 150, 0)])
+    draw = SpriteDraw(b, np.ones((2, 4), np.float32))
+    eye = (0.0, 0.0, 0.0)
+    dist = np.linalg.norm(b.centre_m, axis=1)
+    fresh, none_held = oriented(draw, eye, NO_LOCKS, dist)
+    assert fresh.normals is None and not none_held
+    assert lock_facing(b, eye, NO_LOCKS) == (None, NO_LOCKS)
+    _, held = lock_facing(b, (0.0, 120.0, 0.0), NO_LOCKS)  # 30 m from it: locks
+    assert len(held) == 1
+    kept, still = oriented(draw, eye, held, dist)
+    assert still == held
+    assert kept.normals is not None
+    assert np.allclose(kept.normals[1], (0.0, -1.0, 0.0)) and np.allclose(kept.normals[0], 0.0)
 
 
 def test_in_cloud_visibility_falls_toward_the_core() -> None:

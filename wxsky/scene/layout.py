@@ -39,6 +39,7 @@ from wxsky.scene.gather import (
     near_blocks_keyed,
 )
 from wxsky.scene.in_cloud import (
+    LOCK_FRAC,
     NO_LOCKS,
     NO_VEIL,
     OUTSIDE,
@@ -277,7 +278,11 @@ def oriented(
     (N,) the sprites' distances from the eye, if known."""
     sprites = draw.sprites
     flat = sprites.flat
-    if dist_m is not None and not np.any((dist_m < UNLOCK_FRAC * sprites.size_m) & ~flat):
+    # With no lock held, a sprite locks only within LOCK_FRAC of its edge (lock_facing); a
+    # held one lets go beyond UNLOCK_FRAC. A deck's sprites pass within the one but not the
+    # other under a camera just above or below it, frame after frame.
+    reach = UNLOCK_FRAC if locks else LOCK_FRAC
+    if dist_m is not None and not np.any((dist_m < reach * sprites.size_m) & ~flat):
         # The eye is near no standing sprite (most frames): nothing locks, as lock_facing
         # would find, without cutting the batch.
         lock_normals, kept = None, NO_LOCKS
