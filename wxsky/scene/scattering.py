@@ -56,7 +56,10 @@ def hg_phase(cos_theta: ArrayF | float, g: float = HG_G) -> F64:
     the strong forward peak of cloud droplets (729 times the backward value), which is what
     lights a cloud's rim when the sun is behind it."""
     c = np.asarray(cos_theta, np.float64)
-    denom = np.maximum(1.0 + g * g - 2.0 * g * c, 1e-12) ** 1.5
+    base = np.maximum(1.0 + g * g - 2.0 * g * c, 1e-12)
+    # x * sqrt(x), not x ** 1.5: the same to an ulp, and 8 times faster (numpy's float64 pow
+    # has no vector code here; a frame's near layer asks for (N, 5) of it).
+    denom = base * np.sqrt(base)
     out: F64 = (1.0 - g * g) / (4.0 * math.pi * denom)
     return out
 
