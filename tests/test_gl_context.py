@@ -1,0 +1,73 @@
+"""The one GL context: llvmpipe's raster threads (`context.cpu_raster_threads`)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from wxsky.render import context
+
+# A fresh process (llvmpipe reads its thread count once, when the driver starts): make the
+# context, then name the renderer and count the driver's raster threads, which it names
+# llvmpipe-0, llvmpipe-1, ...
+_PROBE = """
+import json, os
+from wxsky.render.context import create_context
+ctx = create_context()
+names = [open(f"/proc/self/task/{t}/comm").read().strip() for t in os.listdir("/proc/self/task")]
+print(json.dumps({
+    "renderer": ctx.info["GL_RENDERER"],
+    "threads": sum(n.startswith("llvmpipe-") for n in names),
+    "env": os.environ.get("LP_NUM_THREADS"),
+}))
+"""
+
+
+def _probe(lp_num_threads: str | None) -> dict[str, object]:
+    env = {k: v for k, v in os.environ.items() if k != "LP_NUM_THREADS"}
+    if lp_num_threads is not None:
+        env["LP_NUM_THREADS"] = lp_num_threads
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stderr
+    result: dict[str, object] = json.loads(out.stdout.strip().splitlines()[-1])
+    if "llvmpipe" not in str(result["renderer"]):
+        pytest.skip(f"the renderer here is {result['renderer']}, not llvmpipe")
+    return result
+
+
+@pytest.mark.gl
+def test_llvmpipe_draws_with_twice_as_many_threads_as_cores() -> None:
+    cores = len(os.sched_getaffinity(0))
+    if cores < 2:
+        pytest.skip("one core: llvmpipe keeps its own count")
+    result = _probe(None)
+    assert result["env"] == str(2 * cores)
+    assert result["threads"] == 2 * cores
+
+
+@pytest.mark.gl
+def test_a_users_thread_count_wins() -> None:
+    result = _probe("3")
+    assert result["env"] == "3"
+    assert result["threads"] == 3
+
+
+def test_one_core_or_a_count_that_is_no_number_leaves_llvmpipe_its_own(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
+    assert context.cpu_raster_threads() is None
+    assert "LP_NUM_THREADS" not in os.environ
+    monkeypatch.setenv("LP_NUM_THREADS", "many")
+    assert context.cpu_raster_threads() is None
+    assert os.environ["LP_NUM_THREADS"] == "many"
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2})
+    monkeypatch.delenv("LP_NUM_THREADS")
+    assert context.cpu_raster_threads() == 6
