@@ -44,7 +44,7 @@ def cpu_raster_threads() -> int | None:
 
 def create_context() -> moderngl.Context:
     """A standalone OpenGL 3.3+ core context with no window. Raises RenderError saying why not."""
-    cpu_raster_threads()
+    threads = cpu_raster_threads()
     try:
         ctx = moderngl.create_context(
             standalone=True,
@@ -56,7 +56,9 @@ def create_context() -> moderngl.Context:
             f"cannot create a headless EGL OpenGL {GL_VERSION // 100}.{GL_VERSION // 10 % 10} "
             f"context: {exc} (on Debian install libegl1, libegl-mesa0 and libgl1-mesa-dri)"
         ) from exc
-    log.info("GL context: %s (%s)", ctx.info["GL_RENDERER"], ctx.info["GL_VERSION"])
+    renderer = str(ctx.info["GL_RENDERER"])
+    drawing = f", {threads} raster threads" if threads and "llvmpipe" in renderer else ""
+    log.info("GL context: %s (%s)%s", renderer, ctx.info["GL_VERSION"], drawing)
     return ctx
 
 
