@@ -142,6 +142,26 @@ def test_a_polygon_sprite_loses_none_of_its_texture(
 
 
 @pytest.mark.gl
+@pytest.mark.parametrize("slot", [TEX_FLAT_BOTTOM[0], TEX_FOG[1], TEX_PUFFY[2], TEX_WISPY[3]])
+@pytest.mark.parametrize("rotation", [0.0, 0.7])
+def test_a_quad_sprite_wide_enough_for_the_fine_box_loses_none_of_its_texture(
+    renderer: Renderer, slot: int, rotation: float
+) -> None:
+    # The far band's and impostors' quads take the bounding box of the polygon set the
+    # sprite's size picks, as polygons do: at one texel per pixel, the fine set's.
+    cam = Camera((0.0, 0.0, 0.0), 0.0, 0.0, fov_deg=90.0, width_px=257, height_px=257)
+    size_m = 1000.0 * CELL_PX / 128.5
+    draw = SpriteDraw(
+        _batch([(0, 1000, 0)], [size_m], [1], slot, rotation), np.ones((1, 4), np.float32)
+    )
+    target = renderer._target("quad_probe", 257, 257)
+    view, proj = cam.view_matrix(), cam.projection_matrix()
+    renderer._draw_sprites(target, draw, cam.position_m, view, proj, shape="quad")
+    drawn = float(renderer.read("quad_probe")[..., 3].astype(np.float64).sum())
+    assert drawn == pytest.approx(_texture_alpha(slot), rel=0.02)
+
+
+@pytest.mark.gl
 @pytest.mark.parametrize("rotation", [0.0, 0.7])
 def test_a_flat_bottomed_sprite_turning_round_loses_neither_texture(
     renderer: Renderer, rotation: float

@@ -135,7 +135,10 @@ class Renderer:
         turning = (TEX_FLAT_BOTTOM[0], TEX_FOG[0])
         fine = support_polygons(None, turning)  # of the shipped sheet, as `levels` is
         coarse = support_polygons(None, turning, depth=len(levels))
-        boxes = np.concatenate([coarse.min(axis=1), coarse.max(axis=1)], axis=1)
+        # Each set's polygons' bounding boxes, for quads, as the polygons are chosen.
+        boxes = np.concatenate(
+            [np.concatenate([p.min(axis=1), p.max(axis=1)], axis=1) for p in (fine, coarse)]
+        )
         for prog in self._sprite_progs.values():
             _write(prog, "u_polygon", np.concatenate([fine, coarse]).tobytes())
             _write(prog, "u_box", boxes.tobytes())

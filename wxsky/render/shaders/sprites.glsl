@@ -28,7 +28,7 @@ uniform mat4 u_proj;
 #define TURNING_POLYGON (SHEET_CELLS * SHEET_CELLS)
 #define POLYGONS (TURNING_POLYGON + 1)
 uniform vec4 u_polygon[POLYGONS * 8];  // fine set, then coarse
-uniform vec4 u_box[POLYGONS];  // of the coarse set: quads are for small sprites
+uniform vec4 u_box[POLYGONS * 2];  // each set's bounding boxes: fine, then coarse
 uniform float u_viewport_px;  // the target's width
 out vec2 v_uv;
 #if ROUND_MIX
@@ -66,18 +66,19 @@ void main() {
         // cut what the flat one's larger disc let the coarse levels show).
         polygon = round_mix > 0.0 ? TURNING_POLYGON : slot;
     }
+    // Across the picture, the sprite is this many pixels (less, seen obliquely).
+    float across = 0.5 * u_viewport_px * u_proj[0][0] * in_size / max(length(in_centre), 1.0);
+    if (!facing) {
+        across *= abs(dot(normalize(in_normal), normalize(in_centre)));
+    }
+    bool fine = across >= FINE_MIN_PX;
     vec2 local;
     if (gl_VertexID < 8) {
-        // Across the picture, the sprite is this many pixels (less, seen obliquely).
-        float across = 0.5 * u_viewport_px * u_proj[0][0] * in_size / max(length(in_centre), 1.0);
-        if (!facing) {
-            across *= abs(dot(normalize(in_normal), normalize(in_centre)));
-        }
-        int corner = (across >= FINE_MIN_PX ? 0 : POLYGONS * 8) + polygon * 8 + gl_VertexID;
+        int corner = (fine ? 0 : POLYGONS * 8) + polygon * 8 + gl_VertexID;
         vec4 pair = u_polygon[corner / 2];
         local = (corner % 2 == 0) ? pair.xy : pair.zw;
     } else {
-        vec4 box = u_box[polygon];
+        vec4 box = u_box[(fine ? 0 : POLYGONS) + polygon];
         local = mix(box.xy, box.zw, in_corner * 0.5 + 0.5);
     }
     float s = sin(in_rotation), k = cos(in_rotation);
