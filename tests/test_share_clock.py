@@ -15,7 +15,7 @@ from wxsky.engine.stages import SkyEngine
 from wxsky.scene.camera import Camera, turned
 from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
-from wxsky.share.clock import ClockFollower
+from wxsky.share.clock import FAST_PINGS, GOOD_RTT_S, PING_EVERY_S, PING_FAST_S, ClockFollower
 from wxsky.share.messages import ClockTick
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
 from wxsky.weather.transition import TransitionRates
@@ -147,3 +147,18 @@ def test_a_channel_refuses_the_masters_commands_and_the_camera_only_while_it_is_
         assert part.status()["channel"]["dropped"] == {"clock": 1}
     standalone = SharePart(engine, DaemonConfig())
     assert standalone.role == "standalone" and standalone.refusal("apply_preset") is None
+
+
+def test_a_channel_pings_quickly_until_a_short_round_trip_then_settles() -> None:
+    clock = ClockFollower()
+    # Nothing heard: quick pings, but not for ever (no master to answer them).
+    waits = [clock.wait_before_ping_s() for _ in range(FAST_PINGS + 3)]
+    assert waits[:FAST_PINGS] == [PING_FAST_S] * FAST_PINGS
+    assert waits[FAST_PINGS:] == [PING_EVERY_S] * 3
+    # A master: quick again while its round trips are slow (a busy machine just after a
+    # join), and settled once one comes back within GOOD_RTT_S.
+    clock.ping(sent_s=1.0, master_s=101.0, received_s=1.02, master_id=MASTER)
+    assert clock.wait_before_ping_s() == PING_FAST_S
+    clock.ping(sent_s=1.1, master_s=101.1, received_s=1.1 + GOOD_RTT_S / 2, master_id=MASTER)
+    assert clock.wait_before_ping_s() == PING_EVERY_S
+    assert clock.offset_s == pytest.approx(100.0 - GOOD_RTT_S / 4)

@@ -49,7 +49,6 @@ log = logging.getLogger(__name__)
 MASTER_SILENT_S = 2.0
 STATE_REPEAT_S = 1.0  # the state is sent again this often (a partition heals by itself)
 HEALTH_EVERY_S = 1.0
-PING_EVERY_S = 0.5
 WEATHER_COMMANDS = ("apply_preset", "apply_metar", "release", "set_time")
 
 
@@ -399,7 +398,7 @@ class SharePart:
                         self._drop("pong", exc)
                     else:
                         self._follower.ping(sent, mono_s, received, master_id)
-            await asyncio.sleep(PING_EVERY_S)
+            await asyncio.sleep(self._follower.wait_before_ping_s())
 
     async def _heartbeat(self) -> None:
         while True:

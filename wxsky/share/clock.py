@@ -20,6 +20,13 @@ from datetime import datetime, timedelta
 from wxsky.share.messages import ClockTick
 
 PING_MEMORY = 16  # round trips kept for the clock filter
+PING_EVERY_S = 0.5
+# The estimate is uncertain by half its best round trip, and just after a join every daemon
+# on a machine is busiest (its first ring): until a round trip this short has come back, ping
+# this often, at most FAST_PINGS times (answered or not) after starting or a new master.
+GOOD_RTT_S = 0.004
+PING_FAST_S = 0.05
+FAST_PINGS = 64
 
 
 @dataclass(frozen=True)
@@ -44,6 +51,7 @@ class ClockFollower:
         self._tick: ClockTick | None = None
         self._tick_offset_s: float | None = None  # from the latest tick's arrival
         self._master_id: str | None = None
+        self._fast_left = FAST_PINGS  # quick pings left before a good round trip
 
     def ping(self, sent_s: float, master_s: float, received_s: float, master_id: str) -> None:
         """A round trip: sent and received on the local monotonic clock, and the master's
@@ -53,6 +61,16 @@ class ClockFollower:
         if master_id != self._master_id:
             self._restart(master_id)
         self._pings.append(Ping(sent_s, master_s, received_s))
+
+    def wait_before_ping_s(self) -> float:
+        """How long the pinger waits before its next ping (each call is one ping's wait):
+        PING_FAST_S until a round trip within GOOD_RTT_S has come back, FAST_PINGS times at
+        most since the start or a new master, then PING_EVERY_S."""
+        rtt = self.rtt_s
+        if (rtt is None or rtt > GOOD_RTT_S) and self._fast_left > 0:
+            self._fast_left -= 1
+            return PING_FAST_S
+        return PING_EVERY_S
 
     def tick(self, tick: ClockTick, received_s: float) -> None:
         if tick.master_id != self._master_id:
@@ -88,5 +106,6 @@ class ClockFollower:
     def _restart(self, master_id: str) -> None:
         self._master_id = master_id
         self._pings.clear()
+        self._fast_left = FAST_PINGS
         self._tick = None
         self._tick_offset_s = None
