@@ -66,6 +66,13 @@ def sprite_keys(batch: SpriteBatch) -> npt.NDArray[np.int64]:
     )
 
 
+def lock_reach_frac(locks: Locks) -> float:
+    """How near the eye, in sprite edges, a sprite may be locked or keep its lock: with no
+    lock held only within LOCK_FRAC (where a lock is taken), else within UNLOCK_FRAC (where a
+    held one is let go). Beyond it for every sprite, nothing locks (lock_facing)."""
+    return UNLOCK_FRAC if locks else LOCK_FRAC
+
+
 def lock_facing(
     batch: SpriteBatch, eye_m: tuple[float, float, float], locks: Locks
 ) -> tuple[F32 | None, Locks]:
@@ -77,7 +84,7 @@ def lock_facing(
     offset = np.asarray(eye_m, np.float64) - batch.centre_m  # (N, 3) sprite -> eye
     dist = np.linalg.norm(offset, axis=1)
     size = batch.size_m.astype(np.float64)
-    near = np.flatnonzero(dist < UNLOCK_FRAC * size)
+    near = np.flatnonzero(dist < lock_reach_frac(locks) * size)
     if near.size == 0:
         return None, NO_LOCKS
     keys = sprite_keys(batch.take(near))

@@ -39,16 +39,15 @@ from wxsky.scene.gather import (
     near_blocks_keyed,
 )
 from wxsky.scene.in_cloud import (
-    LOCK_FRAC,
     NO_LOCKS,
     NO_VEIL,
     OUTSIDE,
-    UNLOCK_FRAC,
     InCloud,
     Locks,
     in_cloud,
     in_cloud_fog,
     lock_facing,
+    lock_reach_frac,
 )
 from wxsky.scene.rain import is_shaft
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
@@ -278,10 +277,9 @@ def oriented(
     (N,) the sprites' distances from the eye, if known."""
     sprites = draw.sprites
     flat = sprites.flat
-    # With no lock held, a sprite locks only within LOCK_FRAC of its edge (lock_facing); a
-    # held one lets go beyond UNLOCK_FRAC. A deck's sprites pass within the one but not the
-    # other under a camera just above or below it, frame after frame.
-    reach = UNLOCK_FRAC if locks else LOCK_FRAC
+    # lock_facing's own reach: a deck's sprites lie within where a held lock is kept, but not
+    # where one is taken, under a camera just above or below it, frame after frame.
+    reach = lock_reach_frac(locks)
     if dist_m is not None and not np.any((dist_m < reach * sprites.size_m) & ~flat):
         # The eye is near no standing sprite (most frames): nothing locks, as lock_facing
         # would find, without cutting the batch.
