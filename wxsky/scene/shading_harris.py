@@ -214,17 +214,28 @@ def harris_colours(
     `scattered`: `scattered_light` of these sprites, used where its directions are this
     sky's within LIGHT_REUSE_DEG; `dist_m`: (N,) their distances from the eye, if known."""
     lights = scene_lights(sky)
-    if scattered is not None and close_directions(scattered.directions, lights.directions):
-        incident = scattered.rows
-    else:
-        found = None
-        if light is not None and np.array_equal(light.directions, lights.directions):
-            found = light.lookup(batch)
-        if found is None:
-            found = particle_light(batch, lights).lookup(batch)
-            assert found is not None  # the batch's own precompute holds every sprite
-        incident = multiple_scattering(found)
+    incident = harris_incident(batch, lights, light, scattered)
     return harris_rgba(batch.centre_m, batch.opacity, incident, lights, eye_m, dist_m)
+
+
+def harris_incident(
+    batch: SpriteBatch,
+    lights: Lights,
+    light: ParticleLight | None = None,
+    scattered: Scattered | None = None,
+) -> F32:
+    """(N, L) the light reaching each of the batch's sprites from each of `lights` after
+    multiple scattering: `scattered`'s rows where its directions are these within
+    LIGHT_REUSE_DEG, else from `light` (a precompute holding these sprites) or a new one."""
+    if scattered is not None and close_directions(scattered.directions, lights.directions):
+        return scattered.rows
+    found = None
+    if light is not None and np.array_equal(light.directions, lights.directions):
+        found = light.lookup(batch)
+    if found is None:
+        found = particle_light(batch, lights).lookup(batch)
+        assert found is not None  # the batch's own precompute holds every sprite
+    return multiple_scattering(found)
 
 
 def harris_rgba(
@@ -238,13 +249,28 @@ def harris_rgba(
     """`harris_colours` from the light reaching each sprite (`incident`, (N, L) for the L
     `lights`): the eye-dependent half, on the few arrays it reads. `dist_m`: (N,) each
     sprite's distance from the eye, where the caller has it."""
-    view = view_rays(centre_m, eye_m, dist_m)
+    radiance = harris_radiance(view_rays(centre_m, eye_m, dist_m), incident, lights)
+    return with_alpha(exposed(radiance), opacity)
+
+
+def harris_radiance(view: F64, incident: F32, lights: Lights) -> F64:
+    """(N, 3) radiance toward the eye from the light reaching each sprite (`incident`, (N, L)
+    for the L `lights`), along `view_rays` from the eye to the sprites."""
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.
     cos = view @ lights.directions.T  # (N, L)
     phase = (1.0 - DIFFUSE_SHARE) * 4.0 * math.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
-    radiance = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb  # (N, 3)
-    return np.concatenate([exposed(radiance), opacity[:, None]], axis=1).astype(np.float32)
+    out: F64 = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb
+    return out
+
+
+def with_alpha(rgb: F64, opacity: F32) -> F32:
+    """(N, 4) float32 RGBA from (N, 3) colours and (N,) alphas, without the (N, 4) float64
+    that concatenating would make first."""
+    out = np.empty((len(rgb), 4), np.float32)
+    out[:, :3] = rgb
+    out[:, 3] = opacity
+    return out
 
 
 def view_rays(centre_m: F64, eye_m: tuple[float, float, float], dist_m: F64 | None = None) -> F64:

@@ -39,7 +39,13 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.scattering import ALBEDO, hg_phase
-from wxsky.scene.shading_harris import NIGHT_FLOOR_RGB, exposed, scene_lights, view_rays
+from wxsky.scene.shading_harris import (
+    NIGHT_FLOOR_RGB,
+    exposed,
+    scene_lights,
+    view_rays,
+    with_alpha,
+)
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, B
 
@@ -233,26 +239,35 @@ def slab_rgba(
     its base, and inside it on the side of the sprite it looks at. Only the arrays it reads,
     so a frame's slab sprites among others need no sub-batch of every field; `dist_m`: (N,)
     their distances from the eye, if known."""
+    radiance = slab_view_radiance(
+        centre_m[:, 2], slab_m, view_rays(centre_m, eye_m, dist_m), sky, eye_m[2]
+    )
+    return with_alpha(exposed(radiance), opacity)
+
+
+def slab_view_radiance(
+    centre_z_m: F64, slab_m: F32, view: F64, sky: SkyParams, eye_z_m: float
+) -> F64:
+    """(N, 3) radiance toward the eye from sprites of stratiform layers at heights
+    `centre_z_m` (their `slab_m`: base and top MSL), along `view_rays` from the eye."""
     # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
     lights = scene_lights(sky, above_cloud=True)
     key_dir, key_rgb = lights.directions[0], lights.rgb[0]
     sky_rgb = lights.rgb[1:].sum(axis=0)
     base_m = slab_m[:, 0].astype(np.float64)
     top_m = slab_m[:, 1].astype(np.float64)
-    eye = np.asarray(eye_m, np.float64)
-    ray = view_rays(centre_m, eye_m, dist_m)
     eye_above = np.where(
-        eye[2] >= top_m, True, np.where(eye[2] <= base_m, False, centre_m[:, 2] <= eye[2])
+        eye_z_m >= top_m, True, np.where(eye_z_m <= base_m, False, centre_z_m <= eye_z_m)
     )
     # The light is on the top side whenever it is up; the deck is lit from below never.
     mu_l = float(key_dir[2])
     reflected = eye_above  # the key light is above every deck
     key, sky_share = slab_radiance(
-        top_m - base_m, mu_l, np.abs(ray[:, 2]), ray @ key_dir, reflected
+        top_m - base_m, mu_l, np.abs(view[:, 2]), view @ key_dir, reflected
     )
     # The sky term is the slab's own ambient: only the night floor (starlight, towns) is added.
-    radiance = key[:, None] * key_rgb + sky_share[:, None] * sky_rgb + NIGHT_FLOOR_RGB
-    return np.concatenate([exposed(radiance), opacity[:, None]], axis=1).astype(np.float32)
+    out: F64 = key[:, None] * key_rgb + sky_share[:, None] * sky_rgb + NIGHT_FLOOR_RGB
+    return out
 
 
 def _exp_difference(kh: F64, mu_v: F64, mu_l: float, beam: F64) -> F64:
