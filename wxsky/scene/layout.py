@@ -229,8 +229,9 @@ def fade_by_range(
     haze = (1.0 - np.exp(-dist / sky.haze_m)).astype(np.float32)
     out = rgba.copy()
     out[:, :3] = rgba[:, :3] * (1.0 - haze[:, None]) + np.asarray(sky.haze_rgb) * haze[:, None]
-    edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)
-    out[:, 3] *= (edge * edge * (3.0 - 2.0 * edge)).astype(np.float32)
+    if len(dist) and float(dist.max()) > 0.75 * max_range_m:  # the near layer never is
+        edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)
+        out[:, 3] *= (edge * edge * (3.0 - 2.0 * edge)).astype(np.float32)
     return out
 
 
@@ -443,7 +444,13 @@ def build_frame(
     shows = placed.shows
     far_band = lod and settings.far_band_m > 0.0 and len(draw) > 0
     if far_band or shows:
-        dist = np.linalg.norm(draw.sprites.centre_m - np.asarray(eye), axis=1)
+        # The drawn sprites' distances, kept while the draw is still those sprites.
+        known = drawn_dist if front is None else None
+        dist = (
+            np.linalg.norm(draw.sprites.centre_m - np.asarray(eye), axis=1)
+            if known is None
+            else known
+        )
     if far_band:
         far_count = int(np.count_nonzero(dist >= settings.far_band_m))
     if shows:
