@@ -661,9 +661,7 @@ class SkyEngine:
         self._transition(max(0.0, dt_wall_s))
         dt_sim = max(0.0, dt_wall_s) * self.clock_rate
         if dt_sim > 0.0:
-            self._state = dataclasses.replace(
-                self._state, time_utc=self._state.time_utc + timedelta(seconds=dt_sim)
-            )
+            self._state = self._state.at_time(self._state.time_utc + timedelta(seconds=dt_sim))
             self._drift = self._drift_at(self._state.time_utc)
 
     def _drift_at(self, time_utc: datetime) -> Drift:

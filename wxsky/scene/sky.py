@@ -13,8 +13,6 @@ import math
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
-import numpy as np
-
 from wxsky.scene.ephemeris import (
     Matrix3,
     MoonPosition,
@@ -293,7 +291,7 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
     edge_m = max(lay.base_m for lay in low_layers) - state.observer.alt_m
     return DomeControls(
         cover=cover,
-        height=float(np.clip(top.base_m / DOME_TOP_M, 0.0, 1.0)),
+        height=min(max(top.base_m / DOME_TOP_M, 0.0), 1.0),
         density=type_density * (0.6 + 0.4 * cover),
         sunset=sunset,
         speed=min(1.0, math.hypot(wind_e, wind_n) / DOME_MAX_WIND_MPS),

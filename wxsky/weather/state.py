@@ -6,8 +6,10 @@ only the fields it knows; `WeatherState.apply` merges it and records where each 
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import enum
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -271,12 +273,26 @@ class WeatherState:
             self, **changes, sources=dataclasses.replace(self.sources, **sources)
         )
 
+    def at_time(self, time_utc: datetime) -> WeatherState:
+        """This state at another moment. The daemon's clock moves the weather every frame,
+        and checking every other field again on the way (dataclasses.replace) was a twentieth
+        of a frame's scene stage: nothing else changed, so only the time is checked."""
+        if time_utc.tzinfo is None or time_utc.utcoffset() != UTC.utcoffset(None):
+            raise ValueError("time_utc must be timezone-aware UTC")
+        out = copy.copy(self)
+        object.__setattr__(out, "time_utc", time_utc)
+        return out
+
+    @functools.cached_property
+    def _wind_profile(self) -> tuple[list[float], list[tuple[float, float]]]:
+        # Asked for by every layer's drift and the dome, every frame: worked out once a state.
+        return [w.alt_m for w in self.wind], [w.velocity_mps() for w in self.wind]
+
     def wind_at(self, alt_m: float) -> tuple[float, float]:
         """(east, north) wind velocity at an altitude, linear between reported levels."""
         if not self.wind:
             return (0.0, 0.0)
-        vel = [w.velocity_mps() for w in self.wind]
-        alts = [w.alt_m for w in self.wind]
+        alts, vel = self._wind_profile
         if alt_m <= alts[0]:
             return vel[0]
         if alt_m >= alts[-1]:
