@@ -124,7 +124,9 @@ _energies_lock = threading.Lock()
 
 
 def kept_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
-    """`slab_energy`, kept for the last few thicknesses and angles asked for (read-only)."""
+    """`slab_energy`, kept for the last few thicknesses and angles asked for (read-only), with
+    what slab_radiance derives from it: `ratio_r` (R_2 / R_1), `ratio_t` (T_2 / T_1), and
+    `bounce` (the series of bounces between the ground and the deck's base)."""
     h = np.asarray(thickness_m, np.float64)
     key = (h.tobytes(), light_angle_deg)
     with _energies_lock:
@@ -133,6 +135,15 @@ def kept_energy(thickness_m: F64, light_angle_deg: float) -> dict[str, F64]:
             _energies.move_to_end(key)
             return found
     made = slab_energy(h, light_angle_deg)
+    # What slab_radiance derives from them per deck, kept with them: on arrays of a deck or
+    # two, the work is all numpy's overhead, frame after frame.
+    made["ratio_r"] = np.divide(
+        made["r_2"], made["r_1"], out=np.zeros_like(h), where=made["r_1"] > 1e-12
+    )
+    made["ratio_t"] = np.divide(
+        made["t_2"], made["t_1"], out=np.zeros_like(h), where=made["t_1"] > 1e-12
+    )
+    made["bounce"] = GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * made["r_ms"])
     for value in made.values():
         value.flags.writeable = False
     with _energies_lock:
@@ -192,12 +203,12 @@ def slab_radiance(
     # is worked out only for the sprites on it: a deck is mostly seen from one side.
     refl = trans = np.zeros(0)
     if on_lit_side:
-        ratio_r = each(np.divide(e["r_2"], e["r_1"], out=np.zeros_like(h), where=e["r_1"] > 1e-12))
+        ratio_r = each(e["ratio_r"])
         h_l, h_v = each(h / mu_light), each(h) / mu_v
         refl_geo = mu_light / (4.0 * (mu_v + mu_light)) * (1.0 - np.exp(-k * (h_l + h_v)))
         refl = ALBEDO * (p_1 + ratio_r * p_2) * refl_geo
     if on_far_side:
-        ratio_t = each(np.divide(e["t_2"], e["t_1"], out=np.zeros_like(h), where=e["t_1"] > 1e-12))
+        ratio_t = each(e["ratio_t"])
         kh = k * h
         beam = each(np.exp(-kh / mu_light))  # along the light's path: once per deck
         trans_geo = mu_light / 4.0 * _exp_difference(each(kh), mu_v, mu_light, beam)
@@ -215,7 +226,7 @@ def slab_radiance(
     r_ms, t_ms = each(d["r_ms"]), each(d["t_ms"])
     # Ground and base light each other: irradiance on the ground from the key light and the
     # sky through the deck, multiplied by the series of bounces between the two planes.
-    bounce = each(GROUND_ALBEDO / (1.0 - GROUND_ALBEDO * d["r_ms"]))
+    bounce = each(d["bounce"])
     t_key = np.where(lit, each(e["t_ms"]) * mu_light, 0.0)
     # Light the ground sends up leaves the deck on the ground's side by reflection and on the
     # far side by transmission: the opposite of the light from above.
