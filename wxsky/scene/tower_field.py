@@ -217,15 +217,20 @@ def place_towers(
     centres = boxes.centres + shift
     inside = np.all(np.abs(eye - centres) < boxes.halves * INSIDE_MARGIN, axis=1)
     dists = np.linalg.norm(centres - eye, axis=1)
-    scored: list[tuple[float, int, Candidate, tuple[float, float, float]]] = [
-        (float(dists[i]), i, found[i], (float(x), float(y), float(z)))
-        for i, (x, y, z) in enumerate(centres)
-        if not inside[i]
+    # Nearest first, ties in candidate order; only the chosen few become Python objects (the
+    # candidates are a whole near set's worth of cells, every frame).
+    scored = np.flatnonzero(~inside)
+    ranked = scored[np.lexsort((scored, dists[scored]))][:budget]
+    chosen = [
+        (
+            float(dists[i]),
+            found[i],
+            (float(centres[i, 0]), float(centres[i, 1]), float(centres[i, 2])),
+        )
+        for i in ranked.tolist()
     ]
-    scored.sort(key=lambda s: (s[0], s[1]))
-    chosen = scored[:budget]
     shows = []
-    for dist, _, c, centre in chosen:
+    for dist, c, centre in chosen:
         since_s = (clock.time_utc - _set_utc(clock, c.layer)).total_seconds()
         age = c.spec.age_s(since_s)
         if age < 0.0:
@@ -246,7 +251,7 @@ def place_towers(
                 haze=float(1.0 - math.exp(-dist / sky.haze_m)),
             )
         )
-    drop = np.asarray([c.cloud_id for _, _, c, _ in chosen], np.int64)
+    drop = np.asarray([c.cloud_id for _, c, _ in chosen], np.int64)
     return PlacedTowers(tuple(shows), drop, len(scored) - len(chosen), len(found))
 
 
