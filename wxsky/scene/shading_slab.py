@@ -213,12 +213,19 @@ def slab_radiance(
         beam = each(np.exp(-kh / mu_light))  # along the light's path: once per deck
         trans_geo = mu_light / 4.0 * _exp_difference(each(kh), mu_v, mu_light, beam)
         trans = ALBEDO * (p_1 + ratio_t * p_2) * trans_geo
-    if on_lit_side and on_far_side:
-        directional = np.where(reflected, refl, trans)
-    else:
-        directional = refl if on_lit_side else trans
-    diffuse = np.where(reflected, each(e["r_3"]), each(e["t_3"])) * mu_light * spread
-    key = np.where(lit, directional + diffuse, 0.0)
+
+    def by_side(lit_side: F64, far_side: F64) -> F64:
+        # A deck is mostly seen from one side: then no select over every sprite.
+        if not on_far_side:
+            return lit_side
+        if not on_lit_side:
+            return far_side
+        out: F64 = np.where(reflected, lit_side, far_side)
+        return out
+
+    directional = by_side(refl, trans)
+    diffuse = by_side(each(e["r_3"]), each(e["t_3"])) * mu_light * spread
+    key = directional + diffuse if lit else np.zeros(len(mu_v))
     # Sky and ground light arrive from a whole hemisphere: the slab passes it as it passes a
     # beam at DIFFUSE_ANGLE_DEG, not at the sun's angle (at dawn the sun grazes the deck, the
     # sky does not).
@@ -227,11 +234,11 @@ def slab_radiance(
     # Ground and base light each other: irradiance on the ground from the key light and the
     # sky through the deck, multiplied by the series of bounces between the two planes.
     bounce = each(d["bounce"])
-    t_key = np.where(lit, each(e["t_ms"]) * mu_light, 0.0)
+    t_key = each(e["t_ms"]) * mu_light if lit else np.zeros(len(mu_v))
     # Light the ground sends up leaves the deck on the ground's side by reflection and on the
     # far side by transmission: the opposite of the light from above.
-    up_share = np.where(reflected, t_ms, r_ms) * spread
-    from_above = np.where(reflected, r_ms, t_ms) * spread
+    up_share = by_side(t_ms, r_ms) * spread
+    from_above = by_side(r_ms, t_ms) * spread
     key_total: F64 = key + t_key * bounce * up_share
     sky_total: F64 = from_above + t_ms * bounce * up_share
     return key_total, sky_total
