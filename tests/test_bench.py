@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from wxsky.app.bench import STAGES, run_bench
+from wxsky.app.bench import CPU_STAGES, STAGES, run_bench
 from wxsky.app.camera_path import straight_and_level
 from wxsky.app.trace import TraceWriter
 from wxsky.cli import main
@@ -58,6 +58,13 @@ def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None
     d = result.to_dict()
     assert set(d["stages_ms"]) == set(STAGES) and d["frames"] == 80
     assert "impostor_slice" in result.table()
+    # The CPU stages' own CPU: some in every frame, never more than the wall time they took
+    # (one thread), give or take the clocks' grain.
+    walls = [sum(f) for f in zip(*(result.stage_s[n] for n in CPU_STAGES), strict=True)]
+    assert len(result.cpu_stages_s) == 80 and all(c > 0.0 for c in result.cpu_stages_s)
+    assert all(c <= w + 1e-3 for c, w in zip(result.cpu_stages_s, walls, strict=True))
+    assert d["cpu_stages_ms"]["thread_cpu"]["median"] > 0.0
+    assert "frame thread's CPU" in result.table()
 
 
 @pytest.mark.gl

@@ -49,6 +49,9 @@ if TYPE_CHECKING:
     from wxsky.render.renderer import Renderer
 
 STAGES = ("scene", "sort", "impostor_slice", "near_pass", "publish")
+# The stages that are the frame's own CPU work (issue 19): with a GPU drawing, what is left of
+# the frame on the CPU.
+CPU_STAGES = ("scene", "sort", "publish")
 # How long the lead-in waits for the first ring (a 2-core CPU renderer takes 3-10 s).
 LEAD_IN_LIMIT_S = 300.0
 
@@ -82,6 +85,10 @@ class BenchResult:
     frames_s: float
     stage_s: dict[str, list[float]] = field(default_factory=dict)  # per frame, by stage
     frame_s: list[float] = field(default_factory=list)
+    # Per frame, the CPU the calling thread spent in CPU_STAGES (time.thread_time): their
+    # wall time less what the machine's other threads took from it (llvmpipe's raster
+    # threads share its cores).
+    cpu_stages_s: list[float] = field(default_factory=list)
     events: dict[str, int] = field(default_factory=dict)
     build_s: list[float] = field(default_factory=list)  # ring builds on the worker thread
     sprites: list[int] = field(default_factory=list)  # near sprites drawn per frame
@@ -122,6 +129,12 @@ class BenchResult:
             "frames_s": self.frames_s,
             "stages_ms": {name: _summary(v) for name, v in self.stage_s.items()},
             "frame_ms": _summary(self.frame_s),
+            "cpu_stages_ms": {
+                "wall": _summary(
+                    [sum(f) for f in zip(*(self.stage_s[n] for n in CPU_STAGES), strict=True)]
+                ),
+                "thread_cpu": _summary(self.cpu_stages_s),
+            },
             "near_sprites": {
                 "median": statistics.median(self.sprites) if self.sprites else 0,
                 "max": max(self.sprites, default=0),
@@ -167,6 +180,11 @@ class BenchResult:
             lines.append(f"{name:<16}{s['median']:>11.2f}{s['p95']:>10.2f}")
         f = d["frame_ms"]
         lines.append(f"{'frame':<16}{f['median']:>11.2f}{f['p95']:>10.2f}")
+        c = d["cpu_stages_ms"]
+        lines.append(
+            f"CPU stages ({' + '.join(CPU_STAGES)}): median {c['wall']['median']:.2f} ms wall, "
+            f"{c['thread_cpu']['median']:.2f} ms of the frame thread's CPU"
+        )
         lines.append(
             f"near sprites per frame: median {d['near_sprites']['median']:.0f}, "
             f"max {d['near_sprites']['max']}; frames over the cap "
@@ -320,9 +338,10 @@ def run_bench(
             nonlocal drawn
             engine.set_camera(camera_at(t_s))
             times.frame = {}
-            t0 = time.perf_counter()
+            t0, cpu0 = time.perf_counter(), time.thread_time()
             plan = engine.advance(dt, times)
             times.frame["scene"] = time.perf_counter() - t0 - times.frame.get("sort", 0.0)
+            cpu_s = time.thread_time() - cpu0
             with times.stage("impostor_slice"):
                 if plan.rings.render or plan.rings.current is None:
                     draw_ring(renderer, plan)
@@ -332,8 +351,10 @@ def run_bench(
             with times.stage("near_pass"):
                 renderer.render_frame(plan.frame)
                 renderer.finish()
+            cpu0 = time.thread_time()
             with times.stage("publish"):
                 publish_plan(renderer, writer, plan, drawn + 1, settings.ring_texture_px)
+            times.frame["cpu"] = cpu_s + time.thread_time() - cpu0
             times.frame["frame"] = time.perf_counter() - t0
             drawn += 1
             if trace is not None:
@@ -364,6 +385,7 @@ def run_bench(
         for k in range(frames):
             plan = draw(k * dt_s, dt_s if drawn else 0.0)
             result.frame_s.append(times.frame["frame"])
+            result.cpu_stages_s.append(times.frame["cpu"])
             if profiler is not None:
                 profiler.frame_done()
             for name in STAGES:
