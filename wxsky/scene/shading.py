@@ -97,11 +97,12 @@ def sprite_colours(
     if slabs == 0:
         incident = harris_incident(batch, lights, light, scattered)
         return with_alpha(exposed(harris_radiance(view, incident, lights)), batch.opacity)
-    particle = ~slab
+    # Rows by index (ndarray.take), not by mask: a fifth of the time on (N, 3) arrays.
+    particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
     if scattered is not None and close_directions(scattered.directions, lights.directions):
         # A frame's near layer: the light is known, and only the arrays the eye-dependent
         # half reads are cut, not every field of the batch (which was a third of the stage).
-        incident = scattered.rows[particle]
+        incident = scattered.rows.take(particle, axis=0)
     else:
         incident = harris_incident(
             batch.take(particle),
@@ -110,9 +111,13 @@ def sprite_colours(
             None if scattered is None else scattered.take(particle),
         )
     radiance = np.empty((n, 3))
-    radiance[particle] = harris_radiance(view[particle], incident, lights)
-    radiance[slab] = slab_view_radiance(
-        batch.centre_m[slab, 2], batch.slab_m[slab], view[slab], sky, eye_m[2]
+    radiance[particle] = harris_radiance(view.take(particle, axis=0), incident, lights)
+    radiance[slabs_at] = slab_view_radiance(
+        batch.centre_m[:, 2].take(slabs_at),
+        batch.slab_m.take(slabs_at, axis=0),
+        view.take(slabs_at, axis=0),
+        sky,
+        eye_m[2],
     )
     return with_alpha(exposed(radiance), batch.opacity)
 

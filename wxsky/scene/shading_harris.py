@@ -98,7 +98,8 @@ class Scattered(NamedTuple):
     rows: F32  # (N, L) `multiple_scattering` of the precompute's light, a row per sprite
 
     def take(self, index: npt.NDArray[np.intp] | npt.NDArray[np.bool_]) -> Scattered:
-        return Scattered(self.directions, self.rows[index])
+        rows = np.flatnonzero(index) if index.dtype == np.bool_ else index
+        return Scattered(self.directions, self.rows.take(rows, axis=0))
 
 
 def scattered_light(batch: SpriteBatch, lights: Lights) -> Scattered:
@@ -196,6 +197,9 @@ def close_directions(a: F64, b: F64, within_deg: float = LIGHT_REUSE_DEG) -> boo
     within `within_deg` of the other (0: exactly equal)."""
     if a.shape != b.shape:
         return False
+    # Frame after frame the lights are the same quantised directions: no sums for those.
+    if a is b or a.tobytes() == b.tobytes():
+        return True
     if within_deg <= 0.0:
         return bool(np.array_equal(a, b))
     return bool(np.all(np.sum(a * b, axis=1) >= math.cos(math.radians(within_deg))))
