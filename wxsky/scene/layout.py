@@ -227,8 +227,15 @@ def fade_by_range(
     hard line. `dist_m`: (N,) the sprites' distances from the eye, if known."""
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1) if dist_m is None else dist_m
     haze = (1.0 - np.exp(-dist / sky.haze_m)).astype(np.float32)
-    out = rgba.copy()
-    out[:, :3] = rgba[:, :3] * (1.0 - haze[:, None]) + np.asarray(sky.haze_rgb) * haze[:, None]
+    out = np.empty_like(rgba)
+    out[:, 3] = rgba[:, 3]
+    # The float32 colours' share plus the haze's in float64, rounded once into the output.
+    np.add(
+        rgba[:, :3] * (1.0 - haze[:, None]),
+        np.multiply.outer(haze.astype(np.float64), np.asarray(sky.haze_rgb, np.float64)),
+        out=out[:, :3],
+        casting="unsafe",
+    )
     if len(dist) and float(dist.max()) > 0.75 * max_range_m:  # the near layer never is
         edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)
         out[:, 3] *= (edge * edge * (3.0 - 2.0 * edge)).astype(np.float32)
