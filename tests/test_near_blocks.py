@@ -255,3 +255,44 @@ def test_after_a_clock_set_the_near_layer_shows_the_clouds_around_the_eye() -> N
     nudged = advance_drift(state, old, 60.0)
     kept, _, _ = gather_near_blocks(state, nudged, (NearRing(centre, old, 1.0),), radius_m)
     _same_batch(kept, gather_blocks(state, nudged, centre, 0.0, radius_m, select_drift=old))
+
+
+def test_a_set_key_made_in_another_process_finds_the_set_made_here() -> None:
+    """A ring's worker process hands back near sets under their keys: a key's hash is kept
+    for the frames' lookups, but not across processes, where strings hash otherwise."""
+    import os
+    import pickle
+    import subprocess
+    import sys
+
+    state = _state("thunderstorm")
+    drift = zero_drift(state)
+    rings = (NearRing((0.0, 0.0, 1500.0), drift, 1.0),)
+    keyed = gather_module.near_blocks_keyed(state, drift, rings, 8000.0, 40_000.0)
+    assert keyed is not None
+    key, blocks = keyed
+    again = gather_module.near_blocks_keyed(
+        state, advance_drift(state, drift, 1.0), rings, 8000.0, 40_000.0
+    )
+    assert again is not None and again[0] is key and again[1] is blocks  # the kept key
+    code = (
+        "import pickle, sys\n"
+        "from wxsky.scene.gather import NearRing, near_blocks_keyed, zero_drift\n"
+        "from wxsky.settings.presets import load_preset\n"
+        "from wxsky.weather.state import WeatherState\n"
+        "state = WeatherState().apply(load_preset('thunderstorm', ()))\n"
+        "drift = zero_drift(state)\n"
+        "keyed = near_blocks_keyed(state, drift, (NearRing((0.0, 0.0, 1500.0), drift, 1.0),),"
+        " 8000.0, 40_000.0)\n"
+        "from wxsky.scene.gather import SetKey\n"
+        "sys.stdout.buffer.write(pickle.dumps((keyed[0], SetKey(('stratus', 1.5)))))\n"
+    )
+    env = {**os.environ, "PYTHONHASHSEED": "12345"}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, check=True)
+    theirs, named = pickle.loads(done.stdout)
+    assert theirs == key and hash(theirs) == hash(key)
+    # Strings hash otherwise in each process: a key holding one is equal here only if its
+    # hash is worked out here.
+    assert named == gather_module.SetKey(("stratus", 1.5))
+    with gather_module._near_lock:
+        assert gather_module._near_sets.get(theirs) is blocks

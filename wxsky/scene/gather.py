@@ -14,7 +14,7 @@ import math
 import threading
 from collections import OrderedDict
 from collections.abc import Hashable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -325,6 +325,10 @@ class NearBlocks:
     block_rows: npt.NDArray[np.intp]  # (B,) sprites of each block, in batch order
     members: npt.NDArray[np.bool_]  # (R, B) True where the block is within ring r's radius
     block_keys: tuple[tuple[int, int, int], ...] = ()  # (B,) (layer index, east, north)
+    # The shares for the last few rings' weights: the same, frame after frame, but in a fade.
+    _shares: dict[tuple[float, ...], npt.NDArray[np.float32]] = field(
+        default_factory=dict, repr=False
+    )
 
     def placed(
         self, drift: Drift, rings: tuple[NearRing, ...]
@@ -332,13 +336,20 @@ class NearBlocks:
         """The sprites moved by `drift` and (N,) each one's share for these rings' weights
         (see `gather_near`), or None where a weight leaves a block out (a ring weighing 0:
         never the case in a fade, so not worth a set of its own)."""
-        weight = np.zeros(len(self.block_rows))
-        for member, ring in zip(self.members, rings, strict=True):
-            # In ring order, as the blocks' weights have always been summed.
-            weight = weight + np.where(member, ring.weight, 0.0)
-        if not (weight > 0.0).all():
-            return None
-        share = np.repeat(np.minimum(weight, 1.0).astype(np.float32), self.block_rows)
+        weights = tuple(ring.weight for ring in rings)
+        share = self._shares.get(weights)
+        if share is None:
+            weight = np.zeros(len(self.block_rows))
+            for member, w in zip(self.members, weights, strict=True):
+                # In ring order, as the blocks' weights have always been summed.
+                weight = weight + np.where(member, w, 0.0)
+            if not (weight > 0.0).all():
+                return None
+            share = np.repeat(np.minimum(weight, 1.0).astype(np.float32), self.block_rows)
+            share.flags.writeable = False
+            if len(self._shares) >= 4:  # a fade's weights change every frame
+                self._shares.clear()
+            self._shares[weights] = share
         centre = self.batch.centre_m.copy()
         for li, start, stop in self.layer_rows:
             dx, dy = drift[li]
@@ -347,8 +358,33 @@ class NearBlocks:
         return dataclasses.replace(self.batch, centre_m=centre), share
 
 
+class SetKey:
+    """A near set's key: the weather's seed and layers, its rain, and the blocks each ring
+    picks. Its hash is worked out once: hashing the layers (dataclasses) and every block's
+    place anew, twice a frame, was a fiftieth of the scene stage. Rebuilt from its parts
+    when pickled, since a string's hash differs from process to process."""
+
+    __slots__ = ("_hash", "parts")
+
+    def __init__(self, parts: tuple[object, ...]) -> None:
+        self.parts = parts
+        self._hash = hash(parts)
+
+    def __hash__(self) -> int:
+        return self._hash
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, SetKey) and self._hash == other._hash and self.parts == other.parts
+
+    def __reduce__(self) -> tuple[type[SetKey], tuple[tuple[object, ...]]]:
+        return SetKey, (self.parts,)
+
+
 _near_lock = threading.Lock()
 _near_sets: OrderedDict[Hashable, NearBlocks] = OrderedDict()
+# The key the last lookup made: a frame's parts are the last frame's (the same objects, from
+# the weather and `_picks`), which compare equal at once, so its hash is kept too.
+_last_key: SetKey | None = None
 _picks: OrderedDict[tuple[float, float, float, float], tuple[tuple[int, int], ...]] = OrderedDict()
 
 
@@ -399,8 +435,12 @@ def near_blocks_keyed(
                 _blocks_picked(ring.centre_m[0] - sx, ring.centre_m[1] - sy, lo_m, hi_m)
             )
         picks.append(tuple(per_ring))
+    global _last_key
     rain = rain_of(state)
-    key = (state.seed, state.layers, rain, len(rings), tuple(picks))
+    parts = (state.seed, state.layers, rain, len(rings), tuple(picks))
+    last = _last_key  # one read: another thread may replace it
+    key = last if last is not None and last.parts == parts else SetKey(parts)
+    _last_key = key
     with _near_lock:
         found = _near_sets.get(key)
         if found is not None:
