@@ -6,7 +6,6 @@ only the fields it knows; `WeatherState.apply` merges it and records where each 
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import enum
 import functools
@@ -279,8 +278,9 @@ class WeatherState:
         of a frame's scene stage: nothing else changed, so only the time is checked."""
         if time_utc.tzinfo is None or time_utc.utcoffset() != UTC.utcoffset(None):
             raise ValueError("time_utc must be timezone-aware UTC")
-        out = copy.copy(self)
-        object.__setattr__(out, "time_utc", time_utc)
+        out = object.__new__(WeatherState)
+        out.__dict__.update(self.__dict__)  # copy.copy's result, at a fifth of its cost
+        out.__dict__["time_utc"] = time_utc
         return out
 
     @functools.cached_property
