@@ -76,6 +76,8 @@ def sprite_colours(
         return np.zeros((0, 4), np.float32)
     slab = batch.slab
     slabs = int(np.count_nonzero(slab))
+    if slabs == 0 and model != "harris":
+        return wang_colours(batch, sky)
     # The view rays once for all sprites, and one exposure over the sprites' radiance: each
     # row is what shading the slab and particle sprites apart gives, at half the calls.
     view = view_rays(batch.centre_m, eye_m, dist_m)
@@ -83,11 +85,8 @@ def sprite_colours(
         radiance = slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2])
         return with_alpha(exposed(radiance), batch.opacity)
     if model != "harris":
-        out = wang_colours(batch if slabs == 0 else batch.take(~slab), sky)
-        if slabs == 0:
-            return out
         mixed = np.empty((n, 4), np.float32)
-        mixed[~slab] = out
+        mixed[~slab] = wang_colours(batch.take(~slab), sky)
         radiance = slab_view_radiance(
             batch.centre_m[slab, 2], batch.slab_m[slab], view[slab], sky, eye_m[2]
         )

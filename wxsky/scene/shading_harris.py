@@ -91,7 +91,7 @@ class ParticleLight:
 
 class Scattered(NamedTuple):
     """The light reaching each sprite of a batch after multiple scattering, for these light
-    directions: the first, eye-independent half of `harris_colours`, which a caller that
+    directions: the first, eye-independent half of Harris's shading, which a caller that
     shades the same sprites frame after frame (the near layer) works out once."""
 
     directions: F64  # (L, 3) as `Lights.directions`
@@ -103,7 +103,7 @@ class Scattered(NamedTuple):
 
 
 def scattered_light(batch: SpriteBatch, lights: Lights) -> Scattered:
-    """What `harris_colours` lights the batch's sprites with before it looks at the eye."""
+    """What Harris's shading lights the batch's sprites with before it looks at the eye."""
     incident = particle_light(batch, lights).lookup(batch)
     assert incident is not None  # the batch's own precompute holds every sprite
     return Scattered(lights.directions, multiple_scattering(incident))
@@ -205,23 +205,6 @@ def close_directions(a: F64, b: F64, within_deg: float = LIGHT_REUSE_DEG) -> boo
     return bool(np.all(np.sum(a * b, axis=1) >= math.cos(math.radians(within_deg))))
 
 
-def harris_colours(
-    batch: SpriteBatch,
-    sky: SkyParams,
-    eye_m: tuple[float, float, float],
-    light: ParticleLight | None = None,
-    scattered: Scattered | None = None,
-    dist_m: F64 | None = None,
-) -> F32:
-    """(N, 4) straight-alpha RGBA: each sprite's light scattered toward the eye (eq. 9). The
-    renderer's back-to-front blending is eq. 9's recurrence, with alpha as 1 - T.
-    `scattered`: `scattered_light` of these sprites, used where its directions are this
-    sky's within LIGHT_REUSE_DEG; `dist_m`: (N,) their distances from the eye, if known."""
-    lights = scene_lights(sky)
-    incident = harris_incident(batch, lights, light, scattered)
-    return harris_rgba(batch.centre_m, batch.opacity, incident, lights, eye_m, dist_m)
-
-
 def harris_incident(
     batch: SpriteBatch,
     lights: Lights,
@@ -242,24 +225,12 @@ def harris_incident(
     return multiple_scattering(found)
 
 
-def harris_rgba(
-    centre_m: F64,
-    opacity: F32,
-    incident: F32,
-    lights: Lights,
-    eye_m: tuple[float, float, float],
-    dist_m: F64 | None = None,
-) -> F32:
-    """`harris_colours` from the light reaching each sprite (`incident`, (N, L) for the L
-    `lights`): the eye-dependent half, on the few arrays it reads. `dist_m`: (N,) each
-    sprite's distance from the eye, where the caller has it."""
-    radiance = harris_radiance(view_rays(centre_m, eye_m, dist_m), incident, lights)
-    return with_alpha(exposed(radiance), opacity)
-
-
 def harris_radiance(view: F64, incident: F32, lights: Lights) -> F64:
     """(N, 3) radiance toward the eye from the light reaching each sprite (`incident`, (N, L)
-    for the L `lights`), along `view_rays` from the eye to the sprites."""
+    for the L `lights`, `harris_incident`), along `view_rays` from the eye to the sprites:
+    each sprite's light scattered toward the eye (eq. 9). Exposed and given the sprites'
+    opacity as alpha (`shading.sprite_colours`), the renderer's back-to-front blending is
+    eq. 9's recurrence, with alpha as 1 - T."""
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.
     cos = view @ lights.directions.T  # (N, L)

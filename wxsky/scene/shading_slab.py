@@ -41,10 +41,7 @@ import numpy.typing as npt
 from wxsky.scene.scattering import ALBEDO, hg_phase
 from wxsky.scene.shading_harris import (
     NIGHT_FLOOR_RGB,
-    exposed,
     scene_lights,
-    view_rays,
-    with_alpha,
 )
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, B
@@ -244,30 +241,14 @@ def slab_radiance(
     return key_total, sky_total
 
 
-def slab_rgba(
-    centre_m: F64,
-    slab_m: F32,
-    opacity: F32,
-    sky: SkyParams,
-    eye_m: tuple[float, float, float],
-    dist_m: F64 | None = None,
-) -> F32:
-    """(N, 4) straight-alpha RGBA for sprites of stratiform layers (their `slab_m`: base and
-    top MSL), seen from eye_m. The eye is above a sprite's slab above its top, below it under
-    its base, and inside it on the side of the sprite it looks at. Only the arrays it reads,
-    so a frame's slab sprites among others need no sub-batch of every field; `dist_m`: (N,)
-    their distances from the eye, if known."""
-    radiance = slab_view_radiance(
-        centre_m[:, 2], slab_m, view_rays(centre_m, eye_m, dist_m), sky, eye_m[2]
-    )
-    return with_alpha(exposed(radiance), opacity)
-
-
 def slab_view_radiance(
     centre_z_m: F64, slab_m: F32, view: F64, sky: SkyParams, eye_z_m: float
 ) -> F64:
     """(N, 3) radiance toward the eye from sprites of stratiform layers at heights
-    `centre_z_m` (their `slab_m`: base and top MSL), along `view_rays` from the eye."""
+    `centre_z_m` (their `slab_m`: base and top MSL), along `view_rays` from the eye. The eye
+    is above a sprite's slab above its top, below it under its base, and inside it on the
+    side of the sprite it looks at. Only the arrays it reads, so a frame's slab sprites among
+    others need no sub-batch of every field."""
     # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
     lights = scene_lights(sky, above_cloud=True)
     key_dir, key_rgb = lights.directions[0], lights.rgb[0]
