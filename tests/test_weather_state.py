@@ -13,7 +13,7 @@ from wxsky.weather.state import CloudLayer, CloudType, WeatherState, WindLayer
 
 def _state() -> WeatherState:
     return WeatherState(
-        layers=(CloudLayer(CloudType.CUMULUS, 3.0, 1200.0, 2000.0),),
+        layers=(CloudLayer(cover_oktas=3.0, base_m=1200.0, top_m=2000.0, type=CloudType.CUMULUS),),
         wind=(WindLayer(0.0, 270.0, 5.0), WindLayer(3000.0, 300.0, 20.0)),
     )
 
