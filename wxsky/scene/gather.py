@@ -409,6 +409,7 @@ def near_blocks_keyed(
     max_range_m: float | None = None,
 ) -> tuple[Hashable, NearBlocks] | None:
     """`near_blocks`, with the key it is kept under (`install_near_blocks`)."""
+    global _last_key
     if not rings:
         return None
     if len(drift) != len(state.layers):
@@ -435,7 +436,6 @@ def near_blocks_keyed(
                 _blocks_picked(ring.centre_m[0] - sx, ring.centre_m[1] - sy, lo_m, hi_m)
             )
         picks.append(tuple(per_ring))
-    global _last_key
     rain = rain_of(state)
     parts = (state.seed, state.layers, rain, len(rings), tuple(picks))
     last = _last_key  # one read: another thread may replace it

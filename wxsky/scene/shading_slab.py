@@ -39,10 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.scattering import ALBEDO, hg_phase
-from wxsky.scene.shading_harris import (
-    NIGHT_FLOOR_RGB,
-    scene_lights,
-)
+from wxsky.scene.shading_harris import NIGHT_FLOOR_RGB, scene_lights
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, B
 

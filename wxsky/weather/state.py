@@ -220,6 +220,11 @@ class WeatherPatch:
     seed: int | None = None
 
 
+def _check_utc(time_utc: datetime) -> None:
+    if time_utc.tzinfo is None or time_utc.utcoffset() != UTC.utcoffset(None):
+        raise ValueError("time_utc must be timezone-aware UTC")
+
+
 @dataclass(frozen=True)
 class WeatherState:
     observer: Observer = field(default_factory=lambda: Observer(47.4647, 8.5492, 432.0))
@@ -236,8 +241,7 @@ class WeatherState:
     sources: Provenance = field(default_factory=Provenance)
 
     def __post_init__(self) -> None:
-        if self.time_utc.tzinfo is None or self.time_utc.utcoffset() != UTC.utcoffset(None):
-            raise ValueError("time_utc must be timezone-aware UTC")
+        _check_utc(self.time_utc)
         if len(self.layers) > MAX_LAYERS:
             raise ValueError(f"at most {MAX_LAYERS} cloud layers, got {len(self.layers)}")
         if len(self.precipitation) > MAX_PRECIPITATION:
@@ -276,8 +280,7 @@ class WeatherState:
         """This state at another moment. The daemon's clock moves the weather every frame,
         and checking every other field again on the way (dataclasses.replace) was a twentieth
         of a frame's scene stage: nothing else changed, so only the time is checked."""
-        if time_utc.tzinfo is None or time_utc.utcoffset() != UTC.utcoffset(None):
-            raise ValueError("time_utc must be timezone-aware UTC")
+        _check_utc(time_utc)
         out = object.__new__(WeatherState)
         out.__dict__.update(self.__dict__)  # copy.copy's result, at a fifth of its cost
         out.__dict__["time_utc"] = time_utc
