@@ -451,3 +451,71 @@ def test_the_frames_sun_and_moon_are_the_ephemeris_interpolated_without_steps() 
     frame_deg = 360.0 / 86400.0 * 0.002  # the sky turns this far in 2 ms
     for a, b in zip(before, after, strict=True):
         assert 0.0 < apart_deg(a.direction_enu, b.direction_enu) < 2.0 * frame_deg
+
+
+def test_a_frame_on_the_same_sky_step_keeps_the_sky_and_runs_its_clock() -> None:
+    from wxsky.scene.sky import SKY_EPOCH_UTC, SKY_STEP_US, bodies_for, on_sky_step
+
+    t = _at(2026, 6, 21, 18, 30) + timedelta(microseconds=SKY_STEP_US // 4)
+    state = _state(t, layers=(CloudLayer(4.0, 1500.0, 2500.0, CloudType.CUMULUS),))
+    frame = timedelta(seconds=1.0 / 30.0)
+    later = state.at_time(t + frame)  # the same step: a quarter plus a 30th of an eighth
+    assert (
+        on_sky_step(later.time_utc)
+        == on_sky_step(t)
+        == t - timedelta(microseconds=SKY_STEP_US // 4)
+    )
+    first = sky_params(state, 1000.0)
+    again = sky_params(later, 1000.0)
+    # The sky's colours and bodies are the same objects (what is kept by them holds) ...
+    assert again.sun is first.sun and again.zenith_rgb is first.zenith_rgb
+    assert dataclasses.replace(again, sky_time_s=first.sky_time_s) == first
+    # ... and its clock is the frame's own, to the microsecond.
+    assert again.sky_time_s == (later.time_utc - SKY_EPOCH_UTC).total_seconds()
+    assert again.sky_time_s - first.sky_time_s == pytest.approx(1.0 / 30.0, abs=1e-6)
+    known = bodies_for(state)
+    assert bodies_for(later, known) is known
+    # The next step moves the sun, by what it moves in an eighth of a second.
+    step = state.at_time(on_sky_step(t) + timedelta(microseconds=SKY_STEP_US))
+    moved = sky_params(step, 1000.0).sun
+    apart_deg = math.degrees(
+        math.acos(min(1.0, float(np.dot(moved.direction_enu, first.sun.direction_enu))))
+    )
+    assert 0.0 < apart_deg < 360.0 / 86400.0 * SKY_STEP_US * 1e-6 * 1.01
+
+
+def test_the_kept_sky_is_the_sky_worked_out_afresh() -> None:
+    """Whatever changes between frames (the clock across steps and seconds, the eye's height
+    through a layer and above the haze, the weather), the sky reused from the frame before is
+    the one worked out with nothing kept."""
+    from wxsky.scene import sky as sky_module
+
+    stratus = CloudLayer(6.0, 800.0, 1400.0, CloudType.STRATUS)
+    cirrus = CloudLayer(3.0, 8000.0, 8500.0, CloudType.CIRRUS)
+    start = _at(2026, 6, 21, 19, 59, 59) + timedelta(microseconds=900_000)
+    base = _state(start, layers=(stratus,), wind=(WindLayer(8000.0, 270.0, 30.0),))
+    frames: list[tuple[WeatherState, float]] = []
+    for i in range(40):  # a second and a third at 30 fps, across a step and a whole second
+        frames.append((base.at_time(start + timedelta(seconds=i / 30.0)), 500.0))
+    frames += [(base, 900.0), (base, 1100.0), (base, 1100.0), (base, 2600.0), (base, 9000.0)]
+    frames += [
+        (dataclasses.replace(base, visibility_m=3000.0), 500.0),
+        (dataclasses.replace(base, layers=(stratus, cirrus)), 500.0),
+        (dataclasses.replace(base, wind=(WindLayer(8000.0, 90.0, 50.0),)), 500.0),
+        (
+            dataclasses.replace(
+                base, layers=(dataclasses.replace(stratus, type=CloudType.NIMBOSTRATUS),)
+            ),
+            500.0,
+        ),
+        (dataclasses.replace(base, observer=Observer(-33.87, 151.21, 50.0)), 500.0),
+    ]
+    reused = 0
+    for state, eye_m in frames:
+        kept = sky_params(state, eye_m)
+        sky_module._last_sky = None
+        fresh = sky_params(state, eye_m)
+        assert kept == fresh, (state.time_utc, eye_m)
+        reused += kept.zenith_rgb is not fresh.zenith_rgb
+    # Most frames found the sky of the frame before: this was the reuse, not fresh skies.
+    assert reused > len(frames) // 2

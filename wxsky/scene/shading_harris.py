@@ -109,22 +109,38 @@ def scattered_light(batch: SpriteBatch, lights: Lights) -> Scattered:
     return Scattered(lights.directions, multiple_scattering(incident))
 
 
-# The last lights made for each side (below or above the clouds), with their sky: a frame asks
-# three times for its sky's (the near layer's light, its particles and its slabs), 0.2 ms each.
-# Lights are frozen and never written to.
-_last_lights: dict[bool, tuple[SkyParams, Lights]] = {}
+# The last lights made for each side (below or above the clouds), with what they were made
+# from: a frame asks three times for its sky's (the near layer's light, its particles and its
+# slabs), and the frames of one sky step share them. Lights are frozen and never written to.
+_last_lights: dict[bool, tuple[tuple[object, ...], Lights]] = {}
 
 
 def scene_lights(sky: SkyParams, above_cloud: bool = False) -> Lights:
     """The key light, four skylights and the ambient term for this sky; `above_cloud`: the
     skylights of the open sky over every layer (what lights the top of a deck), not the sky
     the eye sees."""
+    key = _light_inputs(sky)
     last = _last_lights.get(above_cloud)  # one read: another thread may replace it
-    if last is not None and last[0] is sky:
+    if last is not None and last[0] == key:
         return last[1]
     made = _scene_lights(sky, above_cloud)
-    _last_lights[above_cloud] = (sky, made)
+    _last_lights[above_cloud] = (key, made)
     return made
+
+
+def _light_inputs(sky: SkyParams) -> tuple[object, ...]:
+    # What _scene_lights reads: the frames of one sky step share these objects
+    # (SkyParams.at_clock), so comparing them is a few identity checks.
+    return (
+        sky.sun,
+        sky.moon,
+        sky.sun_rgb,
+        sky.moon_rgb,
+        sky.zenith_rgb,
+        sky.horizon_rgb,
+        sky.open_zenith_rgb,
+        sky.open_horizon_rgb,
+    )
 
 
 def _scene_lights(sky: SkyParams, above_cloud: bool) -> Lights:

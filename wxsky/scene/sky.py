@@ -61,6 +61,12 @@ _TYPE_DENSITY = {
     CloudType.CUMULONIMBUS: 0.9,
     CloudType.NIMBOSTRATUS: 0.95,
 }
+# The sun, moon and the sky's colours are worked out for the time down to an eighth of a
+# second (`on_sky_step`): the sun moves 9e-6 rad in that, under half of what the sky layer
+# redraws a strip for (render.sky_layer.SKY_REUSE_TOLERANCE), and at 30 fps seven frames in
+# eight find the sky of the frame before (`sky_params`), and with it its lights. The clock
+# the stars twinkle and the cloud dome drifts on (`SkyParams.sky_time_s`) runs every frame.
+SKY_STEP_US = 125_000
 _IDENTITY: Matrix3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 _MOON_DOWN = MoonPosition(-90.0, 0.0, 0.0, 0.0, 0.0, 384_400.0)
 
@@ -128,6 +134,14 @@ class SkyParams:
     # pass fades the high-cloud dome only over the part of its ray below this).
     haze_top_m: float = math.inf
 
+    def at_clock(self, sky_time_s: float) -> SkyParams:
+        """This sky with its clock at sky_time_s (a later frame of the same sky step): every
+        other field is this one's, the same objects, so what is kept by them still holds."""
+        out = object.__new__(SkyParams)
+        out.__dict__.update(self.__dict__)
+        out.__dict__["sky_time_s"] = sky_time_s
+        return out
+
     @property
     def haze_rgb(self) -> RGB:
         """The colour distant clouds fade into (the airlight): the horizon's, greyed as far as
@@ -183,15 +197,22 @@ class Bodies:
 
 
 def bodies_for(state: WeatherState, known: Bodies | None = None) -> Bodies:
-    """The sun and moon at the state's time and site: `known` where it is for exactly those,
-    else worked out afresh (`sun_and_moon_smooth`: exact every two seconds, interpolated
-    between). The ephemeris is the dearest part of the sky, and a frame asks for it more than
-    once (its own sky, the scene the daemon reports)."""
+    """The sun and moon at the state's site, for its time on the sky's step (`on_sky_step`):
+    `known` where it is for exactly those, else worked out afresh (`sun_and_moon_smooth`:
+    exact every two seconds, interpolated between). The ephemeris is the dearest part of the
+    sky, and a frame asks for it more than once (its own sky, the scene the daemon reports)."""
     obs = state.observer
-    if known is not None and known.time_utc == state.time_utc and known.observer == obs:
+    at = on_sky_step(state.time_utc)
+    if known is not None and known.time_utc == at and known.observer == obs:
         return known
-    sun, moon = sun_and_moon_smooth(state.time_utc, obs.lat_deg, obs.lon_deg, obs.alt_m)
-    return Bodies(state.time_utc, obs, sun, moon)
+    sun, moon = sun_and_moon_smooth(at, obs.lat_deg, obs.lon_deg, obs.alt_m)
+    return Bodies(at, obs, sun, moon)
+
+
+def on_sky_step(time_utc: datetime) -> datetime:
+    """The time the sun, moon and sky colours are worked out for: time_utc down to a whole
+    SKY_STEP_US."""
+    return time_utc.replace(microsecond=time_utc.microsecond - time_utc.microsecond % SKY_STEP_US)
 
 
 def sky_params(
@@ -199,20 +220,50 @@ def sky_params(
 ) -> SkyParams:
     """The sky seen from eye_alt_m MSL (default: the observer's): only cloud above the eye
     greys and dims it, so a pilot who climbs out of an overcast deck sees the blue above it.
-    `bodies`: the sun and moon already worked out for this moment, if they are (`bodies_for`)."""
+    `bodies`: the sun and moon already worked out for this moment, if they are (`bodies_for`).
+    The sky of the last call is reused, on this moment's clock (`SkyParams.at_clock`), while
+    what it is made from is the same: the frames of one sky step, at one cover and haze."""
+    global _last_sky
     obs = state.observer
     known = bodies_for(state, bodies)
-    sun, moon = known.sun, known.moon
-    el = sun.elevation_deg
-    day = smoothstep(-6.0, 10.0, el)  # civil twilight to well-lit day
-    sunset = smoothstep(-8.0, 0.0, el) * (1.0 - smoothstep(2.0, 18.0, el))
     # Layers overlap at random (the usual assumption for total cloud amount): two 4/8 layers
     # hide 3/4 of the sky, not all of it, so a forming layer darkens the sky gradually.
     eye_m = obs.alt_m if eye_alt_m is None else eye_alt_m
     clear = math.prod(
         1.0 - min(1.0, lay.cover_oktas / 8.0) * _share_above(lay, eye_m) for lay in state.layers
     )
-    cover = 1.0 - clear
+    haze_top_m = _haze_top_m(state)
+    haze_m = _haze_m(state, eye_m, haze_top_m)
+    whole_second = state.time_utc.replace(microsecond=0)
+    clock_s = (state.time_utc - SKY_EPOCH_UTC).total_seconds()
+    # The eye's height only through the cover and haze it sees, so a climb in clear air
+    # reuses the sky too; the whole second for the dome's solar time and the star field.
+    key = (known, clear, haze_m, whole_second, obs, state.layers, state.wind, state.visibility_m)
+    last = _last_sky  # one read: another thread may replace it
+    if last is not None and last[0] == key:
+        return last[1].at_clock(clock_s)
+    made = _sky_params(state, known, 1.0 - clear, haze_m, haze_top_m, whole_second, clock_s)
+    _last_sky = (key, made)
+    return made
+
+
+_last_sky: tuple[tuple[object, ...], SkyParams] | None = None
+
+
+def _sky_params(
+    state: WeatherState,
+    known: Bodies,
+    cover: float,
+    haze_m: float,
+    haze_top_m: float,
+    whole_second: datetime,
+    clock_s: float,
+) -> SkyParams:
+    obs = state.observer
+    sun, moon = known.sun, known.moon
+    el = sun.elevation_deg
+    day = smoothstep(-6.0, 10.0, el)  # civil twilight to well-lit day
+    sunset = smoothstep(-8.0, 0.0, el) * (1.0 - smoothstep(2.0, 18.0, el))
     overcast_dim = 1.0 - 0.45 * smoothstep(0.6, 1.0, cover)
 
     night_zenith, night_horizon = (0.008, 0.012, 0.035), (0.025, 0.035, 0.07)
@@ -242,8 +293,6 @@ def sky_params(
     moon_gain *= 1.0 - 0.85 * smoothstep(0.6, 1.0, cover)
     moon_rgb = _scale(moon_rgb, moon_gain * smoothstep(-1.0, 0.0, moon.elevation_deg))
 
-    haze_top_m = _haze_top_m(state)
-    whole_second = state.time_utc.replace(microsecond=0)
     return SkyParams(
         sun=sun,
         zenith_rgb=zenith,
@@ -253,7 +302,7 @@ def sky_params(
         ambient=0.06 + 0.94 * day,
         sunset=sunset,
         cover=cover,
-        haze_m=_haze_m(state, eye_m, haze_top_m),
+        haze_m=haze_m,
         haze_top_m=haze_top_m,
         moon=moon,
         moon_rgb=moon_rgb,
@@ -261,7 +310,7 @@ def sky_params(
         open_horizon_rgb=open_horizon,
         stars=stars,
         dome=dome_controls(state, cover, sunset),
-        sky_time_s=(state.time_utc - SKY_EPOCH_UTC).total_seconds(),
+        sky_time_s=clock_s,
         celestial_from_enu=celestial_from_enu(whole_second, obs.lat_deg, obs.lon_deg),
     )
 
