@@ -255,3 +255,46 @@ def test_shading_setting_and_config_key() -> None:
         SceneSection(shading="phong")
     with pytest.raises(ValueError, match="shading must be one of"):
         sprite_colours(_cumulus(), _sky(NOON), EYE, "phong")
+
+
+def test_the_lights_are_kept_for_the_frames_of_one_sky_and_made_anew_for_another() -> None:
+    sky = _sky(NOON)
+    lights = scene_lights(sky)
+    # A later frame of the same sky step: only its clock moved.
+    assert scene_lights(sky.at_clock(sky.sky_time_s + 1.0 / 30.0)) is lights
+    later = _sky(NOON + timedelta(minutes=30))
+    other = scene_lights(later)
+    assert other is not lights
+    assert not np.array_equal(other.directions, lights.directions)
+    # And the first sky's again are its own, not the last asked for.
+    assert np.array_equal(scene_lights(sky).directions, lights.directions)
+
+
+def test_a_mixed_batch_is_shaded_as_its_particles_and_its_slabs_apart() -> None:
+    """Particle and slab sprites share one pass (view rays, exposure) and are put back in
+    their places by index: each sprite's colour is what shading its kind alone gives."""
+    from wxsky.scene.shading import display_colours
+
+    cloud = _cumulus()
+    deck = dataclasses.replace(
+        cloud, slab_m=np.tile(np.float32([1500.0, 1900.0]), (len(cloud), 1))
+    ).take(np.arange(0, len(cloud), 2))
+    # Interleaved, so that neither kind's rows are a block of the batch.
+    mixed = SpriteBatch.concat([cloud, deck])
+    order = np.argsort(np.r_[np.arange(len(cloud)) * 2.0, np.arange(len(deck)) * 4.0 + 1.0])
+    mixed = mixed.take(order)
+    is_slab = order >= len(cloud)
+    sky = _sky(NOON)
+    for model in SHADING_MODELS:
+        rgba = sprite_colours(mixed, sky, EYE, model)
+        np.testing.assert_allclose(
+            rgba[~is_slab], sprite_colours(cloud, sky, EYE, model)[order[~is_slab]], atol=1e-6
+        )
+        np.testing.assert_allclose(
+            rgba[is_slab],
+            sprite_colours(deck, sky, EYE, model)[order[is_slab] - len(cloud)],
+            atol=1e-6,
+        )
+        rgb = display_colours(mixed, sky, EYE, model)
+        assert rgb.shape == (3, len(mixed))
+        np.testing.assert_array_equal(rgba[:, :3], rgb.T.astype(np.float32))

@@ -152,7 +152,10 @@ def in_cloud_fog(
     fog_rgb = rgba[int(np.argmax(sprite_depths(batch, eye_m, dist))), :3].astype(np.float64)
     f = strength * (1.0 - np.exp(-KOSCHMIEDER * dist / cloud.visibility_m))  # (N,)
     out = rgba.copy()
-    out[:, :3] = (rgba[:, :3] * (1.0 - f[:, None]) + fog_rgb * f[:, None]).astype(np.float32)
+    # Channel by channel, (3, N): numpy's loops run along the sprites, not over rows of three.
+    fogged = rgba[:, :3].T * (1.0 - f)
+    fogged += fog_rgb[:, None] * f
+    out[:, :3] = fogged.T
     r, g, b = (float(c) * strength for c in fog_rgb)
     return out, (r, g, b, strength)
 

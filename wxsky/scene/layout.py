@@ -55,14 +55,15 @@ from wxsky.scene.shading import (
     DEFAULT_SHADING,
     ParticleLight,
     Scattered,
+    display_colours,
     prepare_lighting,
-    sprite_colours,
 )
 from wxsky.scene.shading_harris import (
     LIGHT_REUSE_DEG,
     close_directions,
     scattered_light,
     scene_lights,
+    with_alpha,
 )
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
@@ -225,17 +226,25 @@ def fade_by_range(
     """Aerial perspective: distant clouds take the haze's colour (`SkyParams.haze_rgb`) and
     fade out before the edge of the generated range, so the range limit never shows as a
     hard line. `dist_m`: (N,) the sprites' distances from the eye, if known."""
+    return hazed(rgba[:, :3].T, rgba[:, 3], batch, eye_m, sky, max_range_m, dist_m)
+
+
+def hazed(
+    colours: F64 | npt.NDArray[np.float32],
+    alpha: npt.NDArray[np.float32],
+    batch: SpriteBatch,
+    eye_m: tuple[float, float, float],
+    sky: SkyParams,
+    max_range_m: float,
+    dist_m: F64 | None = None,
+) -> npt.NDArray[np.float32]:
+    """`fade_by_range` of (3, N) colours (`shading.display_colours`) and (N,) alphas: (N, 4)
+    straight-alpha RGBA, rounded to float32 once."""
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1) if dist_m is None else dist_m
-    haze = (1.0 - np.exp(-dist / sky.haze_m)).astype(np.float32)
-    out = np.empty_like(rgba)
-    out[:, 3] = rgba[:, 3]
-    # The float32 colours' share plus the haze's in float64, rounded once into the output.
-    np.add(
-        rgba[:, :3] * (1.0 - haze[:, None]),
-        np.multiply.outer(haze.astype(np.float64), np.asarray(sky.haze_rgb, np.float64)),
-        out=out[:, :3],
-        casting="unsafe",
-    )
+    haze = 1.0 - np.exp(-dist / sky.haze_m)
+    rgb = colours * (1.0 - haze)
+    rgb += np.asarray(sky.haze_rgb, np.float64)[:, None] * haze
+    out = with_alpha(rgb, alpha)
     if len(dist) and float(dist.max()) > 0.75 * max_range_m:  # the near layer never is
         edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)
         out[:, 3] *= (edge * edge * (3.0 - 2.0 * edge)).astype(np.float32)
@@ -267,8 +276,8 @@ def shade_for_eye(
     if scattered is not None:
         scattered = scattered.take(order)
     dist = None if dist_m is None else dist_m[order]
-    colours = sprite_colours(drawn, sky, eye_m, shading, light, scattered, dist)
-    rgba = fade_by_range(colours, drawn, eye_m, sky, max_range_m, dist)
+    colours = display_colours(drawn, sky, eye_m, shading, light, scattered, dist)
+    rgba = hazed(colours, drawn.opacity, drawn, eye_m, sky, max_range_m, dist)
     if share is not None and len(share) and share.min() < 1.0:
         rgba[:, 3] *= share[order]
     return SpriteDraw(drawn, rgba)

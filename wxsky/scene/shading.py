@@ -17,7 +17,7 @@ from wxsky.scene.shading_harris import (
     ParticleLight,
     Scattered,
     close_directions,
-    exposed,
+    exposed_channels,
     harris_incident,
     harris_radiance,
     particle_light,
@@ -41,6 +41,7 @@ __all__ = [
     "SHADING_MODELS",
     "ParticleLight",
     "Scattered",
+    "display_colours",
     "prepare_lighting",
     "sprite_colours",
 ]
@@ -71,33 +72,58 @@ def sprite_colours(
     (slab sprites' rows unused); `dist_m`, (N,) each sprite's distance from eye_m where the
     caller has it (a frame's near layer)."""
     _check(model)
+    if model != "harris" and not batch.slab.any():
+        return wang_colours(batch, sky)
+    return with_alpha(
+        display_colours(batch, sky, eye_m, model, light, scattered, dist_m), batch.opacity
+    )
+
+
+def display_colours(
+    batch: SpriteBatch,
+    sky: SkyParams,
+    eye_m: tuple[float, float, float],
+    model: str = DEFAULT_SHADING,
+    light: ParticleLight | None = None,
+    scattered: Scattered | None = None,
+    dist_m: F64 | None = None,
+) -> F64 | F32:
+    """`sprite_colours`' colours without their alpha, channel by channel: (3, N)."""
+    _check(model)
     n = len(batch)
     if n == 0:
-        return np.zeros((0, 4), np.float32)
+        return np.zeros((3, 0))
     slab = batch.slab
     slabs = int(np.count_nonzero(slab))
     if slabs == 0 and model != "harris":
-        return wang_colours(batch, sky)
+        out: F32 = wang_colours(batch, sky)[:, :3].T
+        return out
     # The view rays once for all sprites, and one exposure over the sprites' radiance: each
-    # row is what shading the slab and particle sprites apart gives, at half the calls.
+    # column is what shading the slab and particle sprites apart gives, at half the calls.
     view = view_rays(batch.centre_m, eye_m, dist_m)
     if slabs == n:
-        radiance = slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2])
-        return with_alpha(exposed(radiance), batch.opacity)
-    if model != "harris":
-        mixed = np.empty((n, 4), np.float32)
-        mixed[~slab] = wang_colours(batch.take(~slab), sky)
-        radiance = slab_view_radiance(
-            batch.centre_m[slab, 2], batch.slab_m[slab], view[slab], sky, eye_m[2]
+        return exposed_channels(
+            slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2])
         )
-        mixed[slab] = with_alpha(exposed(radiance), batch.opacity[slab])
+    if slabs == 0:  # Harris
+        lights = scene_lights(sky)
+        incident = harris_incident(batch, lights, light, scattered)
+        return exposed_channels(harris_radiance(view, incident, lights))
+    # Columns by index (ndarray.take), not by mask: a fifth of the time.
+    particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
+    slab_radiance = slab_view_radiance(
+        batch.centre_m[:, 2].take(slabs_at),
+        batch.slab_m.take(slabs_at, axis=0),
+        view.take(slabs_at, axis=1),
+        sky,
+        eye_m[2],
+    )
+    if model != "harris":
+        mixed = np.empty((3, n))
+        mixed[:, slabs_at] = exposed_channels(slab_radiance)
+        mixed[:, particle] = wang_colours(batch.take(particle), sky)[:, :3].T
         return mixed
     lights = scene_lights(sky)
-    if slabs == 0:
-        incident = harris_incident(batch, lights, light, scattered)
-        return with_alpha(exposed(harris_radiance(view, incident, lights)), batch.opacity)
-    # Rows by index (ndarray.take), not by mask: a fifth of the time on (N, 3) arrays.
-    particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
     if scattered is not None and close_directions(scattered.directions, lights.directions):
         # A frame's near layer: the light is known, and only the arrays the eye-dependent
         # half reads are cut, not every field of the batch (which was a third of the stage).
@@ -109,16 +135,10 @@ def sprite_colours(
             light,
             None if scattered is None else scattered.take(particle),
         )
-    radiance = np.empty((n, 3))
-    radiance[particle] = harris_radiance(view.take(particle, axis=0), incident, lights)
-    radiance[slabs_at] = slab_view_radiance(
-        batch.centre_m[:, 2].take(slabs_at),
-        batch.slab_m.take(slabs_at, axis=0),
-        view.take(slabs_at, axis=0),
-        sky,
-        eye_m[2],
-    )
-    return with_alpha(exposed(radiance), batch.opacity)
+    radiance = np.empty((3, n))
+    radiance[:, slabs_at] = slab_radiance
+    radiance[:, particle] = harris_radiance(view.take(particle, axis=1), incident, lights)
+    return exposed_channels(radiance)
 
 
 def _check(model: str) -> None:

@@ -242,45 +242,52 @@ def harris_incident(
 
 
 def harris_radiance(view: F64, incident: F32, lights: Lights) -> F64:
-    """(N, 3) radiance toward the eye from the light reaching each sprite (`incident`, (N, L)
-    for the L `lights`, `harris_incident`), along `view_rays` from the eye to the sprites:
-    each sprite's light scattered toward the eye (eq. 9). Exposed and given the sprites'
-    opacity as alpha (`shading.sprite_colours`), the renderer's back-to-front blending is
-    eq. 9's recurrence, with alpha as 1 - T."""
+    """(3, N) radiance toward the eye, channel by channel, from the light reaching each sprite
+    (`incident`, (N, L) for the L `lights`, `harris_incident`), along `view_rays` ((3, N))
+    from the eye to the sprites: each sprite's light scattered toward the eye (eq. 9).
+    Exposed and given the sprites' opacity as alpha (`shading.sprite_colours`), the renderer's
+    back-to-front blending is eq. 9's recurrence, with alpha as 1 - T."""
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.
-    cos = view @ lights.directions.T  # (N, L)
+    cos = lights.directions @ view  # (L, N)
     phase = (1.0 - DIFFUSE_SHARE) * 4.0 * math.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
-    out: F64 = ALBEDO * ((incident * phase) @ lights.rgb) + lights.ambient_rgb
+    out: F64 = lights.rgb.T @ (incident.T * phase)
+    out *= ALBEDO
+    out += lights.ambient_rgb[:, None]
     return out
 
 
-def with_alpha(rgb: F64, opacity: F32) -> F32:
-    """(N, 4) float32 RGBA from (N, 3) colours and (N,) alphas, without the (N, 4) float64
-    that concatenating would make first."""
-    out = np.empty((len(rgb), 4), np.float32)
-    out[:, :3] = rgb
+def with_alpha(rgb: F64 | F32, opacity: F32) -> F32:
+    """(N, 4) float32 RGBA from (3, N) colours and (N,) alphas, rounded once."""
+    out = np.empty((rgb.shape[1], 4), np.float32)
+    out[:, :3] = rgb.T
     out[:, 3] = opacity
     return out
 
 
 def view_rays(centre_m: F64, eye_m: tuple[float, float, float], dist_m: F64 | None = None) -> F64:
-    """(N, 3) unit rays from the eye to each sprite (zero for one at the eye); `dist_m`: (N,)
-    their lengths, where the caller has them."""
-    ray = centre_m - np.asarray(eye_m, np.float64)
-    dist = np.linalg.norm(ray, axis=1, keepdims=True) if dist_m is None else dist_m[:, None]
-    out: F64 = np.divide(ray, dist, out=np.zeros_like(ray), where=dist > 1e-6)
-    return out
+    """(3, N) unit rays from the eye to each sprite, channel by channel (zero for one at the
+    eye); `dist_m`: (N,) their lengths, where the caller has them. The sprites' light is
+    worked out on rows of N, not N rows of three: numpy's loops then run the whole row at
+    once, at a third of the time."""
+    ray: F64 = centre_m.T - np.asarray(eye_m, np.float64)[:, None]
+    dist = np.sqrt(np.einsum("ij,ij->j", ray, ray)) if dist_m is None else dist_m
+    ray *= np.divide(1.0, dist, out=np.zeros(len(dist)), where=dist > 1e-6)
+    return ray
 
 
 def exposed(radiance: F64) -> F64:
     """(N, 3) display colour in 0..1 for (N, 3) radiance. Exposure on the brightest channel,
     the others in proportion: a sunset-lit rim stays orange instead of washing out to white as
     every channel saturates."""
-    # Column by column: max over rows of three is a third of the time of axis=1's.
-    r, g, b = radiance[:, 0], radiance[:, 1], radiance[:, 2]
+    return exposed_channels(radiance.T).T
+
+
+def exposed_channels(radiance: F64) -> F64:
+    """`exposed` of (3, N) radiance, channel by channel: (3, N)."""
+    r, g, b = radiance
     peak = np.maximum(np.maximum(np.maximum(r, g), b), 1e-6)
-    out: F64 = radiance * ((1.0 - np.exp(-EXPOSURE * peak)) / peak)[:, None]
+    out: F64 = radiance * ((1.0 - np.exp(-EXPOSURE * peak)) / peak)
     return out
 
 

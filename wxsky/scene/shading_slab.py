@@ -31,6 +31,7 @@ pass behind the sprites. Pure numpy, vectorised over sprites.
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from collections import OrderedDict
@@ -217,32 +218,52 @@ def slab_radiance(
         out: F64 = np.where(reflected, lit_side, far_side)
         return out
 
-    directional = by_side(refl, trans)
-    diffuse = by_side(each(e["r_3"]), each(e["t_3"])) * mu_light * spread
-    key = directional + diffuse if lit else np.zeros(len(mu_v))
+    # Everything else a sprite sends is its deck's, per side, times the limb law's spread:
+    # worked out a deck at a time (`_diffuse_terms`), it is one product per sprite.
+    key_lit, key_far, sky_lit, sky_far = _diffuse_terms(h.tobytes(), mu_light)
+    sky_total: F64 = by_side(each(sky_lit), each(sky_far)) * spread
+    if not lit:
+        return np.zeros(len(mu_v)), sky_total
+    key_total: F64 = by_side(refl, trans) + by_side(each(key_lit), each(key_far)) * spread
+    return key_total, sky_total
+
+
+@functools.lru_cache(maxsize=_ENERGY_KEPT)
+def _diffuse_terms(thickness_m: bytes, mu_light: float) -> tuple[F64, F64, F64, F64]:
+    """Per deck of these thicknesses (float64 bytes), lit at mu_light: the diffuse key light
+    (three and more scatterings, and what the ground sends back up of the light through the
+    deck) and sky light leaving the deck, on its lit side and its far side, per unit of the
+    limb law's spread. Kept like `kept_energy`, for the frames of one light."""
+    h = np.frombuffer(thickness_m, np.float64)
+    e = kept_energy(h, math.degrees(math.acos(min(mu_light, 1.0))))
     # Sky and ground light arrive from a whole hemisphere: the slab passes it as it passes a
     # beam at DIFFUSE_ANGLE_DEG, not at the sun's angle (at dawn the sun grazes the deck, the
     # sky does not).
     d = kept_energy(h, DIFFUSE_ANGLE_DEG)
-    r_ms, t_ms = each(d["r_ms"]), each(d["t_ms"])
+    r_ms, t_ms = d["r_ms"], d["t_ms"]
     # Ground and base light each other: irradiance on the ground from the key light and the
-    # sky through the deck, multiplied by the series of bounces between the two planes.
-    bounce = each(d["bounce"])
-    t_key = each(e["t_ms"]) * mu_light if lit else np.zeros(len(mu_v))
-    # Light the ground sends up leaves the deck on the ground's side by reflection and on the
-    # far side by transmission: the opposite of the light from above.
-    up_share = by_side(t_ms, r_ms) * spread
-    from_above = by_side(r_ms, t_ms) * spread
-    key_total: F64 = key + t_key * bounce * up_share
-    sky_total: F64 = from_above + t_ms * bounce * up_share
-    return key_total, sky_total
+    # sky through the deck, times the series of bounces between the two planes. Light the
+    # ground sends up leaves the deck on the ground's side by reflection and on the far side
+    # by transmission: the opposite of the light from above.
+    key_to_ground = e["t_ms"] * mu_light * d["bounce"]
+    sky_to_ground = t_ms * d["bounce"]
+    out = (
+        e["r_3"] * mu_light + key_to_ground * t_ms,
+        e["t_3"] * mu_light + key_to_ground * r_ms,
+        r_ms + sky_to_ground * t_ms,
+        t_ms + sky_to_ground * r_ms,
+    )
+    for value in out:
+        value.flags.writeable = False
+    return out
 
 
 def slab_view_radiance(
     centre_z_m: F64, slab_m: F32, view: F64, sky: SkyParams, eye_z_m: float
 ) -> F64:
-    """(N, 3) radiance toward the eye from sprites of stratiform layers at heights
-    `centre_z_m` (their `slab_m`: base and top MSL), along `view_rays` from the eye. The eye
+    """(3, N) radiance toward the eye, channel by channel, from sprites of stratiform layers at
+    heights `centre_z_m` (their `slab_m`: base and top MSL), along `view_rays` ((3, N)) from
+    the eye. The eye
     is above a sprite's slab above its top, below it under its base, and inside it on the
     side of the sprite it looks at. Only the arrays it reads, so a frame's slab sprites among
     others need no sub-batch of every field."""
@@ -258,11 +279,12 @@ def slab_view_radiance(
     # The light is on the top side whenever it is up; the deck is lit from below never.
     mu_l = float(key_dir[2])
     reflected = eye_above  # the key light is above every deck
-    key, sky_share = slab_radiance(
-        top_m - base_m, mu_l, np.abs(view[:, 2]), view @ key_dir, reflected
-    )
+    key, sky_share = slab_radiance(top_m - base_m, mu_l, np.abs(view[2]), key_dir @ view, reflected)
     # The sky term is the slab's own ambient: only the night floor (starlight, towns) is added.
-    out: F64 = key[:, None] * key_rgb + sky_share[:, None] * sky_rgb + NIGHT_FLOOR_RGB
+    # (3, 1) by (N,): the same products as np.multiply.outer, at a quarter of the time.
+    out: F64 = key_rgb[:, None] * key
+    out += sky_rgb[:, None] * sky_share
+    out += NIGHT_FLOOR_RGB[:, None]
     return out
 
 
