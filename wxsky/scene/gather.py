@@ -355,7 +355,7 @@ class NearBlocks:
             dx, dy = drift[li]
             centre[start:stop, 0] += dx
             centre[start:stop, 1] += dy
-        return dataclasses.replace(self.batch, centre_m=centre), share
+        return self.batch.with_centres(centre), share
 
 
 class SetKey:

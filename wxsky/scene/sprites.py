@@ -7,6 +7,7 @@ stages share one type without importing each other.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -62,10 +63,12 @@ class SpriteBatch:
                 raise ValueError(f"slab_m has {self.slab_m.shape[0]} entries for {n} sprites")
             object.__setattr__(self, "slab_m", np.full((n, 2), np.nan, np.float32))
 
-    @property
+    @functools.cached_property
     def slab(self) -> B:
-        """(N,) True for sprites shaded as part of a stratiform slab."""
+        """(N,) True for sprites shaded as part of a stratiform slab (read-only: a frame asks
+        a batch for it several times)."""
         out: B = ~np.isnan(self.slab_m[:, 0])
+        out.flags.writeable = False
         return out
 
     def __len__(self) -> int:
@@ -76,6 +79,17 @@ class SpriteBatch:
         # index or a mask, for the same copy; a mask becomes its indices once for all fields.
         rows = np.flatnonzero(index) if index.dtype == np.bool_ else index
         return SpriteBatch(**{f.name: getattr(self, f.name).take(rows, axis=0) for f in _FIELDS})
+
+    def with_centres(self, centre_m: F64) -> SpriteBatch:
+        """These sprites at other centres ((N, 3), as many): the other fields are this batch's
+        own arrays, not checked again (a frame moves its near set by the drift this way;
+        `dataclasses.replace` checking every field was 20 us of it)."""
+        if centre_m.shape != self.centre_m.shape:
+            raise ValueError(f"{centre_m.shape[0]} centres for {len(self)} sprites")
+        out = object.__new__(SpriteBatch)
+        out.__dict__.update(self.__dict__)
+        out.__dict__["centre_m"] = centre_m
+        return out
 
     def shifted(self, offset_m: tuple[float, float, float]) -> SpriteBatch:
         return dataclasses.replace(

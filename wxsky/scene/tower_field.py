@@ -209,14 +209,15 @@ def place_towers(
         return PlacedTowers((), np.zeros(0, np.int64), len(found), len(found))
     eye = np.asarray(eye_m, np.float64)
     boxes = _boxes(found)
-    layers = boxes.layers
-    shift = np.zeros((len(found), 3))
-    for li in np.unique(layers):
-        if li < len(drift):
-            shift[layers == li, :2] = drift[li]
-    centres = boxes.centres + shift
-    inside = np.all(np.abs(eye - centres) < boxes.halves * INSIDE_MARGIN, axis=1)
-    dists = np.linalg.norm(centres - eye, axis=1)
+    # Each candidate moved by its layer's drift (none for a layer the drift does not hold).
+    shift = np.zeros((max(len(drift), boxes.layer_count), 3))
+    if drift:
+        shift[: len(drift), :2] = drift
+    rel = boxes.centres + shift[boxes.layers]
+    centres = rel.copy()
+    rel -= eye
+    inside = np.all(np.abs(rel) < boxes.reach, axis=1)
+    dists = np.sqrt(np.einsum("ij,ij->i", rel, rel))
     # Nearest first, ties in candidate order; only the chosen few become Python objects (the
     # candidates are a whole near set's worth of cells, every frame).
     scored = np.flatnonzero(~inside)
@@ -258,8 +259,9 @@ def place_towers(
 @dataclass(frozen=True)
 class _Boxes:
     centres: npt.NDArray[np.float64]  # (C, 3) in the layers' drifting frames
-    halves: npt.NDArray[np.float64]  # (C, 3)
+    reach: npt.NDArray[np.float64]  # (C, 3) half the box, times INSIDE_MARGIN
     layers: npt.NDArray[np.intp]  # (C,)
+    layer_count: int  # the highest layer index, plus one
 
 
 _boxes_memo: dict[int, tuple[tuple[Candidate, ...], _Boxes]] = {}
@@ -271,10 +273,14 @@ def _boxes(found: tuple[Candidate, ...]) -> _Boxes:
     memo = _boxes_memo.get(id(found))
     if memo is not None and memo[0] is found:
         return memo[1]
+    layers = np.asarray([c.layer for c in found], np.intp)
     made = _Boxes(
         np.asarray([c.spec.box_centre_m for c in found], np.float64).reshape(-1, 3),
-        0.5 * np.asarray([c.spec.box_size_m for c in found], np.float64).reshape(-1, 3),
-        np.asarray([c.layer for c in found], np.intp),
+        0.5
+        * np.asarray([c.spec.box_size_m for c in found], np.float64).reshape(-1, 3)
+        * INSIDE_MARGIN,
+        layers,
+        int(layers.max()) + 1 if len(layers) else 0,
     )
     if len(_boxes_memo) > 8:
         _boxes_memo.clear()
