@@ -348,6 +348,20 @@ def test_shifted_moves_only_centres() -> None:
     np.testing.assert_array_equal(b.centre_m[1], [1, 2, 3])  # original untouched
 
 
+def test_with_centres_moves_the_sprites_and_keeps_every_other_field() -> None:
+    b = _batch(3)
+    b = dataclasses.replace(b, slab_m=np.float32([[100, 200], [np.nan, np.nan], [300, 400]]))
+    assert b.slab.tolist() == [True, False, True]
+    moved = b.with_centres(b.centre_m + 5.0)
+    np.testing.assert_array_equal(moved.centre_m, b.centre_m + 5.0)
+    for name in FIELDS[1:]:
+        assert getattr(moved, name) is getattr(b, name)
+    assert moved.slab is b.slab  # kept with the batch, and read-only
+    assert not moved.slab.flags.writeable
+    with pytest.raises(ValueError, match="2 centres for 3 sprites"):
+        b.with_centres(b.centre_m[:2])
+
+
 def test_concat_appends_in_order_and_skips_empties() -> None:
     a, b = _batch(2), _batch(3, offset=10.0)
     c = SpriteBatch.concat([SpriteBatch.empty(), a, SpriteBatch.empty(), b])
