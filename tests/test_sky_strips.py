@@ -115,3 +115,22 @@ def test_strip_rows_hold_every_row_their_rectangle_rasterises_to() -> None:
         centres = (np.arange(357) + 0.5) / 357 * 2.0 - 1.0
         inside = np.flatnonzero((centres >= top) & (centres < bottom))
         assert first <= inside[0] and inside[-1] < stop
+
+
+def test_a_sky_that_moves_in_steps_is_redrawn_evenly_not_in_bursts() -> None:
+    """The sky's numbers move on the sky step (scene.sky.SKY_STEP_US): a jump every fourth
+    frame at 30 fps, still while the rest. The strips are drawn again at the mean rate, a
+    couple a frame, not eight in a step's frame and one in the others."""
+    kept = None
+    strips_drawn = []
+    for k in range(120):
+        parts = [_part("sky", PLAIN, FULL_RECT, 0.48 * (k // 4))]  # 0.12 a frame, on average
+        draws, kept = plan_sky(kept, 7, parts)
+        strip_rows_px = 2.0 / SKY_STRIPS / 2.0 * HEIGHT_PX
+        strips_drawn.append(round(sum(_rows(rect) for _, rect in draws) / strip_rows_px))
+        for values in kept.strips[0]:
+            assert parts[0].drift_from(values) <= SKY_CATCH_UP
+    steady = strips_drawn[20:]
+    assert max(steady) <= 3
+    # Every strip is drawn again in time: as many as the drift asks for, over the frames.
+    assert sum(steady) >= len(steady) * 0.12 * SKY_STRIPS / (SKY_CATCH_UP - 1.0) * 0.9

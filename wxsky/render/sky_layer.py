@@ -15,9 +15,10 @@ and each part remembers, strip by strip, the numbers it was drawn there with:
   turn, a clock set, the stars' twinkle) is drawn again over all of its strips;
 - otherwise, once one of a part's strips has drifted past its tolerance, its stalest strips
   are drawn again, as many a frame as keep them all within SKY_CATCH_UP at the rate things
-  drift. The sun moves a little every frame, and so does the dome: a steady view pays an
-  eighth of its plain sky and a piece of the dome's band every frame or so, instead of the
-  whole sky every few frames, and its frame time stays even.
+  drift (the mean over the last few frames: the sun moves on the sky's eighth-of-a-second
+  step, every third or fourth frame). The sun moves a little, and the dome every frame: a
+  steady view pays an eighth of its plain sky and a piece of the dome's band every frame or
+  so, instead of the whole sky every few frames, and its frame time stays even.
 
 Drawing a part over a strip again means drawing the parts after it there too (each part
 overwrites its rectangle), not the ones before it: a drifting dome does not redraw the plain
@@ -63,6 +64,10 @@ SKY_CATCH_UP = 3.0
 # it is nearest the eye (a soft texture; the band at the horizon is 30 to 100 km off and
 # hardly moves, high cover overhead a few pixels a second).
 DOME_REUSE_PX = 0.25
+# The share of the drift rate a frame keeps from the frames before (an exponential mean over
+# some eight frames: two sky steps at 30 fps).
+RATE_KEEP = 0.875
+_NO_RATE = -1.0  # no frame since the layer was drawn whole
 # Uniforms a change of which always redraws the whole layer (the stars twinkle every frame).
 _ALWAYS = frozenset({"u_star_clock_s"})
 _NOT_COMPARED = frozenset({"u_rect"})  # where a part is drawn, compared as the layout
@@ -166,6 +171,10 @@ class SkyLayerState:
     strip_serials: tuple[int, ...]
     # NDC y of the strips' edges, top to bottom (`strip_edges`): strips + 1 of them.
     edges: tuple[float, ...]
+    # By part, how far its numbers drift a frame, in tolerances, averaged over the last few
+    # frames (RATE_KEEP): the sky moves on its step (scene.sky.SKY_STEP_US), every third or
+    # fourth frame, and strips are drawn again at the mean rate, not in bursts.
+    rates: tuple[float, ...] = ()
 
     def strip_rows(self, height_px: int) -> tuple[tuple[int, int], ...]:
         """Each strip's rows at a picture height_px tall (`strip_rows`)."""
@@ -179,8 +188,8 @@ def plan_sky(
     layer holding `kept` (None: nothing known) to `parts`, and what the layer then holds.
 
     Part by part, in drawing order: of the strips a part covers, the stalest are drawn
-    again, as many as keep them all within SKY_CATCH_UP at this frame's drift (all of them
-    past it), and with them every strip an earlier part was drawn again in (a part
+    again, as many as keep them all within SKY_CATCH_UP at the recent frames' mean drift
+    (all of them past it), and with them every strip an earlier part was drawn again in (a part
     overwrites what lies under its rectangle, not what lies over it)."""
     layout = tuple((p.pass_name, p.feats, p.rect) for p in parts)
     edges = strip_edges(parts)
@@ -200,11 +209,18 @@ def plan_sky(
             tuple(p.values for p in parts),
             (serial,) * count,
             edges,
+            (_NO_RATE,) * len(parts),
         )
     draws: list[tuple[SkyPart, Rect]] = []
     redrawn: set[int] = set()  # strips an earlier part was drawn in again
     strips: list[tuple[F64, ...]] = []
+    rates: list[float] = []
+    was = kept.rates if len(kept.rates) == len(parts) else (_NO_RATE,) * len(parts)
     for k, (part, held, latest) in enumerate(zip(parts, kept.strips, kept.latest, strict=True)):
+        now = part.drift_from(latest)
+        # The first frame after a whole drawing has no mean yet: its own drift starts it.
+        rate = now if was[k] < 0.0 else RATE_KEEP * was[k] + (1.0 - RATE_KEEP) * now
+        rates.append(rate)
         # Strips a later part covers whole (the dome's band, full width) show none of this
         # part: it is not drawn there, and its numbers there are not kept up.
         bands = [(p.rect[1], p.rect[3]) for p in parts[k + 1 :] if _spans_width(p.rect)]
@@ -223,7 +239,6 @@ def plan_sky(
         if stale and drift[stale[0]] > SKY_CATCH_UP:
             chosen = set(mine)
         elif stale:
-            rate = part.drift_from(latest)
             many = max(1, math.ceil(len(mine) * rate / (SKY_CATCH_UP - 1.0)))
             chosen = set(stale[:many])
         else:
@@ -239,12 +254,14 @@ def plan_sky(
         strips.append(tuple(part.values if i in again else v for i, v in enumerate(held)))
     latest_values = tuple(p.values for p in parts)
     if not draws:
-        return [], dataclasses.replace(kept, latest=latest_values)
+        return [], dataclasses.replace(kept, latest=latest_values, rates=tuple(rates))
     serial = next(_serials)
     strip_serials = tuple(
         serial if i in redrawn else held for i, held in enumerate(kept.strip_serials)
     )
-    return draws, SkyLayerState(texture, layout, tuple(strips), latest_values, strip_serials, edges)
+    return draws, SkyLayerState(
+        texture, layout, tuple(strips), latest_values, strip_serials, edges, tuple(rates)
+    )
 
 
 def strip_edges(parts: Sequence[SkyPart]) -> tuple[float, ...]:
