@@ -189,13 +189,14 @@ def _check_sky_reuse(renderer: Renderer, profiler: PassProfiler) -> None:
     kept = renderer.read("sky")
     # A frame later the sun has moved 2.4e-6 rad: the layer stays as it is.
     assert sky_draws(cam, t0 + timedelta(seconds=1 / 30)) == 0
-    # A second later it is redrawn, and differs by no more than rounding from what was kept.
-    assert sky_draws(cam, t0 + timedelta(seconds=1)) == 1
+    # Five seconds later (3.6e-4 rad, past SKY_CATCH_UP tolerances) it is redrawn, and
+    # differs by no more than rounding from what was kept.
+    assert sky_draws(cam, t0 + timedelta(seconds=5)) == 1
     assert np.abs(renderer.read("sky").astype(int) - kept.astype(int)).max() <= 1
     # Any turn of the camera redraws at once.
     turned = dataclasses.replace(cam, heading_deg=200.01)
-    assert sky_draws(turned, t0 + timedelta(seconds=1)) == 1
-    assert sky_draws(turned, t0 + timedelta(seconds=1)) == 0
+    assert sky_draws(turned, t0 + timedelta(seconds=5)) == 1
+    assert sky_draws(turned, t0 + timedelta(seconds=5)) == 0
 
 
 def test_sky_follows_roll(renderer: Renderer) -> None:

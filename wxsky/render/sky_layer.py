@@ -49,9 +49,11 @@ from wxsky.scene.sky import SkyParams
 F64 = npt.NDArray[np.float64]
 
 # A number the sky is drawn from may move this much before the pixels it makes are drawn
-# again: by day the sun moves 2.4e-6 rad a frame at 30 fps, so a strip is drawn again every
-# few frames, by steps a hundredth of a pixel and a hundredth of a colour level wide.
-SKY_REUSE_TOLERANCE = 2e-5
+# again: by day the sun moves 2.4e-6 rad a frame at 30 fps, on the sky's eighth-of-a-second
+# step 9e-6 rad at a time (scene.sky.SKY_STEP_US), so a strip is drawn again every forty
+# frames or so, by steps a tenth of a pixel and a twentieth of a colour level wide; a step
+# is a tenth of a tolerance, and the strips' pace (RATE_KEEP) hardly feels it.
+SKY_REUSE_TOLERANCE = 1e-4
 # Thin strips (22 rows at 720): a drifting part redraws a strip or two of them every frame,
 # where 8 strips of 90 rows came one frame in two or three, and a frame with one cost a
 # millisecond or more than a frame without (clear: p95 / median 1.4-1.6 -> 1.2-1.3).
