@@ -187,8 +187,9 @@ def test_a_new_rings_worker_prepares_the_near_sets_and_light_its_frames_ask_for(
         for rings in (alone, fading):
             blocks = near_blocks(state, drift1, rings, settings.ring_radius_m, 16_000.0)
             assert blocks is not None
-            lights[rings] = layout_module._near_light.get(blocks)
-            assert lights[rings] is not None  # its light is there before any frame
+            kept = layout_module._near_light.get(blocks)
+            assert kept is not None  # its light is there before any frame
+            lights[rings] = kept[0]
         # A frame of the fade, a little later, finds both: nothing is made in it.
         later = advance_drift(state, drift1, 2.0)
         for rings in (alone, fading):
@@ -230,6 +231,27 @@ def test_kept_light_serves_a_sun_that_moved_less_than_the_reuse_angle() -> None:
             assert np.abs(got.rgba - want.rgba).max() < 4.0 / 255.0
     # The cases cover both sides of the angle.
     assert min(moved_deg) < LIGHT_REUSE_DEG < max(moved_deg)
+
+
+def test_a_light_kept_for_some_lights_is_not_taken_where_exact_light_is_asked() -> None:
+    """The frames of a sky step take the kept light without comparing its directions again;
+    that shortcut holds only for as close as was asked: the ring's worker, asking for light
+    made for exactly these lights, still gets it made."""
+    state = _state("fair-cumulus")
+    drift = zero_drift(state)
+    rings = (NearRing((0.0, 0.0, 1500.0), drift, 1.0),)
+    near, _, blocks = gather_near_blocks(state, drift, rings, 8000.0, 40_000.0)
+    assert blocks is not None
+    made = near_scattered_light(blocks, near, sky_params(state))
+    later = dataclasses.replace(state, time_utc=state.time_utc + timedelta(minutes=0.5))
+    sky = sky_params(later)
+    assert made is not None
+    assert not np.array_equal(scene_lights(sky).directions, made.directions)
+    for _ in range(3):  # the step's frames
+        assert near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG) is made
+    exact = near_scattered_light(blocks, near, sky)
+    assert exact is not None and exact is not made
+    np.testing.assert_array_equal(exact.directions, scene_lights(sky).directions)
 
 
 def test_after_a_clock_set_the_near_layer_shows_the_clouds_around_the_eye() -> None:

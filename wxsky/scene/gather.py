@@ -355,6 +355,7 @@ class NearBlocks:
             dx, dy = drift[li]
             centre[start:stop, 0] += dx
             centre[start:stop, 1] += dy
+        self.batch.slab  # noqa: B018 (kept with the set's batch, so every frame's shares it)
         return self.batch.with_centres(centre), share
 
 

@@ -496,7 +496,11 @@ def build_frame(
 # minute or so), and the near layer's sprites are one set from one ring rebuild to the next.
 # Working it out every frame (identifying every sprite, hashing the batch, looking the light
 # up, scattering it) was a third of the scene stage.
-_near_light: weakref.WeakKeyDictionary[NearBlocks, Scattered] = weakref.WeakKeyDictionary()
+# With each light, the last lights' directions (an array a sky step's frames share) it was
+# found close enough to, and how close was asked: the frames of that step take it at once.
+_near_light: weakref.WeakKeyDictionary[
+    NearBlocks, tuple[Scattered, npt.NDArray[np.float64] | None, float]
+] = weakref.WeakKeyDictionary()
 _near_light_lock = threading.Lock()
 
 
@@ -508,14 +512,20 @@ def near_scattered_light(
     sprite is a slab's. The drift moves a cloud's sprites alike, so it changes none of it.
     `within_deg`: light kept for lights that far from this sky's will do (a frame's case:
     LIGHT_REUSE_DEG); 0, what the ring's worker asks, makes it for exactly these lights."""
-    slab = near.slab
-    if len(near) and slab.all():
-        return None
     lights = scene_lights(sky)
     with _near_light_lock:
         found = _near_light.get(blocks)
-    if found is not None and close_directions(found.directions, lights.directions, within_deg):
-        return found
+    if found is not None:  # then the set has particles: no light is kept for slabs alone
+        light, checked, checked_deg = found
+        if checked is lights.directions and checked_deg <= within_deg:
+            return light
+        if close_directions(light.directions, lights.directions, within_deg):
+            with _near_light_lock:
+                _near_light[blocks] = (light, lights.directions, within_deg)
+            return light
+    slab = near.slab
+    if len(near) and slab.all():
+        return None
     if slab.any():
         part = scattered_light(near.take(~slab), lights)
         rows = np.zeros((len(near), part.rows.shape[1]), np.float32)
@@ -524,7 +534,7 @@ def near_scattered_light(
     else:
         made = scattered_light(near, lights)
     with _near_light_lock:
-        _near_light[blocks] = made
+        _near_light[blocks] = (made, None, 0.0)
     return made
 
 
@@ -593,7 +603,7 @@ def install_near(prepared: tuple[PreparedNear, ...]) -> None:
         install_near_blocks(item.key, item.blocks)
         if item.light is not None:
             with _near_light_lock:
-                _near_light[item.blocks] = item.light
+                _near_light[item.blocks] = (item.light, None, 0.0)
 
 
 # A sprite's quad reaches 0.71 of its edge from its centre (a corner of the octagon's square):
