@@ -98,3 +98,24 @@ def test_no_culled_sprite_has_a_corner_in_view(
         | (-y > z * ty).all(axis=1)
     )
     assert outside.all(), f"{int((~outside).sum())} culled sprites show a corner"
+
+
+def test_the_planes_give_the_camera_axes_answer_for_any_sphere() -> None:
+    """The cull as one product against five planes is the test along the camera's axes:
+    in front of the eye within reach, and within reach of the four sides."""
+    rng = np.random.default_rng(19)
+    cam = Camera((100.0, -300.0, 1500.0), 37.0, -12.0, 25.0, 75.0, 320, 180)
+    centres = np.asarray(cam.position_m) + rng.uniform(-8000.0, 8000.0, (20_000, 3))
+    radius = rng.uniform(1.0, 1500.0, 20_000)
+    right, up, fwd = cam.basis()
+    rel = centres - np.asarray(cam.position_m)
+    x, y, z = rel @ right, rel @ up, rel @ fwd
+    tx, ty = cam.tan_half_fov_x, cam.tan_half_fov_y
+    want = (
+        (z > -radius)
+        & (np.abs(x) - z * tx < radius * math.sqrt(1.0 + tx * tx))
+        & (np.abs(y) - z * ty < radius * math.sqrt(1.0 + ty * ty))
+    )
+    got = spheres_in_view(cam, centres, radius)
+    assert 0.05 < want.mean() < 0.95
+    assert (got == want).mean() > 0.9999  # rounding may tip a sphere exactly at a plane

@@ -156,25 +156,41 @@ def spheres_in_view(
     camera: Camera,
     centre_m: npt.NDArray[np.float64],
     radius_m: npt.NDArray[np.float64],
-    offsets_m: tuple[npt.NDArray[np.float64], ...] | None = None,
+    offsets_m: npt.NDArray[np.float64] | tuple[npt.NDArray[np.float64], ...] | None = None,
+    bounds_m: npt.NDArray[np.float64] | None = None,
 ) -> npt.NDArray[np.bool_]:
     """(N,) whether each sphere (centre, radius) reaches into the camera's view: not wholly
     behind the eye, nor wholly beyond one of the four sides of the view. Conservative: a
-    sphere near a corner may pass though it shows nothing. `offsets_m`: (east, north, up)
-    columns of the centres less the eye, where the caller has them."""
+    sphere near a corner may pass though it shows nothing. `offsets_m`: (3, N) east, north
+    and up of the centres less the eye, where the caller has them; `bounds_m`: the radii's
+    `view_bounds` for this camera, where the caller keeps them."""
     if offsets_m is None:
-        eye = camera.position_m
-        offsets_m = (centre_m[:, 0] - eye[0], centre_m[:, 1] - eye[1], centre_m[:, 2] - eye[2])
-    dx, dy, dz = offsets_m
+        offsets_m = np.subtract(
+            centre_m.T, np.asarray(camera.position_m, np.float64)[:, None], order="C"
+        )
+    rel = np.asarray(offsets_m, np.float64)
+    if bounds_m is None:
+        bounds_m = view_bounds(camera, radius_m)
+    # Each sphere's centre against the five planes through the eye (the four sides and the
+    # eye's own, facing back), positive outside, in one product: it is out beyond a plane its
+    # radius does not reach back over.
+    out: npt.NDArray[np.bool_] = np.all(view_planes(camera) @ rel < bounds_m, axis=0)
+    return out
+
+
+def view_planes(camera: Camera) -> npt.NDArray[np.float64]:
+    """(5, 3): the outward normals, unnormalised, of the view's four sides (x - z tan < 0 and
+    the like, x, y and z along the camera's right, up and forward) and of the plane through
+    the eye facing back (-z)."""
     right, up, fwd = camera.basis()
-    x = right[0] * dx + right[1] * dy + right[2] * dz
-    y = up[0] * dx + up[1] * dy + up[2] * dz
-    z = fwd[0] * dx + fwd[1] * dy + fwd[2] * dz
     tx, ty = camera.tan_half_fov_x, camera.tan_half_fov_y
-    # Distances to the side planes through the eye, positive outside: (|x| - z tan) / |n|.
-    out: npt.NDArray[np.bool_] = (
-        (z > -radius_m)
-        & ((np.abs(x) - z * tx) < radius_m * math.sqrt(1.0 + tx * tx))
-        & ((np.abs(y) - z * ty) < radius_m * math.sqrt(1.0 + ty * ty))
-    )
+    return np.stack([right - tx * fwd, -right - tx * fwd, up - ty * fwd, -up - ty * fwd, -fwd])
+
+
+def view_bounds(camera: Camera, radius_m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """(5, N): how far beyond each of `view_planes` (in its units: the normals are not unit)
+    a sphere of each radius still reaches into the view."""
+    tx, ty = camera.tan_half_fov_x, camera.tan_half_fov_y
+    side = np.array([math.sqrt(1.0 + tx * tx)] * 2 + [math.sqrt(1.0 + ty * ty)] * 2 + [1.0])
+    out: npt.NDArray[np.float64] = side[:, None] * radius_m
     return out

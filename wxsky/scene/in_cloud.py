@@ -153,7 +153,7 @@ def in_cloud_fog(
     f = strength * (1.0 - np.exp(-KOSCHMIEDER * dist / cloud.visibility_m))  # (N,)
     out = rgba.copy()
     # Channel by channel, (3, N): numpy's loops run along the sprites, not over rows of three.
-    fogged = rgba[:, :3].T * (1.0 - f)
+    fogged = np.multiply(rgba[:, :3].T, 1.0 - f, order="C")
     fogged += fog_rgb[:, None] * f
     out[:, :3] = fogged.T
     r, g, b = (float(c) * strength for c in fog_rgb)

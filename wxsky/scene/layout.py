@@ -23,7 +23,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.scene.camera import Camera, spheres_in_view
+from wxsky.scene.camera import Camera, spheres_in_view, view_bounds
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
@@ -194,14 +194,15 @@ def sort_order(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> npt.NDA
     return back_to_front(squares(eye_offsets(batch, eye_m)))
 
 
-def eye_offsets(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> tuple[F64, F64, F64]:
-    """(east, north, up): (N,) columns of the sprites' centres less the eye. Column by column
-    is a quarter of the time of the (N, 3) difference for a near set of thousands."""
-    c = batch.centre_m
-    return c[:, 0] - eye_m[0], c[:, 1] - eye_m[1], c[:, 2] - eye_m[2]
+def eye_offsets(batch: SpriteBatch, eye_m: tuple[float, float, float]) -> F64:
+    """(3, N): east, north and up of the sprites' centres less the eye, a row each. Row by
+    row is a quarter of the time of the (N, 3) difference for a near set of thousands."""
+    # order="C": the transpose's own layout would leave each row strided across the sprites.
+    out: F64 = np.subtract(batch.centre_m.T, np.asarray(eye_m, np.float64)[:, None], order="C")
+    return out
 
 
-def squares(offsets: tuple[F64, F64, F64]) -> F64:
+def squares(offsets: F64) -> F64:
     """(N,) squared lengths of `eye_offsets`: the sums np.sum makes over rows of three, in
     its order, so their square roots are np.linalg.norm's to the bit."""
     x, y, z = offsets
@@ -614,12 +615,25 @@ VIEW_REACH = 0.75
 
 
 def in_view(
-    batch: SpriteBatch, camera: Camera, offsets_m: tuple[F64, F64, F64] | None = None
+    batch: SpriteBatch, camera: Camera, offsets_m: F64 | None = None
 ) -> npt.NDArray[np.bool_]:
     """(N,) whether each sprite of the batch may show in the camera's picture (`offsets_m`:
     `eye_offsets` from the camera, if known)."""
-    radius_m = VIEW_REACH * batch.size_m.astype(np.float64)
-    return spheres_in_view(camera, batch.centre_m, radius_m, offsets_m)
+    global _last_bounds
+    # A near set's sprites keep their sizes frame after frame (each frame's batch shares the
+    # set's array), and a camera its field of view: their reach is worked out once.
+    tans = (camera.tan_half_fov_x, camera.tan_half_fov_y)
+    last = _last_bounds  # one read: another thread may replace it
+    if last is not None and last[0] is batch.size_m and last[1] == tans:
+        bounds = last[2]
+    else:
+        bounds = view_bounds(camera, VIEW_REACH * batch.size_m.astype(np.float64))
+        bounds.flags.writeable = False
+        _last_bounds = (batch.size_m, tans, bounds)
+    return spheres_in_view(camera, batch.centre_m, bounds[4], offsets_m, bounds)
+
+
+_last_bounds: tuple[npt.NDArray[np.float32], tuple[float, float], F64] | None = None
 
 
 def split_at_distance(

@@ -270,7 +270,8 @@ def view_rays(centre_m: F64, eye_m: tuple[float, float, float], dist_m: F64 | No
     eye); `dist_m`: (N,) their lengths, where the caller has them. The sprites' light is
     worked out on rows of N, not N rows of three: numpy's loops then run the whole row at
     once, at a third of the time."""
-    ray: F64 = centre_m.T - np.asarray(eye_m, np.float64)[:, None]
+    # order="C": the transpose's own layout would leave each row strided across the sprites.
+    ray: F64 = np.subtract(centre_m.T, np.asarray(eye_m, np.float64)[:, None], order="C")
     dist = np.sqrt(np.einsum("ij,ij->j", ray, ray)) if dist_m is None else dist_m
     ray *= np.divide(1.0, dist, out=np.zeros(len(dist)), where=dist > 1e-6)
     return ray
