@@ -98,6 +98,23 @@ def test_a_shaft_hangs_from_the_base_to_the_ground_under_its_cloud() -> None:
     assert not is_shaft(other).any()
 
 
+def test_the_shafts_kept_for_a_batch_are_its_own() -> None:
+    """is_shaft keeps the last batch's answer by its arrays: a moved copy of the batch (a
+    frame's near set) gets it, any other batch its own."""
+    _, shaft, block = _cb_block(Rain(1.0, False, GROUND_M))
+    _, none, dry = _cb_block(None)
+    assert shaft.any() and not none.any()
+    moved = block.with_centres(block.centre_m + 100.0)
+    for batch, want in ((moved, shaft), (dry, none), (block, shaft), (dry, none)):
+        got = is_shaft(batch)
+        np.testing.assert_array_equal(got, want)
+        assert not got.flags.writeable
+    assert is_shaft(moved) is is_shaft(block)
+    # Rows taken from a batch are a batch of their own.
+    rows = np.flatnonzero(shaft)[:3]
+    assert is_shaft(block.take(rows)).all()
+
+
 def test_a_shaft_is_densest_at_its_core_and_follows_the_intensity_and_formation() -> None:
     clouds = _cb_block(None)[2]
     heavy = shaft_sprites(clouds, 1500.0, Rain(1.0, False, GROUND_M))
