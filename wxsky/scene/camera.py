@@ -179,12 +179,22 @@ def spheres_in_view(
 
 
 def view_planes(camera: Camera) -> npt.NDArray[np.float64]:
-    """(5, 3): the outward normals, unnormalised, of the view's four sides (x - z tan < 0 and
-    the like, x, y and z along the camera's right, up and forward) and of the plane through
-    the eye facing back (-z)."""
-    right, up, fwd = camera.basis()
-    tx, ty = camera.tan_half_fov_x, camera.tan_half_fov_y
-    return np.stack([right - tx * fwd, -right - tx * fwd, up - ty * fwd, -up - ty * fwd, -fwd])
+    """(5, 3), read-only: the outward normals, unnormalised, of the view's four sides
+    (x - z tan < 0 and the like, x, y and z along the camera's right, up and forward) and of
+    the plane through the eye facing back (-z). Kept, as `camera_basis` is, for the last few
+    views."""
+    c = camera
+    return _view_planes(c.heading_deg, c.pitch_deg, c.roll_deg, c.tan_half_fov_x, c.tan_half_fov_y)
+
+
+@functools.lru_cache(maxsize=16)
+def _view_planes(
+    heading_deg: float, pitch_deg: float, roll_deg: float, tx: float, ty: float
+) -> npt.NDArray[np.float64]:
+    right, up, fwd = camera_basis(heading_deg, pitch_deg, roll_deg)
+    out = np.stack([right - tx * fwd, -right - tx * fwd, up - ty * fwd, -up - ty * fwd, -fwd])
+    out.flags.writeable = False
+    return out
 
 
 def view_bounds(camera: Camera, radius_m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
