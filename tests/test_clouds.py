@@ -360,6 +360,10 @@ def test_with_centres_moves_the_sprites_and_keeps_every_other_field() -> None:
     assert not moved.slab.flags.writeable
     with pytest.raises(ValueError, match="2 centres for 3 sprites"):
         b.with_centres(b.centre_m[:2])
+    # Rows taken carry the kept mask, cut alike.
+    taken = moved.take(np.array([2, 1]))
+    assert "slab" in taken.__dict__ and taken.slab.tolist() == [True, False]
+    assert not taken.slab.flags.writeable
 
 
 def test_concat_appends_in_order_and_skips_empties() -> None:
