@@ -107,7 +107,7 @@ def test_profile_counts_every_pass_and_its_pixels(capsys: pytest.CaptureFixture[
         ring_slice_ms=None,  # one whole impostor a frame
         ring_build="sync",  # from the first frame on, however busy the machine
         lead_in=False,  # the first ring's impostors are the passes counted
-        # A fifth of a second a frame: the sun moves 0.15 of the kept sky's tolerance a frame
+        # A fifth of a second a frame: the sun moves 0.3 of the kept sky's tolerance a frame
         # (sky_layer.SKY_REUSE_TOLERANCE), so these 20 frames draw some of its strips again.
         fps=5.0,
     )

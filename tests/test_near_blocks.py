@@ -18,6 +18,7 @@ from wxsky.scene import layout as layout_module
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.gather import (
+    NearBlocks,
     NearRing,
     _gather_near,
     advance_drift,
@@ -38,7 +39,7 @@ from wxsky.scene.layout import (
     shade_for_eye,
     sort_order,
 )
-from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, scene_lights
+from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, Scattered, scene_lights
 from wxsky.scene.sky import sky_params
 from wxsky.scene.sprites import SpriteBatch
 from wxsky.settings.presets import load_preset
@@ -201,16 +202,23 @@ def test_a_new_rings_worker_prepares_the_near_sets_and_light_its_frames_ask_for(
         assert len(made) == 2
 
 
-def test_kept_light_serves_a_sun_that_moved_less_than_the_reuse_angle() -> None:
-    """A frame keeps the near layer's light while every light is within LIGHT_REUSE_DEG of
-    the sky's; past that it makes it again. What the kept light gives stays close to light
-    made anew."""
+def _fair_cumulus_lit() -> tuple[
+    WeatherState, SpriteBatch, np.ndarray, NearBlocks, Scattered | None
+]:
+    """fair-cumulus's near set around 1,500 m over the origin, and its light for the sky."""
     state = _state("fair-cumulus")
     drift = zero_drift(state)
     rings = (NearRing((0.0, 0.0, 1500.0), drift, 1.0),)
     near, share, blocks = gather_near_blocks(state, drift, rings, 8000.0, 40_000.0)
     assert blocks is not None
-    made = near_scattered_light(blocks, near, sky_params(state))
+    return state, near, share, blocks, near_scattered_light(blocks, near, sky_params(state))
+
+
+def test_kept_light_serves_a_sun_that_moved_less_than_the_reuse_angle() -> None:
+    """A frame keeps the near layer's light while every light is within LIGHT_REUSE_DEG of
+    the sky's; past that it makes it again. What the kept light gives stays close to light
+    made anew."""
+    state, near, share, blocks, made = _fair_cumulus_lit()
     eye = (150.0, -40.0, 1500.0)
     order = sort_order(near, eye)
     moved_deg = []
@@ -237,12 +245,7 @@ def test_a_light_kept_for_some_lights_is_not_taken_where_exact_light_is_asked() 
     """The frames of a sky step take the kept light without comparing its directions again;
     that shortcut holds only for as close as was asked: the ring's worker, asking for light
     made for exactly these lights, still gets it made."""
-    state = _state("fair-cumulus")
-    drift = zero_drift(state)
-    rings = (NearRing((0.0, 0.0, 1500.0), drift, 1.0),)
-    near, _, blocks = gather_near_blocks(state, drift, rings, 8000.0, 40_000.0)
-    assert blocks is not None
-    made = near_scattered_light(blocks, near, sky_params(state))
+    state, near, _, blocks, made = _fair_cumulus_lit()
     later = dataclasses.replace(state, time_utc=state.time_utc + timedelta(minutes=0.5))
     sky = sky_params(later)
     assert made is not None

@@ -189,7 +189,7 @@ def _check_sky_reuse(renderer: Renderer, profiler: PassProfiler) -> None:
     kept = renderer.read("sky")
     # A frame later the sun has moved 2.4e-6 rad: the layer stays as it is.
     assert sky_draws(cam, t0 + timedelta(seconds=1 / 30)) == 0
-    # Five seconds later (3.6e-4 rad, past SKY_CATCH_UP tolerances) it is redrawn, and
+    # Five seconds later (3.6e-4 rad, past SKY_CATCH_UP tolerances) it is redrawn whole, and
     # differs by no more than rounding from what was kept.
     assert sky_draws(cam, t0 + timedelta(seconds=5)) == 1
     assert np.abs(renderer.read("sky").astype(int) - kept.astype(int)).max() <= 1

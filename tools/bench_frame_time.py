@@ -112,7 +112,9 @@ def chart(report: dict[str, Any], out: Path) -> None:
     import matplotlib.pyplot as plt
 
     presets = list(report["presets"])
-    fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
+    fig, (ax, cpu) = plt.subplots(
+        1, 2, figsize=(14, 4.8), dpi=110, gridspec_kw={"width_ratios": [3, 2]}
+    )
     x = range(len(presets))
     width = 0.38
     for k, (build, colour) in enumerate((("base", "#b0b0b0"), ("new", "#3b7dd8"))):
@@ -130,6 +132,17 @@ def chart(report: dict[str, Any], out: Path) -> None:
         fontsize=9,
     )
     ax.legend(fontsize=8)
+    # The new build's CPU stages, stacked (the base's are 3-120 ms: off this scale).
+    bottom = [0.0] * len(presets)
+    for stage, colour in zip(CPU_STAGES, ("#3b7dd8", "#8fb8ee", "#f0a040"), strict=True):
+        part = [report["presets"][p]["new"][f"{stage}_median_ms"] for p in presets]
+        cpu.bar(list(x), part, 0.6, bottom=bottom, color=colour, label=stage)
+        bottom = [b + v for b, v in zip(bottom, part, strict=True)]
+    cpu.axhline(2.0, color="#d04040", linewidth=1, linestyle="--", label="2 ms")
+    cpu.set_xticks(list(x), presets, rotation=20, ha="right")
+    cpu.set_ylabel("ms (medians)")
+    cpu.set_title("new build's CPU stages per frame", fontsize=9)
+    cpu.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out)
 

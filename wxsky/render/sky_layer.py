@@ -17,8 +17,8 @@ and each part remembers, strip by strip, the numbers it was drawn there with:
   are drawn again, as many a frame as keep them all within SKY_CATCH_UP at the rate things
   drift (the mean over the last few frames: the sun moves on the sky's eighth-of-a-second
   step, every third or fourth frame). The sun moves a little, and the dome every frame: a
-  steady view pays an eighth of its plain sky and a piece of the dome's band every frame or
-  so, instead of the whole sky every few frames, and its frame time stays even.
+  steady view pays a thin strip of its plain sky and a piece of the dome's band every frame,
+  instead of the whole sky every few frames, and its frame time stays even.
 
 Drawing a part over a strip again means drawing the parts after it there too (each part
 overwrites its rectangle), not the ones before it: a drifting dome does not redraw the plain
@@ -50,10 +50,12 @@ F64 = npt.NDArray[np.float64]
 
 # A number the sky is drawn from may move this much before the pixels it makes are drawn
 # again: by day the sun moves 2.4e-6 rad a frame at 30 fps, on the sky's eighth-of-a-second
-# step 9e-6 rad at a time (scene.sky.SKY_STEP_US), so a strip is drawn again every forty
-# frames or so, by steps a tenth of a pixel and a twentieth of a colour level wide; a step
-# is a tenth of a tolerance, and the strips' pace (RATE_KEEP) hardly feels it.
-SKY_REUSE_TOLERANCE = 1e-4
+# step 9e-6 rad at a time (scene.sky.SKY_STEP_US), so a strip is drawn again every twenty
+# frames or so, by steps a twentieth of a pixel and a fortieth of a colour level wide. A step
+# is a fifth of a tolerance, and the plain sky's 32 strips then come one every frame, evenly
+# (at 1e-4 one in most frames and none in the rest: clear's median fell, its p95 did not; at
+# 2e-5 a step was half a tolerance, and the pace wavered between two strips and three).
+SKY_REUSE_TOLERANCE = 5e-5
 # Thin strips (22 rows at 720): a drifting part redraws a strip or two of them every frame,
 # where 8 strips of 90 rows came one frame in two or three, and a frame with one cost a
 # millisecond or more than a frame without (clear: p95 / median 1.4-1.6 -> 1.2-1.3).
