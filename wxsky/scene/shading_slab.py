@@ -263,10 +263,9 @@ def slab_view_radiance(
 ) -> F64:
     """(3, N) radiance toward the eye, channel by channel, from sprites of stratiform layers at
     heights `centre_z_m` (their `slab_m`: base and top MSL), along `view_rays` ((3, N)) from
-    the eye. The eye
-    is above a sprite's slab above its top, below it under its base, and inside it on the
-    side of the sprite it looks at. Only the arrays it reads, so a frame's slab sprites among
-    others need no sub-batch of every field."""
+    the eye. The eye is above a sprite's slab above its top, below it under its base, and
+    inside it on the side of the sprite it looks at. Only the arrays it reads, so a frame's
+    slab sprites among others need no sub-batch of every field."""
     # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
     lights = scene_lights(sky, above_cloud=True)
     key_dir, key_rgb = lights.directions[0], lights.rgb[0]
