@@ -330,6 +330,11 @@ class NearBlocks:
         default_factory=dict, repr=False
     )
 
+    def __post_init__(self) -> None:
+        # The set's slab mask, kept with its batch once: every frame's moved batch
+        # (SpriteBatch.with_centres) and its drawn rows (take) share it.
+        _ = self.batch.slab
+
     def placed(
         self, drift: Drift, rings: tuple[NearRing, ...]
     ) -> tuple[SpriteBatch, npt.NDArray[np.float32]] | None:
@@ -355,7 +360,6 @@ class NearBlocks:
             dx, dy = drift[li]
             centre[start:stop, 0] += dx
             centre[start:stop, 1] += dy
-        self.batch.slab  # noqa: B018 (kept with the set's batch, so every frame's shares it)
         return self.batch.with_centres(centre), share
 
 

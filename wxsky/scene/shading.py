@@ -71,9 +71,6 @@ def sprite_colours(
     Harris, `shading_harris.scattered_light` of these sprites' particles, a row per sprite
     (slab sprites' rows unused); `dist_m`, (N,) each sprite's distance from eye_m where the
     caller has it (a frame's near layer)."""
-    _check(model)
-    if model != "harris" and not batch.slab.any():
-        return wang_colours(batch, sky)
     return with_alpha(
         display_colours(batch, sky, eye_m, model, light, scattered, dist_m), batch.opacity
     )

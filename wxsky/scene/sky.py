@@ -237,8 +237,9 @@ def sky_params(
     whole_second = state.time_utc.replace(microsecond=0)
     clock_s = (state.time_utc - SKY_EPOCH_UTC).total_seconds()
     # The eye's height only through the cover and haze it sees, so a climb in clear air
-    # reuses the sky too; the whole second for the dome's solar time and the star field.
-    key = (known, clear, haze_m, whole_second, obs, state.layers, state.wind, state.visibility_m)
+    # reuses the sky too; the whole second for the dome's solar time and the star field; the
+    # site through the bodies, which are for it.
+    key = (known, clear, haze_m, whole_second, state.layers, state.wind, state.visibility_m)
     last = _last_sky  # one read: another thread may replace it
     if last is not None and last[0] == key:
         return last[1].at_clock(clock_s)
