@@ -46,11 +46,10 @@ def advance_drift(state: WeatherState, drift: Drift, dt_s: float) -> Drift:
     """Move every layer by the wind at its mid altitude for dt_s simulated seconds."""
     if len(drift) != len(state.layers):
         drift = zero_drift(state)
-    out = []
-    for (dx, dy), layer in zip(drift, state.layers, strict=True):
-        ve, vn = state.wind_at(0.5 * (layer.base_m + layer.top_m))
-        out.append((dx + ve * dt_s, dy + vn * dt_s))
-    return tuple(out)
+    winds = state.layer_winds_mps
+    return tuple(
+        (dx + ve * dt_s, dy + vn * dt_s) for (dx, dy), (ve, vn) in zip(drift, winds, strict=True)
+    )
 
 
 def gather_blocks(

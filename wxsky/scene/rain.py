@@ -12,6 +12,7 @@ snow falls in a wider, paler, more even curtain than rain.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -21,7 +22,7 @@ import numpy.typing as npt
 from wxsky.scene.footprints import footprints
 from wxsky.scene.sprites import SpriteBatch
 from wxsky.scene.texture_slots import TEX_FOG
-from wxsky.weather.state import CloudType, PrecipKind, WeatherState
+from wxsky.weather.state import CloudType, PrecipKind, PrecipLayer, WeatherState
 
 SHAFT_TYPES = frozenset({CloudType.CUMULONIMBUS, CloudType.NIMBOSTRATUS})
 # METAR intensity prefix -> how heavily it falls, 0..1.
@@ -51,8 +52,16 @@ class Rain:
 def rain_of(state: WeatherState) -> Rain | None:
     """The heaviest precipitation the state reports (present weather and CIGI precipitation
     layers), or None when nothing falls that would make a shaft."""
+    # Asked every frame (the near set's key): kept for the last few reports.
+    return _rain_of(state.present_weather, state.precipitation, state.observer.alt_m)
+
+
+@functools.lru_cache(maxsize=16)
+def _rain_of(
+    present_weather: tuple[str, ...], precipitation: tuple[PrecipLayer, ...], ground_m: float
+) -> Rain | None:
     best: tuple[float, bool] | None = None
-    for group in state.present_weather:
+    for group in present_weather:
         code = group.strip().upper()
         prefix = code[0] if code[:1] in ("-", "+") else ""
         body = code[len(prefix) :]
@@ -64,13 +73,13 @@ def rain_of(state: WeatherState) -> Rain | None:
         found = (INTENSITY[prefix], snow)
         if best is None or found[0] > best[0]:
             best = found
-    for layer in state.precipitation:
+    for layer in precipitation:
         found = ((layer.severity + 1) / 6.0, layer.kind == PrecipKind.SNOW)
         if best is None or found[0] > best[0]:
             best = found
     if best is None:
         return None
-    return Rain(best[0], best[1], state.observer.alt_m)
+    return Rain(best[0], best[1], ground_m)
 
 
 def is_shaft(batch: SpriteBatch) -> npt.NDArray[np.bool_]:

@@ -226,14 +226,8 @@ def sky_params(
     global _last_sky
     obs = state.observer
     known = bodies_for(state, bodies)
-    # Layers overlap at random (the usual assumption for total cloud amount): two 4/8 layers
-    # hide 3/4 of the sky, not all of it, so a forming layer darkens the sky gradually.
     eye_m = obs.alt_m if eye_alt_m is None else eye_alt_m
-    clear = math.prod(
-        1.0 - min(1.0, lay.cover_oktas / 8.0) * _share_above(lay, eye_m) for lay in state.layers
-    )
-    haze_top_m = _haze_top_m(state)
-    haze_m = _haze_m(state, eye_m, haze_top_m)
+    clear, haze_top_m, haze_m = _seen_from(state, eye_m)
     whole_second = state.time_utc.replace(microsecond=0)
     clock_s = (state.time_utc - SKY_EPOCH_UTC).total_seconds()
     # The eye's height only through the cover and haze it sees, so a climb in clear air
@@ -249,6 +243,31 @@ def sky_params(
 
 
 _last_sky: tuple[tuple[object, ...], SkyParams] | None = None
+
+
+def _seen_from(state: WeatherState, eye_m: float) -> tuple[float, float, float]:
+    """(clear share of the sky, top of the hazy layer, haze distance) for an eye at eye_m:
+    kept for the last layers (by identity: a state's frames share them), visibility, ground
+    and eye, which a level flight's frames share."""
+    global _last_seen
+    layers = state.layers
+    key = (state.visibility_m, state.observer.alt_m, eye_m)
+    last = _last_seen  # one read: another thread may replace it
+    if last is not None and last[0] is layers and last[1] == key:
+        return last[2]
+    # Layers overlap at random (the usual assumption for total cloud amount): two 4/8 layers
+    # hide 3/4 of the sky, not all of it, so a forming layer darkens the sky gradually.
+    clear = math.prod(
+        1.0 - min(1.0, lay.cover_oktas / 8.0) * _share_above(lay, eye_m) for lay in layers
+    )
+    haze_top_m = _haze_top_m(state)
+    seen = (clear, haze_top_m, _haze_m(state, eye_m, haze_top_m))
+    _last_seen = (layers, key, seen)
+    return seen
+
+
+_last_seen: tuple[tuple[CloudLayer, ...], tuple[float, ...], tuple[float, float, float]] | None
+_last_seen = None
 
 
 def _sky_params(

@@ -110,6 +110,8 @@ class SourceStack:
     def expired(self, now_s: float) -> tuple[SourceStack, tuple[str, ...]]:
         """Drop cockpit fields not updated within the hold time, and the CIGI host's weather
         when the host has been silent for its hold time; returns the dropped fields."""
+        if not self.cigi and not self.cockpit:  # every frame, mostly: nothing to hold
+            return self, ()
         stack = self
         dropped: list[str] = []
         if self.cigi and self.cigi_heard_s < now_s - self.cigi_hold_s:

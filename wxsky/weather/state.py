@@ -291,6 +291,12 @@ class WeatherState:
         # Asked for by every layer's drift and the dome, every frame: worked out once a state.
         return [w.alt_m for w in self.wind], [w.velocity_mps() for w in self.wind]
 
+    @functools.cached_property
+    def layer_winds_mps(self) -> tuple[tuple[float, float], ...]:
+        """(east, north) wind at each layer's mid altitude, the wind its clouds drift with:
+        worked out once a state (`at_time` keeps it), not every frame."""
+        return tuple(self.wind_at(0.5 * (lay.base_m + lay.top_m)) for lay in self.layers)
+
     def wind_at(self, alt_m: float) -> tuple[float, float]:
         """(east, north) wind velocity at an altitude, linear between reported levels."""
         if not self.wind:
