@@ -231,8 +231,12 @@ def test_kept_light_serves_a_sun_that_moved_less_than_the_reuse_angle() -> None:
         moved = float(np.degrees(np.arccos(cos)).max())
         moved_deg.append(moved)
         kept = near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG)
-        assert (kept is made) == (moved < LIGHT_REUSE_DEG)
-        if kept is made:
+        assert kept is not None
+        # Kept: the same rows, handed out under this sky's directions (shading then sees at
+        # once that they are for its lights).
+        assert (kept.rows is made.rows) == (moved < LIGHT_REUSE_DEG)
+        assert kept.directions is lights.directions
+        if kept.rows is made.rows:
             got = shade_for_eye(near, eye, sky, 40_000.0, "harris", None, share, order, kept)
             want = shade_for_eye(near, eye, sky, 40_000.0, "harris", None, share, order)
             assert np.abs(got.rgba - want.rgba).mean() < 0.25 / 255.0
@@ -250,10 +254,12 @@ def test_a_light_kept_for_some_lights_is_not_taken_where_exact_light_is_asked() 
     sky = sky_params(later)
     assert made is not None
     assert not np.array_equal(scene_lights(sky).directions, made.directions)
-    for _ in range(3):  # the step's frames
-        assert near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG) is made
+    kept = near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG)
+    assert kept is not None and kept.rows is made.rows
+    for _ in range(3):  # the step's frames: the one light kept for the step's lights
+        assert near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG) is kept
     exact = near_scattered_light(blocks, near, sky)
-    assert exact is not None and exact is not made
+    assert exact is not None and exact.rows is not made.rows
     np.testing.assert_array_equal(exact.directions, scene_lights(sky).directions)
 
 

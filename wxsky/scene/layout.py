@@ -498,9 +498,11 @@ def build_frame(
 # Working it out every frame (identifying every sprite, hashing the batch, looking the light
 # up, scattering it) was a third of the scene stage.
 # With each light, the last lights' directions (an array a sky step's frames share) it was
-# found close enough to, and how close was asked: the frames of that step take it at once.
+# found close enough to, how close was asked, and the light under those directions: the
+# frames of that step take it at once, and their shading sees it is for their lights by
+# identity, not by comparing the directions again.
 _near_light: weakref.WeakKeyDictionary[
-    NearBlocks, tuple[Scattered, npt.NDArray[np.float64] | None, float]
+    NearBlocks, tuple[Scattered, npt.NDArray[np.float64] | None, float, Scattered]
 ] = weakref.WeakKeyDictionary()
 _near_light_lock = threading.Lock()
 
@@ -517,13 +519,16 @@ def near_scattered_light(
     with _near_light_lock:
         found = _near_light.get(blocks)
     if found is not None:  # then the set has particles: no light is kept for slabs alone
-        light, checked, checked_deg = found
+        light, checked, checked_deg, shown = found
         if checked is lights.directions and checked_deg <= within_deg:
-            return light
+            return shown
+        # Against the directions the light was made for, so that reuse never drifts.
         if close_directions(light.directions, lights.directions, within_deg):
+            if light.directions is not lights.directions:
+                shown = Scattered(lights.directions, light.rows)
             with _near_light_lock:
-                _near_light[blocks] = (light, lights.directions, within_deg)
-            return light
+                _near_light[blocks] = (light, lights.directions, within_deg, shown)
+            return shown
     slab = near.slab
     if len(near) and slab.all():
         return None
@@ -535,7 +540,7 @@ def near_scattered_light(
     else:
         made = scattered_light(near, lights)
     with _near_light_lock:
-        _near_light[blocks] = (made, None, 0.0)
+        _near_light[blocks] = (made, None, 0.0, made)
     return made
 
 
@@ -604,7 +609,7 @@ def install_near(prepared: tuple[PreparedNear, ...]) -> None:
         install_near_blocks(item.key, item.blocks)
         if item.light is not None:
             with _near_light_lock:
-                _near_light[item.blocks] = (item.light, None, 0.0)
+                _near_light[item.blocks] = (item.light, None, 0.0, item.light)
 
 
 # A sprite's quad reaches 0.71 of its edge from its centre (a corner of the octagon's square):
