@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import pickle
 import subprocess
 import sys
 import textwrap
@@ -337,6 +338,31 @@ def test_take_selects_rows_of_every_field() -> None:
     m = b.take(np.array([True, False, False, False, False, True]))
     np.testing.assert_array_equal(m.centre_m[:, 0], [0, 5])
     assert len(b.take(np.array([], dtype=np.intp))) == 0
+
+
+def test_a_take_cuts_each_field_when_first_read_as_an_eager_cut_would() -> None:
+    """`take` cuts a field when it is read: what it reads is what cutting every field at
+    once gives, a take of a take reads the first batch's rows, and a pickled take (a ring
+    built in the worker process) carries its own rows, not the batch it was cut from."""
+    b = _batch(40)
+    first = np.array([30, 2, 17, 5, 9, 33, 0])
+    t = b.take(first)
+    assert "darkness" not in t.__dict__  # nothing read yet
+    np.testing.assert_array_equal(t.darkness, b.darkness[first])
+    assert "darkness" in t.__dict__ and "cloud_id" not in t.__dict__
+    second = np.array([True, False, True, True, False, False, True])
+    tt = t.take(second)
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(tt, name), getattr(b, name)[first[second]])
+    with pytest.raises(AttributeError):
+        _ = t.not_a_field  # type: ignore[attr-defined]
+    whole = pickle.dumps(b)
+    packed = pickle.dumps(t)
+    assert len(packed) < len(whole) / 2
+    back = pickle.loads(packed)
+    assert "_taken" not in back.__dict__
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(back, name), getattr(b, name)[first])
 
 
 def test_shifted_moves_only_centres() -> None:

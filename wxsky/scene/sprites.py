@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -75,16 +76,48 @@ class SpriteBatch:
         return int(self.size_m.shape[0])
 
     def take(self, index: npt.NDArray[np.intp] | B) -> SpriteBatch:
+        """The sprites at `index` (indices, or a mask), in its order. Each field is cut when
+        first read: a frame's drawn sprites are read for a few of their twelve fields (the
+        renderer's, the shading's), and cutting every field was a sixth of the shading."""
         # ndarray.take along the rows: a fifth of the time of indexing (N, 3) arrays with an
         # index or a mask, for the same copy; a mask becomes its indices once for all fields.
         rows = np.flatnonzero(index) if index.dtype == np.bool_ else index
-        out = SpriteBatch(**{f.name: getattr(self, f.name).take(rows, axis=0) for f in _FIELDS})
-        kept = self.__dict__.get("slab")
+        own = self.__dict__
+        out = object.__new__(SpriteBatch)
+        fields = out.__dict__
+        source = own.get("_taken")
+        if source is None:
+            fields["_taken"] = (self, rows)
+        else:  # fields this batch has not cut yet come from its source at once
+            fields["_taken"] = (source[0], source[1].take(rows))
+            for name in _FIELD_NAMES:
+                if name in own:
+                    fields[name] = own[name].take(rows, axis=0)
+        kept = own.get("slab")
         if kept is not None:  # this batch's kept slab mask, cut alike (cheaper than anew)
             taken = kept.take(rows)
             taken.flags.writeable = False
-            out.__dict__["slab"] = taken
+            fields["slab"] = taken
         return out
+
+    if not TYPE_CHECKING:  # so that the type checker still catches a misspelt field
+
+        def __getattr__(self, name):
+            # Reached only for what __dict__ lacks: a field of a `take` not read yet.
+            source = self.__dict__.get("_taken")
+            if source is None or name not in _FIELD_NAMES:
+                raise AttributeError(name)
+            batch, rows = source
+            value = getattr(batch, name).take(rows, axis=0)
+            self.__dict__[name] = value
+            return value
+
+    def __getstate__(self) -> dict[str, object]:
+        # Pickled (a ring built in the worker process) with every field, not its source.
+        state = dict(self.__dict__)
+        if state.pop("_taken", None) is not None:
+            state.update((name, getattr(self, name)) for name in _FIELD_NAMES)
+        return state
 
     def with_centres(self, centre_m: F64) -> SpriteBatch:
         """These sprites at other centres ((N, 3), as many): the other fields are this batch's
@@ -134,3 +167,4 @@ class SpriteBatch:
 
 
 _FIELDS = dataclasses.fields(SpriteBatch)
+_FIELD_NAMES = frozenset(f.name for f in _FIELDS)
