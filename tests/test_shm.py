@@ -88,6 +88,13 @@ def test_round_trip_of_layers_with_different_used_sizes(name: str) -> None:
         # Copies: the first frame is untouched by later publishes, and arrays are writable.
         np.testing.assert_array_equal(frame.layers["clouds"], clouds)
         second.layers["clouds"][0, 0, 0] ^= 1
+        # The first frame's slot again: a layer it held then and not written now is absent.
+        fill(writer, "rain", rain)
+        writer.publish(9, b"")
+        third = reader.read()
+        assert third.layers["clouds"].shape == (0, 0, 4)
+        assert third.layers["haze"].shape == (0, 0, 4)
+        np.testing.assert_array_equal(third.layers["rain"], rain)
 
 
 def test_frame_numbers_and_publish_checks(name: str) -> None:

@@ -8,6 +8,8 @@ with `wxsky bench` so the benchmark times exactly what the daemon does.
 
 from __future__ import annotations
 
+import functools
+import operator
 from collections.abc import Hashable
 from datetime import UTC
 from typing import Protocol
@@ -168,6 +170,9 @@ def publish_plan(
     return meta
 
 
+_ROWS = operator.itemgetter(0, 1)  # a band's rows (first, stop), without its serial
+
+
 def publish_layer(renderer: RingRenderer, sink: LayerSink, name: str) -> None:
     """Layer `name` (sky, near, near_front) of the renderer into the slot being filled: read
     whole where it is drawn every frame, kept or read in part where the renderer keeps it."""
@@ -187,11 +192,7 @@ def publish_layer(renderer: RingRenderer, sink: LayerSink, name: str) -> None:
     held = sink.held_layer(name, width, height)
     buffer = sink.layer_buffer(name, width, height, content)
     old = held[2] if isinstance(held, tuple) and held[:2] == ("layer", name) else None
-    if (
-        old is None
-        or len(old) != len(bands)
-        or any(a[:2] != b[:2] for a, b in zip(old, bands, strict=True))
-    ):
+    if old is None or len(old) != len(bands) or list(map(_ROWS, old)) != list(map(_ROWS, bands)):
         renderer.read_into(name, buffer)
         return
     runs: list[list[int]] = []  # the bands drawn since, touching ones as one read
@@ -217,10 +218,16 @@ def _publish_ring(
 ) -> None:
     """The 8 images of `ring` (None: the empty ring drawn before the first, read every
     frame) from texture set `ring_set` into layers prefix_0..7 of the slot being filled."""
-    for i in range(RING_SIZE):
-        layer, source = f"{prefix}_{i}", ring_target_name(i, ring_set)
-        copies.append((layer, source))
+    pairs = _ring_layers(prefix, ring_set)
+    copies.extend(pairs)
+    for i, (layer, source) in enumerate(pairs):
         content = None if ring is None else ("ring", ring.serial, ring_set, i)
         if content is not None and sink.keep_layer(layer, ring_px, ring_px, content):
             continue
         renderer.read_into(source, sink.layer_buffer(layer, ring_px, ring_px, content))
+
+
+@functools.lru_cache(maxsize=8)
+def _ring_layers(prefix: str, ring_set: int) -> tuple[tuple[str, str], ...]:
+    """(slot layer, renderer target) of each impostor of a ring set: named every frame."""
+    return tuple((f"{prefix}_{i}", ring_target_name(i, ring_set)) for i in range(RING_SIZE))

@@ -150,6 +150,10 @@ LE_WIDTH = 0  # u32
 LE_HEIGHT = 4  # u32
 LE_OFFSET = 8  # u64, from the segment start
 
+# One entry, packed: LE_WIDTH, LE_HEIGHT, LE_OFFSET.
+_ENTRY_FORMAT = "IIQ"
+assert struct.calcsize("<" + _ENTRY_FORMAT) == LAYER_ENTRY_SIZE and (LE_HEIGHT, LE_OFFSET) == (4, 8)
+
 REGION_ALIGN = 64  # cache line: pixel and metadata regions
 SLOT_ALIGN = 4096  # page: header and slot sizes, so every slot starts on a page boundary
 
@@ -416,7 +420,16 @@ class FrameWriter:
         self._index = {spec.name: i for i, spec in enumerate(layout.layers)}
         self._target = 1  # slot being filled; slot 0 is "active" but empty until publish 1
         self._writing = False
-        self._dims: dict[int, tuple[int, int]] = {}
+        # Width and height of each layer published in the slot being filled, flat (0: absent),
+        # and each slot's layer table as written by `publish`: one pack a frame, not two
+        # writes per layer.
+        n_layers = len(layout.layers)
+        self._dims = [0] * (2 * n_layers)
+        self._table = struct.Struct("<" + _ENTRY_FORMAT * n_layers)
+        self._entries = [
+            [v for offset in layout.pixel_offsets for v in (0, 0, layout.slot_base(slot) + offset)]
+            for slot in range(SLOT_COUNT)
+        ]
         # What each slot's layers hold, where the caller named it (`layer_buffer`'s content):
         # layer index -> (content, width, height), set when the slot is published and dropped
         # as soon as a buffer of that layer in that slot is handed out again. Only this writer
@@ -533,7 +546,7 @@ class FrameWriter:
         the pixels instead of writing them (`keep_layer`)."""
         index = self._layer_index(layer, width, height)
         self._begin()
-        self._dims[index] = (width, height)
+        self._dims[2 * index : 2 * index + 2] = (width, height)
         self._held[self._target].pop(index, None)
         if content is None:
             self._filling.pop(index, None)
@@ -555,7 +568,7 @@ class FrameWriter:
         if self._held[self._target].get(index) != (content, width, height):
             return False
         self._begin()
-        self._dims[index] = (width, height)
+        self._dims[2 * index : 2 * index + 2] = (width, height)
         return True
 
     def held_layer(self, layer: str, width: int, height: int) -> Hashable | None:
@@ -597,11 +610,10 @@ class FrameWriter:
             )
         self._begin()
         base = self._layout.slot_base(self._target)
-        for index in range(len(self._layout.layers)):
-            width, height = self._dims.get(index, (0, 0))
-            entry = base + SLOT_LAYERS + index * LAYER_ENTRY_SIZE
-            self._put32(entry + LE_WIDTH, width)
-            self._put32(entry + LE_HEIGHT, height)
+        entries = self._entries[self._target]
+        entries[0::3] = self._dims[0::2]  # LE_WIDTH
+        entries[1::3] = self._dims[1::2]  # LE_HEIGHT (LE_OFFSET: as _init_header wrote it)
+        self._table.pack_into(self._view, base + SLOT_LAYERS, *entries)
         self._put64(base + SLOT_FRAME, frame_number)
         meta_start = base + self._layout.meta_offset
         self._view[meta_start : meta_start + len(meta)] = meta
@@ -615,7 +627,7 @@ class FrameWriter:
         self._filling.clear()
         self._target ^= 1
         self._writing = False
-        self._dims.clear()
+        self._dims[:] = [0] * len(self._dims)
         self._last_frame = frame_number
 
     def _release_handed_out(self) -> None:

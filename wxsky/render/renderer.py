@@ -442,8 +442,8 @@ class Renderer:
         drawn = self._sky_drawn.get(name)
         if drawn is None:
             return None
-        rows = drawn.strip_rows(self.layer_size(name)[1])
-        return tuple((*r, serial) for r, serial in zip(rows, drawn.strip_serials, strict=True))
+        firsts, stops = sky_layer.strip_columns(drawn.strip_rows(self.layer_size(name)[1]))
+        return tuple(zip(firsts, stops, drawn.strip_serials, strict=True))
 
     def _sky_uniforms(
         self,

@@ -302,6 +302,15 @@ def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
 
 
 @functools.lru_cache(maxsize=8)
+def strip_columns(rows: tuple[tuple[int, int], ...]) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """`strip_rows`' first rows and stop rows, apart (a publisher's bands, every frame)."""
+    if not rows:
+        return (), ()
+    firsts, stops = zip(*rows, strict=True)
+    return firsts, stops
+
+
+@functools.lru_cache(maxsize=8)
 def _strips_rows(edges: tuple[float, ...], height_px: int) -> tuple[tuple[int, int], ...]:
     # Asked for every frame by the publisher; the edges change only with the layout.
     return tuple(strip_rows(edges[i], edges[i + 1], height_px) for i in range(len(edges) - 1))
