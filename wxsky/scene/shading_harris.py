@@ -11,6 +11,7 @@ precompute for half a minute of simulated time and the result never depends on t
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import threading
@@ -67,6 +68,14 @@ class Lights:
     directions: F64  # (L, 3) unit vectors towards each light, rounded to _QUANTUM
     rgb: F64  # (L, 3) each light's colour and strength
     ambient_rgb: F64  # (3,)
+
+    @functools.cached_property
+    def sky_rgb(self) -> F64:
+        """(3,) the skylights together (every light but the key), read-only: a slab takes
+        them as one, and the frames of a sky step share its lights."""
+        out: F64 = self.rgb[1:].sum(axis=0)
+        out.flags.writeable = False
+        return out
 
 
 @dataclass(frozen=True)

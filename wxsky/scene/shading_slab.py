@@ -192,7 +192,8 @@ def slab_radiance(
     p_2 = 4.0 * math.pi * hg_phase(cos_phase, G_S * G_S)
     k = KAPPA_S_PER_M
     spread = limb(mu_v)
-    on_lit_side, on_far_side = bool(reflected.any()), not bool(reflected.all())
+    lit_count = int(np.count_nonzero(reflected))
+    on_lit_side, on_far_side = lit_count > 0, lit_count < np.size(reflected)
     # Single scattering reflected / transmitted along the ray (Bouthors 4.3), in units where
     # the Lambertian white is 1: I = a P mu_l / (4 (mu_v +- mu_l)) (1 - tau ...). Each side
     # is worked out only for the sprites on it: a deck is mostly seen from one side.
@@ -269,12 +270,18 @@ def slab_view_radiance(
     # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
     lights = scene_lights(sky, above_cloud=True)
     key_dir, key_rgb = lights.directions[0], lights.rgb[0]
-    sky_rgb = lights.rgb[1:].sum(axis=0)
+    sky_rgb = lights.sky_rgb
     base_m = slab_m[:, 0].astype(np.float64)
     top_m = slab_m[:, 1].astype(np.float64)
-    eye_above = np.where(
-        eye_z_m >= top_m, True, np.where(eye_z_m <= base_m, False, centre_z_m <= eye_z_m)
-    )
+    eye_above: B
+    if len(top_m) and eye_z_m >= top_m.max():  # over every deck (or under): one side for all
+        eye_above = np.ones(len(top_m), np.bool_)
+    elif len(base_m) and eye_z_m <= base_m.min():
+        eye_above = np.zeros(len(top_m), np.bool_)
+    else:
+        eye_above = np.where(
+            eye_z_m >= top_m, True, np.where(eye_z_m <= base_m, False, centre_z_m <= eye_z_m)
+        )
     # The light is on the top side whenever it is up; the deck is lit from below never.
     mu_l = float(key_dir[2])
     reflected = eye_above  # the key light is above every deck
