@@ -24,6 +24,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from wxsky.app.bench import CPU_STAGES  # the stages `wxsky bench` sums as CPU
+
 ROOT = Path(__file__).resolve().parents[1]
 PRESETS = (
     "clear",
@@ -34,7 +36,6 @@ PRESETS = (
     "high-cirrus",
     "thunderstorm",
 )
-CPU_STAGES = ("scene", "sort", "publish")
 
 
 def bench(wxsky: str, preset: str, size: str, frames: int) -> dict[str, Any]:

@@ -26,11 +26,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from wxsky.app.bench import CPU_STAGES
 from wxsky.settings.presets import list_presets
 
 ROOT = Path(__file__).resolve().parents[1]
 MODES = ("ring", "direct")
-CPU_STAGES = ("scene", "sort", "publish")
 GPU_STAGES = ("impostor_slice", "near_pass")
 
 
