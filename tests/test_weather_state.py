@@ -52,3 +52,22 @@ def test_the_wind_profile_follows_the_state_it_belongs_to() -> None:
         1500.0
     )
     assert dataclasses.replace(state, wind=()).wind_at(1500.0) == (0.0, 0.0)
+
+
+def test_the_layers_drift_winds_are_each_layers_mid_altitude_wind_of_its_own_state() -> None:
+    state = _state()
+    (layer,) = state.layers
+    mid = 0.5 * (layer.base_m + layer.top_m)
+    assert state.layer_winds_mps == (state.wind_at(mid),)
+    assert state.at_time(state.time_utc + timedelta(hours=1)).layer_winds_mps == (
+        state.wind_at(mid),
+    )
+    calm = dataclasses.replace(state, wind=())
+    assert calm.layer_winds_mps == ((0.0, 0.0),)
+    assert dataclasses.replace(state, layers=()).layer_winds_mps == ()
+
+
+@pytest.mark.parametrize("bad", [3, "cumulus", None])
+def test_a_cloud_layer_of_no_cloud_type_is_refused(bad: object) -> None:
+    with pytest.raises(ValueError, match="cloud layer type must be one of CloudType"):
+        CloudLayer(3.0, 1200.0, 2000.0, bad)  # type: ignore[arg-type]

@@ -107,6 +107,9 @@ class CloudLayer:
         LAYER_HEIGHT_M.validate("cloud layer top_m", self.top_m)
         if self.top_m <= self.base_m:
             raise ValueError(f"cloud layer top_m {self.top_m} must be above base_m {self.base_m}")
+        # Not a bare number or name: the scene looks its models up by the type's members.
+        if not isinstance(self.type, CloudType):
+            raise ValueError(f"cloud layer type must be one of CloudType, got {self.type!r}")
 
     @property
     def thickness_m(self) -> float:
