@@ -497,13 +497,13 @@ def build_frame(
 # minute or so), and the near layer's sprites are one set from one ring rebuild to the next.
 # Working it out every frame (identifying every sprite, hashing the batch, looking the light
 # up, scattering it) was a third of the scene stage.
-# With each light, the last lights' directions (an array a sky step's frames share) it was
-# found close enough to, how close was asked, and the light under those directions: the
-# frames of that step take it at once, and their shading sees it is for their lights by
-# identity, not by comparing the directions again.
-_near_light: weakref.WeakKeyDictionary[
-    NearBlocks, tuple[Scattered, npt.NDArray[np.float64] | None, float, Scattered]
-] = weakref.WeakKeyDictionary()
+# With each light, the same rows under the directions of the last lights (an array a sky
+# step's frames share) it was found close enough to, and how close was asked: the frames of
+# that step take it at once, and their shading sees by identity that it is for their lights.
+# A light just made is under its own directions, found for them exactly (0 degrees).
+_near_light: weakref.WeakKeyDictionary[NearBlocks, tuple[Scattered, Scattered, float]] = (
+    weakref.WeakKeyDictionary()
+)
 _near_light_lock = threading.Lock()
 
 
@@ -519,15 +519,17 @@ def near_scattered_light(
     with _near_light_lock:
         found = _near_light.get(blocks)
     if found is not None:  # then the set has particles: no light is kept for slabs alone
-        light, checked, checked_deg, shown = found
-        if checked is lights.directions and checked_deg <= within_deg:
+        light, shown, checked_deg = found
+        if shown.directions is lights.directions and checked_deg <= within_deg:
             return shown
         # Against the directions the light was made for, so that reuse never drifts.
         if close_directions(light.directions, lights.directions, within_deg):
-            if light.directions is not lights.directions:
+            if light.directions is lights.directions:
+                shown = light
+            else:
                 shown = Scattered(lights.directions, light.rows)
             with _near_light_lock:
-                _near_light[blocks] = (light, lights.directions, within_deg, shown)
+                _near_light[blocks] = (light, shown, within_deg)
             return shown
     slab = near.slab
     if len(near) and slab.all():
@@ -540,7 +542,7 @@ def near_scattered_light(
     else:
         made = scattered_light(near, lights)
     with _near_light_lock:
-        _near_light[blocks] = (made, None, 0.0, made)
+        _near_light[blocks] = (made, made, 0.0)
     return made
 
 
@@ -609,7 +611,7 @@ def install_near(prepared: tuple[PreparedNear, ...]) -> None:
         install_near_blocks(item.key, item.blocks)
         if item.light is not None:
             with _near_light_lock:
-                _near_light[item.blocks] = (item.light, None, 0.0, item.light)
+                _near_light[item.blocks] = (item.light, item.light, 0.0)
 
 
 # A sprite's quad reaches 0.71 of its edge from its centre (a corner of the octagon's square):
