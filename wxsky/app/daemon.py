@@ -39,6 +39,7 @@ from wxsky.app.control import (
 )
 from wxsky.app.flightgear_part import FlightGearPart
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.app.share_part import SharePart
 from wxsky.app.trace import TraceWriter
 from wxsky.engine.stages import FramePlan, SkyEngine, geodetic_from_enu
@@ -63,6 +64,9 @@ from wxsky.weather.stations import StationWeather
 log = logging.getLogger("wxsky.app.daemon")
 
 FPS_WINDOW_S = 2.0
+# A part's close runs this long past the shared deadline before it is cut: its own handling of
+# the deadline (a line naming what it abandoned) comes first.
+CLOSE_GRACE_S = 0.1
 
 
 def initial_patches(
@@ -214,6 +218,8 @@ class Daemon:
                     f"channel {config.channel.name!r} takes its weather from the sky master; "
                     f"it cannot also read {', '.join(inputs)} (give them to the master)"
                 )
+        # The parts the daemon walks in each phase, in this order (`parts.py`).
+        self.parts: list[Part] = []
         self._target_version = -1
         self._had_feed_weather = False
         self.frames_published = 0
@@ -239,7 +245,7 @@ class Daemon:
             "set_aircraft": lambda p: set_aircraft(self.engine, p),
             "set_time": lambda p: set_time(self.engine, p),
             "apply_preset": lambda p: apply_preset(
-                self.engine, p, config.presets.dirs, keep_site=self._flightgear.follows_pose
+                self.engine, p, config.presets.dirs, keep_site=self._holds_site()
             ),
             "release": lambda p: release(self.engine, p),
             "apply_metar": lambda p: apply_metar(self.engine, p),
@@ -299,6 +305,15 @@ class Daemon:
         for link in self._links:
             link.start(mailbox.post)
             log.info("cockpit input %s (%s)", link.name, link.kind)
+        context = PartContext(
+            self.engine,
+            set_camera=self._set_camera,
+            publish_target=self._publish_target,
+            fps=self.fps,
+            stop=self._stop,
+        )
+        for part in self.parts:
+            await part.start(context)
 
     async def main_loop(self) -> None:
         loop = asyncio.get_running_loop()
@@ -313,6 +328,8 @@ class Daemon:
             now = loop.time()
             host_frames = self._cigi.host_frames()  # what this frame has applied
             self._share.before_frame()  # a channel: the master's clock and camera
+            for part in self.parts:
+                part.before_frame()
             # The scene is built on the render thread too: a ring build takes long enough on a
             # CPU to hold up cockpit input if it ran here.
             plan, meta = await loop.run_in_executor(
@@ -327,6 +344,9 @@ class Daemon:
             # The frame's sim time is the clock's at the frame's start (`now`, the loop's
             # monotonic clock): a master ticks that pair, not the later moment of publishing.
             self._share.after_frame(plan.state.time_utc, now)  # a master: its tick and state
+            frame = PublishedFrame(meta.frame_number, plan.state, now)
+            for part in self.parts:
+                part.after_frame(frame)
             if self.engine.ring is not shown_ring:
                 shown_ring = self.engine.ring
                 self._server_broadcast("scene", self.scene_info())
@@ -352,6 +372,7 @@ class Daemon:
         self._stop.set()
         # First, so a ring build in flight gives up while the rest shuts down.
         self.engine.cancel_scene_work()
+        await self._close_parts(time.monotonic() + max(0.05, timeout / 4))
         # Then the bus: a master's channels see it go at once and keep the last sky.
         try:
             await asyncio.wait_for(self._share.close(), timeout=max(0.05, timeout / 4))
@@ -464,7 +485,7 @@ class Daemon:
         stats = self.inputs["control"]
         stats.message()
         try:
-            refused = self._share.refusal(method)
+            refused = self._share.refusal(method) or self._refusal(method)
             if refused is not None:
                 raise ControlError(refused)
             result = self._dispatch(method, params)
@@ -480,6 +501,12 @@ class Daemon:
                 f"rejected:{kind}", f"control {clip(method, 64)} rejected: {exc}"
             )
             raise
+
+    def _refusal(self, method: str) -> str | None:
+        return next((r for part in self.parts if (r := part.refusal(method)) is not None), None)
+
+    def _holds_site(self) -> bool:
+        return any(part.holds_site for part in self.parts)
 
     def _set_camera(self, params: dict[str, Any]) -> dict[str, Any]:
         out = self.config.output
@@ -548,6 +575,26 @@ class Daemon:
             position=self._camera_lat_lon,
         )
 
+    async def _close_parts(self, deadline_s: float) -> None:
+        """Every part's `close`, all at once, each given `deadline_s`: one still closing a
+        moment after it is logged by name and cut, not waited for."""
+        closing = {
+            asyncio.create_task(part.close(deadline_s), name=f"close {part.name}"): part
+            for part in self.parts
+        }
+        if not closing:
+            return
+        wait_s = max(0.0, deadline_s - time.monotonic()) + CLOSE_GRACE_S
+        done, pending = await asyncio.wait(closing, timeout=wait_s)
+        for task in pending:
+            log.warning("shutdown: %s did not close in time; cut it", closing[task].name)
+            task.cancel()
+        for task in done:
+            exc = None if task.cancelled() else task.exception()
+            if exc is not None:
+                log.error("shutdown: %s failed to close: %s", closing[task].name, exc)
+                log.debug("%s's close", closing[task].name, exc_info=exc)
+
     async def _close_links(self, timeout_s: float) -> None:
         """Stop every cockpit reader thread, together, within the shutdown budget."""
         links, self._links = self._links, []
@@ -591,6 +638,10 @@ class Daemon:
 
     def status(self) -> dict[str, Any]:
         self._cigi.refresh()
+        # The parts' first: one may refresh the detail of its inputs.
+        own: dict[str, Any] = {}
+        for part in self.parts:
+            own.update(part.status())
         return {
             "version": __version__,
             "uptime_s": time.monotonic() - self._started,
@@ -613,6 +664,7 @@ class Daemon:
                 "exported": self._slot_textures is not None,
             },
             **self._share.status(),
+            **own,
         }
 
     def scene_info(self) -> dict[str, Any]:
