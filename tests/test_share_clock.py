@@ -130,22 +130,21 @@ def test_a_channel_refuses_the_masters_commands_and_the_camera_only_while_it_is_
 
     config = DaemonConfig(channel=ChannelSection(join="tcp/127.0.0.1:7447", name="left"))
     cam = Camera((0.0, 0.0, 1500.0))
-    with SkyEngine(WeatherState(), cam, SceneSettings()) as engine:
-        part = SharePart(engine, config)
-        assert part.role == "channel" and not part.master_alive
-        for command in ("apply_preset", "apply_metar", "release", "set_time"):
-            refused = part.refusal(command)
-            assert refused is not None and "sky master at zenoh:tcp/127.0.0.1:7447" in refused
-        assert part.refusal("set_camera") is None  # nothing shared yet
-        assert part.refusal("status") is None
-        part._got_tick(pack_data(encode_tick(_tick(1.0, T0))), 1.0)  # a master sharing none
-        assert part.refusal("set_camera") is None
-        shared = dataclasses.replace(_tick(2.0, T0), camera=cam)
-        part._got_tick(pack_data(encode_tick(shared)), 2.0)
-        assert "shared camera" in (part.refusal("set_camera") or "")
-        part._got_tick(b"\xc1 not msgpack", 3.0)
-        assert part.status()["channel"]["dropped"] == {"clock": 1}
-    standalone = SharePart(engine, DaemonConfig())
+    part = SharePart(config)
+    assert part.role == "channel" and not part.master_alive
+    for command in ("apply_preset", "apply_metar", "release", "set_time"):
+        refused = part.refusal(command)
+        assert refused is not None and "sky master at zenoh:tcp/127.0.0.1:7447" in refused
+    assert part.refusal("set_camera") is None  # nothing shared yet
+    assert part.refusal("status") is None
+    part._got_tick(pack_data(encode_tick(_tick(1.0, T0))), 1.0)  # a master sharing none
+    assert part.refusal("set_camera") is None
+    shared = dataclasses.replace(_tick(2.0, T0), camera=cam)
+    part._got_tick(pack_data(encode_tick(shared)), 2.0)
+    assert "shared camera" in (part.refusal("set_camera") or "")
+    part._got_tick(b"\xc1 not msgpack", 3.0)
+    assert part.status()["channel"]["dropped"] == {"clock": 1}
+    standalone = SharePart(DaemonConfig())
     assert standalone.role == "standalone" and standalone.refusal("apply_preset") is None
 
 

@@ -202,7 +202,7 @@ class Daemon:
         )
         for name, stats in self._flightgear.stats():
             self.inputs[name] = stats
-        self._share = SharePart(self.engine, config)
+        self._share = SharePart(config)
         if self._share.role == "channel":
             inputs = [
                 name
@@ -219,7 +219,7 @@ class Daemon:
                     f"it cannot also read {', '.join(inputs)} (give them to the master)"
                 )
         # The parts the daemon walks in each phase, in this order (`parts.py`).
-        self.parts: list[Part] = []
+        self.parts: list[Part] = [self._share]
         self._target_version = -1
         self._had_feed_weather = False
         self.frames_published = 0
@@ -300,7 +300,6 @@ class Daemon:
             log.info("METAR feed %s", feed.source.name)
         await self._cigi.start()
         await self._flightgear.start()
-        await self._share.start(self.fps)
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
             link.start(mailbox.post)
@@ -327,7 +326,6 @@ class Daemon:
         while not self._stop.is_set():
             now = loop.time()
             host_frames = self._cigi.host_frames()  # what this frame has applied
-            self._share.before_frame()  # a channel: the master's clock and camera
             for part in self.parts:
                 part.before_frame()
             # The scene is built on the render thread too: a ring build takes long enough on a
@@ -341,9 +339,6 @@ class Daemon:
             self._broadcast_frame(plan, meta)
             self._cigi.frame_published(meta.frame_number, host_frames, plan.state)
             self._flightgear.frame_published(plan.state)
-            # The frame's sim time is the clock's at the frame's start (`now`, the loop's
-            # monotonic clock): a master ticks that pair, not the later moment of publishing.
-            self._share.after_frame(plan.state.time_utc, now)  # a master: its tick and state
             frame = PublishedFrame(meta.frame_number, plan.state, now)
             for part in self.parts:
                 part.after_frame(frame)
@@ -373,11 +368,6 @@ class Daemon:
         # First, so a ring build in flight gives up while the rest shuts down.
         self.engine.cancel_scene_work()
         await self._close_parts(time.monotonic() + max(0.05, timeout / 4))
-        # Then the bus: a master's channels see it go at once and keep the last sky.
-        try:
-            await asyncio.wait_for(self._share.close(), timeout=max(0.05, timeout / 4))
-        except TimeoutError:
-            log.warning("shutdown: the channel bus did not close in time; left it")
         if self._feed_tasks:
             _, pending = await asyncio.wait(self._feed_tasks, timeout=max(0.05, timeout / 4))
             for task in pending:
@@ -485,7 +475,7 @@ class Daemon:
         stats = self.inputs["control"]
         stats.message()
         try:
-            refused = self._share.refusal(method) or self._refusal(method)
+            refused = self._refusal(method)
             if refused is not None:
                 raise ControlError(refused)
             result = self._dispatch(method, params)
@@ -663,7 +653,6 @@ class Daemon:
                 or (self._export_probe.reason if self._export_probe is not None else None),
                 "exported": self._slot_textures is not None,
             },
-            **self._share.status(),
             **own,
         }
 

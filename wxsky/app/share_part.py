@@ -4,7 +4,9 @@ them, its engine taking the master's weather, drift anchor and clock, its camera
 camera turned by its view offset.
 
 Zenoh delivers on its own threads; everything here runs on the daemon's event loop
-(callbacks hop over with `call_soon_threadsafe`), and the frame hooks run between frames.
+(callbacks hop over with `call_soon_threadsafe`), and the frame hooks run between frames. A
+daemon part (`parts.py`), always in the daemon's list: a standalone daemon's `status` has its
+keys too.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from collections.abc import Callable
 from datetime import datetime, timedelta
 from typing import Any
 
+from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.engine.stages import SharedSky, SkyEngine
 from wxsky.logs import RateLimitedLog
 from wxsky.output.wire import WireError, pack_data, unpack_data
@@ -52,20 +55,24 @@ HEALTH_EVERY_S = 1.0
 WEATHER_COMMANDS = ("apply_preset", "apply_metar", "release", "set_time")
 
 
-class SharePart:
+class SharePart(Part):
     """`role`: "master", "channel" or "standalone" (neither: nothing is shared)."""
 
-    def __init__(self, engine: SkyEngine, config: DaemonConfig) -> None:
-        self.engine = engine
+    name = "channel bus"
+
+    def __init__(self, config: DaemonConfig) -> None:
+        self._engine: SkyEngine | None = None
         share, channel = config.share, config.channel
         self.role = "master" if share.endpoint else "channel" if channel.join else "standalone"
         self.endpoint = share.endpoint or channel.join
         self.site = share.site if share.endpoint else channel.site
-        self.name = channel.name if channel.join else "master"
+        self.channel_name = channel.name if channel.join else "master"
         self._share_camera = share.camera
         self._view_offset = channel.view_offset_deg
-        self._fov_deg = channel.fov_deg
-        self._own_camera = engine.camera  # a channel's size and fov, before any shared one
+        # A channel's own size and field of view (the daemon's camera as configured), which a
+        # shared camera does not change.
+        self._fov_deg = channel.fov_deg or config.camera.fov_deg
+        self._size_px = (config.camera.width, config.camera.height)
         self._master_id = secrets.token_hex(8)
         self._bus: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -90,18 +97,25 @@ class SharePart:
     def shared(self) -> bool:
         return self.role != "standalone"
 
+    @property
+    def engine(self) -> SkyEngine:
+        if self._engine is None:
+            raise RuntimeError("the channel bus part has not started")
+        return self._engine
+
     # -- life ---------------------------------------------------------------------------
 
-    async def start(self, fps: Callable[[], float]) -> None:
+    async def start(self, ctx: PartContext) -> None:
         """Open the bus (a master claims its site first: a second master refuses to start)."""
-        self._fps = fps
+        self._engine = ctx.engine
+        self._fps = ctx.fps
         if not self.shared:
             return
         from wxsky.share.zenoh_bus import ShareBus
 
         loop = self._loop = asyncio.get_running_loop()
         open_bus = functools.partial(
-            ShareBus, self.endpoint, role=self.role, site=self.site, name=self.name
+            ShareBus, self.endpoint, role=self.role, site=self.site, name=self.channel_name
         )
         try:
             self._bus = await loop.run_in_executor(None, open_bus)
@@ -135,10 +149,10 @@ class SharePart:
             self.role,
             self.endpoint,
             self.site,
-            f", channel {self.name!r}" if self.role == "channel" else "",
+            f", channel {self.channel_name!r}" if self.role == "channel" else "",
         )
 
-    async def close(self) -> None:
+    async def close(self, deadline_s: float) -> None:
         """Leave the bus (a master's channels see it go at once); idempotent."""
         for task in self._tasks:
             task.cancel()
@@ -148,8 +162,13 @@ class SharePart:
         self._tasks.clear()
         bus, self._bus = self._bus, None
         self._loop = None
-        if bus is not None:
-            await asyncio.get_running_loop().run_in_executor(None, bus.close)
+        if bus is None:
+            return
+        leave = asyncio.get_running_loop().run_in_executor(None, bus.close)
+        try:
+            await asyncio.wait_for(leave, timeout=max(0.0, deadline_s - time.monotonic()))
+        except TimeoutError:
+            log.warning("shutdown: the channel bus did not close in time; left it")
 
     # -- the frame hooks ------------------------------------------------------------------
 
@@ -166,9 +185,10 @@ class SharePart:
             self.engine.set_camera(self._view_of(tick.camera))
             self.engine.set_aircraft(tick.aircraft_m)
 
-    def after_frame(self, time_utc: datetime, frame_mono_s: float) -> None:
-        """After a frame of sim time `time_utc`, begun at `frame_mono_s` (monotonic): a master
-        ticks that pair (and sends its state when it changed or is due again)."""
+    def after_frame(self, frame: PublishedFrame) -> None:
+        """After a frame: a master ticks its sim time and the instant it began (not the later
+        moment of publishing), and sends its state when it changed or is due again."""
+        time_utc, frame_mono_s = frame.state.time_utc, frame.started_s
         self._frames += 1
         self._last_frame = (frame_mono_s, time_utc)
         if self.role != "master" or self._bus is None:
@@ -197,14 +217,14 @@ class SharePart:
             return None
         if method in WEATHER_COMMANDS:
             return (
-                f"{method}: this daemon is channel {self.name!r} of a shared sky; the weather "
-                f"and the clock belong to the sky master at zenoh:{self.endpoint}"
+                f"{method}: this daemon is channel {self.channel_name!r} of a shared sky; the "
+                f"weather and the clock belong to the sky master at zenoh:{self.endpoint}"
             )
         tick = self._follower.latest
         if method == "set_camera" and tick is not None and tick.camera is not None:
             return (
-                f"set_camera: channel {self.name!r} shows the master's shared camera turned by "
-                "its view offset; set the camera on the master"
+                f"set_camera: channel {self.channel_name!r} shows the master's shared camera "
+                "turned by its view offset; set the camera on the master"
             )
         return None
 
@@ -217,7 +237,7 @@ class SharePart:
         return time.monotonic() - self._tick_at <= MASTER_SILENT_S
 
     def status(self) -> dict[str, Any]:
-        """`sky_id`, `channel` and `sim_clock` for `status`."""
+        """`sky_id`, `channel` and `sim_clock` for `status` (before start, no sky: None)."""
         now = time.monotonic()
         offset = self._follower.offset_s
         tick = self._follower.latest
@@ -229,7 +249,7 @@ class SharePart:
         return {
             "sky_id": None if state is None else sky_id(state),
             "channel": {
-                "name": self.name if self.shared else None,
+                "name": self.channel_name if self.shared else None,
                 "role": self.role,
                 "site": self.site if self.shared else None,
                 "endpoint": self.endpoint or None,
@@ -252,6 +272,8 @@ class SharePart:
         """This daemon's sim time at a local monotonic reading."""
         if self.role == "channel":
             return self._follower.time_at(local_s)
+        if self._engine is None:
+            return None
         sky = self.engine.shared()
         at = self._last_frame
         if at is None:
@@ -261,7 +283,9 @@ class SharePart:
 
     # -- a master -------------------------------------------------------------------------
 
-    def _own_state(self) -> SkyState:
+    def _own_state(self) -> SkyState | None:
+        if self._engine is None:
+            return None
         sky = self.engine.shared()
         return _sky_state(self.site, self._master_id, self._sequence, sky)
 
@@ -407,22 +431,23 @@ class SharePart:
             if bus is None:
                 continue
             lag = self.status()["channel"]["lag_ms"]
-            health = Health(self.site, self.name, self.role, self._fps(), lag or 0.0, self._frames)
+            health = Health(
+                self.site, self.channel_name, self.role, self._fps(), lag or 0.0, self._frames
+            )
             bus.publish_health(pack_data(encode_health(health)))
             if self.role == "master":
                 self._publish_state(time.monotonic())
 
     def _view_of(self, shared: Camera) -> Camera:
-        own = self._own_camera
         view = turned(shared, *self._view_offset)
         return Camera(
             position_m=view.position_m,
             heading_deg=view.heading_deg,
             pitch_deg=view.pitch_deg,
             roll_deg=view.roll_deg,
-            fov_deg=self._fov_deg or own.fov_deg,
-            width_px=own.width_px,
-            height_px=own.height_px,
+            fov_deg=self._fov_deg,
+            width_px=self._size_px[0],
+            height_px=self._size_px[1],
         )
 
     def _drop(self, what: str, exc: Exception) -> None:
