@@ -325,6 +325,7 @@ def test_only_allowed_hosts_are_heard(tmp_path: Path) -> None:
 
 def test_a_hosts_first_weather_replaces_the_sky_at_once_later_ones_move() -> None:
     from wxsky.app.cigi_part import CigiPart
+    from wxsky.app.parts import PartContext
     from wxsky.engine.stages import SkyEngine
     from wxsky.scene.camera import Camera
     from wxsky.scene.layout import SceneSettings
@@ -335,9 +336,8 @@ def test_a_hosts_first_weather_replaces_the_sky_at_once_later_ones_move() -> Non
     engine = SkyEngine(
         WeatherState(), Camera((0.0, 0.0, 500.0)), SceneSettings(), rates=TransitionRates()
     )
-    part = CigiPart(
-        engine, CigiSection(), publish_target=lambda: None, set_camera=lambda p: p, clock_rate=1.0
-    )
+    part = CigiPart(CigiSection(), clock_rate=1.0)
+    asyncio.run(part.start(PartContext(engine, set_camera=lambda p: p)))  # no sockets to open
     deck = (CloudLayer(8.0, 900.0, 1500.0, CloudType.STRATUS),)
     part.cigi_weather(WeatherPatch(source=Source.CIGI, layers=deck))
     assert engine.state.layers == deck

@@ -6,6 +6,9 @@ What a host sets lands where the other inputs' changes land: the weather in the 
 of the precedence stack (`engine.apply`), the camera as `set_camera` places it (a far place
 becomes a new site), the clock as `set_time` sets it. The answers to Environmental Conditions
 Requests come from the applied weather and the very clouds on show (`scene.conditions`).
+
+A daemon part (`parts.py`): Start of Frame goes out after each published frame, and the
+source sends then too.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from collections.abc import Callable, Sequence
 from datetime import datetime
 from typing import Any
 
+from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.errors import WxskyError
 from wxsky.inputs.cigi_link import (
@@ -44,25 +48,27 @@ log = logging.getLogger("wxsky.app.cigi")
 EXTERNAL_VIEW_M = 10.0
 
 
-class CigiPart:
+class CigiPart(Part):
+    name = "CIGI"
+
+    # Given at start (`PartContext`): a host is heard only after that.
+    _engine: SkyEngine
+    _publish_target: Callable[[], None]
+    _set_camera: Callable[[dict[str, Any]], Any]
+
     def __init__(
         self,
-        engine: SkyEngine,
         section: CigiSection,
         *,
-        publish_target: Callable[[], None],
-        set_camera: Callable[[dict[str, Any]], Any],
         clock_rate: float,
         listen: Sequence[str] = (),
         send_to: Sequence[str] = (),
         blended: Callable[[], Sequence[StationWeather]] = tuple,
         region_slots: int = 0,
     ) -> None:
-        """`blended` gives the METAR stations blended into the weather now; with
-        `region_slots` (the most that can be blended) the source sends them as regions."""
-        self._engine = engine
-        self._publish_target = publish_target
-        self._set_camera = set_camera
+        """`listen`, `send_to`: the command line's, besides the section's. `blended` gives the
+        METAR stations blended into the weather now; with `region_slots` (the most that can be
+        blended) the source sends them as regions."""
         self._clock_rate = clock_rate
         self._warn = RateLimitedLog(log)
         host = (
@@ -85,11 +91,20 @@ class CigiPart:
         self._blended = blended
         self._region_slots = region_slots
         self._started = False
+        self._host_frames: list[int | None] = [None] * len(self.igs)
 
-    def stats(self) -> list[tuple[str, InputStats]]:
-        return [(ig.name, ig.stats) for ig in self.igs] + [(s.name, s.stats) for s in self._senders]
+    @property
+    def listens(self) -> bool:
+        """Whether a host's weather comes in (as an image generator)."""
+        return bool(self.igs)
 
-    async def start(self) -> None:
+    def inputs(self) -> list[InputStats]:
+        return [ig.stats for ig in self.igs] + [s.stats for s in self._senders]
+
+    async def start(self, ctx: PartContext) -> None:
+        self._engine = ctx.engine
+        self._publish_target = ctx.publish_target
+        self._set_camera = ctx.set_camera
         for ig in self.igs:
             await ig.start()
         loop = asyncio.get_running_loop()
@@ -98,7 +113,7 @@ class CigiPart:
             log.info("CIGI source sending to %s", sender.name)
         self._started = True
 
-    def close(self) -> None:
+    async def close(self, deadline_s: float) -> None:
         for ig in self.igs:
             ig.close()
         if self._started:
@@ -109,27 +124,27 @@ class CigiPart:
             sender.sock.close()
         self._started = False
 
-    def host_frames(self) -> list[int | None]:
-        """Each listener's last host frame, taken before a frame is drawn: the frame applies
+    def before_frame(self) -> None:
+        """Each listener's last host frame, taken before a frame is made: the frame applies
         what had arrived by then."""
-        return [ig.last_host_frame for ig in self.igs]
+        self._host_frames = [ig.last_host_frame for ig in self.igs]
 
-    def frame_published(
-        self, frame_number: int, host_frames: Sequence[int | None], state: WeatherState
-    ) -> None:
-        for ig, host_frame in zip(self.igs, host_frames, strict=True):
-            ig.start_of_frame(frame_number, host_frame)
+    def after_frame(self, frame: PublishedFrame) -> None:
+        for ig, host_frame in zip(self.igs, self._host_frames, strict=True):
+            ig.start_of_frame(frame.number, host_frame)
         now = time.monotonic()
         for sender in self._senders:
             if now - sender.sent_at >= self._send_period_s:
                 regions = self._blended() if self._region_slots else ()
-                sender.send(state, self._byte_order, now, regions, self._region_slots)
+                sender.send(frame.state, self._byte_order, now, regions, self._region_slots)
 
-    def refresh(self) -> None:
+    def status(self) -> dict[str, Any]:
+        """No keys of its own: brings its inputs' detail up to date."""
         for ig in self.igs:
             ig.refresh_detail()
         for sender in self._senders:
             sender.refresh_detail()
+        return {}
 
     # -- CigiHandler: what a host's datagram changes -------------------------------------
 

@@ -179,20 +179,17 @@ class Daemon:
                 raise ConfigError(f"two inputs are named {link.name!r}; give one a 'name'")
             self.inputs[link.name] = link.stats
         self._cigi = CigiPart(
-            self.engine,
             config.cigi,
-            publish_target=self._publish_target,
-            set_camera=self._set_camera,
             clock_rate=config.clock.rate,
             listen=cigi,
             send_to=cigi_send,
             blended=self._blended_stations,
             region_slots=config.metar.blend_stations if config.metar.blend_stations > 1 else 0,
         )
-        for name, stats in self._cigi.stats():
-            if name in self.inputs:
-                raise ConfigError(f"two inputs are named {name!r}")
-            self.inputs[name] = stats
+        for stats in self._cigi.inputs():
+            if stats.name in self.inputs:
+                raise ConfigError(f"two inputs are named {stats.name!r}")
+            self.inputs[stats.name] = stats
         self._flightgear = FlightGearPart(
             self.engine,
             config.flightgear,
@@ -219,7 +216,7 @@ class Daemon:
                     f"it cannot also read {', '.join(inputs)} (give them to the master)"
                 )
         # The parts the daemon walks in each phase, in this order (`parts.py`).
-        self.parts: list[Part] = [self._share]
+        self.parts: list[Part] = [self._cigi, self._share]
         self._target_version = -1
         self._had_feed_weather = False
         self.frames_published = 0
@@ -298,7 +295,6 @@ class Daemon:
         for feed in self._feeds:
             self._feed_tasks.append(asyncio.create_task(feed.run_supervised(self._stop)))
             log.info("METAR feed %s", feed.source.name)
-        await self._cigi.start()
         await self._flightgear.start()
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
@@ -325,7 +321,6 @@ class Daemon:
         shown_ring = None
         while not self._stop.is_set():
             now = loop.time()
-            host_frames = self._cigi.host_frames()  # what this frame has applied
             for part in self.parts:
                 part.before_frame()
             # The scene is built on the render thread too: a ring build takes long enough on a
@@ -337,7 +332,6 @@ class Daemon:
             self._publish_target()
             self._count_frame()
             self._broadcast_frame(plan, meta)
-            self._cigi.frame_published(meta.frame_number, host_frames, plan.state)
             self._flightgear.frame_published(plan.state)
             frame = PublishedFrame(meta.frame_number, plan.state, now)
             for part in self.parts:
@@ -377,7 +371,6 @@ class Daemon:
             self._feed_tasks = []
         for feed in self._feeds:
             feed.close()
-        self._cigi.close()
         self._flightgear.close()
         if self._links:
             await self._close_links(max(0.05, timeout / 4))
@@ -627,7 +620,6 @@ class Daemon:
         return geodetic_from_enu(obs.lat_deg, obs.lon_deg, east, north)
 
     def status(self) -> dict[str, Any]:
-        self._cigi.refresh()
         # The parts' first: one may refresh the detail of its inputs.
         own: dict[str, Any] = {}
         for part in self.parts:
