@@ -7,6 +7,7 @@ itself (tests/test_flightgear_fgfs.py, when it is installed)."""
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import dataclasses
 import socket
@@ -229,6 +230,7 @@ def test_a_far_pose_makes_a_new_site_on_flightgears_ground_and_its_clock_can_rul
     clock = flightgear, FlightGear's UTC."""
     from wxsky.app.control import camera_from_params
     from wxsky.app.flightgear_part import FlightGearPart
+    from wxsky.app.parts import PartContext
     from wxsky.engine.stages import SkyEngine
     from wxsky.protocols.flightgear import parse_pose
     from wxsky.scene.camera import Camera
@@ -241,7 +243,8 @@ def test_a_far_pose_makes_a_new_site_on_flightgears_ground_and_its_clock_can_rul
         def set_camera(params: dict[str, Any]) -> None:
             e.set_camera(camera_from_params(e, params, (960, 540)))
 
-        part = FlightGearPart(e, FlightGearSection(clock="flightgear"), set_camera=set_camera)
+        part = FlightGearPart(FlightGearSection(clock="flightgear"))
+        asyncio.run(part.start(PartContext(e, set_camera=set_camera)))  # no sockets to open
         pose = parse_pose(GOOD).pose
         assert pose is not None
         part._on_pose(pose)
@@ -253,7 +256,7 @@ def test_a_far_pose_makes_a_new_site_on_flightgears_ground_and_its_clock_can_rul
         assert (cam.heading_deg, cam.fov_deg) == (pytest.approx(0.0), 55.0)
         assert e.state.time_utc == pose.time_utc
         assert e.shared().aircraft_m is None  # the pilot's eye: no split
-        assert part.stats() == []  # no sockets asked for: no inputs to list
+        assert part.inputs() == []  # no sockets asked for: no inputs to list
         # A chase view 100 m south of the aircraft and 100 ft below: the camera there, looking
         # at the aircraft, which is where the near layer is split.
         chase = GOOD.replace(

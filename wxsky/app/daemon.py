@@ -190,15 +190,9 @@ class Daemon:
             if stats.name in self.inputs:
                 raise ConfigError(f"two inputs are named {stats.name!r}")
             self.inputs[stats.name] = stats
-        self._flightgear = FlightGearPart(
-            self.engine,
-            config.flightgear,
-            set_camera=self._set_camera,
-            props=flightgear,
-            pose=flightgear_pose,
-        )
-        for name, stats in self._flightgear.stats():
-            self.inputs[name] = stats
+        self._flightgear = FlightGearPart(config.flightgear, props=flightgear, pose=flightgear_pose)
+        for stats in self._flightgear.inputs():
+            self.inputs[stats.name] = stats
         self._share = SharePart(config)
         if self._share.role == "channel":
             inputs = [
@@ -216,7 +210,7 @@ class Daemon:
                     f"it cannot also read {', '.join(inputs)} (give them to the master)"
                 )
         # The parts the daemon walks in each phase, in this order (`parts.py`).
-        self.parts: list[Part] = [self._cigi, self._share]
+        self.parts: list[Part] = [self._cigi, self._flightgear, self._share]
         self._target_version = -1
         self._had_feed_weather = False
         self.frames_published = 0
@@ -295,7 +289,6 @@ class Daemon:
         for feed in self._feeds:
             self._feed_tasks.append(asyncio.create_task(feed.run_supervised(self._stop)))
             log.info("METAR feed %s", feed.source.name)
-        await self._flightgear.start()
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
             link.start(mailbox.post)
@@ -332,7 +325,6 @@ class Daemon:
             self._publish_target()
             self._count_frame()
             self._broadcast_frame(plan, meta)
-            self._flightgear.frame_published(plan.state)
             frame = PublishedFrame(meta.frame_number, plan.state, now)
             for part in self.parts:
                 part.after_frame(frame)
@@ -371,7 +363,6 @@ class Daemon:
             self._feed_tasks = []
         for feed in self._feeds:
             feed.close()
-        self._flightgear.close()
         if self._links:
             await self._close_links(max(0.05, timeout / 4))
         if self._server is not None:

@@ -6,16 +6,18 @@ to FlightGear's props server, so FlightGear sees wxsky's transitions as they hap
 
 The sockets live in `inputs/flightgear_link.py` on threads of their own; a pose is handed to
 the event loop, where the camera is set as `set_camera` sets it (a far place becomes a new
-site), so nothing here ever waits for FlightGear.
+site), so nothing here ever waits for FlightGear. A daemon part (`parts.py`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
+from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.engine.stages import SkyEngine
 from wxsky.errors import ConfigError
 from wxsky.inputs.cigi_link import parse_udp
@@ -24,27 +26,25 @@ from wxsky.inputs.stats import InputStats
 from wxsky.protocols.flightgear import FgPose
 from wxsky.settings.config import FlightGearSection
 from wxsky.weather.geo import enu_from_geodetic
-from wxsky.weather.state import Source, WeatherState
+from wxsky.weather.state import Source
 
 log = logging.getLogger("wxsky.app.flightgear")
 
 CLOCK_SLACK_S = 1.0  # FlightGear's clock is taken when it is this far from wxsky's
 
 
-class FlightGearPart:
+class FlightGearPart(Part):
+    name = "FlightGear"
+
+    # Given at start (`PartContext`): a pose arrives only after that.
+    engine: SkyEngine
+    _set_camera: Callable[[dict[str, Any]], Any]
+
     def __init__(
-        self,
-        engine: SkyEngine,
-        section: FlightGearSection,
-        *,
-        set_camera: Callable[[dict[str, Any]], Any],
-        props: str | None = None,
-        pose: str | None = None,
+        self, section: FlightGearSection, *, props: str | None = None, pose: str | None = None
     ) -> None:
         """`props`, `pose`: the command line's, over the section's."""
-        self.engine = engine
         self.section = section
-        self._set_camera = set_camera
         self.props = props or section.props
         self.pose_at = pose or section.pose
         self._props_addr = parse_tcp(self.props, "--flightgear") if self.props else None
@@ -55,7 +55,7 @@ class FlightGearPart:
         self._weather_stats = InputStats("flightgear:weather", "flightgear", ok=False)
 
     @property
-    def follows_pose(self) -> bool:
+    def holds_site(self) -> bool:
         """FlightGear's aircraft places the camera: a preset applied at run time brings its
         weather here rather than moving the site to its own place."""
         return self._pose_addr is not None
@@ -64,15 +64,17 @@ class FlightGearPart:
     def enabled(self) -> bool:
         return self._props_addr is not None or self._pose_addr is not None
 
-    def stats(self) -> list[tuple[str, InputStats]]:
+    def inputs(self) -> list[InputStats]:
         out = []
         if self._pose_addr is not None:
-            out.append((self._pose_stats.name, self._pose_stats))
+            out.append(self._pose_stats)
         if self._props_addr is not None:
-            out.append((self._weather_stats.name, self._weather_stats))
+            out.append(self._weather_stats)
         return out
 
-    async def start(self) -> None:
+    async def start(self, ctx: PartContext) -> None:
+        self.engine = ctx.engine
+        self._set_camera = ctx.set_camera
         loop = asyncio.get_running_loop()
         if self._pose_addr is not None:
             host, port = self._pose_addr
@@ -94,17 +96,18 @@ class FlightGearPart:
             )
             log.info("FlightGear weather to its props server at tcp:%s:%d", host, port)
 
-    def frame_published(self, state: WeatherState) -> None:
-        """A frame went out with `state` applied: FlightGear gets it (only what changed, at
+    def after_frame(self, frame: PublishedFrame) -> None:
+        """A frame went out: FlightGear gets the weather it applied (only what changed, at
         most every write_interval_s)."""
         if self._weather is not None:
-            self._weather.offer(state)
+            self._weather.offer(frame.state)
 
-    def close(self) -> None:
-        if self._pose is not None:
-            self._pose.close()
-        if self._weather is not None:
-            self._weather.close()
+    async def close(self, deadline_s: float) -> None:
+        """Stop both threads together, waiting for them off the loop until the deadline."""
+        links = [link for link in (self._pose, self._weather) if link is not None]
+        self._pose = self._weather = None
+        wait_s = max(0.0, deadline_s - time.monotonic())
+        await asyncio.gather(*(asyncio.to_thread(link.close, wait_s) for link in links))
 
     def _on_pose(self, pose: FgPose) -> None:
         try:
