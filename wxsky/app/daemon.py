@@ -39,15 +39,14 @@ from wxsky.app.control import (
 )
 from wxsky.app.flightgear_part import FlightGearPart
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.metar_part import MetarFeedsPart
 from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.app.share_part import SharePart
 from wxsky.app.trace import TraceWriter
-from wxsky.engine.stages import FramePlan, SkyEngine, geodetic_from_enu
+from wxsky.engine.stages import FramePlan, SkyEngine
 from wxsky.errors import ConfigError, RenderError, WxskyError
 from wxsky.inputs.cockpit_link import CockpitLink, Mailbox
 from wxsky.inputs.drivers import open_link
-from wxsky.inputs.feed_sources import open_source
-from wxsky.inputs.metar_input import MetarFeedInput, MetarSettings
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog, clip
 from wxsky.output.frame_meta import FrameMeta
@@ -59,7 +58,6 @@ from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M
 from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
-from wxsky.weather.stations import StationWeather
 
 log = logging.getLogger("wxsky.app.daemon")
 
@@ -168,8 +166,9 @@ class Daemon:
             "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
             "control": InputStats("control", "control"),
         }
-        self._feeds = [self._feed_input(spec) for spec in (*config.metar.feeds, *(feeds or ()))]
-        self._feed_tasks: list[asyncio.Task[None]] = []
+        self._feeds = MetarFeedsPart(config.metar, (*config.metar.feeds, *(feeds or ())))
+        for stats in self._feeds.inputs():
+            self.inputs[stats.name] = stats
         self._links: list[CockpitLink] = [
             *(open_link("serial", section) for section in (*config.serial, *serial)),
             *(open_link("can", section) for section in (*config.can, *can)),
@@ -183,7 +182,7 @@ class Daemon:
             clock_rate=config.clock.rate,
             listen=cigi,
             send_to=cigi_send,
-            blended=self._blended_stations,
+            blended=self._feeds.blended,
             region_slots=config.metar.blend_stations if config.metar.blend_stations > 1 else 0,
         )
         for stats in self._cigi.inputs():
@@ -198,7 +197,7 @@ class Daemon:
             inputs = [
                 name
                 for name, given in (
-                    ("METAR feeds", self._feeds),
+                    ("METAR feeds", self._feeds.feeds),
                     ("cockpit links", self._links),
                     ("CIGI", (*config.cigi.listen, *cigi)),
                 )
@@ -210,9 +209,8 @@ class Daemon:
                     f"it cannot also read {', '.join(inputs)} (give them to the master)"
                 )
         # The parts the daemon walks in each phase, in this order (`parts.py`).
-        self.parts: list[Part] = [self._cigi, self._flightgear, self._share]
+        self.parts: list[Part] = [self._feeds, self._cigi, self._flightgear, self._share]
         self._target_version = -1
-        self._had_feed_weather = False
         self.frames_published = 0
         self._frame_times: collections.deque[float] = collections.deque()
         self._started = time.monotonic()
@@ -286,9 +284,6 @@ class Daemon:
         )
         if self.preview_dir is not None:
             log.info("preview: %s", (self.preview_dir / "preview.png").resolve())
-        for feed in self._feeds:
-            self._feed_tasks.append(asyncio.create_task(feed.run_supervised(self._stop)))
-            log.info("METAR feed %s", feed.source.name)
         mailbox = Mailbox(loop, self._apply_cockpit)
         for link in self._links:
             link.start(mailbox.post)
@@ -354,15 +349,6 @@ class Daemon:
         # First, so a ring build in flight gives up while the rest shuts down.
         self.engine.cancel_scene_work()
         await self._close_parts(time.monotonic() + max(0.05, timeout / 4))
-        if self._feed_tasks:
-            _, pending = await asyncio.wait(self._feed_tasks, timeout=max(0.05, timeout / 4))
-            for task in pending:
-                # A fetch blocked in a worker thread (a slow URL) cannot be interrupted.
-                log.warning("shutdown: METAR feed still fetching; abandoned it")
-                task.cancel()
-            self._feed_tasks = []
-        for feed in self._feeds:
-            feed.close()
         if self._links:
             await self._close_links(max(0.05, timeout / 4))
         if self._server is not None:
@@ -537,18 +523,6 @@ class Daemon:
         textures, fds = self._slot_textures.descriptors()
         return textures, fds
 
-    def _feed_input(self, spec: str) -> MetarFeedInput:
-        m = self.config.metar
-        stats = InputStats(f"metar:{spec}", "metar")
-        self.inputs[stats.name] = stats
-        return MetarFeedInput(
-            open_source(spec, timeout_s=m.http_timeout_s),
-            MetarSettings.from_section(m),
-            stats,
-            apply=self._apply_feed_weather,
-            position=self._camera_lat_lon,
-        )
-
     async def _close_parts(self, deadline_s: float) -> None:
         """Every part's `close`, all at once, each given `deadline_s`: one still closing a
         moment after it is logged by name and cut, not waited for."""
@@ -591,24 +565,6 @@ class Daemon:
         if self.engine.target_version != self._target_version:
             self._target_version = self.engine.target_version
             self._server_broadcast("target", weather_to_dict(self.engine.target))
-
-    def _apply_feed_weather(self, patch: WeatherPatch) -> None:
-        self.engine.apply(patch)
-        if not self._had_feed_weather:
-            # The first live weather replaces the start-up preset at once: the preset was only
-            # a stand-in until the feed answered, not a sky to morph out of for minutes.
-            self._had_feed_weather = True
-            self.engine.settle()
-            log.info("first METAR feed weather applied: %s", self.engine.state.summary())
-
-    def _blended_stations(self) -> tuple[StationWeather, ...]:
-        """The METAR stations blended into the weather now (the first feed that blends)."""
-        return next((feed.blended for feed in self._feeds if feed.blended), ())
-
-    def _camera_lat_lon(self) -> tuple[float, float]:
-        obs = self.engine.state.observer
-        east, north, _ = self.engine.camera.position_m
-        return geodetic_from_enu(obs.lat_deg, obs.lon_deg, east, north)
 
     def status(self) -> dict[str, Any]:
         # The parts' first: one may refresh the detail of its inputs.
