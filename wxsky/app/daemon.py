@@ -25,6 +25,7 @@ from typing import Any
 
 from wxsky import __version__
 from wxsky.app.cigi_part import CigiPart
+from wxsky.app.cockpit_part import CockpitPart
 from wxsky.app.control import (
     ControlError,
     apply_metar,
@@ -45,7 +46,6 @@ from wxsky.app.share_part import SharePart
 from wxsky.app.trace import TraceWriter
 from wxsky.engine.stages import FramePlan, SkyEngine
 from wxsky.errors import ConfigError, RenderError, WxskyError
-from wxsky.inputs.cockpit_link import CockpitLink, Mailbox
 from wxsky.inputs.drivers import open_link
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog, clip
@@ -56,7 +56,6 @@ from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M
 from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
-from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
 
 log = logging.getLogger("wxsky.app.daemon")
@@ -169,14 +168,16 @@ class Daemon:
         self._feeds = MetarFeedsPart(config.metar, (*config.metar.feeds, *(feeds or ())))
         for stats in self._feeds.inputs():
             self.inputs[stats.name] = stats
-        self._links: list[CockpitLink] = [
-            *(open_link("serial", section) for section in (*config.serial, *serial)),
-            *(open_link("can", section) for section in (*config.can, *can)),
-        ]
-        for link in self._links:
-            if link.name in self.inputs:
-                raise ConfigError(f"two inputs are named {link.name!r}; give one a 'name'")
-            self.inputs[link.name] = link.stats
+        self._cockpit = CockpitPart(
+            [
+                *(open_link("serial", section) for section in (*config.serial, *serial)),
+                *(open_link("can", section) for section in (*config.can, *can)),
+            ]
+        )
+        for stats in self._cockpit.inputs():
+            if stats.name in self.inputs:
+                raise ConfigError(f"two inputs are named {stats.name!r}; give one a 'name'")
+            self.inputs[stats.name] = stats
         self._cigi = CigiPart(
             config.cigi,
             clock_rate=config.clock.rate,
@@ -198,7 +199,7 @@ class Daemon:
                 name
                 for name, given in (
                     ("METAR feeds", self._feeds.feeds),
-                    ("cockpit links", self._links),
+                    ("cockpit links", self._cockpit.links),
                     ("CIGI", (*config.cigi.listen, *cigi)),
                 )
                 if given
@@ -209,7 +210,13 @@ class Daemon:
                     f"it cannot also read {', '.join(inputs)} (give them to the master)"
                 )
         # The parts the daemon walks in each phase, in this order (`parts.py`).
-        self.parts: list[Part] = [self._feeds, self._cigi, self._flightgear, self._share]
+        self.parts: list[Part] = [
+            self._feeds,
+            self._cockpit,
+            self._cigi,
+            self._flightgear,
+            self._share,
+        ]
         self._target_version = -1
         self.frames_published = 0
         self._frame_times: collections.deque[float] = collections.deque()
@@ -284,10 +291,6 @@ class Daemon:
         )
         if self.preview_dir is not None:
             log.info("preview: %s", (self.preview_dir / "preview.png").resolve())
-        mailbox = Mailbox(loop, self._apply_cockpit)
-        for link in self._links:
-            link.start(mailbox.post)
-            log.info("cockpit input %s (%s)", link.name, link.kind)
         context = PartContext(
             self.engine,
             set_camera=self._set_camera,
@@ -349,8 +352,6 @@ class Daemon:
         # First, so a ring build in flight gives up while the rest shuts down.
         self.engine.cancel_scene_work()
         await self._close_parts(time.monotonic() + max(0.05, timeout / 4))
-        if self._links:
-            await self._close_links(max(0.05, timeout / 4))
         if self._server is not None:
             try:
                 await asyncio.wait_for(self._server.close(), timeout=max(0.05, timeout / 2))
@@ -542,24 +543,6 @@ class Daemon:
             if exc is not None:
                 log.error("shutdown: %s failed to close: %s", closing[task].name, exc)
                 log.debug("%s's close", closing[task].name, exc_info=exc)
-
-    async def _close_links(self, timeout_s: float) -> None:
-        """Stop every cockpit reader thread, together, within the shutdown budget."""
-        links, self._links = self._links, []
-        per_link_s = max(0.05, timeout_s - 0.02)
-        try:
-            await asyncio.wait_for(
-                asyncio.gather(*(asyncio.to_thread(link.close, per_link_s) for link in links)),
-                timeout=timeout_s + 0.1,
-            )
-        except TimeoutError:
-            log.warning("shutdown: cockpit readers did not stop in time; abandoned them")
-
-    def _apply_cockpit(self, update: CockpitUpdate) -> None:
-        """Runs on the loop (posted by a reader thread): the target, and the stream's copy
-        of it, change at once rather than at the next frame."""
-        self.engine.apply_cockpit(update)
-        self._publish_target()
 
     def _publish_target(self) -> None:
         if self.engine.target_version != self._target_version:
