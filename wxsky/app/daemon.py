@@ -24,8 +24,6 @@ from types import FrameType
 from typing import Any
 
 from wxsky import __version__
-from wxsky.app.cigi_part import CigiPart
-from wxsky.app.cockpit_part import CockpitPart
 from wxsky.app.control import (
     ControlError,
     apply_metar,
@@ -38,15 +36,12 @@ from wxsky.app.control import (
     set_aircraft,
     set_time,
 )
-from wxsky.app.flightgear_part import FlightGearPart
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
-from wxsky.app.metar_part import MetarFeedsPart
+from wxsky.app.part_factory import parts_from_config
 from wxsky.app.parts import Part, PartContext, PublishedFrame
-from wxsky.app.share_part import SharePart
 from wxsky.app.trace import TraceWriter
 from wxsky.engine.stages import FramePlan, SkyEngine
 from wxsky.errors import ConfigError, RenderError, WxskyError
-from wxsky.inputs.drivers import open_link
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog, clip
 from wxsky.output.frame_meta import FrameMeta
@@ -55,7 +50,7 @@ from wxsky.output.transport import Address, ControlServer, WithFds, default_addr
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M
-from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
+from wxsky.settings.config import DaemonConfig
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
 
 log = logging.getLogger("wxsky.app.daemon")
@@ -101,17 +96,14 @@ class Daemon:
         self,
         config: DaemonConfig,
         patches: list[WeatherPatch],
+        parts: Sequence[Part] | None = None,
+        *,
         address: Address | None = None,
         preview_dir: Path | None = None,
-        feeds: Sequence[str] = (),
-        serial: Sequence[SerialInputSection] = (),
-        can: Sequence[CanInputSection] = (),
         trace_path: Path | None = None,
-        cigi: Sequence[str] = (),
-        cigi_send: Sequence[str] = (),
-        flightgear: str | None = None,
-        flightgear_pose: str | None = None,
     ) -> None:
+        """`parts`: what runs beside the frames (`parts.py`), walked in this order; None for
+        the config's own (`parts_from_config`)."""
         self.config = config
         self._trace_path = trace_path
         self._trace: TraceWriter | None = None
@@ -165,58 +157,13 @@ class Daemon:
             "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
             "control": InputStats("control", "control"),
         }
-        self._feeds = MetarFeedsPart(config.metar, (*config.metar.feeds, *(feeds or ())))
-        for stats in self._feeds.inputs():
-            self.inputs[stats.name] = stats
-        self._cockpit = CockpitPart(
-            [
-                *(open_link("serial", section) for section in (*config.serial, *serial)),
-                *(open_link("can", section) for section in (*config.can, *can)),
-            ]
-        )
-        for stats in self._cockpit.inputs():
-            if stats.name in self.inputs:
-                raise ConfigError(f"two inputs are named {stats.name!r}; give one a 'name'")
-            self.inputs[stats.name] = stats
-        self._cigi = CigiPart(
-            config.cigi,
-            clock_rate=config.clock.rate,
-            listen=cigi,
-            send_to=cigi_send,
-            blended=self._feeds.blended,
-            region_slots=config.metar.blend_stations if config.metar.blend_stations > 1 else 0,
-        )
-        for stats in self._cigi.inputs():
-            if stats.name in self.inputs:
-                raise ConfigError(f"two inputs are named {stats.name!r}")
-            self.inputs[stats.name] = stats
-        self._flightgear = FlightGearPart(config.flightgear, props=flightgear, pose=flightgear_pose)
-        for stats in self._flightgear.inputs():
-            self.inputs[stats.name] = stats
-        self._share = SharePart(config)
-        if self._share.role == "channel":
-            inputs = [
-                name
-                for name, given in (
-                    ("METAR feeds", self._feeds.feeds),
-                    ("cockpit links", self._cockpit.links),
-                    ("CIGI", (*config.cigi.listen, *cigi)),
-                )
-                if given
-            ]
-            if inputs:
-                raise ConfigError(
-                    f"channel {config.channel.name!r} takes its weather from the sky master; "
-                    f"it cannot also read {', '.join(inputs)} (give them to the master)"
-                )
-        # The parts the daemon walks in each phase, in this order (`parts.py`).
-        self.parts: list[Part] = [
-            self._feeds,
-            self._cockpit,
-            self._cigi,
-            self._flightgear,
-            self._share,
-        ]
+        # The parts the daemon walks in each phase, in this order, and their inputs.
+        self.parts = list(parts) if parts is not None else parts_from_config(config)
+        for part in self.parts:
+            for stats in part.inputs():
+                if stats.name in self.inputs:
+                    raise ConfigError(f"two inputs are named {stats.name!r}; give one a 'name'")
+                self.inputs[stats.name] = stats
         self._target_version = -1
         self.frames_published = 0
         self._frame_times: collections.deque[float] = collections.deque()
@@ -351,6 +298,8 @@ class Daemon:
         self._stop.set()
         # First, so a ring build in flight gives up while the rest shuts down.
         self.engine.cancel_scene_work()
+        # Then the parts, together: a master's channels see the bus go at once and keep the
+        # last sky; readers and feeds stop.
         await self._close_parts(time.monotonic() + max(0.05, timeout / 4))
         if self._server is not None:
             try:
@@ -383,6 +332,34 @@ class Daemon:
         if self._trace is not None:
             self._trace.close()
         log.info("stopped after %d frames", self.frames_published)
+
+    # -- the parts --------------------------------------------------------------------
+
+    async def _close_parts(self, deadline_s: float) -> None:
+        """Every part's `close`, all at once, each given `deadline_s`: one still closing a
+        moment after it is logged by name and cut, not waited for."""
+        closing = {
+            asyncio.create_task(part.close(deadline_s), name=f"close {part.name}"): part
+            for part in self.parts
+        }
+        if not closing:
+            return
+        wait_s = max(0.0, deadline_s - time.monotonic()) + CLOSE_GRACE_S
+        done, pending = await asyncio.wait(closing, timeout=wait_s)
+        for task in pending:
+            log.warning("shutdown: %s did not close in time; cut it", closing[task].name)
+            task.cancel()
+        for task in done:
+            exc = None if task.cancelled() else task.exception()
+            if exc is not None:
+                log.error("shutdown: %s failed to close: %s", closing[task].name, exc)
+                log.debug("%s's close", closing[task].name, exc_info=exc)
+
+    def _refusal(self, method: str) -> str | None:
+        return next((r for part in self.parts if (r := part.refusal(method)) is not None), None)
+
+    def _holds_site(self) -> bool:
+        return any(part.holds_site for part in self.parts)
 
     # -- render thread ----------------------------------------------------------------
 
@@ -463,12 +440,6 @@ class Daemon:
             )
             raise
 
-    def _refusal(self, method: str) -> str | None:
-        return next((r for part in self.parts if (r := part.refusal(method)) is not None), None)
-
-    def _holds_site(self) -> bool:
-        return any(part.holds_site for part in self.parts)
-
     def _set_camera(self, params: dict[str, Any]) -> dict[str, Any]:
         out = self.config.output
         camera = camera_from_params(self.engine, params, (out.max_width, out.max_height))
@@ -524,26 +495,6 @@ class Daemon:
         textures, fds = self._slot_textures.descriptors()
         return textures, fds
 
-    async def _close_parts(self, deadline_s: float) -> None:
-        """Every part's `close`, all at once, each given `deadline_s`: one still closing a
-        moment after it is logged by name and cut, not waited for."""
-        closing = {
-            asyncio.create_task(part.close(deadline_s), name=f"close {part.name}"): part
-            for part in self.parts
-        }
-        if not closing:
-            return
-        wait_s = max(0.0, deadline_s - time.monotonic()) + CLOSE_GRACE_S
-        done, pending = await asyncio.wait(closing, timeout=wait_s)
-        for task in pending:
-            log.warning("shutdown: %s did not close in time; cut it", closing[task].name)
-            task.cancel()
-        for task in done:
-            exc = None if task.cancelled() else task.exception()
-            if exc is not None:
-                log.error("shutdown: %s failed to close: %s", closing[task].name, exc)
-                log.debug("%s's close", closing[task].name, exc_info=exc)
-
     def _publish_target(self) -> None:
         if self.engine.target_version != self._target_version:
             self._target_version = self.engine.target_version
@@ -554,7 +505,7 @@ class Daemon:
         own: dict[str, Any] = {}
         for part in self.parts:
             own.update(part.status())
-        return {
+        status = {
             "version": __version__,
             "uptime_s": time.monotonic() - self._started,
             "frames_published": self.frames_published,
@@ -575,8 +526,10 @@ class Daemon:
                 or (self._export_probe.reason if self._export_probe is not None else None),
                 "exported": self._slot_textures is not None,
             },
-            **own,
         }
+        for key, value in own.items():
+            status.setdefault(key, value)  # a part adds keys; the daemon's stay its own
+        return status
 
     def scene_info(self) -> dict[str, Any]:
         ring = self.engine.ring

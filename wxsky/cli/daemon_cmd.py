@@ -334,6 +334,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     import asyncio
 
     from wxsky.app.daemon import Daemon, initial_patches
+    from wxsky.app.part_factory import PartOptions, parts_from_config
     from wxsky.output.transport import parse_address
     from wxsky.settings.config import load_config
 
@@ -341,18 +342,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
     setup_logging(log_level(args, config.daemon.log_level))
     patches = initial_patches(config, preset=args.preset, metar=args.metar)
     address = parse_address(args.control) if args.control else None
-    daemon = Daemon(
-        config,
-        patches,
-        address=address,
-        preview_dir=args.preview,
-        feeds=args.metar_feed,
+    options = PartOptions(
+        metar_feeds=args.metar_feed,
         serial=args.serial,
         can=args.can,
         cigi=args.cigi,
         cigi_send=args.cigi_send,
         flightgear=args.flightgear,
         flightgear_pose=args.flightgear_pose,
+    )
+    daemon = Daemon(
+        config,
+        patches,
+        parts_from_config(config, options),
+        address=address,
+        preview_dir=args.preview,
         trace_path=args.trace,
     )
     return asyncio.run(daemon.run())
