@@ -105,6 +105,18 @@ class Daemon:
         """`parts`: what runs beside the frames (`parts.py`), walked in this order; None for
         the config's own (`parts_from_config`)."""
         self.config = config
+        # The parts the daemon walks in each phase, in this order, and their inputs: checked
+        # before the sky is made.
+        self.parts = list(parts) if parts is not None else parts_from_config(config)
+        self.inputs = {
+            "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
+            "control": InputStats("control", "control"),
+        }
+        for part in self.parts:
+            for stats in part.inputs():
+                if stats.name in self.inputs:
+                    raise ConfigError(f"two inputs are named {stats.name!r}; give one a 'name'")
+                self.inputs[stats.name] = stats
         self._trace_path = trace_path
         self._trace: TraceWriter | None = None
         self.address = address or (
@@ -153,17 +165,6 @@ class Daemon:
         # The first frame's near layer, made before the loop starts, and the frame itself,
         # which the render thread draws once when it starts (`Renderer.warm_up`).
         self._first_frame = self.engine.warm_up()
-        self.inputs = {
-            "initial": InputStats(f"initial:{_source_name(patches)}", "preset", len(patches)),
-            "control": InputStats("control", "control"),
-        }
-        # The parts the daemon walks in each phase, in this order, and their inputs.
-        self.parts = list(parts) if parts is not None else parts_from_config(config)
-        for part in self.parts:
-            for stats in part.inputs():
-                if stats.name in self.inputs:
-                    raise ConfigError(f"two inputs are named {stats.name!r}; give one a 'name'")
-                self.inputs[stats.name] = stats
         self._target_version = -1
         self.frames_published = 0
         self._frame_times: collections.deque[float] = collections.deque()
