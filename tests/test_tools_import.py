@@ -1,17 +1,20 @@
-"""Every tool in tools/ starts as a user starts it and sits in a folder by its purpose: a rename
-in the package or a move breaks a tool here, not the day someone next runs it
-(tools/gallery/build_gallery.py imported a name the sky module had given up)."""
+"""Every tool in tools/ starts as a user starts it, sits in a folder by its purpose and has its
+line in tools/README.md: a rename in the package or a move breaks a tool here, not the day
+someone next runs it (tools/gallery/build_gallery.py imported a name the sky module had given
+up)."""
 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 TOOLS = ROOT / "tools"
-# A new tool goes in one of these (or in a new folder named here).
+# tools/README.md has a section for each; a new tool goes in one of these (or a new folder here
+# and there).
 FOLDERS = ("bench", "emulators", "fuzz", "gallery", "generate", "soak")
 SCRIPTS = sorted(
     p.relative_to(TOOLS).as_posix() for p in TOOLS.rglob("*.py") if p.name != "__init__.py"
@@ -76,6 +79,17 @@ def test_every_tool_is_in_a_folder_by_purpose() -> None:
     # Tests load tools by folder and name; a name in two folders would read as the wrong one.
     names = [rel.split("/")[1] for rel in SCRIPTS]
     assert sorted(set(names)) == sorted(names)
+
+
+def test_the_readme_has_one_line_for_each_tool() -> None:
+    readme = (TOOLS / "README.md").read_text()
+    # A tool's line is a list item that starts with its path (and, for a command, how to run it).
+    listed = re.findall(r"^- `tools/([a-z_]+/[a-z_0-9]+\.py)", readme, flags=re.MULTILINE)
+    missing = sorted(set(SCRIPTS) - set(listed))
+    assert missing == [], "tools/README.md has no line for these tools"
+    assert sorted(set(listed) - set(SCRIPTS)) == [], "tools/README.md lists tools that are gone"
+    assert len(listed) == len(set(listed)), "tools/README.md lists a tool twice"
+    assert "- `tools/setup`" in readme
 
 
 def test_every_tool_starts() -> None:
