@@ -1,5 +1,6 @@
 """Station positions shipped with wxsky, for feeds that carry only the report text (NOAA
-tgftp, VATSIM, plain lines). Built from the AWC cache corpora by tools/build_station_table.py."""
+tgftp, VATSIM, plain lines). Built from the AWC cache corpora by
+tools/generate/build_station_table.py."""
 
 from __future__ import annotations
 

@@ -665,7 +665,7 @@ _QUAD_STRIP = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]], np.
 # Per sprite shape: (first vertex, vertices) in the corner buffer, and how the sheet is read.
 # Polygons are for sprites many pixels wide, read trilinearly; quads for sprites a few pixels
 # wide (the far band, impostors), read from one mip level bilinearly: about a fifth less time
-# for those passes, and no difference to the eye side by side (tools/compare_frames.py).
+# for those passes, and no difference to the eye side by side (tools/gallery/compare_frames.py).
 _SHAPES = {
     "polygon": (0, 8, moderngl.LINEAR_MIPMAP_LINEAR),
     "quad": (8, 4, moderngl.LINEAR_MIPMAP_NEAREST),
