@@ -29,6 +29,7 @@ from wxsky.schema import (
     Tuple,
 )
 from wxsky.settings.config import CLOCK_RATE, PRESET_NAME
+from wxsky.weather.metar_clouds import FIELD_ELEVATION_M
 from wxsky.weather.state import ALT_M, LAT_DEG, LON_DEG, Source, parse_time_utc
 
 
@@ -96,8 +97,7 @@ RELEASE = Table({"source": Field(Text(choices=("control", "cockpit")), "control"
 APPLY_METAR = Table(
     {
         "report": Field(Text(max_len=METAR_MAX_CHARS)),
-        # A report's field elevation: any airport on Earth.
-        "field_elevation_m": Field(Number(-500.0, 9000.0, unit="m")),
+        "field_elevation_m": Field(FIELD_ELEVATION_M),
         "year": Field(Number(1, 9999, integer=True)),
         "month": Field(Number(1, 12, integer=True)),
     }
@@ -214,19 +214,21 @@ def release(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
 
 
 def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
+    """The report becomes the METAR source, its clouds over its station's field (the station
+    table's elevation, as a feed's report is read) or over `field_elevation_m`."""
+    from wxsky.inputs.station_table import report_patch
     from wxsky.weather.metar import decode
-    from wxsky.weather.metar_clouds import metar_to_patch
 
     v = checked_params("apply_metar", APPLY_METAR, params)
     if "report" not in v:
         raise ControlError("apply_metar: report must be a string")
-    elevation = v.get("field_elevation_m", engine.state.observer.alt_m)
     # The report names only its day; by default it is the latest such day and time not after
     # the simulated clock, as a report never comes from the future.
     decoded = decode(
         v["report"], year=v.get("year"), month=v.get("month"), now_utc=engine.state.time_utc
     ).require_usable()
-    engine.apply(metar_to_patch(decoded, field_elevation_m=elevation))
+    patch = report_patch(decoded, v.get("field_elevation_m"), flag="field_elevation_m")
+    engine.apply(patch)
     return decoded.station or ""
 
 

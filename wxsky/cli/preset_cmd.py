@@ -16,6 +16,7 @@ from wxsky.cli.common import (
     control_address,
     show_help,
 )
+from wxsky.cli.metar_cmd import add_field_elevation_option, check_field_elevation
 
 
 def add_commands(sub: Subparsers) -> None:
@@ -52,6 +53,7 @@ def add_commands(sub: Subparsers) -> None:
         "--from-running", action="store_true", help="the weather of the running daemon"
     )
     src.add_argument("--from-metar", metavar="REPORT", help="the weather a METAR report states")
+    add_field_elevation_option(save, "--from-metar")
     save.add_argument(
         "--description", metavar="TEXT", help="the preset's description (default: its source)"
     )
@@ -160,19 +162,15 @@ def _cmd_save(args: argparse.Namespace) -> int:
     from datetime import UTC, datetime
 
     from wxsky.errors import PresetError
-    from wxsky.settings.presets import (
-        find_preset,
-        patch_from_metar_text,
-        preset_to_toml,
-        write_user_preset,
-    )
+    from wxsky.settings.presets import find_preset, preset_to_toml, write_user_preset
 
+    elevation_m = check_field_elevation(args, args.from_metar, "--from-metar")
     stamp = f"{datetime.now(UTC):%Y-%m-%d %H:%MZ}"
     notes: list[str] = []
     if args.from_running:
         patch, source, notes = _running_weather(args)
     else:
-        patch = patch_from_metar_text(args.from_metar)
+        patch = _metar_weather(args.from_metar, elevation_m)
         source = f"METAR {' '.join(args.from_metar.split())}"
     description = args.description or f"Saved from {source}"
     text = preset_to_toml(patch, description, comment=f"Written by 'wxsky preset save' {stamp}")
@@ -186,6 +184,17 @@ def _cmd_save(args: argparse.Namespace) -> int:
     hides = " (overrides the builtin preset)" if existing and existing[1] == "builtin" else ""
     print(f"saved preset {args.name!r} to {path}{hides}")
     return 0
+
+
+def _metar_weather(report: str, field_elevation_m: float | None) -> Any:
+    """The weather a METAR report states, its clouds over its station's field as a feed
+    reads the report (or over the field elevation given)."""
+    from wxsky.inputs.station_table import report_patch
+    from wxsky.weather.metar import decode
+
+    # A preset keeps no date, so any month with 31 days lets every report's day decode.
+    metar = decode(report, year=2000, month=1).require_usable()
+    return report_patch(metar, field_elevation_m)
 
 
 def _running_weather(args: argparse.Namespace) -> tuple[Any, str, list[str]]:
