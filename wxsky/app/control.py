@@ -92,8 +92,16 @@ def _camera_table(max_size: tuple[int, int]) -> Table:
 SET_TIME = Table(
     {"time_utc": Field(Custom(_iso_time, "an ISO 8601 time")), "rate": Field(CLOCK_RATE)}
 )
-APPLY_PRESET = Table({"name": Field(PRESET_NAME), "keep_site": Field(Bool())})
-RELEASE = Table({"source": Field(Text(choices=("control", "cockpit")), "control")})
+# `now`: switch the sky at once rather than move it at the [transition] rates.
+APPLY_PRESET = Table(
+    {"name": Field(PRESET_NAME), "keep_site": Field(Bool()), "now": Field(Bool(), False)}
+)
+RELEASE = Table(
+    {
+        "source": Field(Text(choices=("control", "cockpit")), "control"),
+        "now": Field(Bool(), False),
+    }
+)
 APPLY_METAR = Table(
     {
         "report": Field(Text(max_len=METAR_MAX_CHARS)),
@@ -190,7 +198,9 @@ def apply_preset(
     site (the default while a simulator's pose places the camera, e.g. FlightGear's): not its
     site, its seed or its time. Its time is its own site's hour (overcast-stratus's 11:00Z is
     late morning at Zurich and 1 a.m. at Honolulu), and without its seed it is a change of
-    this sky, made through the transition, not a different sky swapped in at once."""
+    this sky, made through the transition, not a different sky swapped in at once. `now`
+    switches to it at once all the same (a preset with its own site and seed always does:
+    that is another sky, not a change of this one)."""
     from wxsky.settings.presets import load_preset
 
     v = checked_params("apply_preset", APPLY_PRESET, params)
@@ -202,15 +212,21 @@ def apply_preset(
     if v.get("keep_site", keep_site):
         patch = dataclasses.replace(patch, observer=None, seed=None, time_utc=None)
     engine.apply(patch)
+    if v["now"]:
+        engine.settle()
     name: str = v["name"]
     return name
 
 
 def release(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
-    """Hand the fields an override holds back to the sources below it."""
+    """Hand the fields an override holds back to the sources below it: the sky moves back
+    at the [transition] rates, or at once with `now`."""
     v = checked_params("release", RELEASE, params)
     choices = {"control": Source.CONTROL, "cockpit": Source.COCKPIT}
-    return {"source": v["source"], "released": list(engine.release(choices[v["source"]]))}
+    released = list(engine.release(choices[v["source"]]))
+    if v["now"]:
+        engine.settle()
+    return {"source": v["source"], "released": released}
 
 
 def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:

@@ -34,15 +34,30 @@ def add_commands(sub: Subparsers) -> None:
     show.set_defaults(func=_cmd_show)
 
     apply = psub.add_parser(
-        "apply", help="apply a preset to the running daemon (held until 'preset release')"
+        "apply",
+        help="apply a preset to the running daemon (held until 'preset release')",
+        description="Apply a preset's weather to the running daemon, held until 'wxsky preset "
+        "release'. The daemon keeps its clock and site, and its sky moves toward the preset's "
+        "weather at the [transition] rates.",
     )
     apply.add_argument("name", help="preset name (looked up by the daemon)")
+    apply.add_argument("--now", action="store_true", help="switch the sky to the preset at once")
+    apply.add_argument(
+        "--site",
+        action="store_true",
+        help="take the preset's place, date and time and cloud seed as well: another sky, "
+        "switched to at once",
+    )
     add_control_option(apply)
     apply.set_defaults(func=_cmd_apply)
 
     release = psub.add_parser(
-        "release", help="hand the fields a preset or control client holds back to METAR/config"
+        "release",
+        help="hand the fields a preset or control client holds back to METAR/config",
+        description="Hand the fields a preset or control client holds back to the METAR feed "
+        "and the config; the sky moves back at the [transition] rates.",
     )
+    release.add_argument("--now", action="store_true", help="switch the sky back at once")
     add_control_option(release)
     release.set_defaults(func=_cmd_release)
 
@@ -129,12 +144,19 @@ def _cmd_apply(args: argparse.Namespace) -> int:
     from wxsky.host.client import ControlClient
 
     address = control_address(args)
+    params = {"name": args.name, "keep_site": not args.site, "now": args.now}
     with ControlClient.connect(address) as client:
-        result = client.call("apply_preset", {"name": args.name})
+        result = client.call("apply_preset", params)
     name = result if isinstance(result, str) else args.name
+    if args.site:
+        how = "switched to it, at its own site, date and time"
+    elif args.now:
+        how = "switched to it at once"
+    else:
+        how = "the sky moves toward it at the [transition] rates"
     print(
-        f"applied preset {name!r} on the daemon at {address}: its fields override METAR "
-        "until 'wxsky preset release'"
+        f"applied preset {name!r} on the daemon at {address}: {how}; its fields override "
+        "METAR until 'wxsky preset release'"
     )
     return 0
 
@@ -144,7 +166,7 @@ def _cmd_release(args: argparse.Namespace) -> int:
 
     address = control_address(args)
     with ControlClient.connect(address) as client:
-        result = client.call("release", {})
+        result = client.call("release", {"now": args.now})
     released = result.get("released") if isinstance(result, dict) else None
     if not isinstance(released, list):
         raise DaemonUnavailable(
@@ -154,7 +176,10 @@ def _cmd_release(args: argparse.Namespace) -> int:
         print(f"nothing to release: the daemon at {address} held no overrides")
     else:
         fields = ", ".join(str(f) for f in released)
-        print(f"released {len(released)} fields ({fields}): back to METAR/config sources")
+        # A preset applied with its own site and seed was another sky: so is the way back.
+        jump = args.now or {"observer", "seed"} & set(released)
+        how = "at once" if jump else "at the [transition] rates"
+        print(f"released {len(released)} fields ({fields}): back to METAR/config sources, {how}")
     return 0
 
 
