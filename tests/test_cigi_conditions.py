@@ -46,15 +46,19 @@ def test_a_point_above_or_below_every_layer_is_never_in_cloud(name: str) -> None
     rng = np.random.default_rng(39)
     heights = outside_heights(state)
     places = rng.uniform(-6000.0, 6000.0, size=(40, 2))
-    for east, north in places:
+    for k, (east, north) in enumerate(places):
         for alt in heights:
-            got = conditions_at(state, drift, (float(east), float(north), alt))
+            point = (float(east), float(north), alt)
+            got = conditions_at(state, drift, point)
             where = f"{name}: ({east:.0f}, {north:.0f}, {alt:.1f} m)"
             assert not got.in_cloud, where
             assert got.visibility_m == state.visibility_m, where
             assert all(w == 0.0 for w in got.cloud_water_gpm3), where
             if state.visibility_m >= FOG_VISIBILITY_M:
                 assert got.humidity_pct <= CLEAR_AIR_MAX_HUMIDITY_PCT, where
+            if k < 3:  # and the frames' camera there is not in cloud, nor veiled
+                seen = _frame(state, drift, point)
+                assert not seen.in_cloud.inside and seen.veil_rgba[3] == 0.0, where
 
 
 def test_the_reported_point_above_a_stratus_deck_is_clear() -> None:
