@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
@@ -68,7 +69,8 @@ class Rig:
         before = ig.stats.messages
         self.frame += 1
         self.host.send([make("ig_control", ig_mode=1, host_frame_number=self.frame), *packets])
-        for _ in range(500):  # the loop reads the datagram: only a hang runs this out
+        deadline = time.monotonic() + 30.0  # the loop reads the datagram: only a hang waits
+        while time.monotonic() < deadline:
             await asyncio.sleep(0.01)
             if ig.stats.messages > before:
                 return
