@@ -2,7 +2,7 @@
 """A CIGI 3.3 host emulator: plays a scripted flight (tools/emulators/cigi_script.py) at a host's
 frame rate against an image generator, wxsky's or any other, and scores what comes back.
 
-    .venv/bin/python tools/emulators/cigi_host.py --to udp:127.0.0.1:8001 [--rate-hz 60] \\
+    .venv/bin/python tools/emulators/cigi_host.py --to udp:127.0.0.1:8000 [--rate-hz 60] \\
         [--seconds S] [--byte-order big|little] [--pcap FILE] [--json]
 
 Every message leads with IG Control (operate, the host frame counter, the last IG frame heard)

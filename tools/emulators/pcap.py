@@ -3,7 +3,7 @@
 for Wireshark/tshark to decode what wxsky's CIGI encoder and the host emulator sent.
 
     from tools.emulators.pcap import Datagram, write_pcap
-    write_pcap(path, [Datagram(0.0, ("127.0.0.1", 8000), ("127.0.0.1", 8001), payload)])
+    write_pcap(path, [Datagram(0.0, ("127.0.0.1", 8001), ("127.0.0.1", 8000), payload)])
 
 The IPv4 header carries a correct checksum; the UDP checksum is 0 ("none", allowed over IPv4),
 so a reader never flags a datagram for it. Only what tshark needs: no IPv6, no fragments.
@@ -35,10 +35,10 @@ SNAPLEN = 65_535
 IPV4_HEADER = struct.Struct(">BBHHHBBH4s4s")
 UDP_HEADER = struct.Struct(">HHHH")
 MAX_PAYLOAD = SNAPLEN - IPV4_HEADER.size - UDP_HEADER.size
-# CIGI ends: a simulation host and an image generator (TEST-NET-1 addresses), on the UDP
-# ports of CCL's example host and dummy IG.
-CIGI_HOST = ("192.0.2.1", 8000)
-CIGI_IG = ("192.0.2.2", 8001)
+# CIGI ends: a simulation host and an image generator (TEST-NET-1 addresses), each on the
+# port it receives on in CCL's example programs: the IG on 8000, the host on 8001.
+CIGI_HOST = ("192.0.2.1", 8001)
+CIGI_IG = ("192.0.2.2", 8000)
 
 
 @dataclass(frozen=True)

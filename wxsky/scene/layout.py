@@ -40,6 +40,7 @@ from wxsky.scene.in_cloud import (
     Locks,
     in_cloud,
     in_cloud_fog,
+    layer_spans,
     lock_facing,
     lock_reach_frac,
 )
@@ -447,7 +448,7 @@ def build_frame(
         if budget.dropped:
             shaded, dropped = SpriteDraw(budget.sprites, budget.rgba), budget.dropped
             drawn_dist = None
-    cloud = in_cloud(near, eye, state.visibility_m, dist)
+    cloud = in_cloud(near, eye, state.visibility_m, dist, spans_m=layer_spans(state.layers))
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud, drawn_dist)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks, drawn_dist)
     front: SpriteDraw | None = None
