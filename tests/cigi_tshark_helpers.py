@@ -1,6 +1,6 @@
 """Wireshark's CIGI dissector as a second opinion on what wxsky sends: the one map from the
 packet table's fields to the tshark fields that show them, and one tshark run over a pcap
-(tools/pcap.py). Shared by tests/test_cigi_tshark.py (every field of every packet) and
+(tools/emulators/pcap.py). Shared by tests/test_cigi_tshark.py (every field of every packet) and
 tests/test_cigi_send.py (what `wxsky cigi send` sends for a daemon's weather)."""
 
 from __future__ import annotations

@@ -552,12 +552,12 @@ def test_round_trip_through_a_virtual_bus() -> None:
 
 
 def test_shipped_dbc_is_the_generated_one() -> None:
-    assert DBC_PATH.read_bytes() == dbc_text().encode("ascii"), "run tools/build_dbc.py"
+    assert DBC_PATH.read_bytes() == dbc_text().encode("ascii"), "run tools/generate/build_dbc.py"
 
 
 def test_build_dbc_check(tmp_path: Path) -> None:
     out = tmp_path / "x.dbc"
-    tool = [sys.executable, str(ROOT / "tools" / "build_dbc.py"), "--out", str(out)]
+    tool = [sys.executable, str(ROOT / "tools" / "generate" / "build_dbc.py"), "--out", str(out)]
     assert subprocess.run([*tool, "--check"], capture_output=True).returncode == 1  # missing
     assert subprocess.run(tool, capture_output=True).returncode == 0
     assert out.read_text(encoding="ascii") == dbc_text()

@@ -433,3 +433,40 @@ def test_an_external_view_splits_the_near_layer_at_the_ownship(daemon: RunningDa
         none = _split_distance(daemon, 0.3)
     assert split == pytest.approx(math.hypot(60.0, 11.0), abs=0.5)
     assert none is None
+
+
+def test_over_a_deck_is_clear_and_answers_carry_the_hosts_layer_ids(daemon: RunningDaemon) -> None:
+    """Issue 39: 100 m above a 600-900 m stratus deck came back as in cloud; and aerosol
+    answers numbered the layers by rank, not by the host's ids."""
+    high = make(
+        "weather_control",
+        layer_id=1,
+        weather_enable=1,
+        cloud_type=9,
+        coverage_pct=40.0,
+        base_elevation_m=3000.0,
+        thickness_m=500.0,
+    )
+    deck = make(
+        "weather_control",
+        layer_id=2,
+        weather_enable=1,
+        cloud_type=10,
+        coverage_pct=100.0,
+        base_elevation_m=600.0,
+        thickness_m=300.0,
+    )
+    body = [p for p in session_body(0.0) if p.key != "weather_control"]
+    with CigiHostSocket(ig_address(daemon)) as host:
+        drive(host, 0.5, "big", [*body, high, deck])
+        above = answers_to(host, 1000.0, 21)
+        inside = answers_to(host, 750.0, 22)
+        # The module's other tests fly under the one-layer deck of session_body.
+        drive(host, 0.3, "big", [*session_body(0.0), make("weather_control", layer_id=2)])
+    assert status(daemon)["target"]["layers"][0]["base_m"] == 1000.0
+    w_above, w_in = above["weather"], inside["weather"]
+    assert w_above["humidity_pct"] < 100 and w_above["visibility_m"] == 25_000.0
+    assert above["aerosol"] == {1: 0.0, 2: 0.0}
+    assert w_in["humidity_pct"] == 100 and w_in["visibility_m"] < 600.0
+    # The deck is the host's layer 2, though it is the lowest.
+    assert inside["aerosol"][2] > 0.0 and inside["aerosol"][1] == 0.0

@@ -42,7 +42,7 @@ from wxsky.weather.state import (
     weather_to_dict,
 )
 
-pcap = load_tool("pcap")
+pcap = load_tool("emulators/pcap")
 
 T0 = datetime(2026, 7, 22, 15, 0, 0, tzinfo=UTC)
 WEATHER_IDS = list(range(1, 8))  # cloud layers 1-3, precipitation 4-7

@@ -1,6 +1,7 @@
-"""The CIGI host emulator (tools/cigi_host.py, its flight in tools/cigi_script.py) against a real
-daemon: the whole script played in a few seconds gets a Start of Frame for its messages and an
-answer to each request, and leaves the daemon with the layers, clock and camera it sent."""
+"""The CIGI host emulator (tools/emulators/cigi_host.py, its flight in
+tools/emulators/cigi_script.py) against a real daemon: the whole script played in a few seconds
+gets a Start of Frame for its messages and an answer to each request, and leaves the daemon with
+the layers, clock and camera it sent."""
 
 from __future__ import annotations
 
@@ -17,8 +18,8 @@ from wxsky.protocols.cigi_session import Region
 from wxsky.protocols.cigi_weather import region_weight
 
 # Before the tool that imports it, so both share one module.
-script = load_tool("cigi_script")
-host = load_tool("cigi_host")
+script = load_tool("emulators/cigi_script")
+host = load_tool("emulators/cigi_host")
 
 SECONDS = 3.0
 

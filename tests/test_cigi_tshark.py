@@ -1,8 +1,8 @@
 """wxsky's CIGI 3.3 encoder checked by a decoder it shares nothing with: Wireshark's CIGI
 dissector (issue 15, item 5). Every message the encoder makes (`cigi_examples.messages()`), and
 one packet per value field with that field set to a value of its own, go into one pcap in both
-byte orders (tools/pcap.py); one tshark run decodes the whole file, and each field tshark shows
-must be the value that was encoded.
+byte orders (tools/emulators/pcap.py); one tshark run decodes the whole file, and each field
+tshark shows must be the value that was encoded.
 
 tshark reads CIGI 3.x in both byte orders but walks a datagram by its own idea of each packet's
 length and never compares the size byte with it, so the size bytes are compared here, with
@@ -41,7 +41,7 @@ from wxsky.protocols.cigi_examples import examples
 from wxsky.protocols.cigi_fields import Field, PacketSpec
 from wxsky.protocols.cigi_packets import PACKETS
 
-pcap = load_tool("pcap")
+pcap = load_tool("emulators/pcap")
 
 # -- the mapping ------------------------------------------------------------------------------
 
@@ -105,12 +105,12 @@ def _probes(spec: PacketSpec) -> list[Packet]:
 class Sent:
     order: ByteOrder
     packets: list[Packet]
-    datagram: Any  # pcap.Datagram (tools/pcap.py, loaded at run time)
+    datagram: Any  # pcap.Datagram (tools/emulators/pcap.py, loaded at run time)
 
 
 def _sent() -> list[Sent]:
-    """The example messages (as `tools/pcap.py cigi-examples` writes them), then per packet
-    type in each byte order the probe packets behind their direction's first packet."""
+    """The example messages (as `tools/emulators/pcap.py cigi-examples` writes them), then per
+    packet type in each byte order the probe packets behind their direction's first packet."""
     sent = [Sent(o, m, d) for o, m, d in pcap.cigi_example_datagrams()]
     ex = examples()
     first = {spec.direction: ex[spec.key] for spec in PACKETS if spec.starts_message}

@@ -14,12 +14,13 @@ from daemon_harness import running_daemon
 
 from wxsky.cli import main
 from wxsky.host.client import ControlClient
+from wxsky.inputs.station_table import report_patch
 from wxsky.settings.presets import (
     load_preset,
     load_preset_file,
-    patch_from_metar_text,
     patch_from_weather_dict,
 )
+from wxsky.weather.metar import decode
 from wxsky.weather.state import Source
 
 REPO = Path(__file__).resolve().parents[1]
@@ -103,8 +104,10 @@ def test_save_from_metar_writes_a_preset_with_the_reports_layers(
     assert out == f"saved preset 'lszh-now' to {path}\n"
     info, patch = load_preset_file(path)
     assert info.description == f"Saved from METAR {METAR}"
-    # Exactly the decoder's weather, and that is the report's: FEW030 and BKN080.
-    assert patch == dataclasses.replace(patch_from_metar_text(METAR), source=Source.PRESET)
+    # Exactly the decoder's weather, and that is the report's: FEW030 and BKN080, over
+    # LSZH's field as a feed reads the report.
+    expected = report_patch(decode(METAR, year=2000, month=1))
+    assert patch == dataclasses.replace(expected, source=Source.PRESET)
     assert patch.layers is not None
     few, bkn = patch.layers
     assert few.cover_oktas < bkn.cover_oktas and bkn.cover_oktas >= 5
@@ -390,7 +393,7 @@ def test_release_hands_the_fields_back(capsys: pytest.CaptureFixture[str], tmp_p
             pytest.skip("this daemon has no 'release' command yet (it is being added)")
         assert code == 0, err
         assert out.startswith("released ") and "layers" in out
-        assert out.rstrip().endswith("back to METAR/config sources")
+        assert "back to METAR/config sources" in out
         wait_for_layers(c, start_layers)
         code, out, err = wxsky(capsys, "preset", "release", "--control", d.address)
         assert code == 0, err

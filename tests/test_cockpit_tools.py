@@ -1,7 +1,7 @@
-"""The cockpit emulator and the capture replayer (tools/cockpit_emulator.py,
-tools/replay_capture.py): scenarios sweep what they claim, what they send decodes with wxsky's
-own decoders to the values meant, and both tools work end to end on a real pty and on a
-python-can virtual bus, at the recorded pace or faster."""
+"""The cockpit emulator and the capture replayer (tools/emulators/cockpit_emulator.py,
+tools/emulators/replay_capture.py): scenarios sweep what they claim, what they send decodes
+with wxsky's own decoders to the values meant, and both tools work end to end on a real pty and
+on a python-can virtual bus, at the recorded pace or faster."""
 
 from __future__ import annotations
 
@@ -37,17 +37,16 @@ from wxsky.weather.cockpit import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-TOOLS = ROOT / "tools"
+EMULATORS = ROOT / "tools" / "emulators"
 DATA = ROOT / "tests" / "data" / "cockpit"
 NMEA_FIXTURE = DATA / "instructor-panel.nmea"
 CAN_LOG = DATA / "canaerospace.log"
 CAN_ASC = DATA / "canaerospace.asc"
 
 
-# Before the tools that import it, so they share this module rather than load a second copy.
-scenarios = load_tool("cockpit_scenarios")
-emulator = load_tool("cockpit_emulator")
-replay = load_tool("replay_capture")
+scenarios = load_tool("emulators/cockpit_scenarios")
+emulator = load_tool("emulators/cockpit_emulator")
+replay = load_tool("emulators/replay_capture")
 
 
 def _merged(decoded: list[Decoded]) -> CockpitUpdate:
@@ -221,7 +220,7 @@ def run_tool() -> Iterator[Any]:
 
     def start(tool: str, *args: str) -> tuple[subprocess.Popen[str], str]:
         proc = subprocess.Popen(
-            [sys.executable, str(TOOLS / tool), *args],
+            [sys.executable, str(EMULATORS / tool), *args],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,

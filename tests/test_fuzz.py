@@ -1,8 +1,8 @@
-"""The fuzz harnesses (tools/fuzz_targets.py, tools/fuzz.py): every input a fuzz run saved
+"""The fuzz harnesses (tools/fuzz/fuzz_targets.py, tools/fuzz/fuzz.py): every input a fuzz run saved
 (tests/data/fuzz/<target>/) replays clean, every target survives a short deterministic smoke,
 and the harness itself fails on a broken parser, so it cannot pass everything by accident.
 
-The long runs are `tools/fuzz.py all` (see its docstring); these are the CI smoke.
+The long runs are `tools/fuzz/fuzz.py all` (see its docstring); these are the CI smoke.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from tool_loader import load_tool
 from wxsky.weather.cockpit import CockpitUpdate
 from wxsky.weather.state import Source, WeatherPatch
 
-targets = load_tool("fuzz_targets")
-fuzz = load_tool("fuzz")
+targets = load_tool("fuzz/fuzz_targets")
+fuzz = load_tool("fuzz/fuzz")
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = targets.TARGETS
@@ -157,7 +157,7 @@ def test_mutations_are_deterministic_and_bounded() -> None:
 
 def _fuzz_command(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "tools/fuzz.py", *args],
+        [sys.executable, "tools/fuzz/fuzz.py", *args],
         cwd=ROOT,
         capture_output=True,
         text=True,

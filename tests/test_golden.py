@@ -1,7 +1,7 @@
 """Whole-picture regression: fixed snapshots compared with the goldens in tests/golden/.
 
-The goldens are written only by tools/regen_goldens.py (see tests/golden/README.md). A mismatch
-leaves tests/_failures/<case>_{actual,expected,diff}.png behind and names them.
+The goldens are written only by tools/generate/regen_goldens.py (see tests/golden/README.md). A
+mismatch leaves tests/_failures/<case>_{actual,expected,diff}.png behind and names them.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ MAX_FAR_OFF_SHARE = 0.005
 DIFF_GAIN = 8
 
 
-TOOL = load_tool("regen_goldens")
+TOOL = load_tool("generate/regen_goldens")
 CASES = {case.name: case for case in TOOL.CASES}
 
 
@@ -62,7 +62,7 @@ def compare_images(
         f"{far_off:.2%} of pixels off by more than {FAR_OFF_LEVELS} "
         f"(limit {MAX_FAR_OFF_SHARE:.1%}). Wrote {paths['actual']}, {paths['expected']} and "
         f"{paths['diff']} (x{DIFF_GAIN}). If the change is intended, regenerate with "
-        f"tools/regen_goldens.py {name}"
+        f"tools/generate/regen_goldens.py {name}"
     )
 
 
@@ -124,9 +124,9 @@ def test_compare_rejects_a_size_change(tmp_path: Path) -> None:
 
 def test_every_case_has_a_golden_and_the_readme_names_the_renderer() -> None:
     readme = (GOLDEN_DIR / "README.md").read_text(encoding="utf-8")
-    assert "Made on:" in readme and "tools/regen_goldens.py" in readme
+    assert "Made on:" in readme and "tools/generate/regen_goldens.py" in readme
     for name in CASES:
-        assert (GOLDEN_DIR / f"{name}.png").is_file(), f"run tools/regen_goldens.py {name}"
+        assert (GOLDEN_DIR / f"{name}.png").is_file(), f"run tools/generate/regen_goldens.py {name}"
         assert f"`{name}.png`" in readme
 
 
@@ -134,7 +134,7 @@ def test_every_case_has_a_golden_and_the_readme_names_the_renderer() -> None:
 def test_golden(renderer: Renderer, name: str) -> None:
     path = GOLDEN_DIR / f"{name}.png"
     if not path.is_file():
-        pytest.fail(f"missing golden {path}: create it with tools/regen_goldens.py {name}")
+        pytest.fail(f"missing golden {path}: create it with tools/generate/regen_goldens.py {name}")
     expected = read_png(path)
     actual = TOOL.render_case(CASES[name], renderer)
     assert actual.shape == (TOOL.HEIGHT, TOOL.WIDTH, 4)

@@ -1,5 +1,5 @@
 """The C host kit's benchmark program (plugins/host-c/tests/wxsky_gl_bench.c, driven by
-tools/bench_host_c.py) against a real daemon: a short run reports every stage and the
+tools/bench/bench_host_c.py) against a real daemon: a short run reports every stage and the
 set_camera latency with sane numbers, and the latency's frame had the camera it sent. No
 timing is asserted."""
 

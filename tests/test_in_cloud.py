@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from sprite_helpers import sprite_batch
@@ -22,6 +24,9 @@ from wxsky.scene.in_cloud import (
 from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw, build_frame, oriented
 from wxsky.scene.sky import sky_params
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+
+# Sprites of no particular layer: every height is inside one.
+EVERYWHERE = ((-math.inf, math.inf),)
 
 
 def batch(centres: list[tuple[float, float, float]], size_m: float = 400.0) -> SpriteBatch:
@@ -86,19 +91,20 @@ def test_the_frames_lock_shortcut_agrees_with_lock_facing_between_the_two_radii(
 
 def test_in_cloud_visibility_falls_toward_the_core() -> None:
     b = batch([(0, 0, 0)])
-    assert not in_cloud(b, (0.0, 500.0, 0.0), 10_000.0).inside
-    edge = in_cloud(b, (0.0, 120.0, 0.0), 10_000.0)
-    core = in_cloud(b, (0.0, 0.0, 0.0), 10_000.0)
+    assert not in_cloud(b, (0.0, 500.0, 0.0), 10_000.0, spans_m=EVERYWHERE).inside
+    edge = in_cloud(b, (0.0, 120.0, 0.0), 10_000.0, spans_m=EVERYWHERE)
+    core = in_cloud(b, (0.0, 0.0, 0.0), 10_000.0, spans_m=EVERYWHERE)
     assert edge.inside and core.inside
     assert core.visibility_m == pytest.approx(VISIBILITY_CORE_M)
     assert edge.visibility_m is not None and edge.visibility_m > core.visibility_m
-    assert in_cloud(b, (0.0, 0.0, 0.0), 25.0).visibility_m == 25.0  # fog is worse still
+    fog = in_cloud(b, (0.0, 0.0, 0.0), 25.0, spans_m=EVERYWHERE)
+    assert fog.visibility_m == 25.0  # fog is worse still
     assert core.to_dict() == {"in_cloud": True, "in_cloud_visibility_m": VISIBILITY_CORE_M}
 
 
 def test_empty_batch_is_outside() -> None:
     empty = SpriteBatch.empty()
-    assert not in_cloud(empty, (0.0, 0.0, 0.0), 1000.0).inside
+    assert not in_cloud(empty, (0.0, 0.0, 0.0), 1000.0, spans_m=EVERYWHERE).inside
     assert lock_facing(empty, (0.0, 0.0, 0.0), NO_LOCKS) == (None, NO_LOCKS)
 
 
@@ -160,13 +166,14 @@ def _fog_case(eye_y: float) -> tuple[np.ndarray, tuple[float, float, float, floa
     b = batch([(0, 0, 0), (0, 1500, 0)])
     rgba = np.array([[0.3, 0.4, 0.5, 1.0], [0.9, 0.9, 0.9, 1.0]], np.float32)
     eye = (0.0, eye_y, 0.0)
-    return in_cloud_fog(b, rgba, eye, in_cloud(b, eye, 9999.0))
+    return in_cloud_fog(b, rgba, eye, in_cloud(b, eye, 9999.0, spans_m=EVERYWHERE))
 
 
 def test_outside_a_cloud_nothing_is_fogged() -> None:
     b = batch([(0, 1000, 0)])
     rgba = np.full((1, 4), 0.5, np.float32)
-    out, veil = in_cloud_fog(b, rgba, (0.0, 0.0, 0.0), in_cloud(b, (0.0, 0.0, 0.0), 9999.0))
+    eye = (0.0, 0.0, 0.0)
+    out, veil = in_cloud_fog(b, rgba, eye, in_cloud(b, eye, 9999.0, spans_m=EVERYWHERE))
     assert veil == NO_VEIL and out is rgba
 
 

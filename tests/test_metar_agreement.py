@@ -1,4 +1,4 @@
-"""Agreement of our METAR decoder with AWC's own decoded columns (tools/metar_agreement.py).
+"""Agreement of our METAR decoder with AWC's own decoded columns (tools/bench/metar_agreement.py).
 
 The whole-corpus table is in docs/metar-agreement.md; here the comparison runs on the 2026
 excerpt plus every 16th report of the 2020 AWC cache (about 300 reports, every AWC convention
@@ -26,7 +26,7 @@ CACHE_2020 = DATA / "awc_cache_2020-05-02_luasamples.csv.gz"
 SAMPLE_STRIDE = 16
 
 
-ma = load_tool("metar_agreement")
+ma = load_tool("bench/metar_agreement")
 
 
 @pytest.fixture(scope="module")

@@ -732,7 +732,7 @@ def test_common_header_shortcut_agrees_with_the_general_path(
     assert decode_all() == fast
 
 
-# -- found by tools/metar_agreement.py against AWC's own decode (2014-09 corpus) ---------------
+# -- found by tools/bench/metar_agreement.py against AWC's own decode (2014-09 corpus) ---------
 
 
 def test_kts_wind_unit_is_knots() -> None:

@@ -14,7 +14,7 @@ import pytest
 from wxsky.app.camera_path import straight_and_level
 from wxsky.engine.stages import SkyEngine
 from wxsky.scene import gather as gather_module
-from wxsky.scene import layout as layout_module
+from wxsky.scene import near_sets as near_sets_module
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.gather import (
@@ -34,11 +34,10 @@ from wxsky.scene.layout import (
     SpriteDraw,
     empty_ring,
     in_view,
-    near_scattered_light,
-    prepare_near,
     shade_for_eye,
     sort_order,
 )
+from wxsky.scene.near_sets import near_scattered_light, prepare_near
 from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, Scattered, scene_lights
 from wxsky.scene.sky import sky_params
 from wxsky.scene.sprites import SpriteBatch
@@ -188,7 +187,7 @@ def test_a_new_rings_worker_prepares_the_near_sets_and_light_its_frames_ask_for(
         for rings in (alone, fading):
             blocks = near_blocks(state, drift1, rings, settings.ring_radius_m, 16_000.0)
             assert blocks is not None
-            kept = layout_module._near_light.get(blocks)
+            kept = near_sets_module._near_light.get(blocks)
             assert kept is not None  # its light is there before any frame
             lights[rings] = kept[0]
         # A frame of the fade, a little later, finds both: nothing is made in it.

@@ -24,7 +24,6 @@ from wxsky.settings.presets import (
     list_presets,
     load_preset,
     load_preset_file,
-    patch_from_metar_text,
     patch_from_weather_dict,
     preset_search_path,
     resolve_preset,
@@ -658,17 +657,6 @@ def test_patch_from_weather_dict_rounds_oktas_and_drops_unknowns() -> None:
     weather["layers"][0]["base_m"] = "high"
     with pytest.raises(PresetError, match=r"layers\[0\]\.base_m: must be a number"):
         patch_from_weather_dict(weather)
-
-
-def test_patch_from_metar_text() -> None:
-    patch = patch_from_metar_text("LSZH 211250Z 24012G25KT 9999 FEW030 BKN080 18/09 Q1012")
-    assert patch.layers is not None
-    few, bkn = patch.layers
-    assert few.cover_oktas < bkn.cover_oktas and bkn.cover_oktas >= 5
-    assert bkn.base_m - few.base_m == pytest.approx(5000 * 0.3048)
-    assert patch.qnh_hpa == pytest.approx(1012.0)
-    assert (patch.temperature_c, patch.dewpoint_c) == (18.0, 9.0)
-    assert patch.wind is not None and patch.wind[0].dir_from_deg == 240.0
 
 
 # -- comparing presets --------------------------------------------------------------------------

@@ -53,7 +53,7 @@ DATA = ROOT / "wxsky" / "render" / "data"
 U8 = npt.NDArray[np.uint8]
 
 
-TOOL = load_tool("build_sky_textures")
+TOOL = load_tool("generate/build_sky_textures")
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""tools/soak.py end to end, for a few seconds: it runs a real daemon through every kind of
+"""tools/soak/soak.py end to end, for a few seconds: it runs a real daemon through every kind of
 fault, writes a report with every metric at a plausible value, a chart and the daemon's log,
 and leaves no process, segment or temporary folder behind. Whether the daemon meets the
 targets is the hour-long run's business (docs/reliability.md), not this test's: the exit
@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SOAK = ROOT / "tools" / "soak.py"
+SOAK = ROOT / "tools" / "soak" / "soak.py"
 
 TARGETS = (
     "crashes",

@@ -41,7 +41,7 @@ F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
 
 
-TOOL = load_tool("build_sprite_sheet")
+TOOL = load_tool("generate/build_sprite_sheet")
 
 
 @pytest.fixture(scope="module")

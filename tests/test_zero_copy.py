@@ -29,7 +29,7 @@ from wxsky.errors import RenderError
 from wxsky.output.transport import WithFds
 
 ROOT = Path(__file__).resolve().parents[1]
-PROBE = ROOT / "tools" / "probe_zero_copy.py"
+PROBE = ROOT / "tools" / "bench" / "probe_zero_copy.py"
 ZERO_COPY = "wxsky_gl_zero_copy"
 SANITIZER_EXITS = (98, 99)
 ABGR8888 = 0x34324241  # 'AB24'
@@ -37,7 +37,8 @@ ABGR8888 = 0x34324241  # 'AB24'
 
 @pytest.fixture(scope="module")
 def probed() -> dict[str, Any]:
-    """What tools/probe_zero_copy.py says of this machine (its own process, as a user runs it)."""
+    """What tools/bench/probe_zero_copy.py says of this machine (its own process, as a user runs
+    it)."""
     proc = subprocess.run(
         [sys.executable, str(PROBE), "--json"], capture_output=True, text=True, timeout=60
     )

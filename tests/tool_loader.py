@@ -1,21 +1,22 @@
-"""Load a script from tools/ as a module, for tests of the tools themselves."""
+"""Load a tool from tools/ as a module, for tests of the tools themselves."""
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import sys
 from pathlib import Path
 from types import ModuleType
 
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
+ROOT = Path(__file__).resolve().parents[1]
+TOOLS = ROOT / "tools"
 
 
-def load_tool(name: str) -> ModuleType:
-    """tools/<name>.py as the module `name`; registered in sys.modules first, because
-    dataclasses look their module up by name and sibling tools import it by that name."""
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
+def load_tool(path: str) -> ModuleType:
+    """tools/<path>.py, e.g. "emulators/cigi_host", imported as `tools.emulators.cigi_host`:
+    the name the tools import each other by, so a test and the tool it loads share one copy of
+    every sibling module."""
+    if not (TOOLS / f"{path}.py").is_file():
+        raise FileNotFoundError(f"no tool tools/{path}.py")
+    if str(ROOT) not in sys.path:  # pytest puts tests/ on the path, not the checkout's root
+        sys.path.append(str(ROOT))
+    return importlib.import_module("tools." + path.replace("/", "."))

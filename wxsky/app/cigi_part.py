@@ -36,6 +36,7 @@ from wxsky.protocols.cigi import ByteOrder, Packet
 from wxsky.protocols.cigi_eye import Eye
 from wxsky.protocols.cigi_session import responses
 from wxsky.protocols.cigi_source import SourceFrame, host_message
+from wxsky.protocols.cigi_weather import answer_layer_ids
 from wxsky.scene.conditions import conditions_at
 from wxsky.settings.config import CigiSection
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
@@ -195,6 +196,7 @@ class CigiPart(Part):
     def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]:
         engine = self._engine
         state, drift = engine.state, engine.drift
+        ids = answer_layer_ids(state.layers, engine.target.layers, [ig.state for ig in self.igs])
         obs = state.observer
         out: list[Packet] = []
         for request in requests:
@@ -205,7 +207,7 @@ class CigiPart(Part):
                 float(request["lon_deg"]),
                 float(request["alt_m"]),
             )
-            out += responses(request, conditions_at(state, drift, point))
+            out += responses(request, conditions_at(state, drift, point), ids)
         return out
 
 

@@ -29,6 +29,7 @@ from wxsky.schema import (
     Tuple,
 )
 from wxsky.settings.config import CLOCK_RATE, PRESET_NAME
+from wxsky.weather.metar_clouds import FIELD_ELEVATION_M
 from wxsky.weather.state import ALT_M, LAT_DEG, LON_DEG, Source, parse_time_utc
 
 
@@ -91,13 +92,20 @@ def _camera_table(max_size: tuple[int, int]) -> Table:
 SET_TIME = Table(
     {"time_utc": Field(Custom(_iso_time, "an ISO 8601 time")), "rate": Field(CLOCK_RATE)}
 )
-APPLY_PRESET = Table({"name": Field(PRESET_NAME), "keep_site": Field(Bool())})
-RELEASE = Table({"source": Field(Text(choices=("control", "cockpit")), "control")})
+# `now`: switch the sky at once rather than move it at the [transition] rates.
+APPLY_PRESET = Table(
+    {"name": Field(PRESET_NAME), "keep_site": Field(Bool()), "now": Field(Bool(), False)}
+)
+RELEASE = Table(
+    {
+        "source": Field(Text(choices=("control", "cockpit")), "control"),
+        "now": Field(Bool(), False),
+    }
+)
 APPLY_METAR = Table(
     {
         "report": Field(Text(max_len=METAR_MAX_CHARS)),
-        # A report's field elevation: any airport on Earth.
-        "field_elevation_m": Field(Number(-500.0, 9000.0, unit="m")),
+        "field_elevation_m": Field(FIELD_ELEVATION_M),
         "year": Field(Number(1, 9999, integer=True)),
         "month": Field(Number(1, 12, integer=True)),
     }
@@ -190,7 +198,9 @@ def apply_preset(
     site (the default while a simulator's pose places the camera, e.g. FlightGear's): not its
     site, its seed or its time. Its time is its own site's hour (overcast-stratus's 11:00Z is
     late morning at Zurich and 1 a.m. at Honolulu), and without its seed it is a change of
-    this sky, made through the transition, not a different sky swapped in at once."""
+    this sky, made through the transition, not a different sky swapped in at once. `now`
+    switches to it at once all the same (a preset with its own site and seed always does:
+    that is another sky, not a change of this one)."""
     from wxsky.settings.presets import load_preset
 
     v = checked_params("apply_preset", APPLY_PRESET, params)
@@ -202,31 +212,39 @@ def apply_preset(
     if v.get("keep_site", keep_site):
         patch = dataclasses.replace(patch, observer=None, seed=None, time_utc=None)
     engine.apply(patch)
+    if v["now"]:
+        engine.settle()
     name: str = v["name"]
     return name
 
 
 def release(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
-    """Hand the fields an override holds back to the sources below it."""
+    """Hand the fields an override holds back to the sources below it: the sky moves back
+    at the [transition] rates, or at once with `now`."""
     v = checked_params("release", RELEASE, params)
     choices = {"control": Source.CONTROL, "cockpit": Source.COCKPIT}
-    return {"source": v["source"], "released": list(engine.release(choices[v["source"]]))}
+    released = list(engine.release(choices[v["source"]]))
+    if v["now"]:
+        engine.settle()
+    return {"source": v["source"], "released": released}
 
 
 def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
+    """The report becomes the METAR source, its clouds over its station's field (the station
+    table's elevation, as a feed's report is read) or over `field_elevation_m`."""
+    from wxsky.inputs.station_table import report_patch
     from wxsky.weather.metar import decode
-    from wxsky.weather.metar_clouds import metar_to_patch
 
     v = checked_params("apply_metar", APPLY_METAR, params)
     if "report" not in v:
         raise ControlError("apply_metar: report must be a string")
-    elevation = v.get("field_elevation_m", engine.state.observer.alt_m)
     # The report names only its day; by default it is the latest such day and time not after
     # the simulated clock, as a report never comes from the future.
     decoded = decode(
         v["report"], year=v.get("year"), month=v.get("month"), now_utc=engine.state.time_utc
     ).require_usable()
-    engine.apply(metar_to_patch(decoded, field_elevation_m=elevation))
+    patch = report_patch(decoded, v.get("field_elevation_m"), flag="field_elevation_m")
+    engine.apply(patch)
     return decoded.station or ""
 
 

@@ -62,24 +62,24 @@ CLOSE_GRACE_S = 0.1
 
 
 def initial_patches(
-    config: DaemonConfig, preset: str | None = None, metar: str | None = None
+    config: DaemonConfig,
+    preset: str | None = None,
+    metar: str | None = None,
+    field_elevation_m: float | None = None,
 ) -> list[WeatherPatch]:
-    """The weather the daemon starts on: a preset (the config's unless named), or a METAR."""
+    """The weather the daemon starts on: a preset (the config's unless named), or a METAR,
+    its clouds over its station's field (the station table's, as a feed's report of that
+    station is read) unless `field_elevation_m` is given."""
+    from wxsky.inputs.station_table import report_patch
     from wxsky.settings.presets import load_preset
     from wxsky.weather.metar import decode
-    from wxsky.weather.metar_clouds import metar_to_patch
 
     patches = [load_preset(preset or config.daemon.preset, config.presets.dirs)]
     if metar:
         # The report names only its day: the latest such day not after the start time.
         start = patches[0].time_utc or WeatherState().time_utc
         report = decode(metar, now_utc=start).require_usable()
-        patches.append(
-            metar_to_patch(
-                report,
-                field_elevation_m=patches[0].observer.alt_m if patches[0].observer else 0.0,
-            )
-        )
+        patches.append(report_patch(report, field_elevation_m))
     return patches
 
 

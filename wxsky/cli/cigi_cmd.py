@@ -64,14 +64,15 @@ def add_commands(sub: Subparsers) -> None:
         required=True,
         type=Checked("--to", _udp("--to")),
         metavar="udp:HOST:PORT",
-        help="the image generator's address, e.g. udp:127.0.0.1:8001",
+        help="the image generator's address, e.g. udp:127.0.0.1:8000 (CCL's example IG's port)",
     )
     send.add_argument(
         "--bind",
         type=Checked("--bind", _udp("--bind")),
         metavar="udp:HOST:PORT",
         help="send from, and read the IG's answers on, this address (default: any free port, "
-        "on loopback for an IG on loopback, else on every interface)",
+        "on loopback for an IG on loopback, else on every interface; CCL's example IG "
+        "answers to port 8001)",
     )
     send.add_argument(
         "--rate-hz",

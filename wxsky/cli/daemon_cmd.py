@@ -21,6 +21,7 @@ from wxsky.cli.common import (
     size_arg,
     time_arg,
 )
+from wxsky.cli.metar_cmd import add_field_elevation_option, check_field_elevation
 from wxsky.schema import Number
 
 # How far into a change of weather a snapshot may look: a day is more than any transition.
@@ -46,6 +47,7 @@ def add_commands(sub: Subparsers) -> None:
     run.add_argument(
         "--metar", metavar="REPORT", help="METAR report to start with (beats the preset's fields)"
     )
+    add_field_elevation_option(run, "--metar")
     run.add_argument(
         "--metar-feed",
         action="append",
@@ -172,8 +174,10 @@ def add_commands(sub: Subparsers) -> None:
     src.add_argument(
         "--metar",
         metavar="REPORT",
-        help="the weather this METAR report states (its site's field at 0 m)",
+        help="the weather this METAR report states, over its station's field, where the "
+        "camera stands",
     )
+    add_field_elevation_option(snap, "--metar")
     snap.add_argument(
         "--config",
         type=Path,
@@ -338,9 +342,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from wxsky.output.transport import parse_address
     from wxsky.settings.config import load_config
 
+    elevation_m = check_field_elevation(args, args.metar, "--metar")
     config = _shared_config(load_config(args.config), args)
     setup_logging(log_level(args, config.daemon.log_level))
-    patches = initial_patches(config, preset=args.preset, metar=args.metar)
+    patches = initial_patches(
+        config, preset=args.preset, metar=args.metar, field_elevation_m=elevation_m
+    )
     address = parse_address(args.control) if args.control else None
     options = PartOptions(
         metar_feeds=args.metar_feed,
@@ -460,6 +467,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         raise UsageError("--lat and --lon go together")
     if args.elapsed_s and not args.transition_to:
         raise UsageError("--elapsed-s goes with --transition-to")
+    check_field_elevation(args, args.metar, "--metar")
     config = load_config(args.config)
     width, height = args.size
     state = WeatherState().apply(_weather_patch(args, config.presets.dirs))
@@ -508,16 +516,23 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
 
 
 def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any:
+    import dataclasses
+
+    from wxsky.inputs.station_table import field_elevation_m, report_patch
     from wxsky.settings.presets import load_preset
     from wxsky.weather.metar import decode
-    from wxsky.weather.metar_clouds import metar_to_patch
     from wxsky.weather.state import WeatherState
 
     if args.metar:
         # The report names only its day: the latest such day not after the snapshot's time.
-        when = args.time or WeatherState().time_utc
-        report = decode(args.metar, now_utc=when).require_usable()
-        return metar_to_patch(report, field_elevation_m=0.0)
+        site = WeatherState()
+        report = decode(args.metar, now_utc=args.time or site.time_utc).require_usable()
+        # Its clouds over its station's field, as a feed reads the report; the camera stands
+        # on that field, so they are as high above it as the report says. The site's place
+        # (and so the sun) stays the default one's.
+        elevation_m = field_elevation_m(report.station, args.field_elevation_m)
+        observer = dataclasses.replace(site.observer, alt_m=elevation_m)
+        return dataclasses.replace(report_patch(report, elevation_m), observer=observer)
     return load_preset(args.preset, preset_dirs)
 
 

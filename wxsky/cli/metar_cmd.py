@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import json
 import sys
+from collections.abc import Iterable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -95,6 +96,30 @@ def add_commands(sub: Subparsers) -> None:
     fetch.set_defaults(func=_cmd_fetch)
 
 
+def add_field_elevation_option(p: argparse.ArgumentParser, report_flag: str) -> None:
+    """`--field-elevation-m`, for a command that takes a METAR report as `report_flag`."""
+    p.add_argument(
+        "--field-elevation-m",
+        type=NumberArg(
+            "--field-elevation-m", KindRef("wxsky.weather.metar_clouds:FIELD_ELEVATION_M")
+        ),
+        metavar="M",
+        help=f"with {report_flag}: the field elevation (MSL) the report's cloud bases are "
+        "above (default: its station's, from wxsky's station table, as a METAR feed's report "
+        "of that station is read)",
+    )
+
+
+def check_field_elevation(
+    args: argparse.Namespace, report: str | None, report_flag: str
+) -> float | None:
+    """The --field-elevation-m given, which goes with a report only."""
+    given: float | None = args.field_elevation_m
+    if given is not None and not report:
+        raise UsageError(f"--field-elevation-m goes with {report_flag}")
+    return given
+
+
 def _cmd_decode(args: argparse.Namespace) -> int:
     if (args.report is None) == (args.file is None):
         raise UsageError("give a REPORT or --file PATH (one of them)")
@@ -182,6 +207,7 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
     weather = None
     if choice.patch is not None:
         weather = _patch_fields(weather_to_dict(observer.apply(choice.patch)), choice.patch)
+    hint = _archive_hint(result.stations.values(), choice.fresh, settings.age_reference)
     summary: dict[str, Any] = {
         "source": args.source,
         "format": feed.format,
@@ -197,6 +223,7 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
         "fresh": choice.fresh,
         "stale": choice.stale_count,
         "reason": choice.reason or None,
+        "hint": hint,
         "weather": weather,
     }
     if args.json:
@@ -215,6 +242,8 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
         f"observer {lat:.4f} {lon:.4f}: {choice.fresh} fresh and {choice.stale_count} stale "
         f"stations (age limit {m.max_age_min:.0f} min against the {settings.age_reference})"
     )
+    if hint:
+        print(f"note: {hint}")
     if weather is None:
         print(f"the daemon would keep its weather: {choice.reason}")
         return status
@@ -222,6 +251,22 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
     print(f"the daemon would take (source metar) from {using}:")
     print(json.dumps(weather, indent=2))
     return status
+
+
+def _archive_hint(stations: Iterable[Any], fresh: int, age_reference: str) -> str | None:
+    """How to see a feed whose reports are all too old against the clock (an archived file)
+    as of its own time; None where that is not the case."""
+    if fresh or age_reference != "clock":
+        return None
+    times = [s.observed_utc for s in stations if s.observed_utc is not None]
+    if not times:
+        return None
+    newest = max(times)
+    return (
+        f"the feed's newest report is from {newest:%Y-%m-%d %H:%M}Z: to see the feed as of "
+        "its own time, age its reports against that one with --age-reference feed "
+        '([metar] age_reference = "feed" for the daemon)'
+    )
 
 
 def _patch_fields(weather: dict[str, Any], patch: Any) -> dict[str, Any]:

@@ -16,6 +16,7 @@ from wxsky.cli.common import (
     control_address,
     show_help,
 )
+from wxsky.cli.metar_cmd import add_field_elevation_option, check_field_elevation
 
 
 def add_commands(sub: Subparsers) -> None:
@@ -33,15 +34,30 @@ def add_commands(sub: Subparsers) -> None:
     show.set_defaults(func=_cmd_show)
 
     apply = psub.add_parser(
-        "apply", help="apply a preset to the running daemon (held until 'preset release')"
+        "apply",
+        help="apply a preset to the running daemon (held until 'preset release')",
+        description="Apply a preset's weather to the running daemon, held until 'wxsky preset "
+        "release'. The daemon keeps its clock and site, and its sky moves toward the preset's "
+        "weather at the [transition] rates.",
     )
     apply.add_argument("name", help="preset name (looked up by the daemon)")
+    apply.add_argument("--now", action="store_true", help="switch the sky to the preset at once")
+    apply.add_argument(
+        "--site",
+        action="store_true",
+        help="take the preset's place, date and time and cloud seed as well: another sky, "
+        "switched to at once",
+    )
     add_control_option(apply)
     apply.set_defaults(func=_cmd_apply)
 
     release = psub.add_parser(
-        "release", help="hand the fields a preset or control client holds back to METAR/config"
+        "release",
+        help="hand the fields a preset or control client holds back to METAR/config",
+        description="Hand the fields a preset or control client holds back to the METAR feed "
+        "and the config; the sky moves back at the [transition] rates.",
     )
+    release.add_argument("--now", action="store_true", help="switch the sky back at once")
     add_control_option(release)
     release.set_defaults(func=_cmd_release)
 
@@ -52,6 +68,7 @@ def add_commands(sub: Subparsers) -> None:
         "--from-running", action="store_true", help="the weather of the running daemon"
     )
     src.add_argument("--from-metar", metavar="REPORT", help="the weather a METAR report states")
+    add_field_elevation_option(save, "--from-metar")
     save.add_argument(
         "--description", metavar="TEXT", help="the preset's description (default: its source)"
     )
@@ -127,12 +144,19 @@ def _cmd_apply(args: argparse.Namespace) -> int:
     from wxsky.host.client import ControlClient
 
     address = control_address(args)
+    params = {"name": args.name, "keep_site": not args.site, "now": args.now}
     with ControlClient.connect(address) as client:
-        result = client.call("apply_preset", {"name": args.name})
+        result = client.call("apply_preset", params)
     name = result if isinstance(result, str) else args.name
+    if args.site:
+        how = "switched to it, at its own site, date and time"
+    elif args.now:
+        how = "switched to it at once"
+    else:
+        how = "the sky moves toward it at the [transition] rates"
     print(
-        f"applied preset {name!r} on the daemon at {address}: its fields override METAR "
-        "until 'wxsky preset release'"
+        f"applied preset {name!r} on the daemon at {address}: {how}; its fields override "
+        "METAR until 'wxsky preset release'"
     )
     return 0
 
@@ -142,7 +166,7 @@ def _cmd_release(args: argparse.Namespace) -> int:
 
     address = control_address(args)
     with ControlClient.connect(address) as client:
-        result = client.call("release", {})
+        result = client.call("release", {"now": args.now})
     released = result.get("released") if isinstance(result, dict) else None
     if not isinstance(released, list):
         raise DaemonUnavailable(
@@ -152,7 +176,10 @@ def _cmd_release(args: argparse.Namespace) -> int:
         print(f"nothing to release: the daemon at {address} held no overrides")
     else:
         fields = ", ".join(str(f) for f in released)
-        print(f"released {len(released)} fields ({fields}): back to METAR/config sources")
+        # A preset applied with its own site and seed was another sky: so is the way back.
+        jump = args.now or {"observer", "seed"} & set(released)
+        how = "at once" if jump else "at the [transition] rates"
+        print(f"released {len(released)} fields ({fields}): back to METAR/config sources, {how}")
     return 0
 
 
@@ -160,19 +187,15 @@ def _cmd_save(args: argparse.Namespace) -> int:
     from datetime import UTC, datetime
 
     from wxsky.errors import PresetError
-    from wxsky.settings.presets import (
-        find_preset,
-        patch_from_metar_text,
-        preset_to_toml,
-        write_user_preset,
-    )
+    from wxsky.settings.presets import find_preset, preset_to_toml, write_user_preset
 
+    elevation_m = check_field_elevation(args, args.from_metar, "--from-metar")
     stamp = f"{datetime.now(UTC):%Y-%m-%d %H:%MZ}"
     notes: list[str] = []
     if args.from_running:
         patch, source, notes = _running_weather(args)
     else:
-        patch = patch_from_metar_text(args.from_metar)
+        patch = _metar_weather(args.from_metar, elevation_m)
         source = f"METAR {' '.join(args.from_metar.split())}"
     description = args.description or f"Saved from {source}"
     text = preset_to_toml(patch, description, comment=f"Written by 'wxsky preset save' {stamp}")
@@ -186,6 +209,17 @@ def _cmd_save(args: argparse.Namespace) -> int:
     hides = " (overrides the builtin preset)" if existing and existing[1] == "builtin" else ""
     print(f"saved preset {args.name!r} to {path}{hides}")
     return 0
+
+
+def _metar_weather(report: str, field_elevation_m: float | None) -> Any:
+    """The weather a METAR report states, its clouds over its station's field as a feed
+    reads the report (or over the field elevation given)."""
+    from wxsky.inputs.station_table import report_patch
+    from wxsky.weather.metar import decode
+
+    # A preset keeps no date, so any month with 31 days lets every report's day decode.
+    metar = decode(report, year=2000, month=1).require_usable()
+    return report_patch(metar, field_elevation_m)
 
 
 def _running_weather(args: argparse.Namespace) -> tuple[Any, str, list[str]]:

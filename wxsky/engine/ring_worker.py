@@ -14,7 +14,7 @@ the child and so breaks any script without a `__main__` guard), started when the
 starts so its imports are done before the first build. It talks over a socket pair with
 multiprocessing's pickling `Connection`. `build` sends one job and waits, watching the
 cancel flag; the child answers with the ring and the near sets it made
-(`scene.layout.prepare_near`), which the parent installs in its own caches. To cancel, the
+(`scene.near_sets.prepare_near`), which the parent installs in its own caches. To cancel, the
 parent sends a word: the child's build looks for anything to read between blocks and gives
 up. A child that dies is started again by the next build (the schedule retries a failed
 build); one whose parent goes away reads the end of its socket and exits.
@@ -32,10 +32,13 @@ import threading
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
+from typing import Protocol, cast
 
 from wxsky.scene.gather import BuildCancelled, CancelFlag, Drift, NearRing
-from wxsky.scene.layout import PreparedNear, RingScene, SceneSettings, build_ring, prepare_near
+from wxsky.scene.layout import RingScene, SceneSettings, build_ring
+from wxsky.scene.near_sets import PreparedNear, prepare_near
 from wxsky.scene.sky import SkyParams
+from wxsky.scene.tower_field import LayerEpoch
 from wxsky.weather.state import WeatherState
 
 log = logging.getLogger(__name__)
@@ -62,6 +65,19 @@ class BuildJob:
     sky: SkyParams
     settings: SceneSettings
     shown: NearRing | None  # the ring on show, whose cross-fade near set is made too
+    # The towers' epochs of `state`'s layers: the near sets' cells are found for them too
+    # (None: no towers).
+    epochs: tuple[LayerEpoch | None, ...] | None = None
+
+    def run(self, cancel: CancelFlag | None = None) -> tuple[object, ...]:
+        return run_job(self, cancel)
+
+
+class Job(Protocol):
+    """Work a worker process runs: immutable values, pickled to the child, whose `run` gives
+    what is pickled back (the near layer's sets: `engine.near_work.NearJob`)."""
+
+    def run(self, cancel: CancelFlag | None = None) -> tuple[object, ...]: ...
 
 
 def run_job(
@@ -69,15 +85,17 @@ def run_job(
 ) -> tuple[RingScene, tuple[PreparedNear, ...]]:
     """The build itself, in whichever process runs it."""
     ring = build_ring(job.state, job.drift, job.centre_m, job.sky, job.settings, cancel)
-    return ring, prepare_near(job.state, ring, job.shown, job.sky, job.settings)
+    return ring, prepare_near(job.state, ring, job.shown, job.sky, job.settings, job.epochs)
 
 
 class RingWorker:
-    """One child process that builds rings, one at a time. `build` from one thread at a
-    time (the schedule's builder thread); `close` from any, idempotent."""
+    """One child process that builds rings (or runs other `Job`s), one at a time. `build`
+    and `run` from one thread at a time (the schedule's builder thread, the near layer's);
+    `close` from any, idempotent. `label` names it in errors and the log."""
 
-    def __init__(self, nice: int = DEFAULT_NICE) -> None:
+    def __init__(self, nice: int = DEFAULT_NICE, label: str = "ring") -> None:
         self.nice = nice
+        self.label = label
         self._proc: subprocess.Popen[bytes] | None = None
         self._conn: Connection | None = None
         self._lock = threading.Lock()  # held by `build` while a job is out
@@ -97,8 +115,17 @@ class RingWorker:
     def build(
         self, job: BuildJob, cancel: threading.Event
     ) -> tuple[RingScene, tuple[PreparedNear, ...]]:
-        """Run `job` in the child and return what it made; raises BuildCancelled once
-        `cancel` (or `close`) has made the child give up, RingWorkerError if it died."""
+        """Build `job`'s ring in the child and return it with the near sets it made; raises
+        BuildCancelled once `cancel` (or `close`) has made the child give up, RingWorkerError
+        if it died."""
+        ring, prepared = self.run(job, cancel)
+        assert isinstance(ring, RingScene)
+        # A ring's serial is unique in the process that shows it: the child's counter is not.
+        return dataclasses.replace(ring), cast("tuple[PreparedNear, ...]", prepared)
+
+    def run(self, job: Job, cancel: threading.Event) -> tuple[object, ...]:
+        """Run `job` in the child and return what its `run` gave; raises as `build`."""
+        what = f"the {self.label}'s worker process"
         with self._lock:
             if self._closed or cancel.is_set():
                 raise BuildCancelled("scene work cancelled")
@@ -111,13 +138,11 @@ class RingWorker:
                         conn.send(("cancel",))
                         asked = True
                     if proc.poll() is not None:
-                        raise RingWorkerError(
-                            f"the ring's worker process died (exit code {proc.returncode})"
-                        )
+                        raise RingWorkerError(f"{what} died (exit code {proc.returncode})")
                 reply = conn.recv()
             except (EOFError, OSError) as exc:
                 self._drop()
-                raise RingWorkerError(f"the ring's worker process is gone: {exc}") from None
+                raise RingWorkerError(f"{what} is gone: {exc}") from None
             except RingWorkerError:
                 self._drop()
                 raise
@@ -127,10 +152,8 @@ class RingWorker:
         if kind == "cancelled":
             raise BuildCancelled("scene work cancelled")
         if kind == "error":
-            raise RingWorkerError(f"ring build in the worker process: {reply[1]}")
-        ring, prepared = reply[1], reply[2]
-        # A ring's serial is unique in the process that shows it: the child's counter is not.
-        return dataclasses.replace(ring), prepared
+            raise RingWorkerError(f"{self.label} work in the worker process: {reply[1]}")
+        return tuple(reply[1:])
 
     def close(self, wait_s: float = 1.0) -> None:
         """Make the child give up any build and exit, waiting up to wait_s before it is
@@ -145,7 +168,7 @@ class RingWorker:
             finally:
                 self._lock.release()
         elif proc is not None:
-            _reap(proc, wait_s)
+            _reap(proc, wait_s, self.label)
 
     def __enter__(self) -> RingWorker:
         return self
@@ -179,7 +202,8 @@ class RingWorker:
             )
         except OSError as exc:
             mine.close()
-            raise RingWorkerError(f"cannot start the ring's worker process: {exc}") from None
+            why = f"cannot start the {self.label}'s worker process: {exc}"
+            raise RingWorkerError(why) from None
         finally:
             theirs.close()
         self._conn, self._proc = Connection(mine.detach()), proc
@@ -192,15 +216,15 @@ class RingWorker:
             self._conn = None
         proc, self._proc = self._proc, None
         if proc is not None:
-            _reap(proc, wait_s)
+            _reap(proc, wait_s, self.label)
 
 
-def _reap(proc: subprocess.Popen[bytes], wait_s: float) -> None:
+def _reap(proc: subprocess.Popen[bytes], wait_s: float, label: str = "ring") -> None:
     """Wait up to wait_s for the child to exit, then kill it."""
     try:
         proc.wait(max(0.0, wait_s))
     except subprocess.TimeoutExpired:
-        log.warning("ring worker process still busy after %.1f s: killed", wait_s)
+        log.warning("%s worker process still busy after %.1f s: killed", label, wait_s)
         proc.kill()
         proc.wait()
 
@@ -229,11 +253,10 @@ def serve(fd: int) -> None:
             job = conn.recv()
         except (EOFError, OSError, KeyboardInterrupt):
             return  # the parent is gone, or closed the socket
-        if not isinstance(job, BuildJob):
+        if not callable(getattr(job, "run", None)):
             continue  # (a cancel that came after its build ended)
         try:
-            ring, prepared = run_job(job, asked)
-            reply: tuple[object, ...] = ("ok", ring, prepared)
+            reply: tuple[object, ...] = ("ok", *job.run(asked))
         except BuildCancelled:
             reply = ("cancelled",)
         except Exception as exc:  # the parent logs it and retries later

@@ -25,13 +25,22 @@ import threading
 import time
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
+from typing import NamedTuple
 
+from wxsky.engine.near_work import NearWork
 from wxsky.engine.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
 from wxsky.engine.ring_worker import DEFAULT_NICE, BuildJob, RingWorker, run_job
 from wxsky.engine.tower_work import TowerWork
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import layer_keys
-from wxsky.scene.gather import Drift, NearRing, advance_drift, carry_drift, zero_drift
+from wxsky.scene.gather import (
+    BuildCancelled,
+    Drift,
+    NearRing,
+    advance_drift,
+    carry_drift,
+    zero_drift,
+)
 from wxsky.scene.in_cloud import NO_LOCKS, Locks
 from wxsky.scene.layout import (
     FrameScene,
@@ -40,9 +49,8 @@ from wxsky.scene.layout import (
     StageClock,
     build_frame,
     empty_ring,
-    install_near,
-    warm_near,
 )
+from wxsky.scene.near_sets import NearInputs, install_near, stale_light, warm_near
 from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
 from wxsky.scene.tower_field import LayerEpoch, TowerClock
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
@@ -85,6 +93,15 @@ class FramePlan:
     def ring_changed(self) -> bool:
         """Some impostor must be drawn this frame (see `rings.render`)."""
         return self.rings.changed
+
+
+class _LastNear(NamedTuple):
+    """The last near layer a frame was drawn from, and the weather it was gathered for."""
+
+    state: WeatherState
+    drift: Drift
+    epochs: tuple[LayerEpoch | None, ...]
+    gathered: NearInputs
 
 
 @dataclass(frozen=True)
@@ -185,6 +202,15 @@ class SkyEngine:
         self._update_epochs()
         self._towers = TowerWork("async" if ring_build == "async" else "immediate")
         self._towers_capping = False
+        # The daemon's frames never make a near set: they look it up and, while it is made
+        # elsewhere, are drawn from the last near layer they had (`near_work`).
+        self._near_work: NearWork | None = None
+        if ring_build == "async" and render_mode == "ring":
+            self._near_work = NearWork(process=ring_worker == "process")
+        self._last_near: _LastNear | None = None
+        self._near_waiting = False
+        self.near_waits = 0  # frames drawn from the last near layer while a set was made
+        self._work_gate: threading.Event | None = None
 
     @property
     def state(self) -> WeatherState:
@@ -253,10 +279,19 @@ class SkyEngine:
         centre_m: tuple[float, float, float],
         sky: SkyParams,
     ) -> RingScene:
+        gate = self._work_gate
+        while gate is not None and not gate.wait(0.1):
+            if self._schedule.cancel_event.is_set():
+                raise BuildCancelled("scene work cancelled")
         t0 = time.perf_counter()
         current = self._schedule.current  # (read off the render thread: a hint, nothing more)
         shown = None if current is None else NearRing(current.geometry.centre_m, current.drift, 1.0)
-        job = BuildJob(state, drift, centre_m, sky, self.settings, shown)
+        # The towers' epochs for the sets the ring's frames will gather: their cells are
+        # found with the sets, so those frames find everything ready.
+        epochs = None
+        if self.settings.max_towers > 0:
+            epochs = tuple(self._epochs.get(k) for k in layer_keys(state.layers))
+        job = BuildJob(state, drift, centre_m, sky, self.settings, shown, epochs)
         if self._worker is not None:
             ring, prepared = self._worker.build(job, self._schedule.cancel_event)
             install_near(prepared)
@@ -271,6 +306,25 @@ class SkyEngine:
         """A ring rebuild is under way (building, rendering or fading in)."""
         return self._schedule.busy
 
+    @property
+    def work_gate(self) -> threading.Event | None:
+        """Work off the frame path (ring builds, near sets, towers) waits for this Event to
+        be set before each job; None: it never waits. Tests hold the work back with it and
+        count the frames published meanwhile."""
+        return self._work_gate
+
+    @work_gate.setter
+    def work_gate(self, gate: threading.Event | None) -> None:
+        self._work_gate = gate
+        if self._near_work is not None:
+            self._near_work.gate = gate
+        self._towers.gate = gate
+
+    @property
+    def near_pending(self) -> bool:
+        """A near set asked for by the frames is being made (or waits to be)."""
+        return self._near_work is not None and self._near_work.pending
+
     def cancel_scene_work(self) -> None:
         """Make a ring build in flight give up at its next block and start no more (safe
         from any thread: the daemon calls it first thing at shutdown)."""
@@ -282,6 +336,8 @@ class SkyEngine:
         cut = self._schedule.close(wait_s)
         if self._worker is not None:
             self._worker.close(max(wait_s, 0.5))
+        if self._near_work is not None:
+            self._near_work.close(max(wait_s, 0.5))
         self._towers.close(max(wait_s, 0.5))
         return cut
 
@@ -498,9 +554,18 @@ class SkyEngine:
             rings = self._schedule.step(state, drift, camera, sky, dt_wall_s)
             near = rings.near_rings(camera, drift)
         self._rings = rings
+        # What the frame is drawn from: this frame's weather, or while its near set is made
+        # elsewhere the last near layer drawn, where its clouds last stood.
+        drawn_state, drawn_drift, gathered = state, drift, None
+        if self._near_work is not None:
+            gathered = self._near_work.inputs(state, drift, near, sky, self.settings, towers.epochs)
+            if gathered is not None:
+                self._last_near = _LastNear(state, drift, towers.epochs, gathered)
+            else:
+                drawn_state, drawn_drift, gathered, towers = self._held_near(state, sky, towers)
         frame = build_frame(
-            state,
-            drift,
+            drawn_state,
+            drawn_drift,
             camera,
             near,
             sky,
@@ -511,11 +576,21 @@ class SkyEngine:
             split_at_m=aircraft_m,
             lod=self.render_mode != "direct",
             towers=towers,
+            gathered=gathered,
         )
         if frame.towers:
             frame = dataclasses.replace(frame, towers=self._towers.fill(frame.towers, sky))
         self._locks = frame.locks
         events = rings.events
+        waiting = self._near_work is not None and drawn_state is not state
+        if waiting:
+            self.near_waits += 1
+        if waiting != self._near_waiting:
+            # The frames are drawn from the last near layer while this frame's set is made
+            # off the frame path (a new site, a clock set, a step of the weather).
+            self._near_waiting = waiting
+            name = "near_wait_start" if waiting else "near_wait_end"
+            events = (*events, RingEvent(name, {"frames": self.near_waits}))
         if (frame.near_dropped > 0) != self._capping:
             self._capping = frame.near_dropped > 0
             name = "near_cap_start" if self._capping else "near_cap_end"
@@ -530,6 +605,24 @@ class SkyEngine:
             events = (*events, RingEvent(name, fields))
         shown = rings.current or empty_ring(camera.position_m, self.settings.ring_radius_m, drift)
         return FramePlan(state, frame, shown, rings, events)
+
+    def _held_near(
+        self, state: WeatherState, sky: SkyParams, towers: TowerClock
+    ) -> tuple[WeatherState, Drift, NearInputs, TowerClock]:
+        """The inputs of a frame whose near set is not ready: the last near layer drawn, as
+        it stood, lit by this sky's light directions (its rows are the old sun's until the
+        new light comes), its towers aged to this frame's time; before any, no near clouds
+        (the ring and the sky are still this frame's)."""
+        last = self._last_near
+        if last is None:
+            return state, zero_drift(state), NearInputs.empty(), towers
+        gathered = last.gathered
+        if gathered.scattered is not None and gathered.blocks is not None:
+            relit = stale_light(gathered.blocks, sky)
+            if relit is not None:
+                gathered = dataclasses.replace(gathered, scattered=relit)
+        held_towers = TowerClock(last.epochs, towers.time_utc)
+        return last.state, last.drift, gathered, held_towers
 
     def warm_up(self) -> FrameScene | None:
         """Do at startup what the first frame would otherwise pay for: gather the near

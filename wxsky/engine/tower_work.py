@@ -96,6 +96,9 @@ class TowerWork:
         self.made = 0  # lit steps handed out, for the bench and tests
         self.lit_count = 0  # of which lit here (not found made by another engine)
         self.busy_s = 0.0  # the CPU time that lighting took
+        # The thread waits for this Event before each step, where one is set (tests hold the
+        # work back with it: `SkyEngine.work_gate`).
+        self.gate: threading.Event | None = None
         if mode == "async":
             self._thread = threading.Thread(target=self._run, name="wxsky-towers", daemon=True)
             self._thread.start()
@@ -221,6 +224,14 @@ class TowerWork:
                     self._lock.wait()
                 if self._closed:
                     return
+            gate = self.gate
+            if gate is not None and not gate.wait(0.1):
+                continue
+            with self._lock:
+                if self._closed:
+                    return
+                if not self._wanted:
+                    continue
                 key, sky = self._wanted.popitem(last=False)
             try:
                 self._make(key, sky)

@@ -9,6 +9,10 @@ the status says `stale`.
 A report whose observation time is impossible (day 32, hour 25) still counts for its station: it
 is dated by the feed's own time for it (AWC observation_time, the tgftp timestamp line) and, where
 the feed has none, kept without a time, which makes it always stale (`stations.split_by_age`).
+A report whose time group disagrees with the feed's own observation time for it (AWC's
+observation_time, by more than `FEED_TIME_SLACK_S`) is dated by the feed's time too: a station's
+wrong day (`PTSA 022350Z` in a file of 1-2 May 00:40) would otherwise be the feed's newest
+report, and against it (`age_reference = "feed"`) every other station would be stale.
 Text without a time group at all is no report (`PART 1 OF 2`) and is only named as a problem.
 
 A defect of the decoder (`MetarInternalError`) is not bad input: it is kept apart from the
@@ -38,12 +42,16 @@ from typing import TYPE_CHECKING
 
 from wxsky.errors import FeedChanging, FeedError, FeedTooLarge, FeedUnavailable
 from wxsky.inputs.feed_sources import FeedSource, Fetched, StreamSource
-from wxsky.inputs.station_table import StationPosition, station_table
+from wxsky.inputs.station_table import (
+    StationPosition,
+    field_elevation_m,
+    report_patch,
+    station_table,
+)
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog, clip
 from wxsky.weather.feeds import Feed, parse_feed
 from wxsky.weather.metar import MetarInternalError, decode
-from wxsky.weather.metar_clouds import metar_to_patch
 from wxsky.weather.state import WeatherPatch
 from wxsky.weather.stations import StationWeather, blend, nearest, split_by_age
 
@@ -56,6 +64,10 @@ RESELECT_S = 5.0  # how often the station choice follows the observer between fe
 STREAM_POLL_S = 0.25
 # The first wait before restarting a failed feed task; it doubles up to max_backoff_s.
 RESTART_FIRST_S = 1.0
+# A report's own time and the feed's observation time for it (AWC) agree to the minute in
+# every row of the four AWC corpora but three, which are hours or a day apart: beyond this
+# the report's day group is taken to be wrong and the feed's time dates it.
+FEED_TIME_SLACK_S = 30 * 60.0
 
 
 @dataclass(frozen=True)
@@ -148,6 +160,15 @@ def ingest(
             trouble = next((e for e in metar.errors if repr(metar.time_group) in e), "no time")
             kept = "dated by the feed" if observed else "kept without a time, so never fresh"
             problems.append(f"{where}: {trouble}; {kept}")
+        elif report.feed_utc is not None and _disagree(observed, report.feed_utc):
+            # A station's wrong day group (`PTSA 022350Z` in a feed of 1 May 23:50): dated by
+            # its day it would be the feed's newest report, and every other station would be
+            # aged against it (age_reference "feed").
+            problems.append(
+                f"{where}: time group {metar.time_group} says {_iso(observed)}, the feed's "
+                f"observation time {_iso(report.feed_utc)}; dated by the feed"
+            )
+            observed = report.feed_utc
         pos = _position(report.lat_deg, report.lon_deg, report.elevation_m)
         pos = pos or positions.get(station)
         if pos is None:
@@ -159,14 +180,17 @@ def ingest(
         if _superseded(old, observed):
             accepted += 1  # a good report, only superseded
             continue
+        # The field every other path reads this station's reports at (the table's, before
+        # the feed's own figure), so the feed's clouds are the command line's.
+        elevation_m = field_elevation_m(station, feed_m=pos.elevation_m, positions=positions)
         try:
-            patch = metar_to_patch(metar, field_elevation_m=pos.elevation_m)
+            patch = report_patch(metar, elevation_m)
         except ValueError as exc:
             problems.append(f"{where}: {exc}")
             continue
         accepted += 1
         stations[station] = StationWeather(
-            station, pos.lat_deg, pos.lon_deg, pos.elevation_m, observed, patch
+            station, pos.lat_deg, pos.lon_deg, elevation_m, observed, patch
         )
     return Ingested(
         stations=stations,
@@ -178,6 +202,14 @@ def ingest(
         problems=tuple(problems),
         internal_errors=tuple(internal),
     )
+
+
+def _disagree(report_utc: datetime, feed_utc: datetime) -> bool:
+    return abs((report_utc - feed_utc).total_seconds()) > FEED_TIME_SLACK_S
+
+
+def _iso(time: datetime) -> str:
+    return f"{time:%Y-%m-%dT%H:%M}Z"
 
 
 def _superseded(old: StationWeather | None, observed: datetime | None) -> bool:

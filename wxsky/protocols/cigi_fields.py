@@ -28,8 +28,9 @@ HEADER_SIZE = 2  # u8 packet id, u8 packet size
 MAJOR_VERSION = 3
 MINOR_VERSION = 3
 BYTE_SWAP_MAGIC = 0x8000
-# A wrapped angle may arrive anywhere in this band (CCL hosts send -180..180 where the ICD
-# says 0..360 and the reverse); it is kept normalised into its field's [lo, hi).
+# A wrapped angle may arrive anywhere in this band (CCL's Weather Control sends the wind
+# direction as -180..180 where the ICD says 0..360; a host with CCL's range checks off, or
+# built without CCL, may wrap any angle either way); it is kept normalised into [lo, hi).
 WRAP_ACCEPT_DEG = 360.0
 DIRECTION_TEXT: Mapping[str, str] = MappingProxyType(
     {"host_to_ig": "host → IG", "ig_to_host": "IG → host"}

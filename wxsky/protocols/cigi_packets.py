@@ -4,11 +4,13 @@
 packet tables in docs/cigi.md (`table_markdown`). Each packet lists its fields in byte order:
 offset, wire type, name with its unit, and the range where the standard gives one. Bytes the
 table does not name are reserved: the encoder zeroes them and the decoder does not read them
-(CCL leaves some uninitialised).
+(CCL 3.3.3's `Pack()` zeroes them in these packets, but a host need not be built on CCL).
 
 Layouts are SISO-STD-013 CIGI 3.3 as read from CCL's `Pack()` (protocols reference §6.3-§6.8,
 §6.10a); what the reference lacks is taken from the 3.3 ICD and said so in a `source` note.
-Ranges a CCL-based host exceeds (angles, wind direction) are accepted wider and normalised.
+Angles are accepted in ±360° and normalised: CCL's Weather Control sends its wind direction
+as -180..180 where the ICD says 0..360, and a host with CCL's range checks off (or none) may
+send any angle either way.
 """
 
 from __future__ import annotations
@@ -119,7 +121,7 @@ CELESTIAL_SPHERE_CONTROL = PacketSpec(
         ),
         f32("star_field_intensity_pct", 12, 0.0, 100.0),
     ),
-    "protocols §6.7 (CCL CigiCelestialCtrl)",
+    "protocols §6.7 (CCL CigiCelestialCtrlV3)",
 )
 
 ATMOSPHERE_CONTROL = PacketSpec(
@@ -138,7 +140,7 @@ ATMOSPHERE_CONTROL = PacketSpec(
         angle("wind_dir_deg", 20, 0.0, "true, from"),
         f32("pressure_hpa", 24, 0.0, note="millibars on the wire (= hPa)"),
     ),
-    "protocols §6.6 (CCL CigiAtmosCtrl); the global values weather layers override",
+    "protocols §6.6 (CCL CigiAtmosCtrlV3); the global values weather layers override",
 )
 
 ENVIRONMENTAL_REGION_CONTROL = PacketSpec(

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, date, datetime
 from types import MappingProxyType
@@ -413,10 +413,15 @@ def _layer(p: Packet) -> Layer:
 # --- answers ----------------------------------------------------------------------------------
 
 
-def responses(request: Packet, weather: PointWeather) -> list[Packet]:
+def responses(
+    request: Packet, weather: PointWeather, layer_ids: Sequence[int] | None = None
+) -> list[Packet]:
     """The answers to an Environmental Conditions Request: a Weather Conditions Response
     for the weather bit, an Aerosol Concentration Response per cloud layer for the aerosol
-    bit. Values are clamped into the packets' ranges (a response is never refused)."""
+    bit, in the order of their layer ids. `layer_ids`: each of the weather's cloud layers' id
+    (`cigi_weather.answer_layer_ids`; layers sharing an id are summed into one answer), by
+    default its rank from the lowest. Values are clamped into the packets' ranges (a
+    response is never refused)."""
     rid = int(request["request_id"])
     out: list[Packet] = []
     if request["request_weather"]:
@@ -434,13 +439,20 @@ def responses(request: Packet, weather: PointWeather) -> list[Packet]:
             )
         )
     if request["request_aerosol"]:
-        for layer_id, water in enumerate(weather.cloud_water_gpm3[:255], 1):
+        water = weather.cloud_water_gpm3
+        ids = range(1, len(water) + 1) if layer_ids is None else layer_ids
+        if len(ids) != len(water):
+            raise ValueError(f"{len(ids)} layer ids for {len(water)} cloud layers")
+        by_id: dict[int, float] = {}
+        for layer_id, gpm3 in zip(ids, water, strict=True):
+            by_id[layer_id] = by_id.get(layer_id, 0.0) + gpm3
+        for layer_id in sorted(by_id):
             out.append(
                 make(
                     "aerosol_concentration_response",
                     request_id=rid,
                     layer_id=layer_id,
-                    aerosol_concentration_gpm3=water,
+                    aerosol_concentration_gpm3=by_id[layer_id],
                 )
             )
     return out

@@ -1,13 +1,17 @@
 """The weather a CIGI host's packets make at a place: its global layers with a region's
 blended in by the region's weight there (1 inside its rounded rectangle, falling smoothly to
 0 across the transition perimeter outside it), the fog layer's visibility where the place is
-in the fog, precipitation layers and the present weather they report. Pure.
+in the fog, precipitation layers and the present weather they report; and which of the applied
+weather's cloud layers are the host's, under which of its layer ids (`answer_layer_ids`, for
+the Aerosol Concentration Responses). Pure.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
+from wxsky.protocols.cigi_eye import eye
 from wxsky.protocols.cigi_session import (
     CLOUD_LAYERS,
     FOG_CODE_BELOW_M,
@@ -33,6 +37,12 @@ from wxsky.weather.state import (
     WindLayer,
     dir_from_deg,
 )
+from wxsky.weather.transition import pair_layers
+
+# CIGI's layer ids 10-255 are the IG's own: the answers number the layers the host did not set
+# from here while any layer carries one of the host's ids (1-3), so none is taken for its.
+IG_LAYER_IDS_FROM = 10
+MAX_LAYER_ID = 255
 
 
 def region_weight(region: Region, lat_deg: float, lon_deg: float) -> float:
@@ -75,7 +85,7 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
     temperature and pressure to the sources below it."""
     rid, weight = _region_at(host, lat_deg, lon_deg)
     ids = sorted({lid for (r, lid) in host.layers if r is None or r == rid})
-    clouds: list[CloudLayer] = []
+    clouds = [cloud for cloud, _ in _clouds_by_id(host, rid, weight, ids)]
     winds: list[WindLayer] = []
     precip: list[PrecipLayer] = []
     fog: Layer | None = None
@@ -85,7 +95,6 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
         # A region that leaves a layer id unset leaves the global layer there.
         w = weight if r is not None else 0.0
         if lid in CLOUD_LAYERS:
-            clouds += _blend_clouds(g, r, w)
             if (wind := _blend_wind(g, r, w)) is not None:
                 winds.append(wind)
         else:
@@ -119,6 +128,69 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
     if winds:  # a host that gives no wind leaves it to the sources below
         fields["wind"] = tuple(winds)
     return WeatherPatch(source=Source.CIGI, **fields)  # type: ignore[arg-type]
+
+
+def host_clouds(host: HostState) -> tuple[tuple[CloudLayer, int], ...]:
+    """The cloud layers the host's packets make where its weather is taken (the rendered
+    view's eye, as `weather_patch` is asked for it), each with the host's layer id (a layer
+    id a region blends in two cloud types gives two)."""
+    view = eye(host)
+    if view is None and host.regions:
+        return ()  # no weather of the host's is applied before it places its ownship
+    lat, lon = (view.lat_deg, view.lon_deg) if view is not None else (0.0, 0.0)
+    rid, weight = _region_at(host, lat, lon)
+    ids = sorted({lid for (r, lid) in host.layers if r is None or r == rid})
+    return tuple(_clouds_by_id(host, rid, weight, ids))
+
+
+def answer_layer_ids(
+    applied: Sequence[CloudLayer],
+    target: Sequence[CloudLayer],
+    hosts: Sequence[HostState] = (),
+) -> tuple[int, ...]:
+    """The layer id each applied cloud layer answers under. A layer moving toward one of the
+    hosts' layers (paired with it as the transition pairs layers: same type, nearest base)
+    has that host's id, several layers of one id summing into one answer; every other layer
+    (from a METAR, a preset, a knob, or one of the host's on its way out after the host
+    replaced or removed it) is numbered by its rank from the lowest: from 1 while no layer
+    has a host's id, else from IG_LAYER_IDS_FROM, CIGI's first IG-defined id."""
+    pool = [(cloud, lid) for host in hosts for cloud, lid in host_clouds(host)]
+    goal_ids: dict[int, int] = {}  # id() of a target layer -> the host's layer id
+    for layer in target:
+        found = next((k for k, (cloud, _) in enumerate(pool) if cloud == layer), None)
+        if found is not None:
+            goal_ids[id(layer)] = pool.pop(found)[1]
+    where = {id(layer): i for i, layer in enumerate(applied)}
+    ids = [0] * len(applied)
+    others: list[int] = []
+    for now, goal in pair_layers(tuple(applied), tuple(target)):
+        if now is None:
+            continue
+        i = where[id(now)]
+        lid = goal_ids.get(id(goal)) if goal is not None else None
+        if lid is None:
+            others.append(i)
+        else:
+            ids[i] = lid
+    first = IG_LAYER_IDS_FROM if len(others) < len(applied) else 1
+    for rank, i in enumerate(sorted(others, key=lambda i: (applied[i].base_m, i))):
+        ids[i] = min(first + rank, MAX_LAYER_ID)
+    return tuple(ids)
+
+
+def _clouds_by_id(
+    host: HostState, rid: int | None, weight: float, ids: Sequence[int]
+) -> list[tuple[CloudLayer, int]]:
+    out: list[tuple[CloudLayer, int]] = []
+    for lid in ids:
+        if lid not in CLOUD_LAYERS:
+            continue
+        g = host.layers.get((None, lid))
+        r = host.layers.get((rid, lid)) if rid is not None else None
+        # A region that leaves a layer id unset leaves the global layer there.
+        w = weight if r is not None else 0.0
+        out += [(cloud, lid) for cloud in _blend_clouds(g, r, w)]
+    return out
 
 
 def _cloud(layer: Layer, cover_pct: float, base_m: float, thickness_m: float) -> CloudLayer:

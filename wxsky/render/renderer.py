@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import itertools
 import logging
 import math
 from dataclasses import dataclass
@@ -173,7 +174,20 @@ class Renderer:
         shader's machine code for the state it is drawn with at its first draw, and the kept
         sky layer is drawn whole the first time; both made the first frame the slowest."""
         self.render_frame(frame)
+        self._warm_sky_variants(frame.camera, frame.sky)
         self.finish()
+
+    def _warm_sky_variants(self, cam: Camera, sky: SkyParams) -> None:
+        """Draw every variant of the sky pass once, into a scratch target: llvmpipe makes a
+        program's machine code at its first draw (a night sky with the moon and the dome:
+        about 0.1 s), and a clock set or the evening would otherwise pay it in a frame."""
+        scratch = self._target("sky_warm_up", 16, 16)
+        scratch.fbo.use()
+        self.ctx.disable(moderngl.BLEND)
+        for stars, moon, dome in itertools.product((False, True), repeat=3):
+            feats = sky_textures.SkyFeatures(stars=stars, moon=moon, dome=dome)
+            uniforms = self._sky_uniforms(cam, sky, feats, sky_textures.FULL_RECT)
+            self._sky_draw("sky warm-up", feats, uniforms)
 
     def render_frame(self, frame: FrameScene) -> None:
         """Draw the sky and the near layer for the frame's camera, and the near_front layer
@@ -665,7 +679,7 @@ _QUAD_STRIP = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]], np.
 # Per sprite shape: (first vertex, vertices) in the corner buffer, and how the sheet is read.
 # Polygons are for sprites many pixels wide, read trilinearly; quads for sprites a few pixels
 # wide (the far band, impostors), read from one mip level bilinearly: about a fifth less time
-# for those passes, and no difference to the eye side by side (tools/compare_frames.py).
+# for those passes, and no difference to the eye side by side (tools/gallery/compare_frames.py).
 _SHAPES = {
     "polygon": (0, 8, moderngl.LINEAR_MIPMAP_LINEAR),
     "quad": (8, 4, moderngl.LINEAR_MIPMAP_NEAREST),

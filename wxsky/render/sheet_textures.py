@@ -21,7 +21,7 @@ of the nearby cloud (push-pull per cell), so bilinear filtering never blends in 
 Only numpy: PCG64 streams from `SeedSequence([seed, slot])` (so retuning one slot leaves
 the others alone) and elementwise float64 maths, quantised to 8 bits at the end, so every
 machine produces the same bytes. A libm or SIMD difference in the last bit of exp or sin
-could in principle flip one rounding somewhere; `tools/build_sprite_sheet.py --check`
+could in principle flip one rounding somewhere; `tools/generate/build_sprite_sheet.py --check`
 would say so.
 
 The parts live in three modules: `wxsky.render.sheet_primitives` (the grid, window, noise

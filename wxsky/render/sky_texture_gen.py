@@ -1,10 +1,10 @@
 """The one generator of the sky pass's texture images, from fixed seeds (Roden & Parberry).
 
 `build_sky_textures` makes every image, (H, W, 4) uint8 as shipped, by file name;
-`tools/build_sky_textures.py` writes them to `data/sky_*.png`, and `wxsky.render.sky_textures`
-(which says what each channel means to the shader) only loads them. Numpy only: seeded PCG64
-streams and float64 maths quantised to 8 bits at the end, so every machine makes the same
-bytes (the tool's `--check` would say if one did not).
+`tools/generate/build_sky_textures.py` writes them to `data/sky_*.png`, and
+`wxsky.render.sky_textures` (which says what each channel means to the shader) only loads
+them. Numpy only: seeded PCG64 streams and float64 maths quantised to 8 bits at the end, so
+every machine makes the same bytes (the tool's `--check` would say if one did not).
 
 - stars: a share of the cube-map cells hold a star, three times as many along the Milky Way,
   with power-law brightnesses, flicker rates, variances and phases.

@@ -2,7 +2,7 @@
 
 The textures are made procedurally from fixed seeds by one generator,
 `wxsky.render.sky_texture_gen.build_sky_textures`, and shipped as package data:
-`tools/build_sky_textures.py` writes its output to `data/sky_*.png` (`--check` there, and
+`tools/generate/build_sky_textures.py` writes its output to `data/sky_*.png` (`--check` there, and
 tests/test_sky_texture_files.py, keep the files equal to it), and the renderer only loads them,
 once per process (`star_texture`, `galaxy_texture`, `dome_noise_texture`, `sunset_texture`).
 Every file is 8-bit RGBA, so all are stored losslessly:
@@ -85,7 +85,7 @@ DOME_MIN_CLEARANCE_M = 300.0
 EARTH_RADIUS_M = 6_371_000.0
 EARTHSHINE = 0.05  # of the sunlit face's brightness, on the dark part of a crescent at night
 
-# The shipped files: wxsky/render/data/, written by tools/build_sky_textures.py.
+# The shipped files: wxsky/render/data/, written by tools/generate/build_sky_textures.py.
 DATA_PACKAGE = "wxsky.render"
 DATA_DIR = "data"
 

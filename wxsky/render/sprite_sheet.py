@@ -6,7 +6,7 @@ Slots, row-major on a 4 x 4 grid as `wxsky.scene.texture_slots` lays them out: 0
 hooked mares' tail (the "streaks" of cirrus), 13-15 ragged broken wisps (the "ragged" fringes
 and scud of the cloud models, see `wxsky.scene.cloud_model_files`).
 
-The PNGs under `data/` are made by `tools/build_sprite_sheet.py` from the one generator,
+The PNGs under `data/` are made by `tools/generate/build_sprite_sheet.py` from the one generator,
 `wxsky.render.sheet_textures`; `--check` there (and tests/test_sprite_sheet.py) keeps them equal
 to its output. The renderer only loads them (6 ms; generating takes 1.7 s of numpy).
 

@@ -15,7 +15,7 @@ slot is whole, as for its pixels).
 
 Only ctypes on libEGL here, and only entry points whose extension the display lists: Mesa
 22.3's llvmpipe crashes (SIGSEGV) in eglExportDMABUFImageQueryMESA when the display does not
-list EGL_MESA_image_dma_buf_export (`tools/probe_zero_copy.py --call-anyway` shows it).
+list EGL_MESA_image_dma_buf_export (`tools/bench/probe_zero_copy.py --call-anyway` shows it).
 """
 
 from __future__ import annotations

@@ -1,8 +1,10 @@
 """The weather at a point of the scene, as a host's flight model asks for it (CIGI's
 Environmental Conditions Request): the air there from the applied weather, and whether the
 point is inside one of the clouds the sky draws, from the very sprites of that cloud, placed
-where the wind has drifted them. So the wind, the visibility and the cloud water a host's
-aircraft feels are the ones its pilot sees. Pure.
+where the wind has drifted them, by the rule the frames use for the camera
+(`in_cloud.sprite_depths`: within a sprite's reach and within its layer's base and top). So
+the wind, the visibility and the cloud water a host's aircraft feels are the ones its pilot
+sees, and a point above or below every layer is never in cloud. Pure.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 from wxsky.scene.clouds import SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
 from wxsky.scene.gather import Drift, blocks_within
-from wxsky.scene.in_cloud import in_cloud, sprite_depths
+from wxsky.scene.in_cloud import in_cloud, layer_spans, sprite_depths
 from wxsky.weather.atmosphere import PointWeather, air_at
 from wxsky.weather.state import CloudType, WeatherState, dir_from_deg
 
@@ -55,11 +57,17 @@ def conditions_at(
     east, north, alt = point_m
     temperature, humidity, pressure = air_at(state, alt)
     keys = layer_keys(state.layers)
+    spans = layer_spans(state.layers)
     water: list[float] = []
     batches: list[SpriteBatch] = []
     for i, (layer, key) in enumerate(zip(state.layers, keys, strict=True)):
         dx, dy = drift[i] if i < len(drift) else (0.0, 0.0)
-        if not layer.base_m - SPRITE_REACH_M <= alt <= layer.top_m + SPRITE_REACH_M:
+        # A layer's sprites have their centres within it: they count only while the point is
+        # in a layer holding them, so in one overlapping this one (itself, mostly).
+        if not any(
+            base <= alt <= top and base <= layer.top_m and top >= layer.base_m
+            for base, top in spans
+        ):
             water.append(0.0)
             continue
         qx, qy = east - dx, north - dy
@@ -68,10 +76,10 @@ def conditions_at(
             for bx, by in blocks_within(qx, qy, 0.0, SPRITE_REACH_M)
         ]
         batch = SpriteBatch.concat(parts)
-        depth = float(sprite_depths(batch, point_m).max()) if len(batch) else 0.0
+        depth = float(sprite_depths(batch, point_m, spans).max()) if len(batch) else 0.0
         water.append(CLOUD_WATER_GPM3[layer.type] * min(1.0, max(0.0, depth)))
         batches.append(batch)
-    inside = in_cloud(SpriteBatch.concat(batches), point_m, state.visibility_m)
+    inside = in_cloud(SpriteBatch.concat(batches), point_m, state.visibility_m, spans_m=spans)
     ve, vn = state.wind_at(alt)
     speed = float(np.hypot(ve, vn))
     direction = dir_from_deg(ve, vn) if speed > 0.0 else 0.0

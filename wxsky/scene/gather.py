@@ -413,6 +413,36 @@ def near_blocks_keyed(
     max_range_m: float | None = None,
 ) -> tuple[Hashable, NearBlocks] | None:
     """`near_blocks`, with the key it is kept under (`install_near_blocks`)."""
+    wanted = near_set_key(state, drift, rings, radius_m, max_range_m)
+    if wanted is None:
+        return None
+    found = kept_near_blocks(wanted.key)
+    if found is not None:
+        return wanted.key, found
+    made = make_near_blocks(state, wanted)
+    install_near_blocks(wanted.key, made)
+    return wanted.key, made
+
+
+class NearSetKey(NamedTuple):
+    """Which near set a frame needs (`near_set_key`): its key and what making it reads."""
+
+    key: SetKey
+    picks: tuple[tuple[tuple[tuple[int, int], ...], ...], ...]  # per layer, per ring: blocks
+    n_rings: int
+    rain: Rain | None
+
+
+def near_set_key(
+    state: WeatherState,
+    drift: Drift,
+    rings: tuple[NearRing, ...],
+    radius_m: float,
+    max_range_m: float | None = None,
+) -> NearSetKey | None:
+    """The key of the near set these rings pick (None without rings), without making it:
+    a frame that must not wait looks it up (`kept_near_blocks`) and, where it is missing,
+    has it made elsewhere (`make_near_blocks`)."""
     global _last_key
     if not rings:
         return None
@@ -441,18 +471,27 @@ def near_blocks_keyed(
             )
         picks.append(tuple(per_ring))
     rain = rain_of(state)
-    parts = (state.seed, state.layers, rain, len(rings), tuple(picks))
+    chosen = tuple(picks)
+    parts = (state.seed, state.layers, rain, len(rings), chosen)
     last = _last_key  # one read: another thread may replace it
     key = last if last is not None and last.parts == parts else SetKey(parts)
     _last_key = key
+    return NearSetKey(key, chosen, len(rings), rain)
+
+
+def kept_near_blocks(key: Hashable) -> NearBlocks | None:
+    """The near set kept under `key` (made here or installed), or None."""
     with _near_lock:
         found = _near_sets.get(key)
         if found is not None:
             _near_sets.move_to_end(key)
-            return key, found
-    made = _make_near_blocks(state, picks, len(rings), rain)
-    install_near_blocks(key, made)
-    return key, made
+        return found
+
+
+def make_near_blocks(state: WeatherState, wanted: NearSetKey) -> NearBlocks:
+    """The near set `wanted` names, made now (tens to hundreds of milliseconds: every block
+    not in the block cache is generated); not kept: see `install_near_blocks`."""
+    return _make_near_blocks(state, list(wanted.picks), wanted.n_rings, wanted.rain)
 
 
 def install_near_blocks(key: Hashable, blocks: NearBlocks) -> None:

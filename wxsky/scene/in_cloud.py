@@ -8,13 +8,21 @@ into the cloud instead of showing clear through it.
 
 Locks are the only per-frame memory of the scene stage. They are keyed by a sprite's identity
 (its cloud, size and rotation, which generation fixes), not by its place in a batch, so a
-sprite keeps its lock while others form, dissipate or are sorted around it. Pure.
+sprite keeps its lock while others form, dissipate or are sorted around it.
+
+A sprite's dense part is where it is drawn: within its reach of the sprite's centre, and
+within the layer the sprite belongs to, its base to its top. The sprites of a deck are far
+wider than the deck is thick, so a sphere round each would reach hundreds of metres above
+and below it, and a point in the clear air over a stratus deck would be "in cloud". So the
+eye is in a sprite only while it is inside a cloud layer holding the sprite's centre, and its
+depth there falls to nothing at the layer's base and top as it does at the sprite's edge. Rain
+and snow shafts hang below their clouds and are not cloud. Pure.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -22,11 +30,14 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.clouds import SpriteBatch
+from wxsky.scene.rain import is_shaft
 from wxsky.scene.sky import KOSCHMIEDER
+from wxsky.weather.state import CloudLayer
 
 F32 = npt.NDArray[np.float32]
 SpriteKey = tuple[int, int, int]  # (cloud_id, size in cm, rotation in 1e-4 rad)
 Locks = Mapping[SpriteKey, tuple[float, float, float]]  # sprite -> locked unit normal (ENU)
+Spans = tuple[tuple[float, float], ...]  # each cloud layer's (base, top), m MSL
 
 LOCK_FRAC = 0.25  # lock within half the sprite's radius (a quarter of its edge)
 UNLOCK_FRAC = 0.5  # release once the camera is out of the sprite's radius again
@@ -40,6 +51,9 @@ VISIBILITY_CORE_M = 40.0
 VEIL_FULL_DEPTH = 0.5
 NO_LOCKS: Locks = MappingProxyType({})
 NO_VEIL = (0.0, 0.0, 0.0, 0.0)
+# A sprite's centre is its layer's base plus a height within the layer's thickness: the sum
+# may miss the top by a rounding, so a layer holds the centres within this of it.
+SPAN_SLACK_M = 0.01
 
 
 @dataclass(frozen=True)
@@ -105,17 +119,25 @@ def lock_facing(
     return normals, MappingProxyType(kept)
 
 
+def layer_spans(layers: Sequence[CloudLayer]) -> Spans:
+    """The cloud layers' (base, top), what `in_cloud` and `sprite_depths` hold sprites to."""
+    return tuple((layer.base_m, layer.top_m) for layer in layers)
+
+
 def in_cloud(
     batch: SpriteBatch,
     eye_m: tuple[float, float, float],
     weather_visibility_m: float,
     dist_m: npt.NDArray[np.float64] | None = None,
+    *,
+    spans_m: Spans,
 ) -> InCloud:
     """Whether the eye is inside a cloud's dense part, and the visibility there (`dist_m`:
-    the sprites' distances from the eye, if known)."""
+    the sprites' distances from the eye, if known; `spans_m`: the layers the sprites belong
+    to, `layer_spans`)."""
     if len(batch) == 0:
         return OUTSIDE
-    deepest = float(sprite_depths(batch, eye_m, dist_m).max())
+    deepest = float(sprite_depths(batch, eye_m, spans_m, dist_m).max())
     if deepest <= 0.0:
         return OUTSIDE
     depth_frac = min(1.0, deepest)
@@ -149,7 +171,8 @@ def in_cloud_fog(
         if dist_m is None
         else dist_m
     )
-    fog_rgb = rgba[int(np.argmax(sprite_depths(batch, eye_m, dist))), :3].astype(np.float64)
+    # The colour only: the sprite nearest the eye for its size, drawn or not in its layer.
+    fog_rgb = rgba[int(np.argmax(_radial_depths(batch, eye_m, dist))), :3].astype(np.float64)
     f = strength * (1.0 - np.exp(-KOSCHMIEDER * dist / cloud.visibility_m))  # (N,)
     out = rgba.copy()
     # Channel by channel, (3, N): numpy's loops run along the sprites, not over rows of three.
@@ -163,14 +186,55 @@ def in_cloud_fog(
 def sprite_depths(
     batch: SpriteBatch,
     eye_m: tuple[float, float, float],
+    spans_m: Spans,
     dist_m: npt.NDArray[np.float64] | None = None,
 ) -> npt.NDArray[np.float64]:
-    """(N,) how deep the eye is in each sprite's dense part: > 0 inside, 1 at its centre."""
+    """(N,) how deep the eye is in each sprite's dense part: > 0 inside, 1 at its centre, 0
+    where it is not in the sprite. The depth is the lesser of how far in from the sprite's
+    edge (its reach round its centre) and how far in from the nearer of its layer's base and
+    top, each as a share of the reach: it falls to 0 at either, never jumps. A sprite counts
+    only while the eye is inside a layer of `spans_m` holding the sprite's centre (overlapping
+    layers: the one the eye is deepest in); rain and snow shafts never count."""
+    n = len(batch)
+    out = np.zeros(n)
+    alt = float(eye_m[2])
+    # The eye's room in each layer it is in: how far it is from that layer's base or top.
+    rooms = [(base, top, min(alt - base, top - alt)) for base, top in spans_m if base <= alt <= top]
+    if not rooms or n == 0:
+        return out
+    reach = INSIDE_FRAC * batch.size_m.astype(np.float64)
+    radial = _radial_depths(batch, eye_m, dist_m, opacity=False)
+    near = np.flatnonzero(radial > 0.0)
+    if near.size == 0:
+        return out
+    centre_z = batch.centre_m[near, 2]
+    room = np.zeros(near.size)
+    for base, top, eye_room in rooms:
+        holds = (centre_z >= base - SPAN_SLACK_M) & (centre_z <= top + SPAN_SLACK_M)
+        room = np.where(holds, np.maximum(room, eye_room), room)
+    depth = np.minimum(radial[near], room / reach[near]) * batch.opacity[near].astype(np.float64)
+    if depth.max() > 0.0:
+        depth[is_shaft(batch)[near]] = 0.0
+    out[near] = np.maximum(depth, 0.0)
+    return out
+
+
+def _radial_depths(
+    batch: SpriteBatch,
+    eye_m: tuple[float, float, float],
+    dist_m: npt.NDArray[np.float64] | None = None,
+    *,
+    opacity: bool = True,
+) -> npt.NDArray[np.float64]:
+    """(N,) how far in from each sprite's edge the eye is, by distance alone (> 0 within its
+    reach, 1 at its centre), times its opacity unless `opacity` is False."""
     dist = (
         np.linalg.norm(batch.centre_m - np.asarray(eye_m, np.float64), axis=1)
         if dist_m is None
         else dist_m
     )
     reach = INSIDE_FRAC * batch.size_m.astype(np.float64)
-    out: npt.NDArray[np.float64] = (1.0 - dist / reach) * batch.opacity.astype(np.float64)
+    out: npt.NDArray[np.float64] = 1.0 - dist / reach
+    if opacity:
+        out *= batch.opacity.astype(np.float64)
     return out

@@ -13,12 +13,9 @@ import contextlib
 import dataclasses
 import itertools
 import math
-import threading
-import weakref
-from collections.abc import Hashable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
-from typing import NamedTuple, Protocol
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -30,13 +27,10 @@ from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
 from wxsky.scene.gather import (
     CancelFlag,
     Drift,
-    NearBlocks,
     NearRing,
     check_cancel,
     gather_far,
     gather_near_blocks,
-    install_near_blocks,
-    near_blocks_keyed,
 )
 from wxsky.scene.in_cloud import (
     NO_LOCKS,
@@ -46,9 +40,11 @@ from wxsky.scene.in_cloud import (
     Locks,
     in_cloud,
     in_cloud_fog,
+    layer_spans,
     lock_facing,
     lock_reach_frac,
 )
+from wxsky.scene.near_sets import NearInputs, near_scattered_light
 from wxsky.scene.rain import is_shaft
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
 from wxsky.scene.shading import (
@@ -58,13 +54,7 @@ from wxsky.scene.shading import (
     display_colours,
     prepare_lighting,
 )
-from wxsky.scene.shading_harris import (
-    LIGHT_REUSE_DEG,
-    close_directions,
-    scattered_light,
-    scene_lights,
-    with_alpha,
-)
+from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, with_alpha
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.scene.sprites import F64
@@ -382,21 +372,30 @@ def build_frame(
     split_at_m: tuple[float, float, float] | None = None,
     lod: bool = True,
     towers: TowerClock | None = None,
+    gathered: NearInputs | None = None,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
     `locks` are the previous frame's in-cloud locks; `clock` times the sort for benchmarks;
     `split_at_m`: the host's aircraft, at whose distance the near layer is split; `lod`: far
-    near clouds as one sprite each (off in direct mode, which draws every sprite)."""
-    radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
-    near, share, blocks = gather_near_blocks(state, drift, rings, radius_m, settings.max_range_m)
-    scattered = None
-    if blocks is not None and settings.shading == "harris":
-        scattered = near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG)
+    near clouds as one sprite each (off in direct mode, which draws every sprite).
+    `gathered`: the near layer already gathered, lit and its cells found (the daemon's
+    frames, which never make a set: `engine.near_work`); by default gathered here, and what
+    is missing made at once."""
+    if gathered is None:
+        gathered = gather_inputs(state, drift, rings, sky, settings, near_radius_m, towers)
+    near, share, blocks, scattered = (
+        gathered.near,
+        gathered.share,
+        gathered.blocks,
+        gathered.scattered,
+    )
     eye = camera.position_m
     placed = NO_TOWERS
     if towers is not None and blocks is not None and settings.max_towers > 0:
-        found = candidates(blocks, state, towers.epochs)
+        found = gathered.found
+        if found is None:
+            found = candidates(blocks, state, towers.epochs)
         placed = place_towers(
             found, drift, share, eye, towers, sky, settings.max_towers, settings.max_range_m
         )
@@ -449,7 +448,7 @@ def build_frame(
         if budget.dropped:
             shaded, dropped = SpriteDraw(budget.sprites, budget.rgba), budget.dropped
             drawn_dist = None
-    cloud = in_cloud(near, eye, state.visibility_m, dist)
+    cloud = in_cloud(near, eye, state.visibility_m, dist, spans_m=layer_spans(state.layers))
     fogged, veil = in_cloud_fog(shaded.sprites, shaded.rgba, eye, cloud, drawn_dist)
     draw, kept = oriented(SpriteDraw(shaded.sprites, fogged), eye, locks, drawn_dist)
     front: SpriteDraw | None = None
@@ -492,126 +491,26 @@ def build_frame(
     )
 
 
-# Harris's light on the near layer's particles, per set of near blocks: it depends on the
-# sprites and the light directions only (rounded so that the sun moves them every half
-# minute or so), and the near layer's sprites are one set from one ring rebuild to the next.
-# Working it out every frame (identifying every sprite, hashing the batch, looking the light
-# up, scattering it) was a third of the scene stage.
-# With each light, the same rows under the directions of the last lights (an array a sky
-# step's frames share) it was found close enough to, and how close was asked: the frames of
-# that step take it at once, and their shading sees by identity that it is for their lights.
-# A light just made is under its own directions, found for them exactly (0 degrees).
-_near_light: weakref.WeakKeyDictionary[NearBlocks, tuple[Scattered, Scattered, float]] = (
-    weakref.WeakKeyDictionary()
-)
-_near_light_lock = threading.Lock()
-
-
-def near_scattered_light(
-    blocks: NearBlocks, near: SpriteBatch, sky: SkyParams, within_deg: float = 0.0
-) -> Scattered | None:
-    """Harris's light (`shading_harris.scattered_light`) on each sprite of `near`, the sprites
-    of `blocks` placed for a frame, a row per sprite (zeros for slab sprites); None when every
-    sprite is a slab's. The drift moves a cloud's sprites alike, so it changes none of it.
-    `within_deg`: light kept for lights that far from this sky's will do (a frame's case:
-    LIGHT_REUSE_DEG); 0, what the ring's worker asks, makes it for exactly these lights."""
-    lights = scene_lights(sky)
-    with _near_light_lock:
-        found = _near_light.get(blocks)
-    if found is not None:  # then the set has particles: no light is kept for slabs alone
-        light, shown, checked_deg = found
-        if shown.directions is lights.directions and checked_deg <= within_deg:
-            return shown
-        # Against the directions the light was made for, so that reuse never drifts.
-        if close_directions(light.directions, lights.directions, within_deg):
-            if light.directions is lights.directions:
-                shown = light
-            else:
-                shown = Scattered(lights.directions, light.rows)
-            with _near_light_lock:
-                _near_light[blocks] = (light, shown, within_deg)
-            return shown
-    slab = near.slab
-    if len(near) and slab.all():
-        return None
-    if slab.any():
-        part = scattered_light(near.take(~slab), lights)
-        rows = np.zeros((len(near), part.rows.shape[1]), np.float32)
-        rows[~slab] = part.rows
-        made = Scattered(lights.directions, rows)
-    else:
-        made = scattered_light(near, lights)
-    with _near_light_lock:
-        _near_light[blocks] = (made, made, 0.0)
-    return made
-
-
-class PreparedNear(NamedTuple):
-    """A near set made with a ring, and Harris's light on it (None: not Harris, or every
-    sprite a slab's), under the key the frames look it up by (`gather.near_blocks_keyed`)."""
-
-    key: Hashable
-    blocks: NearBlocks
-    light: Scattered | None
-
-
-def prepare_near(
-    state: WeatherState,
-    ring: RingScene,
-    shown: NearRing | None,
-    sky: SkyParams,
-    settings: SceneSettings,
-) -> tuple[PreparedNear, ...]:
-    """Make, with a new ring (on its worker), the near sets the frames will ask for once it
-    is complete, and Harris's light on them: the cross-fade's (with `shown`, the ring then on
-    show, at any weight) and the new ring's own. Made in a frame, each cost that frame tens
-    of milliseconds. Returns them, for a worker in another process to hand back
-    (`install_near`)."""
-    new = NearRing(ring.geometry.centre_m, ring.drift, 1.0)
-    sets: list[tuple[NearRing, ...]] = [(new,)]
-    if shown is not None:
-        cur = shown._replace(weight=0.5)
-        sets.append((cur, new._replace(weight=0.5)))
-    made = (_near_set(state, ring.drift, rings, sky, settings) for rings in sets)
-    return tuple(p for p in made if p is not None)
-
-
-def warm_near(
-    state: WeatherState, drift: Drift, ring: NearRing, sky: SkyParams, settings: SceneSettings
-) -> None:
-    """Make the near set a frame gathers for `ring`, with its light, ahead of that frame."""
-    _near_set(state, drift, (ring,), sky, settings)
-
-
-def _near_set(
+def gather_inputs(
     state: WeatherState,
     drift: Drift,
     rings: tuple[NearRing, ...],
     sky: SkyParams,
     settings: SceneSettings,
-) -> PreparedNear | None:
-    """The near set for `rings` (made, or found in the cache) and its light made for
-    exactly this sky."""
-    keyed = near_blocks_keyed(state, drift, rings, settings.ring_radius_m, settings.max_range_m)
-    if keyed is None:
-        return None
-    key, blocks = keyed
-    light = None
-    if settings.shading == "harris":
-        placed = blocks.placed(drift, rings)
-        if placed is not None:
-            light = near_scattered_light(blocks, placed[0], sky)
-    return PreparedNear(key, blocks, light)
-
-
-def install_near(prepared: tuple[PreparedNear, ...]) -> None:
-    """Keep near sets and their light made by `prepare_near` in another process, so the
-    frames find them as if made here."""
-    for item in prepared:
-        install_near_blocks(item.key, item.blocks)
-        if item.light is not None:
-            with _near_light_lock:
-                _near_light[item.blocks] = (item.light, item.light, 0.0)
+    near_radius_m: float | None = None,
+    towers: TowerClock | None = None,
+) -> NearInputs:
+    """The near layer for `rings` gathered, and what a frame needs of its set made now where
+    it is missing (the set, its light, its cells)."""
+    radius_m = settings.ring_radius_m if near_radius_m is None else near_radius_m
+    near, share, blocks = gather_near_blocks(state, drift, rings, radius_m, settings.max_range_m)
+    scattered = None
+    if blocks is not None and settings.shading == "harris":
+        scattered = near_scattered_light(blocks, near, sky, LIGHT_REUSE_DEG)
+    found = None
+    if towers is not None and blocks is not None and settings.max_towers > 0:
+        found = candidates(blocks, state, towers.epochs)
+    return NearInputs(near, share, blocks, scattered, found)
 
 
 # A sprite's quad reaches 0.71 of its edge from its centre (a corner of the octagon's square):

@@ -148,9 +148,8 @@ def candidates(
 ) -> tuple[Candidate, ...]:
     """Every convective cell of the near set (kept with it: the same set gives the same cells
     until the weather or the epochs change)."""
-    key = (epochs, state.temperature_c, state.dewpoint_c, state.layers)
-    with _found_lock:
-        found = _found.get(blocks, {}).get(key)
+    key = candidates_key(state, epochs)
+    found = kept_candidates(blocks, state, epochs, key)
     if found is not None:
         return found
     out: list[Candidate] = []
@@ -187,9 +186,32 @@ def candidates(
                 )
             )
     made = tuple(out)
-    with _found_lock:
-        _found.setdefault(blocks, {})[key] = made
+    install_candidates(blocks, key, made)
     return made
+
+
+def candidates_key(state: WeatherState, epochs: tuple[LayerEpoch | None, ...]) -> object:
+    """What a set's convective cells depend on besides the set: the epochs and the air."""
+    return (epochs, state.temperature_c, state.dewpoint_c, state.layers)
+
+
+def kept_candidates(
+    blocks: NearBlocks,
+    state: WeatherState,
+    epochs: tuple[LayerEpoch | None, ...],
+    key: object | None = None,
+) -> tuple[Candidate, ...] | None:
+    """The set's convective cells if already found for this weather and these epochs."""
+    if key is None:
+        key = candidates_key(state, epochs)
+    with _found_lock:
+        return _found.get(blocks, {}).get(key)
+
+
+def install_candidates(blocks: NearBlocks, key: object, found: tuple[Candidate, ...]) -> None:
+    """Keep a set's cells (found here, or by a worker process for the set it handed back)."""
+    with _found_lock:
+        _found.setdefault(blocks, {})[key] = found
 
 
 def place_towers(

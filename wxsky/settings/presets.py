@@ -39,7 +39,6 @@ __all__ = [
     "list_presets",
     "load_preset",
     "load_preset_file",
-    "patch_from_metar_text",
     "patch_from_weather_dict",
     "preset_diff",
     "preset_search_path",
@@ -141,17 +140,6 @@ def resolve_preset(
     path, origin = find_preset(name_or_path, extra_dirs)
     info, patch = load_preset_file(path)
     return PresetInfo(info.name, info.description, path, origin), patch
-
-
-def patch_from_metar_text(report: str) -> WeatherPatch:
-    """The weather a METAR report states, as the METAR decoder gives it (cloud bases above a
-    field at 0 m). The one place presets call the decoder, so its API can change here alone."""
-    from wxsky.weather.metar import decode
-    from wxsky.weather.metar_clouds import metar_to_patch
-
-    # A preset keeps no date, so any month with 31 days lets every report's day decode.
-    metar = decode(report, year=2000, month=1).require_usable()
-    return metar_to_patch(metar, field_elevation_m=0.0)
 
 
 def patch_from_weather_dict(weather: Mapping[str, Any]) -> WeatherPatch:

@@ -8,6 +8,8 @@ a tgftp report with an impossible timestamp line, or with none, is kept (and nam
 
 Year and month always come from the feed (AWC observation_time, the tgftp timestamp line) or, for
 feeds without dates, from the caller's reference time: a ddhhmmZ group alone names only the day.
+AWC's observation_time is also kept as the report's `feed_utc`, which dates it where its own day
+group is wrong (metar_input.ingest).
 Against a reference the day decides (`month_of_day`): a report later on the reference's own day
 stays in that month, because feed and station clocks differ by minutes and a live feed's newest
 report must not be taken for last month's.
@@ -58,6 +60,9 @@ class Report:
     lon_deg: float | None = None
     elevation_m: float | None = None
     where: str = ""
+    # The feed's own observation time for the report (AWC's observation_time), where it gives
+    # one: it dates the report when the report's day group disagrees (metar_input.ingest).
+    feed_utc: datetime | None = None
     # Hints only, and unhashable (it holds a list): kept out of equality and hashing.
     awc: Mapping[str, Any] | None = field(default=None, compare=False)
 
@@ -386,7 +391,8 @@ def awc_reports(
     months = Counter((time.year, time.month) for time in times if time is not None)
     file_month = months.most_common(1)[0][0] if months else None
     reports = []
-    for record, observed in zip(records, times, strict=True):
+    for record, feed_utc in zip(records, times, strict=True):
+        observed = feed_utc
         head = read_head(record.raw)
         if observed is None and record.observation_time is not None:
             problems.add(record.line, f"unreadable observation_time {record.observation_time!r}")
@@ -416,6 +422,7 @@ def awc_reports(
                 lon_deg=_finite(record.longitude),
                 elevation_m=_finite(record.elevation_m),
                 where=problems.where(record.line),
+                feed_utc=feed_utc,
                 awc=record.hints,
             )
         )

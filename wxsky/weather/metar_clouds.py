@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from wxsky.schema import Number
 from wxsky.units import FT_TO_M
 from wxsky.weather.metar import Metar, MetarSkyGroup
 from wxsky.weather.state import MAX_LAYERS, CloudLayer, CloudType, Source, WeatherPatch, WindLayer
@@ -55,7 +56,10 @@ CONVECTIVE_DEPTH_SCALE = (0.5, 2.0)
 WIND_HEIGHT_M = 10.0  # anemometer height above the field
 VV_MIN_DEPTH_M = 30.0  # VV000 still gets a visible fog layer
 MAX_CLOUD_TOP_M = 25_000.0  # CloudLayer's limit
+# A report's field elevation: any airport on Earth (the control channel's and the command
+# line's `field_elevation_m` are checked against this kind).
 FIELD_ELEVATION_RANGE_M = (-500.0, 9000.0)
+FIELD_ELEVATION_M = Number(*FIELD_ELEVATION_RANGE_M, unit="m")
 
 # Lowest base (ft AGL) a layer may have and still be reported alongside each clear-sky group.
 CLEAR_SKY_MIN_BASE_FT: dict[str, float] = {

@@ -1,5 +1,5 @@
 /* wxsky_gl_bench: times the host side of a frame against a live daemon, on a headless EGL
- * context, for tools/bench_host_c.py (and tests/test_host_c_bench.py).
+ * context, for tools/bench/bench_host_c.py (and tests/test_host_c_bench.py).
  *
  *   wxsky_gl_bench SEGMENT [--frames N] [--warmup N] [--latency N --control ADDR]
  *

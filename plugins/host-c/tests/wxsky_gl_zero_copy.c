@@ -1,7 +1,7 @@
 /* wxsky_gl_zero_copy: a host that asks a running daemon for its layer textures (protocol §6),
  * imports them where the daemon exports and this GL imports dma-bufs, and otherwise falls back
  * to the shared-memory segment; then composites the latest frame, or times both paths. For
- * tests/test_zero_copy.py and tools/bench_host_c.py --zero-copy.
+ * tests/test_zero_copy.py and tools/bench/bench_host_c.py --zero-copy.
  *
  *   wxsky_gl_zero_copy ADDR SEGMENT OUT.rgba [--require] [--wait-stdin]
  *   wxsky_gl_zero_copy ADDR SEGMENT --bench N [--require]

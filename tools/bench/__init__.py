@@ -1,0 +1,1 @@
+"""Benchmarks and measurements: the figures docs/performance.md and the other docs quote."""

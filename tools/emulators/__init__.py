@@ -1,0 +1,1 @@
+"""Emulators: a CIGI host, cockpit hardware and capture replay that drive wxsky from outside."""

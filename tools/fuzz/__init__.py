@@ -1,0 +1,1 @@
+"""Fuzzing: the harness and one target per parser (docs/reliability.md)."""

@@ -1,0 +1,1 @@
+"""Generators of files the repository ships: package data, the DBC, the station table, goldens."""
