@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import pytest
 
 from wxsky.app.cigi_part import CigiPart
+from wxsky.app.parts import PartContext, PublishedFrame
 from wxsky.engine.stages import SkyEngine
 from wxsky.inputs.cigi_link import CigiHostSocket
 from wxsky.protocols.cigi import Packet, decode_datagram, encode_datagram, make
@@ -89,7 +90,8 @@ class Rig:
         """The Aerosol Concentration Responses to a request at alt_m over the observer, as
         they come back behind the next frame's Start of Frame: layer id -> g/m³."""
         await self.send(request(request_id, alt_m))
-        self.part.frame_published(self.frame, self.part.host_frames(), self.engine.state)
+        self.part.before_frame()
+        self.part.after_frame(PublishedFrame(self.frame, self.engine.state, time.monotonic()))
         got = self.host.receive(10.0)
         assert got is not None, "no Start of Frame came back"
         packets = got[0].packets
@@ -110,20 +112,13 @@ async def rig() -> AsyncIterator[Rig]:
     state = dataclasses.replace(WeatherState(), observer=OBSERVER, layers=())
     # The default rates: a host's later changes move the sky over minutes.
     engine = SkyEngine(state, Camera((0.0, 0.0, 500.0)), SceneSettings(), rates=TransitionRates())
-    part = CigiPart(
-        engine,
-        CigiSection(),
-        publish_target=lambda: None,
-        set_camera=lambda params: params,
-        clock_rate=1.0,
-        listen=("udp:127.0.0.1:0",),
-    )
-    await part.start()
+    part = CigiPart(CigiSection(), clock_rate=1.0, listen=("udp:127.0.0.1:0",))
+    await part.start(PartContext(engine, set_camera=lambda params: params))
     try:
         with CigiHostSocket(("127.0.0.1", part.igs[0].port)) as host:
             yield Rig(engine, part, host)
     finally:
-        part.close()
+        await part.close(time.monotonic())
 
 
 def test_a_host_layer_answers_under_its_own_id_wherever_it_lies() -> None:
