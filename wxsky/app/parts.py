@@ -24,6 +24,8 @@ what it needs. The daemon calls, on its event loop and in the list's order:
 
 Hooks run on the loop between frames: a hook that blocks holds up every frame after it. Heavy
 or blocking work belongs on a task (`asyncio.create_task`) or a thread (`asyncio.to_thread`).
+A frame hook that raises is a defect and ends the daemon, as one in the daemon's own code would;
+bad input a part reads is its own to count in its inputs' stats and log, rate-limited.
 """
 
 from __future__ import annotations
