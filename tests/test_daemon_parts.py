@@ -41,6 +41,8 @@ STATUS_KEYS = {
     "shm_name",
     "camera",
     "clock_rate",
+    "frames",
+    "scene_work",
     "block_cache",
     "zero_copy",
     "sky_id",

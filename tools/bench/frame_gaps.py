@@ -14,9 +14,10 @@ Each phase starts one event and watches the frames for `--phase-s` seconds:
     cigi-resite     a CIGI host's first datagrams, its ownship 500 km away (a new site);
                     the first Start of Frame's latency is timed from the first sendto
     time-jump       `set_time` six hours on (a ring for the new sun, towers aged 6 h)
-    preset-apply    `apply_preset thunderstorm`, as `wxsky preset apply` sends it
-    preset-site     `apply_preset overcast-stratus` with its own site, seed and date
-    release         `release` (the weather goes back to the feed's or the start-up preset)
+    preset-apply    `wxsky preset apply thunderstorm` (at the [transition] rates)
+    preset-now      `wxsky preset apply overcast-stratus --now` (layers swapped at once)
+    preset-site     `wxsky preset apply broken-stratocumulus --site` (its site, seed, date)
+    release         `wxsky preset release --now` (back to the feed's or start-up weather)
     feed-change     the feed file replaced by another of 4,900 stations (parsed, re-chosen)
     channel-join    a display channel (a second daemon) joins the master's sky
 
@@ -298,16 +299,23 @@ def run_scenario(
             client.call("set_time", {"time_utc": later})
             finish(p)
 
+            # As `wxsky preset apply` and `release` send them.
             p = phase("preset-apply")
-            client.call("apply_preset", {"name": "thunderstorm"})
+            client.call("apply_preset", {"name": "thunderstorm", "keep_site": True})
+            finish(p)
+
+            p = phase("preset-now")
+            client.call(
+                "apply_preset", {"name": "overcast-stratus", "keep_site": True, "now": True}
+            )
             finish(p)
 
             p = phase("preset-site")
-            client.call("apply_preset", {"name": "overcast-stratus", "keep_site": False})
+            client.call("apply_preset", {"name": "broken-stratocumulus", "keep_site": False})
             finish(p)
 
             p = phase("release")
-            client.call("release", {"source": "control"})
+            client.call("release", {"now": True})
             finish(p)
 
             p = phase("feed-change")
@@ -320,15 +328,25 @@ def run_scenario(
             join = ["--join", f"zenoh:{endpoint}", "--channel", "left", "--view-offset=-60,0,0"]
             with daemon(tmp, "channel", config, join) as (_cproc, channel):
                 finish(p)
-                channel_frames = channel.call("status")["frames_published"]
+                seen = channel.call("status")
             watcher.halt.set()
             watcher.join(5.0)
             watch_client.close()
             rows = [ph.gaps(watcher.frames) for ph in phases]
+            # The channel's own frames, from its first (its start-up is not a gap): the
+            # largest gap it counted itself, through taking the master's sky.
+            rows.append(
+                {
+                    "phase": "channel's own frames",
+                    "frames": seen["frames_published"],
+                    "largest_gap_s": seen["frames"]["largest_gap_s"],
+                    "frames_not_seen": 0,
+                    "first_sof_s": None,
+                }
+            )
             return {
                 "rows": rows,
                 "daemon_clock": watcher.frames.daemon_clock,
-                "channel_frames": channel_frames,
                 "frames": watcher.frames.times,
                 "phases": [(ph.name, ph.start, ph.stop) for ph in phases],
             }

@@ -8,7 +8,6 @@ The main loop waits on an Event between ticks: a signal wakes it at once.
 from __future__ import annotations
 
 import asyncio
-import collections
 import concurrent.futures
 import contextlib
 import inspect
@@ -37,6 +36,7 @@ from wxsky.app.control import (
     set_time,
 )
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
+from wxsky.app.frame_times import FrameTimes
 from wxsky.app.part_factory import parts_from_config
 from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.app.trace import TraceWriter
@@ -55,7 +55,6 @@ from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_d
 
 log = logging.getLogger("wxsky.app.daemon")
 
-FPS_WINDOW_S = 2.0
 # A part's close runs this long past the shared deadline before it is cut: its own handling of
 # the deadline (a line naming what it abandoned) comes first.
 CLOSE_GRACE_S = 0.1
@@ -167,7 +166,7 @@ class Daemon:
         self._first_frame = self.engine.warm_up()
         self._target_version = -1
         self.frames_published = 0
-        self._frame_times: collections.deque[float] = collections.deque()
+        self._frame_times = FrameTimes()
         self._started = time.monotonic()
         self._stop = asyncio.Event()
         self._signals = 0
@@ -264,13 +263,13 @@ class Daemon:
                 part.before_frame()
             # The scene is built on the render thread too: a ring build takes long enough on a
             # CPU to hold up cockpit input if it ran here.
-            plan, meta = await loop.run_in_executor(
+            plan, meta, published_s = await loop.run_in_executor(
                 self._render_exec, self._advance_render_publish, now - last
             )
             last = now
             self._publish_target()
-            self._count_frame()
-            self._broadcast_frame(plan, meta)
+            self._count_frame(published_s)
+            self._broadcast_frame(plan, meta, published_s)
             frame = PublishedFrame(meta.frame_number, plan.state, now)
             for part in self.parts:
                 part.after_frame(frame)
@@ -389,9 +388,13 @@ class Daemon:
             self._renderer.close()
             self._renderer = None
 
-    def _advance_render_publish(self, dt_wall_s: float) -> tuple[FramePlan, FrameMeta]:
+    def _advance_render_publish(self, dt_wall_s: float) -> tuple[FramePlan, FrameMeta, float]:
+        """The frame path, on the render thread: the scene stages, drawing and publishing;
+        nothing here may wait on work off it (docs/ARCHITECTURE.md, Threads). Returns the
+        plan, its record and when its slot was flipped (the daemon's monotonic clock)."""
         plan = self.engine.advance(dt_wall_s)
-        return plan, self._render_and_publish(plan)
+        meta = self._render_and_publish(plan)
+        return plan, meta, time.monotonic()
 
     def _render_and_publish(self, plan: FramePlan) -> FrameMeta:
         r, writer = self._renderer, self._writer
@@ -520,6 +523,8 @@ class Daemon:
             "shm_name": self.config.output.shm_name,
             "camera": camera_to_dict(self.engine.camera),
             "clock_rate": self.engine.clock_rate,
+            "frames": self._frame_times.to_dict(),
+            "scene_work": self.engine.scene_work(),
             "block_cache": BLOCK_CACHE.info().to_dict(),
             "zero_copy": {
                 "supported": self._export_probe is not None and self._export_probe.supported,
@@ -546,11 +551,12 @@ class Daemon:
             "layers": [s.name for s in layer_specs(self.config)],
         }
 
-    def _broadcast_frame(self, plan: FramePlan, meta: FrameMeta) -> None:
+    def _broadcast_frame(self, plan: FramePlan, meta: FrameMeta, published_s: float) -> None:
         self._server_broadcast(
             "frame",
             {
                 "frame_number": meta.frame_number,
+                "published_s": published_s,
                 "time_utc": _frame_time(plan.state.time_utc),
                 "ring_version": meta.ring_version,
                 "ring_set": meta.ring_set,
@@ -568,18 +574,12 @@ class Daemon:
 
     # -- bookkeeping ------------------------------------------------------------------
 
-    def _count_frame(self) -> None:
+    def _count_frame(self, published_s: float) -> None:
         self.frames_published += 1
-        now = time.monotonic()
-        self._frame_times.append(now)
-        while self._frame_times and now - self._frame_times[0] > FPS_WINDOW_S:
-            self._frame_times.popleft()
+        self._frame_times.published(published_s)
 
     def fps(self) -> float:
-        times = self._frame_times
-        if len(times) < 2:
-            return 0.0
-        return (len(times) - 1) / max(times[-1] - times[0], 1e-6)
+        return self._frame_times.fps()
 
     def status_line(self) -> str:
         inputs = ", ".join(

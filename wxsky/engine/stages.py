@@ -320,6 +320,17 @@ class SkyEngine:
             self._near_work.gate = gate
         self._towers.gate = gate
 
+    def scene_work(self) -> dict[str, object]:
+        """What is being made off the frame path now, for `status`: a ring (building,
+        rendering or fading in), the near layer's set the frames asked for, tower steps; and
+        how many frames were drawn from the last near layer while a set was made."""
+        return {
+            "ring_busy": self.ring_busy,
+            "near_pending": self.near_pending,
+            "towers_pending": self.towers_pending,
+            "near_held_frames": self.near_waits,
+        }
+
     @property
     def near_pending(self) -> bool:
         """A near set asked for by the frames is being made (or waits to be)."""
