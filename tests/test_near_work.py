@@ -159,3 +159,34 @@ def test_a_change_of_layers_is_drawn_from_the_last_layer_until_its_set_is_made()
         assert len(after.frame.near) != len(before.frame.near)
     finally:
         engine.close(1.0)
+
+
+def test_a_tower_not_lit_yet_stays_the_sprite_cloud_it_grows_from() -> None:
+    """A convective cell whose volume is not made yet is drawn as its sprite cloud, not left
+    out: the sky shows a cumulus where the tower will be, never a hole."""
+    engine = _engine("towering-cumulus", "thread")
+    try:
+        gate = threading.Event()
+        engine.work_gate = gate  # no tower step is lit until the gate opens
+        engine.drift_for(1800.0)  # half an hour on: the cells have grown
+        engine.warm_up()
+        held = _off_thread(lambda: [engine.advance(DT_S) for _ in range(5)])[-1]
+        assert engine.towers_pending > 0 and held.frame.towers == ()
+        # Every cloud is drawn as sprites, as with no towers at all.
+        state, camera = held.state, held.frame.camera
+        plain = build_frame(
+            state,
+            engine.drift,
+            camera,
+            held.rings.near_rings(camera, engine.drift),
+            engine.sky(camera.position_m[2]),
+            dataclasses.replace(SETTINGS, max_towers=0),
+        )
+        np.testing.assert_array_equal(held.frame.near.sprites.centre_m, plain.near.sprites.centre_m)
+        gate.set()
+        lit = _off_thread(lambda: _settle(engine))
+        assert lit.frame.towers, "the cells grow as volumes once lit"
+        lit_ids = set(lit.frame.near.sprites.cloud_id.tolist())
+        assert not {t.cloud_id for t in lit.frame.towers} & lit_ids  # now drawn as volumes
+    finally:
+        engine.close(1.0)

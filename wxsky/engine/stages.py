@@ -588,9 +588,8 @@ class SkyEngine:
             lod=self.render_mode != "direct",
             towers=towers,
             gathered=gathered,
+            fill_towers=lambda shows: self._towers.fill(shows, sky),
         )
-        if frame.towers:
-            frame = dataclasses.replace(frame, towers=self._towers.fill(frame.towers, sky))
         self._locks = frame.locks
         events = rings.events
         waiting = self._near_work is not None and drawn_state is not state
@@ -649,7 +648,8 @@ class SkyEngine:
         self._bodies = bodies = bodies_for(state, self._bodies)
         sky = sky_params(state, camera.position_m[2], bodies)
         ring = NearRing(camera.position_m, drift, 1.0)
-        warm_near(state, drift, ring, sky, self.settings)
+        epochs = tuple(self._epochs.get(k) for k in layer_keys(state.layers))
+        warm_near(state, drift, ring, sky, self.settings, epochs)
         return build_frame(
             state,
             drift,

@@ -13,6 +13,7 @@ import contextlib
 import dataclasses
 import itertools
 import math
+from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -60,6 +61,7 @@ from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.scene.sprites import F64
 from wxsky.scene.tower_field import (
     NO_TOWERS,
+    PlacedTowers,
     TowerClock,
     TowerShow,
     candidates,
@@ -373,6 +375,7 @@ def build_frame(
     lod: bool = True,
     towers: TowerClock | None = None,
     gathered: NearInputs | None = None,
+    fill_towers: Callable[[tuple[TowerShow, ...]], tuple[TowerShow, ...]] | None = None,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
@@ -381,7 +384,9 @@ def build_frame(
     near clouds as one sprite each (off in direct mode, which draws every sprite).
     `gathered`: the near layer already gathered, lit and its cells found (the daemon's
     frames, which never make a set: `engine.near_work`); by default gathered here, and what
-    is missing made at once."""
+    is missing made at once. `fill_towers`: gives the towers their lit steps
+    (`engine.tower_work.TowerWork.fill`); a tower it leaves without any stays the sprite
+    cloud it grew from until one is made, rather than a hole in the sky."""
     if gathered is None:
         gathered = gather_inputs(state, drift, rings, sky, settings, near_radius_m, towers)
     near, share, blocks, scattered = (
@@ -399,6 +404,8 @@ def build_frame(
         placed = place_towers(
             found, drift, share, eye, towers, sky, settings.max_towers, settings.max_range_m
         )
+        if fill_towers is not None and placed.shows:
+            placed = _filled(placed, fill_towers(placed.shows))
     with (clock or NO_CLOCK).stage("sort"):
         offsets = eye_offsets(near, eye)
         d2 = squares(offsets)
@@ -489,6 +496,16 @@ def build_frame(
         towers=shows,
         towers_left_out=placed.left_out,
     )
+
+
+def _filled(placed: PlacedTowers, filled: tuple[TowerShow, ...]) -> PlacedTowers:
+    """`placed` with the towers' lit steps; those with none yet keep their clouds' sprites."""
+    waiting = [t.cloud_id for t in filled if not t.volumes]
+    if not waiting:
+        return dataclasses.replace(placed, shows=filled)
+    keep = ~np.isin(placed.drop_ids, np.asarray(waiting, np.int64))
+    shows = tuple(t for t in filled if t.volumes)
+    return dataclasses.replace(placed, shows=shows, drop_ids=placed.drop_ids[keep])
 
 
 def gather_inputs(

@@ -188,10 +188,16 @@ def prepare_near(
 
 
 def warm_near(
-    state: WeatherState, drift: Drift, ring: NearRing, sky: SkyParams, settings: SceneSettings
+    state: WeatherState,
+    drift: Drift,
+    ring: NearRing,
+    sky: SkyParams,
+    settings: SceneSettings,
+    epochs: tuple[LayerEpoch | None, ...] | None = None,
 ) -> None:
-    """Make the near set a frame gathers for `ring`, with its light, ahead of that frame."""
-    near_set(state, drift, (ring,), sky, settings)
+    """Make the near set a frame gathers for `ring`, with its light and (with `epochs`) its
+    cells, ahead of that frame."""
+    near_set(state, drift, (ring,), sky, settings, epochs)
 
 
 def near_set(
