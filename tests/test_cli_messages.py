@@ -27,6 +27,8 @@ import pytest
 from daemon_harness import DaemonSpec, running_daemon, running_daemons, write_config
 from server_thread import ServerThread
 
+from wxsky.app.bench import run_bench
+from wxsky.app.camera_path import straight_and_level
 from wxsky.cli import build_parser, main
 from wxsky.cli.common import (
     EXIT_FAILURE,
@@ -44,7 +46,10 @@ from wxsky.output.shm import FrameWriter, LayerSpec
 from wxsky.output.transport import ControlServer
 from wxsky.output.wire import Request, encode
 from wxsky.png import read_png
+from wxsky.scene.layout import SceneSettings
 from wxsky.settings.config import load_config
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import WeatherState
 
 REPO = Path(__file__).resolve().parents[1]
 FEED = REPO / "tests" / "data" / "metar" / "noaa_cycle_2025-07-26_okay_weather_HEAD1500.txt.gz"
@@ -211,7 +216,7 @@ def test_a_snapshot_looking_down_from_the_southern_hemisphere(tmp_path: Path) ->
     out = tmp_path / "down.png"
     proc = subprocess.run(
         [*WXSKY, "snapshot", "--preset", "clear", "--size", "48x32", "--lat", "-33.9",
-         "--lon", "-70.7", "--pitch-deg", "-5", "--heading-deg", "-90", "--out", str(out)],
+         "--lon", "-70.7", "--pitch-deg", "-5", "--heading-deg", "-9e1", "--out", str(out)],
         capture_output=True,
         text=True,
         timeout=600,
@@ -223,14 +228,19 @@ def test_a_snapshot_looking_down_from_the_southern_hemisphere(tmp_path: Path) ->
 # -- output paths -------------------------------------------------------------------------------
 
 
+# Each command is also given an unknown preset: the path must be refused first, before any
+# work (and a command that took the path would stop there, not render or run a daemon).
+NO_SKY = ("--preset", "no-such-sky")
+
+
 @pytest.mark.parametrize(
     ("command", "name", "needle"),
     [
-        (("snapshot", "--preset", "clear"), "--out", "does not exist (create it first)"),
-        (("snapshot", "--preset", "clear", "--out", "x.png"), "--layers-out", "does not exist"),
-        (("bench",), "--trace", "does not exist (create it first)"),
-        (("run",), "--trace", "does not exist (create it first)"),
-        (("run",), "--preview", "does not exist"),
+        (("snapshot", *NO_SKY), "--out", "does not exist (create it first)"),
+        (("snapshot", *NO_SKY, "--out", "x.png"), "--layers-out", "does not exist"),
+        (("bench", *NO_SKY), "--trace", "does not exist (create it first)"),
+        (("run", *NO_SKY), "--trace", "does not exist (create it first)"),
+        (("run", *NO_SKY), "--preview", "does not exist"),
     ],
 )
 def test_a_missing_directory_is_refused_not_made(
@@ -252,7 +262,7 @@ def test_a_missing_directory_is_refused_not_made(
 @pytest.mark.parametrize("name", ["x.jpg", "x.jpeg", "x", "x.png.txt", "x.tiff"])
 def test_out_must_be_a_png(capsys: pytest.CaptureFixture[str], tmp_path: Path, name: str) -> None:
     out = tmp_path / name
-    code, _, err = in_process(capsys, "snapshot", "--preset", "clear", "--out", str(out))
+    code, _, err = in_process(capsys, "snapshot", *NO_SKY, "--out", str(out))
     assert code == EXIT_USAGE
     assert one_line(err) == (
         f"wxsky: error: --out {out}: PNG is written: give a name ending in .png"
@@ -265,12 +275,12 @@ def test_out_refuses_a_directory_and_layers_out_a_file(
 ) -> None:
     folder = tmp_path / "shots.png"
     folder.mkdir()
-    code, _, err = in_process(capsys, "snapshot", "--preset", "clear", "--out", str(folder))
+    code, _, err = in_process(capsys, "snapshot", *NO_SKY, "--out", str(folder))
     assert code == EXIT_USAGE
     assert one_line(err).endswith(": is a directory: give a file name")
     afile = tmp_path / "layers"
     afile.write_text("")
-    args = ("snapshot", "--preset", "clear", "--out", str(tmp_path / "x.png"))
+    args = ("snapshot", *NO_SKY, "--out", str(tmp_path / "x.png"))
     code, _, err = in_process(capsys, *args, "--layers-out", str(afile))
     assert code == EXIT_USAGE
     assert one_line(err) == f"wxsky: error: --layers-out {afile}: is not a directory"
@@ -536,6 +546,47 @@ def test_snapshot_shows_its_steps_on_a_terminal(tmp_path: Path) -> None:
     assert stdout.decode().startswith(f"wrote {out} (32x16)")
     assert shown.startswith(f"{ERASE}wxsky: snapshot: reading the weather (0 s)"), repr(shown)
     assert shown.endswith(ERASE) and "\n" not in shown
+
+
+@pytest.mark.gl
+def test_bench_shows_its_frames_on_a_terminal() -> None:
+    term = Terminal()
+    proc = subprocess.Popen(
+        [*WXSKY, "bench", "--mode", "direct", "--frames", "2", "--size", "48x32",
+         "--preset", "clear"],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=term.slave,
+    )  # fmt: skip
+    term.start_reading()
+    try:
+        stdout, _ = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    shown = term.close()
+    assert proc.returncode == 0, shown
+    assert stdout.decode().startswith("wxsky bench: clear, direct mode, 48x32, 2 frames")
+    assert shown.startswith(f"{ERASE}wxsky: bench: starting the renderer and the scene (0 s)")
+    assert shown.endswith(ERASE) and "\n" not in shown, repr(shown)
+
+
+@pytest.mark.gl
+def test_run_bench_says_each_frame() -> None:
+    """What the bench's line shows, frame by frame (a terminal shows the latest each tick)."""
+    said: list[str] = []
+    state = WeatherState().apply(load_preset("clear"))
+    run_bench(
+        state,
+        SceneSettings(),
+        straight_and_level(),
+        2,
+        "direct",
+        (48, 32),
+        progress=said.append,
+    )
+    assert said == ["starting the renderer and the scene", "frame 1 of 2", "frame 2 of 2"]
 
 
 # -- runtime errors say what to do next ---------------------------------------------------------
