@@ -654,6 +654,26 @@ def test_a_udp_port_in_use_names_the_flag_and_key_that_pick_another() -> None:
         taken.close()
 
 
+def test_a_daemon_that_speaks_another_version_is_named_as_the_likely_cause(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    async def old_daemon(method: str, params: dict[str, Any]) -> Any:
+        return {"version": "0.0"}  # a status without the weather this wxsky reads
+
+    path = tmp_path / "wx.sock"
+    server = ServerThread(f"unix:{path}", old_daemon)
+    try:
+        args = ("cigi", "send", "--to", "udp:127.0.0.1:9", "--count", "1")
+        code, _, err = in_process(capsys, *args, "--control", f"unix:{path}")
+    finally:
+        server.stop()
+    assert code == EXIT_FAILURE
+    assert one_line(err) == (
+        f"wxsky: error: the daemon at unix:{path} sent no weather; is it another wxsky "
+        "version? run the daemon's own `wxsky cigi send`"
+    )
+
+
 def test_shm_name_is_checked_as_the_config_checks_it(capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = in_process(capsys, "run", "--shm-name", "a/b")
     assert code == EXIT_USAGE
