@@ -366,7 +366,8 @@ def test_a_port_already_taken_stops_the_start_with_one_line(tmp_path: Path) -> N
     assert run.returncode == 1, run.stderr
     errors = [line for line in run.stderr.splitlines() if line.startswith("wxsky: error:")]
     assert errors == [
-        f"wxsky: error: cigi:udp:127.0.0.1:{port}: cannot listen: Address already in use"
+        f"wxsky: error: cigi:udp:127.0.0.1:{port}: cannot listen: Address already in use; "
+        "give another address with --cigi udp:HOST:PORT or [cigi] listen"
     ]
 
 

@@ -259,7 +259,8 @@ def test_no_daemon_is_a_runtime_failure(tmp_path: Path) -> None:
     assert proc.returncode == 1, proc.stderr
     assert proc.stderr.strip().splitlines() == [
         f"wxsky: error: cannot connect to the wxsky daemon at unix:{tmp_path}/none.sock: "
-        "No such file or directory"
+        "No such file or directory; start one with `wxsky run`, or name the address it listens "
+        "on with --control ADDR (its [output] control)"
     ]
     assert proc.stdout == ""
 

@@ -173,6 +173,7 @@ def test_snapshot_layers_are_pixel_identical_across_processes(
     runs = []
     for n in range(2):
         out = tmp_path / f"run{n}"
+        out.mkdir()  # --out goes into a directory that exists
         wxsky(
             "snapshot",
             *(("--time", time) if time else ()),
@@ -215,6 +216,7 @@ def test_a_later_time_shows_the_clouds_blown_on(tmp_path: Path) -> None:
     near = {}
     for name, when in (("at", None), ("later", later), ("much", much_later)):
         out = tmp_path / name
+        out.mkdir()
         wxsky(
             "snapshot",
             "--preset",

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -309,7 +310,19 @@ def test_an_output_file_that_cannot_be_written_is_a_usage_error(
         capsys, "snapshot", "--preset", "clear", "--out", str(blocker / "x.png")
     )
     assert code == EXIT_USAGE
-    assert one_line(err).startswith(f"wxsky: error: --out {blocker / 'x.png'}: cannot write it")
+    assert one_line(err) == f"wxsky: error: --out {blocker / 'x.png'}: {blocker} is not a directory"
+    # A directory that exists but cannot be written: refused before any work too.
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    if os.access(locked, os.W_OK):
+        pytest.skip("running as a user that writes anywhere (root)")
+    code, _, err = in_process(
+        capsys, "snapshot", "--preset", "clear", "--out", str(locked / "x.png")
+    )
+    assert code == EXIT_USAGE
+    assert one_line(err) == (
+        f"wxsky: error: --out {locked / 'x.png'}: directory {locked} is not writable"
+    )
 
 
 # -- internal errors and -v ---------------------------------------------------------------------
@@ -547,5 +560,6 @@ def test_a_daemon_that_cannot_listen_is_a_runtime_failure(tmp_path: Path) -> Non
     proc = run_wxsky("run", "--control", f"unix:{blocker}")
     assert proc.returncode == 1, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == (
-        f"wxsky: error: {blocker} exists and is not a socket; refusing to replace it"
+        f"wxsky: error: {blocker} exists and is not a socket; refusing to replace it: remove "
+        "it, or give this daemon another with --control ADDR or [output] control"
     )

@@ -146,22 +146,29 @@ def test_client_limit_floods_bad_params_and_accept_failures_leave_the_daemon_usa
         _wait("the harness's own clients gone", lambda: keeper.call("status")["clients"] == 1, d)
         fillers = [_connect(d.socket_path) for _ in range(5)]
         _wait("six clients", lambda: keeper.call("status")["clients"] == 6, d)
-        # Over the limit: a one-line error each, then the daemon hangs up.
+        # Over the limit: each new client is served, and the longest idle one (never the
+        # keeper, a listener) is told why in one line and closed to make room.
         log_start = len(d.log())
-        for _ in range(30):
-            with _connect(d.socket_path) as extra:
-                messages, closed = _answer_and_hang_up(extra)
-            assert closed and len(messages) == 1, messages
-            (refusal,) = messages
-            assert isinstance(refusal, Response) and refusal.msgid is None
-            assert "too many control clients" in refusal.error and "max_clients" in refusal.error
-            assert "\n" not in refusal.error
-        assert keeper.call("status")["clients"] == 6  # the clients already there still work
-        refusals = d.log()[log_start:].count("too many control clients")
-        assert 1 <= refusals <= 2, d.log()[log_start:]
-        for sock in fillers:
-            sock.close()
-        _wait("the fillers gone", lambda: keeper.call("status")["clients"] == 1, d)
+        extras = [_connect(d.socket_path) for _ in range(30)]
+        try:
+            for sock in fillers + extras[:25]:
+                messages, closed = _answer_and_hang_up(sock)
+                assert closed and len(messages) == 1, messages
+                (evicted,) = messages
+                assert isinstance(evicted, Response) and evicted.msgid is None
+                assert evicted.error.startswith("control: closed to make room for a new client")
+                assert "max_clients" in evicted.error and "\n" not in evicted.error
+            for n, sock in enumerate(extras[25:]):  # the five newest are served
+                sock.sendall(encode(Request(n, "status", {})))
+                messages, _ = _answer_and_hang_up_after_one(sock)
+                assert isinstance(messages[0], Response) and messages[0].error is None
+            assert keeper.call("status")["clients"] == 6  # the keeper was never in the way
+            made_room = d.log()[log_start:].count("to make room for a new one")
+            assert 1 <= made_room <= 2, d.log()[log_start:]
+        finally:
+            for sock in fillers + extras:
+                sock.close()
+        _wait("the extras gone", lambda: keeper.call("status")["clients"] == 1, d)
 
         # 10,000 notifications naming no command, and rejected params far larger than any
         # legal one: a few log lines, none of them long.

@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import logging
 import os
+import select
 import socket
 import stat
 import time
@@ -20,8 +21,8 @@ from typing import Any, TypeVar
 import pytest
 from server_thread import ServerThread as LoopServer
 
-from wxsky.errors import WxskyError
-from wxsky.host.client import ControlClient, RemoteError
+from wxsky.errors import RuntimeFailure, WxskyError
+from wxsky.host.client import ControlClient, DaemonHungUp, RemoteError
 from wxsky.output.transport import (
     ControlServer,
     TcpAddress,
@@ -442,3 +443,187 @@ def test_default_address_falls_back_to_tmp(monkeypatch: pytest.MonkeyPatch) -> N
         if not existed:
             with contextlib.suppress(OSError):
                 directory.rmdir()
+
+
+# -- a full server makes room (issue 39) ----------------------------------------------------
+
+
+def connect_unix(sock: socket.socket, path: Path, timeout_s: float = 120.0) -> None:
+    """Connect as a blocking client would, but never hang: a unix socket whose listen
+    backlog is full refuses a non-blocking connect (EAGAIN) until the server accepts."""
+    deadline = time.monotonic() + timeout_s
+    sock.setblocking(False)
+    while True:
+        try:
+            sock.connect(str(path))
+            break
+        except BlockingIOError:
+            assert time.monotonic() < deadline, f"{path}: the server never accepted"
+            select.select([], [], [], 0.005)
+    sock.settimeout(timeout_s)
+
+
+def _connect_raw(address: UnixAddress) -> socket.socket:
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    connect_unix(sock, address.path)
+    return sock
+
+
+def _hung_up_with(sock: socket.socket) -> list[Any]:
+    """Every message the server sends on `sock` until it closes it (waiting as long as it
+    takes: only a hang fails)."""
+    decoder = MessageDecoder()
+    messages: list[Any] = []
+    while True:
+        chunk = sock.recv(65536)
+        if not chunk:
+            return messages
+        messages += decoder.feed(chunk)
+
+
+def _answers(sock: socket.socket, msgid: int) -> Any:
+    """Send an echo request on a raw connection; its answer (the connection is open)."""
+    sock.sendall(encode(Request(msgid, "echo", {"n": msgid})))
+    decoder = MessageDecoder()
+    while True:
+        chunk = sock.recv(65536)
+        assert chunk, f"connection {msgid} was closed"
+        for message in decoder.feed(chunk):
+            assert isinstance(message, Response) and message.msgid == msgid, message
+            return message.result
+
+
+def _made_room(message: Any, max_clients: int) -> bool:
+    return (
+        isinstance(message, Response)
+        and message.msgid is None
+        and message.error is not None
+        and message.error.startswith("control: closed to make room for a new client")
+        and f"of the {max_clients} the daemon serves ([output] max_clients)" in message.error
+    )
+
+
+def test_a_full_server_closes_the_longest_idle_clients_to_answer_a_new_one(
+    sock_path: Path,
+) -> None:
+    max_clients = 8
+    server = ServerThread(f"unix:{sock_path}", max_clients=max_clients)
+    address = UnixAddress(sock_path)
+    idle: list[socket.socket] = []
+    try:
+        # max_clients + 100 connections that never send anything, opened one after another.
+        idle = [_connect_raw(address) for _ in range(max_clients + 100)]
+        # The first 100 were closed, each with one line saying why: the longest idle went.
+        for n, sock in enumerate(idle[:100]):
+            messages = _hung_up_with(sock)
+            assert len(messages) == 1 and _made_room(messages[0], max_clients), (n, messages)
+        # A new client is answered at once...
+        with ControlClient.connect(address) as operator:
+            assert operator.call("echo", {"status": "?"}) == {"status": "?"}
+            # ... and the one that made room for it was the longest idle of those left.
+            assert _made_room(_hung_up_with(idle[100])[0], max_clients)
+            for n, sock in enumerate(idle[101:], 101):
+                assert _answers(sock, n) == {"n": n}
+            assert server.on_loop(lambda: server.server.evicted_clients) == 101
+            assert operator.call("echo", {"still": "served"}) == {"still": "served"}
+    finally:
+        for sock in idle:
+            sock.close()
+        server.stop()
+
+
+def test_listeners_are_closed_to_make_room_only_when_every_client_is_one(sock_path: Path) -> None:
+    server = ServerThread(f"unix:{sock_path}", max_clients=3)
+    address = UnixAddress(sock_path)
+    raw: list[socket.socket] = []
+    try:
+        with ControlClient.connect(address) as listener:
+            listener.subscribe(["frame"])  # the oldest connection, and a listener
+            raw = [_connect_raw(address) for _ in range(2)]  # b, c: idle
+            server.wait_for_clients(3)
+            raw.append(_connect_raw(address))  # d: b goes, not the older listener
+            assert _made_room(_hung_up_with(raw[0])[0], 3)
+            raw.append(_connect_raw(address))  # e: c goes
+            assert _made_room(_hung_up_with(raw[1])[0], 3)
+            assert server.broadcast("frame", {"n": 1}) == 1
+            note = listener.next_notification(timeout_s=10)
+            assert note is not None and note.params == {"n": 1}
+            # Every client a listener now: the longest idle of them goes for a new one.
+            for n, sock in enumerate(raw[2:], 2):
+                sock.sendall(encode(Request(n, SUBSCRIBE_METHOD, {"topics": ["frame"]})))
+                assert _hung_up_with_answer(sock, n) == {"topics": ["frame"]}
+            with ControlClient.connect(address) as newcomer:
+                assert newcomer.call("echo", {}) == {}
+                with pytest.raises(DaemonHungUp, match="closed to make room"):
+                    listener.call("echo", {})
+    finally:
+        for sock in raw:
+            sock.close()
+        server.stop()
+
+
+SUBSCRIBE_METHOD = "subscribe"
+
+
+def _hung_up_with_answer(sock: socket.socket, msgid: int) -> Any:
+    decoder = MessageDecoder()
+    while True:
+        chunk = sock.recv(65536)
+        assert chunk, f"connection {msgid} was closed"
+        for message in decoder.feed(chunk):
+            if isinstance(message, Response) and message.msgid == msgid:
+                return message.result
+
+
+class Gate:
+    """A handler whose "wait" requests are answered only when the test opens the gate: they
+    stay in the middle of a request as long as the test wants, with no clock involved."""
+
+    def __init__(self) -> None:
+        self.waiting = 0
+        self.gate: asyncio.Event | None = None
+
+    async def __call__(self, method: str, params: dict[str, Any]) -> Any:
+        if self.gate is None:
+            self.gate = asyncio.Event()
+        if method == "wait":
+            self.waiting += 1
+            await self.gate.wait()
+            return "opened"
+        return await handler(method, params)
+
+
+def test_when_every_client_is_in_the_middle_of_a_request_a_new_one_is_refused(
+    sock_path: Path,
+) -> None:
+    gate = Gate()
+    server = ServerThread(f"unix:{sock_path}", gate, max_clients=2)
+    address = UnixAddress(sock_path)
+    busy: list[socket.socket] = []
+    try:
+        busy = [_connect_raw(address) for _ in range(2)]
+        for n, sock in enumerate(busy):
+            sock.sendall(encode(Request(n, "wait", {})))
+        deadline = time.monotonic() + 30
+        while server.on_loop(lambda: gate.waiting) < 2:
+            assert time.monotonic() < deadline, "the requests never arrived"
+            time.sleep(0.01)
+        with pytest.raises(DaemonHungUp) as refused, ControlClient.connect(address) as late:
+            late.call("echo", {})
+        assert str(refused.value).startswith(
+            "too many control clients: all 2 the daemon serves ([output] max_clients) are in "
+            "the middle of a request"
+        )
+        assert isinstance(refused.value, RuntimeFailure)  # the CLI's exit 1
+
+        def open_gate() -> None:
+            assert gate.gate is not None
+            gate.gate.set()
+
+        server.on_loop(open_gate)
+        for n, sock in enumerate(busy):
+            assert _hung_up_with_answer(sock, n) == "opened"
+    finally:
+        for sock in busy:
+            sock.close()
+        server.stop()

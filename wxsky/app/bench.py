@@ -26,7 +26,7 @@ import logging
 import os
 import statistics
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -264,6 +264,7 @@ def run_bench(
     check_order: bool = False,
     profile: bool = False,
     lead_in: bool = True,
+    progress: Callable[[str], None] | None = None,
 ) -> BenchResult:
     """Render `frames` frames along `path`; `started_s`: the perf_counter reading the process's
     startup is counted from (default: now). `check_order`: also measure what each change in the
@@ -274,12 +275,15 @@ def run_bench(
     tests) instead of on the worker as the daemon does. `lead_in` (ring mode): first render
     untimed frames, the camera at the path's start, until the first ring has been built,
     drawn and faded in, so the timed frames are the daemon's steady state and not its first
-    seconds (which draw no far clouds); False times the frames from the daemon's start."""
+    seconds (which draw no far clouds); False times the frames from the daemon's start.
+    `progress` is told what is being done as it starts (the command line shows it)."""
     from wxsky.render.context import describe
     from wxsky.render.renderer import Renderer
     from wxsky.render.towers import SLICE_TEXELS
 
     t_start = time.perf_counter() if started_s is None else started_s
+    say = progress if progress is not None else _quiet
+    say("starting the renderer and the scene")
     width, height = size
     dt_s = 1.0 / fps
 
@@ -364,6 +368,7 @@ def run_bench(
         if lead_in and mode == "ring":
             t_lead = time.perf_counter()
             while True:
+                say(f"untimed frames until the first ring is shown: {drawn}")
                 plan = draw(0.0, dt_s if drawn else 0.0)
                 ring_shown = plan.rings.current is not None and plan.rings.incoming is None
                 # ... and every tower drawn, with no lit step still owed to it (the steady state
@@ -383,6 +388,7 @@ def run_bench(
         work_before, lit_before = engine.tower_work_s, engine.tower_steps_lit
         loop_start = time.perf_counter()
         for k in range(frames):
+            say(f"frame {k + 1} of {frames}")
             plan = draw(k * dt_s, dt_s if drawn else 0.0)
             result.frame_s.append(times.frame["frame"])
             result.cpu_stages_s.append(times.frame["cpu"])
@@ -409,9 +415,14 @@ def run_bench(
         if profiler is not None:
             from wxsky.render.profile import measure_fill_limits
 
+            say("measuring this machine's fill limits")
             result.fill_limits = measure_fill_limits(renderer.ctx, size, renderer.finish)
             result.passes = profiler.rows(result.fill_limits)
     return result
+
+
+def _quiet(what: str) -> None:
+    pass
 
 
 def order_change(

@@ -7,6 +7,7 @@ picture: the same engine plan, the same renderer passes, the same compositor.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,14 @@ from wxsky.weather.transition import TransitionRates
 LAYER_NAMES: tuple[str, ...] = ("sky", "near", *(f"ring_{i}" for i in range(RING_SIZE)))
 
 U8 = npt.NDArray[np.uint8]
+
+Progress = Callable[[str], None]
+"""Told what a snapshot is doing now, in a few words ("drawing the far clouds")."""
+
+
+def _quiet(what: str) -> None:
+    pass
+
 
 # What a snapshot takes at its peak, calibrated from the peak resident memory of
 # `/usr/bin/time -v wxsky snapshot --preset clear --size WxH` on llvmpipe: 145 MiB at 16x16,
@@ -72,15 +81,19 @@ def take_snapshot(
     drift_s: float = 0.0,
     mode: str = "ring",
     position_deg: tuple[float, float] | None = None,
+    progress: Progress = _quiet,
 ) -> Snapshot:
     """`drift_s`: how long the wind has blown the clouds since the weather was set (a picture
     later than its preset's time shows them moved on, the same in every process). `mode`:
     "ring" (far clouds in impostors, as the daemon draws them) or "direct" (every cloud as a
     sprite, to compare). `position_deg`: (lat, lon) of the camera, placed as the daemon's
     `set_camera` places it (near the site: under the same sky; far: a new site).
+    `progress` is told each step as it starts (the command line shows it: a towering sky
+    takes minutes on a CPU).
     Raises RuntimeFailure, before anything is built, if the picture would not fit in the
     memory available (`snapshot_bytes`)."""
     check_snapshot_memory(camera.width_px, camera.height_px, settings)
+    progress("building the clouds")
     engine = SkyEngine(state, camera, settings, clock_rate=0.0, render_mode=mode)
     if drift_s:
         engine.drift_for(drift_s)
@@ -98,9 +111,11 @@ def take_snapshot(
         engine.run_weather(transition.elapsed_s)
     plan = engine.advance(0.0)
     own = renderer is None
+    if own:
+        progress("starting the renderer")
     r = renderer if renderer is not None else Renderer(settings.ring_texture_px)
     try:
-        return picture(r, plan)
+        return picture(r, plan, progress=progress)
     finally:
         if own:
             r.close()
@@ -126,12 +141,17 @@ def check_snapshot_memory(width: int, height: int, settings: SceneSettings) -> N
     )
 
 
-def picture(renderer: Renderer, plan: FramePlan, draw_ring: bool = True) -> Snapshot:
+def picture(
+    renderer: Renderer, plan: FramePlan, draw_ring: bool = True, progress: Progress = _quiet
+) -> Snapshot:
     """Draw a plan (its whole ring too, unless `draw_ring` is False because the renderer
     already holds it) and composite it as a host would."""
     if draw_ring:
+        progress("drawing the far clouds (the impostor ring)")
         renderer.render_ring(plan.ring)
+    progress("drawing the near clouds and the sky")
     renderer.render_frame(plan.frame)
+    progress("compositing")
     images = {name: renderer.read(name) for name in LAYER_NAMES}
     if plan.ring.shadow is not None:
         images["shadow"] = np.array(plan.ring.shadow.rgba)

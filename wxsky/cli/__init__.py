@@ -3,7 +3,13 @@
 Exit status: 0 on success; 2 for a usage error (a bad option or value, an unknown preset, a
 file that is wrong), one line on stderr; 1 for a runtime failure (no daemon at the address, a
 feed that cannot be read, no GL context), one line too, and for an internal error (a bug: any
-exception that is not a WxskyError), one line or with -v its traceback; 130 on Ctrl-C.
+exception that is not a WxskyError), one line or with -v its traceback; 130 when Ctrl-C
+interrupts a command, as a shell reports a process killed by SIGINT. `wxsky run` is the
+exception: the daemon catches SIGINT and SIGTERM, shuts down cleanly and exits 0, as an
+operator stopping a service expects; a second Ctrl-C forces it out with 130.
+
+A command that may take a while (snapshot, bench, metar fetch) shows what it is doing on a
+line of stderr when stderr is a terminal (`common.Progress`), and nothing otherwise.
 
 Each command group lives in its own module and adds its subparsers through `add_commands`:
 `daemon_cmd` (run, status, snapshot), `metar_cmd` (metar ...), `preset_cmd` (preset ...),
@@ -28,6 +34,7 @@ from wxsky.cli.common import (
     EXIT_USAGE,
     LOGGING_DEFAULTS,
     Parser,
+    Progress,
     log_level,
     logging_to_stderr,
     parse_size,
@@ -61,8 +68,14 @@ def _print_error(exc: WxskyError) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    # Every command may report what it is doing (`args.progress(...)`); the line is erased
+    # before anything else is printed, a result or an error.
+    args.progress = Progress(_command_name(args))
     try:
-        result: int = args.func(args)
+        try:
+            result: int = args.func(args)
+        finally:
+            args.progress.done()
         return result
     except WxskyError as exc:
         if args.debug:
@@ -88,6 +101,15 @@ def _run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         return EXIT_FAILURE
+
+
+def _command_name(args: argparse.Namespace) -> str:
+    words = [args.command] if getattr(args, "command", None) else []
+    for group in ("metar_command", "preset_command", "cigi_command"):
+        word = getattr(args, group, None)
+        if word:
+            words.append(word)
+    return " ".join(words) or "wxsky"
 
 
 def exit_status(exc: WxskyError) -> int:
@@ -122,7 +144,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Flight-simulator weather and cloud daemon. Run 'wxsky COMMAND --help' for "
         "a command's options.",
         epilog="Exit status: 0 success, 1 runtime failure (no daemon, unreadable feed) or "
-        "internal error, 2 usage error (bad option, unknown preset, bad file).",
+        "internal error, 2 usage error (bad option, unknown preset, bad file), 130 interrupted "
+        "by Ctrl-C ('wxsky run' shuts down cleanly on Ctrl-C or SIGTERM and exits 0).",
     )
     p.add_argument("--version", action="version", version=f"wxsky {__version__}")
     p.set_defaults(func=show_help(p))

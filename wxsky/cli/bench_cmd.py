@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from wxsky.cli.common import KindRef, NumberArg, Subparsers, UsageError, size_arg
+from wxsky.cli.common import KindRef, NumberArg, OutputFile, Subparsers, UsageError, size_arg
 from wxsky.schema import Number
 
 STARTED_S = time.perf_counter()  # the command's start, for the startup figure
@@ -89,7 +89,9 @@ def add_commands(sub: Subparsers) -> None:
         "untimed frames until the first ring is shown, then the timed ones)",
     )
     bench.add_argument("--json", action="store_true", help="print one JSON object")
-    bench.add_argument("--trace", type=Path, metavar="FILE", help="write ring events there")
+    bench.add_argument(
+        "--trace", type=OutputFile("--trace"), metavar="FILE", help="write ring events there"
+    )
     bench.set_defaults(func=_cmd_bench)
 
 
@@ -140,9 +142,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             check_order=args.check_order,
             profile=args.profile,
             lead_in=not args.from_start,
+            progress=args.progress,
         )
     finally:
         if trace is not None:
             trace.close()
+    args.progress.done()
     print(json.dumps(result.to_dict(), indent=2) if args.json else result.table())
     return 0

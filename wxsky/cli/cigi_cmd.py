@@ -44,6 +44,8 @@ REPORT_EVERY_S = 1.0
 NOTIFICATION_WAIT_S = 0.001
 MAX_NOTIFICATIONS_PER_MESSAGE = 1000  # a daemon flooding the channel still lets us send
 TOPICS = ("weather", "frame")
+# A daemon whose messages this command cannot read is most likely another wxsky's.
+OTHER_VERSION_HINT = "is it another wxsky version? run the daemon's own `wxsky cigi send`"
 
 
 def add_commands(sub: Subparsers) -> None:
@@ -151,11 +153,13 @@ def _state(weather: Any, where: str) -> WeatherState:
     from wxsky.weather.state import weather_from_dict
 
     if not isinstance(weather, dict):
-        raise DaemonUnavailable(f"{where} sent no weather")
+        raise DaemonUnavailable(f"{where} sent no weather; {OTHER_VERSION_HINT}")
     try:
         return weather_from_dict(weather)
     except (KeyError, TypeError, ValueError) as exc:
-        raise DaemonUnavailable(f"{where} sent weather wxsky cannot read: {exc!r}") from None
+        raise DaemonUnavailable(
+            f"{where} sent weather wxsky cannot read: {exc!r}; {OTHER_VERSION_HINT}"
+        ) from None
 
 
 @dataclass
@@ -299,7 +303,9 @@ def _at_frame_time(state: WeatherState, params: Any, where: str) -> WeatherState
     try:
         when = parse_time_utc(str(params["time_utc"]))
     except (KeyError, TypeError, ValueError) as exc:
-        raise DaemonUnavailable(f"{where} sent a frame without a time: {exc!r}") from None
+        raise DaemonUnavailable(
+            f"{where} sent a frame without a time: {exc!r}; {OTHER_VERSION_HINT}"
+        ) from None
     return dataclasses.replace(state, time_utc=when)
 
 

@@ -9,11 +9,15 @@ import contextlib
 import importlib
 import logging
 import math
+import os
 import re
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any, NoReturn
+from pathlib import Path
+from typing import Any, NoReturn, TextIO
 
 from wxsky.errors import WxskyError
 from wxsky.schema import Number, fmt_number
@@ -31,6 +35,10 @@ DEFAULT_LOG_LEVEL = "WARNING"
 
 # The type of `ArgumentParser.add_subparsers()`'s result, for the modules' add_commands.
 Subparsers = Any
+
+
+# What argparse takes for a negative number rather than an option (see Parser.__init__).
+NEGATIVE_NUMBER = re.compile(r"-\.?\d")
 
 
 class UsageError(WxskyError):
@@ -76,6 +84,11 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
+        # A value that starts with '-' and a digit is a value, not an option: `--view-offset
+        # -60,0,0`, `--lon -1e-3`, `--pitch-deg -5.` (argparse before Python 3.13 takes only
+        # `-5` and `-5.0` so, and calls the rest an unknown option; 3.13 matches this). No
+        # wxsky option is spelled like a negative number.
+        self._negative_number_matcher = NEGATIVE_NUMBER
         add_logging_options(self)
 
     def error(self, message: str) -> NoReturn:
@@ -278,6 +291,170 @@ def _parse_time(text: str) -> Any:
     return parse_time_utc(text)
 
 
+class OutputFile(OptionType):
+    """A file to write, in a directory that exists (a typo in the path is an error before any
+    work is done, not a tree of new folders), with `suffix` when one is given (a name that
+    promises another format must not get PNG data)."""
+
+    def __init__(self, flag: str, suffix: str | None = None) -> None:
+        self.flag = flag
+        self.suffix = suffix
+
+    def describe(self) -> str:
+        kind = f"a {self.suffix} file" if self.suffix else "a file"
+        return f"{kind} in an existing directory"
+
+    def __call__(self, text: str) -> Path:
+        path = Path(text)
+        if self.suffix and path.suffix.lower() != self.suffix:
+            fmt = self.suffix.lstrip(".").upper()
+            raise self.fail(text, f": {fmt} is written: give a name ending in {self.suffix}")
+        if path.is_dir():
+            raise self.fail(text, ": is a directory: give a file name")
+        _check_directory(self, text, path.parent)
+        return path
+
+
+class OutputDir(OptionType):
+    """A directory to write files into: one that exists, or a new one inside a directory that
+    exists (made when the command writes; as mkdir, not mkdir -p)."""
+
+    def __init__(self, flag: str) -> None:
+        self.flag = flag
+
+    def describe(self) -> str:
+        return "made if missing, in an existing directory"
+
+    def __call__(self, text: str) -> Path:
+        path = Path(text)
+        if path.is_dir():
+            _check_directory(self, text, path)
+        elif path.exists():
+            raise self.fail(text, ": is not a directory")
+        else:
+            _check_directory(self, text, path.parent)
+        return path
+
+
+def _check_directory(option: OptionType, text: str, directory: Path) -> None:
+    shown = str(directory)
+    if not directory.exists():
+        raise option.fail(text, f": directory {shown} does not exist (create it first)")
+    if not directory.is_dir():
+        raise option.fail(text, f": {shown} is not a directory")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise option.fail(text, f": directory {shown} is not writable")
+
+
+# -- progress -----------------------------------------------------------------------------------
+
+PROGRESS_INTERVAL_S = 0.25  # how often the line is redrawn (the seconds shown change each 1 s)
+_TERMINAL_LOCK = threading.Lock()  # the progress line and log records share stderr
+_showing: Progress | None = None  # the progress whose line is on the terminal now
+
+
+class Progress:
+    """What a long command is doing, on one line of stderr rewritten in place while it works:
+    `wxsky: snapshot: drawing the far clouds (14 s)`, erased when it is done. Only on a
+    terminal: a pipe or a file gets nothing, so scripts and logs see only the command's own
+    output. Call it with what is being done now (from any thread); `done()` erases the line
+    (a command calls it before printing its result; `main` calls it at the end whatever
+    happens). Nothing runs until the first call."""
+
+    def __init__(self, command: str, stream: TextIO | None = None) -> None:
+        self.command = command
+        self._stream = stream if stream is not None else sys.stderr
+        self._enabled = _is_terminal(self._stream)
+        self._what = ""
+        self._start_s = 0.0
+        self._shown = ""  # the text on the terminal now
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def enabled(self) -> bool:
+        return self._enabled
+
+    def __call__(self, what: str) -> None:
+        if not self._enabled or self._stop.is_set():
+            return
+        # Only noted: the thread shows it at its next tick, so a caller may say something
+        # every frame at no cost.
+        self._what = what
+        if self._thread is None:
+            self._start_s = time.monotonic()
+            self._draw()  # at once; the thread keeps the line up to date from here
+            self._thread = threading.Thread(target=self._run, name="wxsky-progress", daemon=True)
+            self._thread.start()
+
+    def done(self) -> None:
+        """Erase the line and stop. Idempotent; later calls show nothing."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        with _TERMINAL_LOCK:
+            self._erase_locked()
+
+    def _run(self) -> None:
+        while not self._stop.wait(PROGRESS_INTERVAL_S):
+            self._draw()
+
+    def _draw(self) -> None:
+        global _showing
+        seconds = int(time.monotonic() - self._start_s)
+        text = f"wxsky: {self.command}: {self._what} ({seconds} s)"
+        width = _terminal_width(self._stream)
+        if len(text) >= width:  # a line that wraps cannot be rewritten in place
+            text = text[: max(width - 2, 1)] + "…"
+        with _TERMINAL_LOCK:
+            if self._stop.is_set() or text == self._shown:
+                return
+            try:
+                self._stream.write("\r\x1b[K" + text)
+                self._stream.flush()
+            except (OSError, ValueError):
+                self._enabled = False  # the terminal went away: nothing more to show
+                return
+            self._shown = text
+            _showing = self
+
+    def _erase_locked(self) -> None:
+        global _showing
+        if _showing is self:
+            _showing = None
+        if not self._shown:
+            return
+        self._shown = ""
+        with contextlib.suppress(OSError, ValueError):
+            self._stream.write("\r\x1b[K")
+            self._stream.flush()
+
+
+def _is_terminal(stream: TextIO) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):  # a closed stream, or no stream at all
+        return False
+
+
+def _terminal_width(stream: TextIO) -> int:
+    try:
+        return os.get_terminal_size(stream.fileno()).columns or 80
+    except (AttributeError, OSError, ValueError):
+        return 80
+
+
+class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
+    """Log records to stderr, on a line of their own: a progress line there is erased first
+    (and drawn again by its next tick)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        with _TERMINAL_LOCK:
+            if _showing is not None:
+                _showing._erase_locked()
+            super().emit(record)
+
+
 # -- logging ------------------------------------------------------------------------------------
 
 
@@ -297,7 +474,7 @@ def logging_to_stderr(level: str) -> Iterator[None]:
     """Log records to stderr for the length of a command, then leave logging as it was (the
     tests call main in-process, many times)."""
     root = logging.getLogger()
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _StderrHandler(sys.stderr)
     handler.setFormatter(
         logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s", "%H:%M:%S")
     )

@@ -12,6 +12,8 @@ from wxsky.cli.common import (
     Checked,
     KindRef,
     NumberArg,
+    OutputDir,
+    OutputFile,
     Subparsers,
     UsageError,
     add_control_option,
@@ -141,14 +143,21 @@ def add_commands(sub: Subparsers) -> None:
     )
     add_control_option(run)
     run.add_argument(
+        "--shm-name",
+        type=Checked("--shm-name", _shm_name),
+        metavar="NAME",
+        help="the shared-memory segment the frames go to (over [output] shm_name; another "
+        "name lets a second daemon run beside the first)",
+    )
+    run.add_argument(
         "--preview",
-        type=Path,
+        type=OutputDir("--preview"),
         metavar="DIR",
         help="write a composited preview.png there every few seconds",
     )
     run.add_argument(
         "--trace",
-        type=Path,
+        type=OutputFile("--trace"),
         metavar="FILE",
         help="write the ring's rebuild events there, one JSON object per line",
     )
@@ -261,9 +270,18 @@ def add_commands(sub: Subparsers) -> None:
         help="far clouds as ring impostors (what the daemon does), or every cloud drawn as "
         "sprites, to compare the two",
     )
-    snap.add_argument("--out", type=Path, required=True, metavar="FILE.png", help="output PNG")
     snap.add_argument(
-        "--layers-out", type=Path, metavar="DIR", help="also write the raw layers there"
+        "--out",
+        type=OutputFile("--out", ".png"),
+        required=True,
+        metavar="FILE.png",
+        help="output PNG",
+    )
+    snap.add_argument(
+        "--layers-out",
+        type=OutputDir("--layers-out"),
+        metavar="DIR",
+        help="also write the raw layers there, a LAYER.png each",
     )
     snap.set_defaults(func=_cmd_snapshot)
 
@@ -300,6 +318,17 @@ def _zenoh_spec(spec: str) -> str:
     return spec.removeprefix("zenoh:")
 
 
+def _shm_name(name: str) -> str:
+    from wxsky.schema import Invalid
+    from wxsky.settings.config import OutputSection
+
+    try:
+        OutputSection(shm_name=name)  # the config's own check of the name
+    except Invalid as exc:
+        raise ValueError(str(exc).removeprefix("output.shm_name: ")) from None
+    return name
+
+
 def _view_offset(spec: str) -> tuple[float, float, float]:
     parts = spec.split(",")
     if len(parts) != 3:
@@ -308,7 +337,8 @@ def _view_offset(spec: str) -> tuple[float, float, float]:
 
 
 def _shared_config(config: Any, args: argparse.Namespace) -> Any:
-    """The config with `run`'s sharing options laid over [share] and [channel]."""
+    """The config with `run`'s sharing options laid over [share] and [channel], and
+    --shm-name over [output]."""
     import dataclasses
 
     from wxsky.errors import ConfigError
@@ -329,7 +359,10 @@ def _shared_config(config: Any, args: argparse.Namespace) -> Any:
         if args.site is not None:
             share = dataclasses.replace(share, site=args.site)
             channel = dataclasses.replace(channel, site=args.site)
-        return dataclasses.replace(config, share=share, channel=channel)
+        output = config.output
+        if args.shm_name is not None:
+            output = dataclasses.replace(output, shm_name=args.shm_name)
+        return dataclasses.replace(config, share=share, channel=channel, output=output)
     except Invalid as exc:
         raise ConfigError(f"wxsky run: {exc}") from None
 
@@ -468,6 +501,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     if args.elapsed_s and not args.transition_to:
         raise UsageError("--elapsed-s goes with --transition-to")
     check_field_elevation(args, args.metar, "--metar")
+    args.progress("reading the weather")
     config = load_config(args.config)
     width, height = args.size
     state = WeatherState().apply(_weather_patch(args, config.presets.dirs))
@@ -506,11 +540,14 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         drift_s=drift_s,
         mode=args.mode,
         position_deg=None if args.lat is None else (args.lat, args.lon),
+        progress=args.progress,
     )
+    args.progress(f"writing {args.out}")
     _write_png("--out", args.out, shot.image)
     if args.layers_out:
         for name, image in shot.layers.items():
             _write_png("--layers-out", args.layers_out / f"{name}.png", image)
+    args.progress.done()
     print(f"wrote {args.out} ({width}x{height}): {shot.state.summary()}")
     return 0
 

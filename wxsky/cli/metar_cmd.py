@@ -180,6 +180,7 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
     lat = observer.observer.lat_deg if args.lat is None else args.lat
     lon = observer.observer.lon_deg if args.lon is None else args.lon
     if args.source == "-":
+        args.progress("reading stdin")
         data = sys.stdin.buffer.read(MAX_FEED_BYTES + 1)
         if len(data) > MAX_FEED_BYTES:
             raise FeedTooLarge(f"stdin: over the {MAX_FEED_BYTES}-byte limit for a METAR feed")
@@ -189,8 +190,13 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
 
         # A one-shot read: the file is read as it is now, however recently it was written.
         source = open_source(args.source, timeout_s=m.http_timeout_s, settle_s=0.0)
-        fetched = asyncio.run(source.fetch())
+        args.progress(f"reading {args.source}")
+        # Read on this thread: Ctrl-C then stops the command at once, where the
+        # daemon's way (a worker thread) would wait out the HTTP timeout first.
+        fetch_now = getattr(source, "fetch_now", None)
+        fetched = fetch_now() if fetch_now is not None else asyncio.run(source.fetch())
     assert fetched is not None  # a first fetch always returns data or raises
+    args.progress(f"decoding {len(fetched.data):,} bytes of reports")
     feed = parse_feed(
         fetched.data,
         format=settings.format,
@@ -198,6 +204,7 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
         reference_utc=fetched.reference_utc,
     )
     result = ingest(feed)
+    args.progress.done()
     # A decoder defect on any report is a wxsky bug: the rest is shown, and the status says so.
     status = EXIT_FAILURE if result.internal_errors else EXIT_OK
     for defect in result.internal_errors:

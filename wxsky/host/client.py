@@ -40,6 +40,20 @@ class DaemonUnavailable(RuntimeFailure):
     protocol: nothing the request itself did wrong."""
 
 
+class DaemonHungUp(DaemonUnavailable, RemoteError):
+    """The daemon said why in one line and closed the connection (protocol §2.5: a response
+    with no msgid): it is full, this connection was idle or made room for another, it is
+    shutting down, or it could not read what was sent. The message is the daemon's, verbatim;
+    a RemoteError too, as it was before it had a class of its own."""
+
+
+# What to do when nothing answers at the address: a daemon is not running there.
+NO_DAEMON_HINT = (
+    "start one with `wxsky run`, or name the address it listens on with --control ADDR "
+    "(its [output] control)"
+)
+
+
 class ControlClient:
     """Build with `ControlClient.connect`."""
 
@@ -69,7 +83,9 @@ class ControlClient:
                 sock = socket.create_connection((addr.host, addr.port), timeout=timeout_s)
         except OSError as exc:
             why = exc.strerror or str(exc) or type(exc).__name__
-            raise DaemonUnavailable(f"cannot connect to the wxsky daemon at {addr}: {why}") from exc
+            raise DaemonUnavailable(
+                f"cannot connect to the wxsky daemon at {addr}: {why}; {_connect_hint(exc)}"
+            ) from exc
         return cls(sock, addr)
 
     @property
@@ -93,7 +109,8 @@ class ControlClient:
                 if not self._receive(deadline):
                     raise DaemonUnavailable(
                         f"no answer to {method!r} from the wxsky daemon at {self._address} "
-                        f"within {timeout_s} s"
+                        f"within {timeout_s:g} s; it is running but busy or stuck: see its log, "
+                        "and try again"
                     )
             reply = self._reply
         finally:
@@ -130,10 +147,29 @@ class ControlClient:
             self._sock.settimeout(timeout_s)
             self._sock.sendall(data)
         except OSError as exc:
+            # The daemon may have said why it hung up before we wrote (protocol §2.5).
+            said = self._hang_up_line()
             # A partial send leaves the stream out of step; the connection is unusable.
             self.close()
+            if said is not None:
+                raise DaemonHungUp(said) from exc
             why = exc.strerror or str(exc) or type(exc).__name__
-            raise DaemonUnavailable(f"lost the wxsky daemon at {self._address}: {why}") from exc
+            raise DaemonUnavailable(
+                f"lost the wxsky daemon at {self._address}: {why}; it may have stopped: see its log"
+            ) from exc
+
+    def _hang_up_line(self) -> str | None:
+        """The daemon's reason for closing the connection, if it is already here to read."""
+        try:
+            self._sock.settimeout(0.0)
+            data = self._sock.recv(_READ_SIZE)
+            messages = self._decoder.feed(data)
+        except (OSError, WireError):
+            return None
+        for message in messages:
+            if isinstance(message, Response) and message.msgid is None:
+                return message.error or "protocol error"
+        return None
 
     def _receive(self, deadline: float | None) -> bool:
         """Read once and sort what arrived; False if the deadline passed first."""
@@ -151,10 +187,15 @@ class ControlClient:
         except OSError as exc:
             self.close()
             why = exc.strerror or str(exc) or type(exc).__name__
-            raise DaemonUnavailable(f"lost the wxsky daemon at {self._address}: {why}") from exc
+            raise DaemonUnavailable(
+                f"lost the wxsky daemon at {self._address}: {why}; it may have stopped: see its log"
+            ) from exc
         if not data:
             self.close()
-            raise DaemonUnavailable(f"the wxsky daemon at {self._address} closed the connection")
+            raise DaemonUnavailable(
+                f"the wxsky daemon at {self._address} closed the connection; it may have "
+                "stopped: see its log, or `wxsky status` to ask whether it still runs"
+            )
         try:
             messages = self._decoder.feed(data)
         except WireError as exc:
@@ -167,9 +208,9 @@ class ControlClient:
                 self._notifications.append(message)
             elif isinstance(message, Response):
                 if message.msgid is None:
-                    # The daemon could not parse something we sent and hangs up after this.
+                    # The daemon says why and hangs up (docs/protocol.md §2.5).
                     self.close()
-                    raise RemoteError(message.error or "protocol error")
+                    raise DaemonHungUp(message.error or "protocol error")
                 if message.msgid == self._pending:
                     self._reply = message
                 else:
@@ -195,3 +236,15 @@ class ControlClient:
         tb: TracebackType | None,
     ) -> None:
         self.close()
+
+
+def _connect_hint(exc: OSError) -> str:
+    """What to do when connecting failed, by why it failed."""
+    if isinstance(exc, TimeoutError):
+        return "a daemon is there but did not take the connection: see its log, and try again"
+    if isinstance(exc, PermissionError):
+        return (
+            "the socket belongs to another user: run as that user, or start a daemon of your "
+            "own with `wxsky run`"
+        )
+    return NO_DAEMON_HINT

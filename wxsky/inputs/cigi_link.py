@@ -139,7 +139,10 @@ class CigiIg(asyncio.DatagramProtocol):
                 lambda: self, local_addr=(host, port), family=family
             )
         except OSError as exc:
-            raise RuntimeFailure(f"{self.name}: cannot listen: {exc.strerror or exc}") from None
+            raise RuntimeFailure(
+                f"{self.name}: cannot listen: {exc.strerror or exc}; give another address "
+                "with --cigi udp:HOST:PORT or [cigi] listen"
+            ) from None
         log.info("CIGI IG listening on udp %s:%d", host, self.port)
 
     @property

@@ -18,6 +18,7 @@ import threading
 import time
 from collections.abc import Callable
 
+from wxsky.errors import RuntimeFailure
 from wxsky.inputs.stats import InputStats
 from wxsky.protocols.flightgear import TAKE_OVER, FgPose, parse_pose, weather_properties
 from wxsky.weather.state import WeatherState
@@ -45,7 +46,15 @@ class FlightGearPose:
         self.stats = stats or InputStats(f"{name}:pose", "flightgear")
         self._on_pose = on_pose
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.bind((host, port))
+        try:
+            self._sock.bind((host, port))
+        except OSError as exc:
+            self._sock.close()
+            raise RuntimeFailure(
+                f"{name}: cannot listen for the pose stream on udp:{host}:{port}: "
+                f"{exc.strerror or exc}; give another address with --flightgear-pose "
+                "udp:HOST:PORT or [flightgear] pose"
+            ) from None
         self._sock.settimeout(0.2)
         self.address = self._sock.getsockname()
         self.last_pose: FgPose | None = None

@@ -258,7 +258,11 @@ def select(
         return Selection(
             None,
             stale=True,
-            reason=f"no fresh report within {limit / 1000:.0f} km ({age})",
+            reason=(
+                f"no fresh report from station {settings.station} ({age})"
+                if settings.station  # any distance: no limit to name
+                else f"no fresh report within {limit / 1000:.0f} km ({age})"
+            ),
             fresh=len(fresh),
             stale_count=len(stale),
             stale_stations=names,

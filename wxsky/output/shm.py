@@ -165,6 +165,14 @@ _NAME_RE = re.compile(r"[A-Za-z0-9._-]{1,200}")
 _LAYER_NAME_RE = re.compile(r"[\x21-\x7e]{1,16}")
 
 
+# What to do when a segment name is taken: how a daemon is given another.
+OTHER_NAME_HINT = (
+    "give this daemon another segment name with `wxsky run --shm-name NAME` or [output] shm_name"
+)
+# When a segment cannot be made at all: /dev/shm is missing, full or not writable.
+_CREATE_HINT = "check that /dev/shm is mounted and writable by this user"
+
+
 def _align(value: int, alignment: int) -> int:
     return (value + alignment - 1) // alignment * alignment
 
@@ -333,24 +341,28 @@ def _replace_stale(name: str) -> None:
         return  # removed between our create attempt and now
     except OSError as exc:
         raise RuntimeFailure(
-            f"shared-memory segment {name!r} already exists and cannot be opened: {exc.strerror}"
+            f"shared-memory segment {name!r} already exists and cannot be opened: "
+            f"{exc.strerror}; {OTHER_NAME_HINT}"
         ) from exc
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
-                raise RuntimeFailure(f"cannot lock shared-memory segment {name!r}: {exc}") from exc
+                raise RuntimeFailure(
+                    f"cannot lock shared-memory segment {name!r}: {exc}; {OTHER_NAME_HINT}"
+                ) from exc
             pid = _writer_pid(fd)
             owner = f" (pid {pid})" if pid else ""
             raise RuntimeFailure(
-                f"shared-memory segment {name!r} is in use by another wxsky writer{owner}; "
-                "stop it or choose another segment name"
+                f"shared-memory segment {name!r} is in use by another wxsky writer{owner}: "
+                f"stop it, or {OTHER_NAME_HINT}"
             ) from None
         if not _looks_like_ours(fd):
             raise RuntimeFailure(
                 f"shared-memory segment {name!r} exists and is not a wxsky frame segment; "
-                f"refusing to replace it (remove /dev/shm/{name} by hand if it is stale)"
+                f"refusing to replace it: remove /dev/shm/{name} by hand if it is stale, or "
+                f"{OTHER_NAME_HINT}"
             )
         logger.warning(
             "replacing stale shared-memory segment %r (writer pid %s exited without closing it)",
@@ -374,12 +386,16 @@ def _create_segment(name: str, size: int) -> int:
         except FileExistsError:
             raise RuntimeFailure(
                 f"shared-memory segment {name!r} was created by another writer while this one "
-                "was starting"
+                f"was starting: stop it, or {OTHER_NAME_HINT}"
             ) from None
         except OSError as exc:
-            raise RuntimeFailure(f"cannot create shared-memory segment {name!r}: {exc}") from exc
+            raise RuntimeFailure(
+                f"cannot create shared-memory segment {name!r}: {exc}; {_CREATE_HINT}"
+            ) from exc
     except OSError as exc:
-        raise RuntimeFailure(f"cannot create shared-memory segment {name!r}: {exc}") from exc
+        raise RuntimeFailure(
+            f"cannot create shared-memory segment {name!r}: {exc}; {_CREATE_HINT}"
+        ) from exc
     try:
         # Taken before the segment has a magic, so a concurrent create sees it as in use.
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -389,7 +405,7 @@ def _create_segment(name: str, size: int) -> int:
             os.close(fd)
             raise RuntimeFailure(
                 f"shared-memory segment {name!r} was replaced by another writer while this one "
-                "was starting"
+                f"was starting: stop it, or {OTHER_NAME_HINT}"
             )
         os.ftruncate(fd, size)
         if hasattr(os, "posix_fallocate"):
@@ -401,7 +417,8 @@ def _create_segment(name: str, size: int) -> int:
         os.close(fd)
         raise RuntimeFailure(
             f"cannot allocate {size} bytes of shared memory for segment {name!r}: "
-            f"{exc.strerror} (is /dev/shm large enough?)"
+            f"{exc.strerror}; make /dev/shm larger (Docker: --shm-size) or the frames smaller "
+            "([output] max_width and max_height)"
         ) from exc
     return fd
 
@@ -694,7 +711,8 @@ def _parse_header(name: str, mm: mmap.mmap, size: int) -> _Layout:
     if version != VERSION:
         raise RuntimeFailure(
             f"shared-memory segment {name!r} uses frame protocol version {version}; "
-            f"this wxsky understands version {VERSION}"
+            f"this wxsky understands version {VERSION}: run a daemon and a host of the same "
+            "wxsky version"
         )
 
     def bad(why: str) -> WxskyError:
@@ -753,7 +771,8 @@ class FrameReader:
             fd = _shm_open(bare, os.O_RDONLY)
         except FileNotFoundError:
             raise RuntimeFailure(
-                f"no shared-memory frame segment named {bare!r} (is the wxsky daemon running?)"
+                f"no shared-memory frame segment named {bare!r}: start the daemon with `wxsky "
+                "run`, or give the name its [output] shm_name sets (its status says it)"
             ) from None
         except OSError as exc:
             raise RuntimeFailure(f"cannot open shared-memory segment {bare!r}: {exc}") from exc

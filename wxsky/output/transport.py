@@ -8,8 +8,13 @@ permissions are the access control).
 clients that subscribed to them. It is built so a misbehaving client cannot hurt the daemon: a
 client that stops reading loses its oldest queued notifications instead of growing memory or
 blocking `broadcast`, and a client that sends bytes that are not MessagePack-RPC is answered and
-disconnected without disturbing the others. Clients are counted (one over `max_clients` is
-answered with a one-line error and closed), a client that neither sends nor subscribes for
+disconnected without disturbing the others. No client can lock the others out: when
+`max_clients` are connected, a new one is served and the longest-idle client is closed to make
+room (with a one-line reason), as sshd's MaxStartups and nginx's keepalive reuse do, so an
+operator's `wxsky status` is answered whoever holds the connections; a client in the middle of
+a request is never the one closed, and a listener (subscribed to a topic) only when every
+client is one. Only when every client is in the middle of a request is the new one answered
+"too many control clients" and closed. A client that neither sends nor subscribes for
 `idle_timeout_s` is closed, no message over `wire.MAX_REQUEST_SIZE` is read, and every log line
 a client can cause is rate-limited and clipped (`wxsky.logs`). The server accepts connections
 itself, so running out of file descriptors is one log line when it starts and one when it ends.
@@ -90,6 +95,8 @@ _READ_SIZE = 65536
 _BACKLOG = 128
 _ACCEPT_RETRY_S = 0.5  # after accept fails (out of descriptors): try again this often
 _SUN_PATH_MAX = 107  # Linux sockaddr_un.sun_path is 108 bytes including the NUL
+# What to do when the address is taken: how a daemon is given another.
+OTHER_ADDRESS_HINT = "give this daemon another with --control ADDR or [output] control"
 SCM_MAX_FD = 253  # Linux: the most descriptors one sendmsg may carry
 
 
@@ -183,12 +190,18 @@ def _private_dir(directory: Path) -> Path:
     except FileExistsError:
         pass
     except OSError as exc:
-        raise RuntimeFailure(f"cannot create socket directory {directory}: {exc.strerror}") from exc
+        raise RuntimeFailure(
+            f"cannot create socket directory {directory}: {exc.strerror}; name a socket "
+            "elsewhere with --control unix:PATH (or set XDG_RUNTIME_DIR)"
+        ) from exc
     info = os.lstat(directory)
     # In /tmp another user could have created the directory (or a symlink) first, to sit on
     # our socket; refuse rather than use it.
     if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid():
-        raise RuntimeFailure(f"socket directory {directory} is not a directory owned by this user")
+        raise RuntimeFailure(
+            f"socket directory {directory} is not a directory owned by this user; name a "
+            "socket elsewhere with --control unix:PATH (or set XDG_RUNTIME_DIR)"
+        )
     if stat.S_IMODE(info.st_mode) != 0o700:
         os.chmod(directory, 0o700)
     return directory
@@ -211,27 +224,38 @@ def _one_line(exc: BaseException) -> str:
 
 
 class _Client:
-    def __init__(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, peer: str
-    ) -> None:
-        self.reader = reader
-        self.writer = writer
-        self.peer = peer
+    """One connection, from the moment it is accepted: its streams are made by its task."""
+
+    def __init__(self, conn: socket.socket, now_s: float) -> None:
+        self.conn = conn
+        self.peer = _peer_name(conn)
+        self.reader: asyncio.StreamReader | None = None
+        self.writer: asyncio.StreamWriter | None = None
+        self.task: asyncio.Task[None] | None = None
         self.topics: set[str] = set()
         self.queue: deque[bytes] = deque()
         self.wakeup = asyncio.Event()
         self.dropped = 0
-        sock = writer.get_extra_info("socket")
         # Only a unix socket can carry file descriptors (WithFds).
-        self.unix = sock is not None and sock.family == socket.AF_UNIX
+        self.unix = conn.family == socket.AF_UNIX
+        self.last_active_s = now_s  # when it last sent something or was last answered
+        self.busy = 0  # its requests being answered now: it is not idle meanwhile
+        self.started = False  # its task has begun making its streams
+        self.evicted = False
+
+    @property
+    def streams(self) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+        assert self.reader is not None and self.writer is not None, "not started"
+        return self.reader, self.writer
 
 
 class ControlServer:
     """MessagePack-RPC server for one handler. Use from a single event loop.
 
-    `max_clients` connections are served at once; `idle_timeout_s` closes a client that sends
-    nothing and subscribes to nothing for that long (0: never); per-client log lines are
-    rate-limited to one of a kind per `log_interval_s`."""
+    `max_clients` connections are served at once (one more closes the longest-idle: see the
+    module docstring); `idle_timeout_s` closes a client that sends nothing and subscribes to
+    nothing for that long (0: never); per-client log lines are rate-limited to one of a kind
+    per `log_interval_s`."""
 
     def __init__(
         self,
@@ -254,9 +278,11 @@ class ControlServer:
         self._retry: asyncio.TimerHandle | None = None
         self._accept_failing = 0  # failed accepts since accepting last worked
         self._socket_id: tuple[int, int] | None = None
-        self._clients: set[_Client] = set()
+        # Connections being served and not being closed, by when they were accepted.
+        self._clients: dict[_Client, None] = {}
         self._tasks: set[asyncio.Task[None]] = set()
         self._dropped = 0
+        self._evicted = 0
         self._closed = False
 
     @property
@@ -266,9 +292,14 @@ class ControlServer:
 
     @property
     def client_count(self) -> int:
-        """Connections being served, closing ones included: the number `max_clients` limits
-        (a client that hung up holds its place until its connection is closed here)."""
+        """Connections held, closing ones included (a client that hung up or was closed to
+        make room holds its descriptor until its connection is closed here)."""
         return len(self._tasks)
+
+    @property
+    def evicted_clients(self) -> int:
+        """Clients closed so far to make room for new ones."""
+        return self._evicted
 
     @property
     def dropped_notifications(self) -> int:
@@ -289,7 +320,12 @@ class ControlServer:
                 if address.port == 0:
                     self._address = TcpAddress(address.host, int(listener.getsockname()[1]))
         except OSError as exc:
-            raise RuntimeFailure(f"cannot listen on {address}: {exc.strerror or exc}") from exc
+            why = exc.strerror or str(exc)
+            if exc.errno == errno.EADDRINUSE:
+                why += " (another program listens there)"
+            raise RuntimeFailure(
+                f"cannot listen on {address}: {why}; {OTHER_ADDRESS_HINT}"
+            ) from exc
         listener.setblocking(False)
         self._listeners.append(listener)
         self._loop.add_reader(listener.fileno(), self._accept, listener)
@@ -307,7 +343,8 @@ class ControlServer:
                 if exc.errno == errno.EADDRINUSE:
                     raise RuntimeFailure(
                         f"another wxsky daemon is starting on unix:{path} (the socket file "
-                        "appeared while this one was checking it)"
+                        f"appeared while this one was checking it): stop it, or "
+                        f"{OTHER_ADDRESS_HINT}"
                     ) from exc
                 raise
             info = os.stat(path)
@@ -328,7 +365,10 @@ class ControlServer:
         except FileNotFoundError:
             return
         if not stat.S_ISSOCK(info.st_mode):
-            raise RuntimeFailure(f"{path} exists and is not a socket; refusing to replace it")
+            raise RuntimeFailure(
+                f"{path} exists and is not a socket; refusing to replace it: remove it, or "
+                f"{OTHER_ADDRESS_HINT}"
+            )
         try:
             _, writer = await asyncio.wait_for(asyncio.open_unix_connection(str(path)), 1.0)
         except (ConnectionRefusedError, FileNotFoundError):
@@ -342,11 +382,17 @@ class ControlServer:
                     os.unlink(path)
             return
         except (OSError, TimeoutError) as exc:
-            raise RuntimeFailure(f"cannot tell whether {path} is in use: {_one_line(exc)}") from exc
+            raise RuntimeFailure(
+                f"cannot tell whether {path} is in use: {_one_line(exc)}; if no daemon uses "
+                f"it, remove it, or {OTHER_ADDRESS_HINT}"
+            ) from exc
         writer.close()
         with contextlib.suppress(OSError):
             await writer.wait_closed()
-        raise RuntimeFailure(f"another wxsky daemon is listening on unix:{path}")
+        raise RuntimeFailure(
+            f"another wxsky daemon is listening on unix:{path}: stop it (`wxsky status "
+            f"--control unix:{path}` shows it), or {OTHER_ADDRESS_HINT}"
+        )
 
     def remove_socket_file(self) -> bool:
         """Remove the socket file this server bound, if its path still names that file (a
@@ -374,6 +420,9 @@ class ControlServer:
         # Now, not after the clients: a caller that stops waiting for them (the daemon's
         # shutdown budget) must not leave the file behind.
         self.remove_socket_file()
+        for client in self._clients:
+            if not client.started:  # its task is cancelled before it could close the socket
+                client.conn.close()
         tasks = list(self._tasks)
         for task in tasks:
             task.cancel()
@@ -439,40 +488,99 @@ class ControlServer:
 
     def _admit(self, conn: socket.socket) -> None:
         conn.setblocking(False)
-        if self._closed or self.client_count >= self._max_clients:
-            self._refuse(conn)
+        if self._closed:
+            self._refuse(conn, "the wxsky daemon is shutting down")
+            return
+        if len(self._clients) >= self._max_clients and not self._make_room():
+            self._refuse(
+                conn,
+                f"too many control clients: all {self._max_clients} the daemon serves "
+                "([output] max_clients) are in the middle of a request; closing this "
+                "connection: try again shortly, or raise [output] max_clients",
+            )
             return
         assert self._loop is not None
-        task = self._loop.create_task(self._serve(conn))
+        client = _Client(conn, self._loop.time())
+        self._clients[client] = None
+        task = self._loop.create_task(self._serve(client))
+        client.task = task
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
-    def _refuse(self, conn: socket.socket) -> None:
-        """Over the limit: one line saying so, then the connection is closed."""
-        if self._closed:
-            message = "the wxsky daemon is shutting down"
-        else:
-            message = (
-                f"too many control clients (at most {self._max_clients}, the daemon's "
-                "[output] max_clients): closing this connection; try again later"
-            )
+    def _make_room(self) -> bool:
+        """Close the longest-idle client for a new one; False if every client is busy. A
+        listener is idle between its own requests too, but it is closed only when every
+        other client is one: a host following the frames loses more than a forgotten
+        connection does."""
+        idle = [c for c in self._clients if not c.busy]
+        if not idle:
+            return False
+        victim = min(idle, key=lambda c: (bool(c.topics), c.last_active_s))
+        assert self._loop is not None
+        idle_s = self._loop.time() - victim.last_active_s
+        message = (
+            f"control: closed to make room for a new client: this connection was the longest "
+            f"idle ({idle_s:.0f} s) of the {self._max_clients} the daemon serves ([output] "
+            "max_clients); connect again to go on"
+        )
+        self._log.warning(
+            "evicted",
+            f"control: {self._max_clients} clients connected ([output] max_clients): closing "
+            f"the longest idle, {victim.peer} (idle {idle_s:.0f} s), to make room for a new one",
+        )
+        self._evict(victim, message)
+        return True
+
+    def _evict(self, client: _Client, message: str) -> None:
+        """Say why in one line and close `client` now: its descriptor is free at once, not
+        when its task gets round to it."""
+        self._evicted += 1
+        client.evicted = True
+        self._clients.pop(client, None)
+        data = encode(Response(None, message, None))
+        if client.writer is None:  # its streams are not made yet: only the bare socket
+            with contextlib.suppress(OSError):
+                client.conn.send(data)
+                client.conn.shutdown(socket.SHUT_WR)
+            if client.task is not None:
+                client.task.cancel()  # a task that has begun closes the socket itself
+            if not client.started:
+                client.conn.close()
+            return
+        transport = client.writer.transport
+        # An idle client's socket has room: the line goes to the kernel now, before the
+        # abort (which drops only what is still buffered here: a listener not reading).
+        with contextlib.suppress(OSError, RuntimeError):
+            transport.write(data)
+        transport.abort()
+
+    def _refuse(self, conn: socket.socket, message: str) -> None:
+        """One line saying why, then the connection is closed."""
         with contextlib.suppress(OSError):
-            conn.send(encode(Response(None, message, None)))  # a fresh socket takes 140 bytes
+            # A fresh socket's buffer takes a line of a few hundred bytes.
+            conn.send(encode(Response(None, message, None)))
             conn.shutdown(socket.SHUT_WR)
         conn.close()
         self._log.warning("too-many", f"control: {message}")
 
-    async def _serve(self, conn: socket.socket) -> None:
+    async def _serve(self, client: _Client) -> None:
+        client.started = True
         loop = asyncio.get_running_loop()
+        conn = client.conn
         try:
             reader = asyncio.StreamReader(limit=_READ_SIZE, loop=loop)
             protocol = asyncio.StreamReaderProtocol(reader, loop=loop)
             transport, _ = await loop.connect_accepted_socket(lambda: protocol, conn)
         except (OSError, asyncio.CancelledError):
+            self._clients.pop(client, None)
             conn.close()
             return
-        writer = asyncio.StreamWriter(transport, protocol, reader, loop)
-        await self._serve_client(reader, writer)
+        client.reader = reader
+        client.writer = asyncio.StreamWriter(transport, protocol, reader, loop)
+        if client.evicted:  # closed to make room while its streams were being made
+            transport.abort()
+            return
+        await self._serve_client(client)
 
     def broadcast(self, method: str, params: dict[str, Any] | None = None) -> int:
         """Queue a notification for every client subscribed to topic `method`; never blocks.
@@ -501,12 +609,9 @@ class ControlServer:
 
     # -- one client -------------------------------------------------------------------
 
-    async def _serve_client(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
-    ) -> None:
-        peer = _peer_name(writer)
-        client = _Client(reader, writer, peer)
-        self._clients.add(client)
+    async def _serve_client(self, client: _Client) -> None:
+        _, writer = client.streams
+        peer = client.peer
         sender = asyncio.create_task(self._send_notifications(client))
         logger.debug("control client %s connected", peer)
         try:
@@ -520,7 +625,7 @@ class ControlServer:
                 "client", f"control client {peer}: unexpected error; disconnecting it", exc
             )
         finally:
-            self._clients.discard(client)
+            self._clients.pop(client, None)
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await asyncio.gather(sender, return_exceptions=True)
@@ -536,12 +641,14 @@ class ControlServer:
             logger.debug("control client %s disconnected", peer)
 
     async def _read_requests(self, client: _Client) -> None:
+        reader, _ = client.streams
+        loop = asyncio.get_running_loop()
         decoder = MessageDecoder(MAX_REQUEST_SIZE)
         while True:
             # A client that subscribed may only listen; one that did not must send something.
             idle_s = self._idle_timeout_s if self._idle_timeout_s and not client.topics else None
             try:
-                data = await asyncio.wait_for(client.reader.read(_READ_SIZE), idle_s)
+                data = await asyncio.wait_for(reader.read(_READ_SIZE), idle_s)
             except TimeoutError:
                 await self._hang_up(
                     client,
@@ -552,13 +659,21 @@ class ControlServer:
                 return
             if not data:
                 return
+            client.last_active_s = loop.time()
             while True:
                 try:
                     messages, error = decoder.feed(data), None
                 except WireError as exc:
                     messages, error = exc.decoded, exc
-                for message in messages:
-                    await self._dispatch(client, message)
+                # Busy until answered: a client waiting for its answer is never the one
+                # closed to make room.
+                client.busy += 1
+                try:
+                    for message in messages:
+                        await self._dispatch(client, message)
+                finally:
+                    client.busy -= 1
+                    client.last_active_s = loop.time()
                 if error is None:
                     break
                 if not (error.recoverable and error.msgid is not None):
@@ -574,9 +689,10 @@ class ControlServer:
     async def _hang_up(self, client: _Client, kind: str, message: str) -> None:
         """Say why in one line (a response with no msgid), then the caller closes."""
         self._log.warning(kind, f"control client {client.peer}: {message}; disconnecting it")
-        client.writer.write(encode(Response(None, message, None)))
+        _, writer = client.streams
+        writer.write(encode(Response(None, message, None)))
         with contextlib.suppress(ConnectionError, TimeoutError):
-            await asyncio.wait_for(client.writer.drain(), 1.0)
+            await asyncio.wait_for(writer.drain(), 1.0)
 
     async def _dispatch(self, client: _Client, message: Message) -> None:
         if isinstance(message, Request):
@@ -650,8 +766,9 @@ class ControlServer:
     async def _send(client: _Client, data: bytes) -> None:
         # Awaiting drain here only holds up this client's own read loop, which is the
         # back-pressure we want: a client that does not read its responses stops being read.
-        client.writer.write(data)
-        await client.writer.drain()
+        _, writer = client.streams
+        writer.write(data)
+        await writer.drain()
 
     @staticmethod
     async def _send_with_fds(client: _Client, data: bytes, fds: tuple[int, ...]) -> None:
@@ -660,7 +777,7 @@ class ControlServer:
         stream stays in order; the notification sender runs on this loop too, and nothing
         awaits between the check and the send), sendmsg on a duplicate of the socket, and
         give the transport whatever the kernel did not take at once."""
-        writer = client.writer
+        _, writer = client.streams
         transport = writer.transport
         pause = 0.001
         while True:
@@ -689,15 +806,16 @@ class ControlServer:
 
     @staticmethod
     async def _send_notifications(client: _Client) -> None:
+        _, writer = client.streams
         try:
             while True:
                 await client.wakeup.wait()
                 client.wakeup.clear()
                 while client.queue:
-                    client.writer.write(client.queue.popleft())
-                    await client.writer.drain()
+                    writer.write(client.queue.popleft())
+                    await writer.drain()
         except ConnectionError:
-            client.writer.close()  # the read loop sees EOF and cleans up
+            writer.close()  # the read loop sees EOF and cleans up
 
 
 def _update_topics(client: _Client, method: str, params: dict[str, Any]) -> dict[str, Any]:
@@ -729,9 +847,11 @@ def _bind_tcp(address: TcpAddress) -> socket.socket:
     return socket.create_server((host, address.port), family=family, backlog=_BACKLOG)
 
 
-def _peer_name(writer: asyncio.StreamWriter) -> str:
-    peer = writer.get_extra_info("peername")
+def _peer_name(conn: socket.socket) -> str:
+    try:
+        peer = conn.getpeername()
+    except OSError:
+        peer = None
     if isinstance(peer, tuple) and len(peer) >= 2:
         return f"{peer[0]}:{peer[1]}"
-    sock = writer.get_extra_info("socket")
-    return f"unix fd {sock.fileno()}" if sock is not None else "unix"
+    return f"unix fd {conn.fileno()}"

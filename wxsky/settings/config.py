@@ -238,7 +238,7 @@ class OutputSection(_Section):
     max_width: int = _opt(1920, VIEWPORT_PX)
     max_height: int = _opt(1080, VIEWPORT_PX)
     # Control clients served at once (output/transport.py DEFAULT_MAX_CLIENTS); one more is
-    # answered "too many control clients" and closed. Each holds a file descriptor.
+    # served and the longest-idle one closed to make room. Each holds a file descriptor.
     max_clients: int = _opt(64, _int(1, 1000))
     # A control client that sends nothing and subscribes to nothing for this long is closed
     # (DEFAULT_IDLE_TIMEOUT_S there); 0: never.
