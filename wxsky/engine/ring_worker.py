@@ -29,6 +29,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -49,6 +50,17 @@ log = logging.getLogger(__name__)
 # leave, which at 30 Hz is most of one.
 DEFAULT_NICE = 19
 POLL_S = 0.05  # how often the waiting thread looks at the cancel flag and the child
+# The idle class runs only on a core nothing else wants: beside CPU-bound work (a simulator,
+# `stress-ng --cpu 2` on 2 cores) a build there took minutes or never ended, and the sky
+# stayed the old one. A job whose child got less than STARVED_SHARE of a core over its first
+# STARVED_S is started again in a child at ESCALATED_NICE, in the normal class: a busy
+# machine then slows the new sky rather than starving it. That child serves until a job
+# finds a core to itself again (RELAXED_SHARE), when the next job goes back to the idle class.
+STARVED_S = 3.0
+STARVED_SHARE = 0.1
+RELAXED_SHARE = 0.8
+RELAX_MIN_S = 0.5  # a job shorter than this says too little about the machine
+ESCALATED_NICE = 10
 
 
 class RingWorkerError(RuntimeError):
@@ -96,6 +108,8 @@ class RingWorker:
     def __init__(self, nice: int = DEFAULT_NICE, label: str = "ring") -> None:
         self.nice = nice
         self.label = label
+        self.escalations = 0  # jobs started again out of the idle class, starved there
+        self._child_nice = nice  # the nice value the next child starts at
         self._proc: subprocess.Popen[bytes] | None = None
         self._conn: Connection | None = None
         self._lock = threading.Lock()  # held by `build` while a job is out
@@ -133,13 +147,19 @@ class RingWorker:
             try:
                 conn.send(job)
                 asked = False
+                watch = _Share(proc.pid)
                 while not conn.poll(POLL_S):
                     if not asked and (cancel.is_set() or self._closed):
                         conn.send(("cancel",))
                         asked = True
                     if proc.poll() is not None:
                         raise RingWorkerError(f"{what} died (exit code {proc.returncode})")
+                    if not asked and self._starved(watch):
+                        conn, proc = self._escalate(watch)
+                        conn.send(job)
+                        watch = _Share(proc.pid)
                 reply = conn.recv()
+                self._relax(watch)
             except (EOFError, OSError) as exc:
                 self._drop()
                 raise RingWorkerError(f"{what} is gone: {exc}") from None
@@ -176,6 +196,37 @@ class RingWorker:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _starved(self, watch: _Share) -> bool:
+        """The job's child is in the idle class and got almost no core for STARVED_S."""
+        if self._child_nice < 19 or watch.wall_s() < STARVED_S:
+            return False
+        share = watch.share()
+        return share is not None and share < STARVED_SHARE
+
+    def _escalate(self, watch: _Share) -> tuple[Connection, subprocess.Popen[bytes]]:
+        share = watch.share() or 0.0
+        log.info(
+            "%s build starved in the idle class (%.0f%% of a core over %.1f s): "
+            "started again in a worker at nice %d",
+            self.label,
+            100.0 * share,
+            watch.wall_s(),
+            ESCALATED_NICE,
+        )
+        self.escalations += 1
+        self._drop(0.0, quiet=True)
+        self._child_nice = ESCALATED_NICE
+        return self._ensure()
+
+    def _relax(self, watch: _Share) -> None:
+        """Back to the idle class for the next job once one had a core to itself."""
+        if self._child_nice == self.nice or watch.wall_s() < RELAX_MIN_S:
+            return
+        share = watch.share()
+        if share is not None and share >= RELAXED_SHARE:
+            self._child_nice = self.nice
+            self._drop(0.0, quiet=True)
+
     def _ensure(self) -> tuple[Connection, subprocess.Popen[bytes]]:
         if self._closed:
             raise BuildCancelled("scene work cancelled")
@@ -189,7 +240,8 @@ class RingWorker:
         # Lower first, then import: the imports are half a second of work the frames beside
         # it would otherwise share the cores with.
         code = (
-            f"from wxsky.engine.priority import lower_priority; lower_priority({self.nice}); "
+            "from wxsky.engine.priority import lower_priority; "
+            f"lower_priority({self._child_nice}); "
             f"from wxsky.engine.ring_worker import serve; serve({theirs.fileno()})"
         )
         try:
@@ -209,24 +261,55 @@ class RingWorker:
         self._conn, self._proc = Connection(mine.detach()), proc
         return self._conn, proc
 
-    def _drop(self, wait_s: float = 1.0) -> None:
-        """Close the socket (the child exits when it reads its end) and reap the child."""
+    def _drop(self, wait_s: float = 1.0, quiet: bool = False) -> None:
+        """Close the socket (the child exits when it reads its end) and reap the child
+        (`quiet`: killing it is the point, not news)."""
         if self._conn is not None:
             self._conn.close()
             self._conn = None
         proc, self._proc = self._proc, None
         if proc is not None:
-            _reap(proc, wait_s, self.label)
+            _reap(proc, wait_s, None if quiet else self.label)
 
 
-def _reap(proc: subprocess.Popen[bytes], wait_s: float, label: str = "ring") -> None:
-    """Wait up to wait_s for the child to exit, then kill it."""
+def _reap(proc: subprocess.Popen[bytes], wait_s: float, label: str | None = "ring") -> None:
+    """Wait up to wait_s for the child to exit, then kill it (logged unless `label` is None)."""
     try:
         proc.wait(max(0.0, wait_s))
     except subprocess.TimeoutExpired:
-        log.warning("%s worker process still busy after %.1f s: killed", label, wait_s)
+        if label is not None:
+            log.warning("%s worker process still busy after %.1f s: killed", label, wait_s)
         proc.kill()
         proc.wait()
+
+
+class _Share:
+    """How much of a core a child has had since this was made (Linux: /proc/PID/stat)."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.start_s = time.monotonic()
+        self.cpu0_s = _cpu_s(pid)
+
+    def wall_s(self) -> float:
+        return time.monotonic() - self.start_s
+
+    def share(self) -> float | None:
+        now = _cpu_s(self.pid)
+        if now is None or self.cpu0_s is None:
+            return None
+        return (now - self.cpu0_s) / max(self.wall_s(), 1e-6)
+
+
+def _cpu_s(pid: int) -> float | None:
+    """A process's user and system CPU seconds so far; None where /proc cannot say."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        ticks = os.sysconf("SC_CLK_TCK")
+        return (int(fields[11]) + int(fields[12])) / ticks
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 class _Asked:
