@@ -76,7 +76,7 @@ def test_the_worker_runs_below_the_frames_priority() -> None:
         worker.start()
         pid = worker.pid
         assert pid is not None
-        deadline = time.monotonic() + 20.0
+        deadline = time.monotonic() + 60.0
         # (It lowers its own priority first thing: wait for it.)
         while os.getpriority(os.PRIO_PROCESS, pid) != 19 and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -91,16 +91,18 @@ def test_a_cancel_ends_a_build_at_its_next_block() -> None:
     with RingWorker() as worker:
         worker.start()
         worker.build(_job("clear"), threading.Event())  # the child has done its imports
+        child = worker.pid
         cancel = threading.Event()
         threading.Timer(0.3, cancel.set).start()
-        t0 = time.monotonic()
+        # The child answers "cancelled" only when its build gave up between two blocks; one
+        # that ran to the end is answered with the ring, cancel or not. (How soon after the
+        # cancel is a benchmark's business: a busy machine starves the child.)
         with pytest.raises(BuildCancelled):
             worker.build(job, cancel)
-        cancelled_s = time.monotonic() - t0
-        t0 = time.monotonic()
-        worker.build(job, threading.Event())
-        whole_s = time.monotonic() - t0
-    assert cancelled_s < 0.6 * whole_s, (cancelled_s, whole_s)
+        # The same child, not killed for it, then builds the whole ring.
+        ring, _ = worker.build(job, threading.Event())
+        assert worker.pid == child
+    assert sum(len(d) for d in ring.impostors) > 1000
 
 
 def test_a_child_that_dies_fails_one_build_and_the_next_starts_a_new_one() -> None:
