@@ -4,7 +4,13 @@ enough); they are skipped, with the reason, only where no EGL OpenGL 3.3 context
 Every test that needs GL carries the `gl` marker, whether it draws in this process or starts
 a `wxsky` process that does (a snapshot, the daemon). The context is tried once, on the first
 such test, and where it cannot be made every `gl` test is skipped with the error: the rest of
-the suite still runs on a machine without EGL."""
+the suite still runs on a machine without EGL. (The daemon harness skips the same way, so a
+daemon test that lacks the marker skips too rather than failing.)
+
+Under pytest-xdist (the README's command runs the suite on every core) each worker is a
+process of its own: "the session" is the worker's, with its own context and renderer. Tests
+that share something fixed on the machine (a multicast port, an in-tree build) carry
+`pytest.mark.xdist_group`, which keeps them on one worker (`--dist loadgroup`)."""
 
 from __future__ import annotations
 
@@ -12,31 +18,13 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 import pytest
-
-from wxsky.errors import RenderError
+from gl_probe import gl_context, release, skip_without_gl
 
 if TYPE_CHECKING:
-    import moderngl
-
     from wxsky.render.renderer import Renderer
 
 # Ring impostor texture size for GL tests and golden images: small keeps llvmpipe fast.
 GL_RING_PX = 128
-
-# The session's one GL context, or why there is none: made on the first `gl` test's setup.
-_gl: dict[str, moderngl.Context | str] = {}
-
-
-def _gl_context() -> moderngl.Context | str:
-    """The session's context, or the reason it cannot be made (tried once per session)."""
-    if not _gl:
-        from wxsky.render.context import create_context
-
-        try:
-            _gl["ctx"] = create_context()
-        except RenderError as exc:
-            _gl["ctx"] = str(exc)
-    return _gl["ctx"]
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
@@ -48,24 +36,19 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
-    if item.get_closest_marker("gl") is None:
-        return
-    ctx = _gl_context()
-    if isinstance(ctx, str):
-        pytest.skip(f"no EGL OpenGL context: {ctx}")
+    if item.get_closest_marker("gl") is not None:
+        skip_without_gl()
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
-    ctx = _gl.pop("ctx", None)
-    if ctx is not None and not isinstance(ctx, str):
-        ctx.release()
+    release()
 
 
 @pytest.fixture(scope="session")
 def gl_renderer() -> Iterator[Renderer]:
     from wxsky.render.renderer import Renderer
 
-    ctx = _gl_context()
+    ctx = gl_context()
     if isinstance(ctx, str):
         # Only reached from a test the marker check missed; say why all the same.
         pytest.skip(f"no EGL OpenGL context: {ctx}")

@@ -3,6 +3,7 @@ AddressSanitizer + UndefinedBehaviorSanitizer, for the tests that run its progra
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import subprocess
@@ -20,7 +21,12 @@ def _build(sanitize: bool) -> Path:
     args = ["make", "-s", "-C", str(KIT), f"-j{os.cpu_count() or 2}"]
     if sanitize:
         args.append("SANITIZE=1")
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    # Each pytest-xdist worker asks for the build: one make at a time in the kit's folder (the
+    # others then find it made), never two writing the same objects and programs at once.
+    (KIT / "build").mkdir(exist_ok=True)
+    with open(KIT / "build" / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        proc = subprocess.run(args, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return KIT / "build" / ("sanitize" if sanitize else "")
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
-from daemon_harness import DaemonSpec, RunningDaemon, running_daemon, running_daemons
+from daemon_harness import HANG_S, DaemonSpec, RunningDaemon, running_daemon, running_daemons
 from test_channels import channel_args, free_port, status, wait_for
 
 from wxsky.host.reference import HostFrame, ReferenceHost
@@ -22,6 +22,9 @@ from wxsky.png import write_png
 from wxsky.scene.camera import Camera
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed")
+
+# Five daemons, each drawing every frame.
+pytestmark = pytest.mark.gl
 
 W, H = 240, 136
 CONFIG = f"""
@@ -59,7 +62,7 @@ def _camera(d: RunningDaemon) -> Camera:
 def _picture(d: RunningDaemon) -> F:
     """The channel's latest frame once its ring has settled, composited: (H, W, 3) in 0..1."""
     with ReferenceHost.connect(d.address) as host:
-        frame: HostFrame = host.wait_settled_frame(timeout_s=60.0)
+        frame: HostFrame = host.wait_settled_frame(timeout_s=HANG_S)
         rgb = frame.composite()
     return np.asarray(rgb[..., :3], np.float64) / 255.0
 
@@ -132,7 +135,7 @@ def _follow(m: RunningDaemon, chans: dict[str, RunningDaemon]) -> None:
             for c in chans.values()
         )
 
-    wait_for("channels following the master", joined, 20.0)
+    wait_for("channels following the master", joined)
 
 
 def test_adjacent_and_overlapping_channels_agree_where_they_meet(tmp_path: Path) -> None:

@@ -420,7 +420,7 @@ def test_a_daemon_that_goes_away_is_a_runtime_failure(tmp_path: Path) -> None:
         try:
             ig.recvfrom(65_535)
             daemon.stop()
-            _, err = proc.communicate(timeout=10)
+            _, err = proc.communicate(timeout=60)
         finally:
             if proc.poll() is None:
                 proc.kill()

@@ -9,12 +9,14 @@ import logging
 import os
 import subprocess
 import sys
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from daemon_harness import write_config
 
 import wxsky.app.snapshot
 import wxsky.scene.camera
@@ -557,7 +559,9 @@ def test_a_daemon_that_cannot_listen_is_a_runtime_failure(tmp_path: Path) -> Non
     # The environment is in the way (a file where the socket should go), not the command.
     blocker = tmp_path / "not-a-socket"
     blocker.write_text("x", encoding="utf-8")
-    proc = run_wxsky("run", "--control", f"unix:{blocker}")
+    # A segment of its own: the default one may be another daemon's (or test's) on this machine.
+    config = write_config(tmp_path / "wxsky.toml", f"wxsky-test-{uuid.uuid4().hex[:10]}")
+    proc = run_wxsky("run", "--config", str(config), "--control", f"unix:{blocker}")
     assert proc.returncode == 1, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == (
         f"wxsky: error: {blocker} exists and is not a socket; refusing to replace it: remove "

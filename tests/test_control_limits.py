@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from daemon_harness import RunningDaemon, running_daemon, write_config
+from daemon_harness import HANG_S, RunningDaemon, running_daemon, write_config
 
 from wxsky.app.control import APPLY_METAR, METAR_MAX_CHARS
 from wxsky.host.client import RemoteError
@@ -42,7 +42,7 @@ WXSKY_RUN = (sys.executable, "-m", "wxsky", "run")
 
 
 def _wait(
-    what: str, done: Callable[[], bool], daemon: RunningDaemon, timeout_s: float = 10.0
+    what: str, done: Callable[[], bool], daemon: RunningDaemon, timeout_s: float = HANG_S
 ) -> None:
     deadline = time.monotonic() + timeout_s
     while not done():
@@ -66,7 +66,7 @@ def _answer_and_hang_up(sock: socket.socket) -> tuple[list[Any], bool]:
     """Every message the daemon sends on `sock`, and whether it then closed the connection."""
     decoder = MessageDecoder()
     messages: list[Any] = []
-    sock.settimeout(5.0)
+    sock.settimeout(HANG_S)
     while True:
         try:
             chunk = sock.recv(65536)
@@ -81,7 +81,7 @@ def _answer_and_hang_up(sock: socket.socket) -> tuple[list[Any], bool]:
 
 def _connect(path: Path) -> socket.socket:
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    sock.settimeout(5.0)
+    sock.settimeout(HANG_S)
     sock.connect(str(path))
     return sock
 
@@ -109,7 +109,7 @@ def test_a_second_daemon_interrupted_while_starting_leaves_the_first_ones_socket
             try:
                 # Interrupted while starting: after its signal handlers are in place, before
                 # it gets to the socket (making the renderer alone takes longer than this).
-                deadline = time.monotonic() + 30
+                deadline = time.monotonic() + HANG_S
                 while not _catches_sigterm(proc.pid):
                     assert proc.poll() is None, (where / "daemon.log").read_text()
                     assert time.monotonic() < deadline, "the second daemon never started"
@@ -122,7 +122,7 @@ def test_a_second_daemon_interrupted_while_starting_leaves_the_first_ones_socket
                         if proc.poll() is not None or time.monotonic() > deadline:
                             break
                         time.sleep(0.002)
-                proc.wait(timeout=15)
+                proc.wait(timeout=HANG_S)
             finally:
                 if proc.poll() is None:
                     os.killpg(proc.pid, signal.SIGKILL)

@@ -83,7 +83,7 @@ def build(request: pytest.FixtureRequest) -> tuple[Path, bool]:
 
 
 def run(
-    folder: Path, *args: str, sanitized: bool = False, timeout: float = 30
+    folder: Path, *args: str, sanitized: bool = False, timeout: float = 120
 ) -> subprocess.CompletedProcess[str]:
     proc = subprocess.run(
         [str(folder / PROGRAM), *args],
@@ -129,7 +129,7 @@ class Repl:
         return reply
 
     def finish(self) -> str:
-        _, stderr = self.proc.communicate("quit\n", timeout=10)
+        _, stderr = self.proc.communicate("quit\n", timeout=60)
         assert self.proc.returncode not in SANITIZER_EXIT, stderr
         assert "Sanitizer" not in stderr and "runtime error" not in stderr, stderr
         return stderr
@@ -740,7 +740,8 @@ def test_frames_read_under_a_racing_writer_are_whole_and_increasing(
         racer.publish(0)
         racer.start()
         try:
-            proc = run(host_kit, mode, name, "--frames", "200", "--pattern", "--timeout-ms", "5000")
+            args = ("--frames", "200", "--pattern", "--timeout-ms", "60000")
+            proc = run(host_kit, mode, name, *args)
         finally:
             racer.stop.set()
             racer.join()

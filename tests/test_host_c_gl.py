@@ -9,7 +9,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import signal
 import subprocess
 import uuid
 from collections.abc import Iterator
@@ -18,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
-from daemon_harness import running_daemon
+from daemon_harness import HANG_S, running_daemon
 from host_kit import gl_program, gl_sanitizer_env, host_kit, host_kit_sanitized  # noqa: F401
 
 from wxsky.host.compositor import stretch
@@ -446,14 +445,14 @@ def test_a_running_daemons_frame_composites_as_the_python_reference_host_does(
             {"heading_deg": 200.0, "pitch_deg": 6.0, "fov_deg": 75.0, "width": 320, "height": 180},
         )
         start = host.reader.frame_number
-        host.wait_settled_frame(after=start + 2, timeout_s=60)
-        d.proc.send_signal(signal.SIGSTOP)
+        host.wait_settled_frame(after=start + 2, timeout_s=HANG_S)
+        d.pause()
         try:
             ref_frame = host.read_latest()
             frames: list[int] = []
             got = c_composite(host_kit, d.shm_name, (180, 320), frame_out=frames)
         finally:
-            d.proc.send_signal(signal.SIGCONT)
+            d.resume()
     assert frames == [ref_frame.meta.frame_number]
     ref = ref_frame.composite()
     per_channel = np.mean(np.abs(got.astype(int) - ref.astype(int)), axis=(0, 1))

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import subprocess
 import uuid
 from collections.abc import Iterator
@@ -17,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
-from daemon_harness import running_daemon
+from daemon_harness import HANG_S, running_daemon
 from host_kit import gl_program, gl_sanitizer_env, host_kit, host_kit_sanitized  # noqa: F401
 
 from wxsky.app.frame_publish import frame_layer_specs
@@ -266,11 +265,11 @@ def test_a_daemons_shadow_map_reaches_both_hosts_and_moves_with_the_clouds(
                 "height": H,
             },
         )
-        first = host.wait_settled_frame(after=host.reader.frame_number + 2, timeout_s=60)
+        first = host.wait_settled_frame(after=host.reader.frame_number + 2, timeout_s=HANG_S)
         later = first
         while later.meta.time_utc_unix_s - first.meta.time_utc_unix_s < 1.5:
-            later = host.wait_frame(later.meta.frame_number, timeout_s=10)
-        d.proc.send_signal(signal.SIGSTOP)
+            later = host.wait_frame(later.meta.frame_number, timeout_s=60)
+        d.pause()
         try:
             frame = host.read_latest()
             points = random_points(np.random.default_rng(6), (300.0, -200.0, 432.0), 9000.0, 800)
@@ -278,7 +277,7 @@ def test_a_daemons_shadow_map_reaches_both_hosts_and_moves_with_the_clouds(
             ground = Ground(432.0, frame.meta.sun_direction_enu)
             c_picture = c_ground(host_kit, d.shm_name, (H, W), ground)
         finally:
-            d.proc.send_signal(signal.SIGCONT)
+            d.resume()
     meta, shadow = frame.meta, frame.meta.shadow
     assert shadow is not None and frame.layers.shadow is not None
     assert f"shadow_version {shadow.version} present 1" in out, out

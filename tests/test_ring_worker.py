@@ -76,13 +76,22 @@ def test_the_worker_runs_below_the_frames_priority() -> None:
         worker.start()
         pid = worker.pid
         assert pid is not None
-        deadline = time.monotonic() + 20.0
+        idle_class = hasattr(os, "sched_getscheduler")
+
+        def lowered() -> bool:
+            # Its nice value first, then the idle class: two calls, and on a busy machine a
+            # process already at nice 19 may wait a long time between them.
+            return os.getpriority(os.PRIO_PROCESS, pid) == 19 and (
+                not idle_class or os.sched_getscheduler(pid) == os.SCHED_IDLE
+            )
+
+        deadline = time.monotonic() + 60.0
         # (It lowers its own priority first thing: wait for it.)
-        while os.getpriority(os.PRIO_PROCESS, pid) != 19 and time.monotonic() < deadline:
+        while not lowered() and time.monotonic() < deadline:
             time.sleep(0.05)
         assert os.getpriority(os.PRIO_PROCESS, pid) == 19
         assert os.getpriority(os.PRIO_PROCESS, 0) < 19
-        if hasattr(os, "sched_getscheduler"):
+        if idle_class:
             assert os.sched_getscheduler(pid) == os.SCHED_IDLE
 
 
@@ -91,16 +100,18 @@ def test_a_cancel_ends_a_build_at_its_next_block() -> None:
     with RingWorker() as worker:
         worker.start()
         worker.build(_job("clear"), threading.Event())  # the child has done its imports
+        child = worker.pid
         cancel = threading.Event()
         threading.Timer(0.3, cancel.set).start()
-        t0 = time.monotonic()
+        # The child answers "cancelled" only when its build gave up between two blocks; one
+        # that ran to the end is answered with the ring, cancel or not. (How soon after the
+        # cancel is a benchmark's business: a busy machine starves the child.)
         with pytest.raises(BuildCancelled):
             worker.build(job, cancel)
-        cancelled_s = time.monotonic() - t0
-        t0 = time.monotonic()
-        worker.build(job, threading.Event())
-        whole_s = time.monotonic() - t0
-    assert cancelled_s < 0.6 * whole_s, (cancelled_s, whole_s)
+        # The same child, not killed for it, builds the next ring whole.
+        ring, _ = worker.build(_job("fair-cumulus"), threading.Event())
+        assert worker.pid == child
+    assert sum(len(d) for d in ring.impostors) > 1000
 
 
 def test_a_child_that_dies_fails_one_build_and_the_next_starts_a_new_one() -> None:
@@ -163,15 +174,20 @@ def test_the_frames_find_the_near_sets_the_worker_process_made() -> None:
         mp.setattr(gather_module, "_make_near_blocks", counted)
         engine.warm_up()
         assert len(made) == 1  # the set around the camera, where the first ring is built
-        deadline = time.monotonic() + 60.0
+        # (The child is in the idle class: beside stress-ng --cpu 2 its first ring took a
+        # minute here, against half a second on an idle machine. The wait only catches a hang.)
+        deadline = time.monotonic() + 300.0
         k = 0
         while time.monotonic() < deadline:
-            engine.set_camera(cam(k / 30.0))
+            # A second of flight (120 m), then the aircraft holds its place: how far it would
+            # fly before the ring came must not depend on how busy the machine is (on a
+            # loaded one the build takes a minute, and the flight would leave the ring).
+            engine.set_camera(cam(min(k, 30) / 30.0))
             plan = engine.advance(1.0 / 30.0 if k else 0.0)
             k += 1
             if plan.rings.current is not None:
                 break
             time.sleep(0.01)
-        assert plan.rings.current is not None, "no ring within a minute"
+        assert plan.rings.current is not None, "no ring within five minutes"
         assert len(plan.frame.near) > 100
         assert len(made) == 1  # nothing made in a frame: the child's set was installed

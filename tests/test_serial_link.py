@@ -106,7 +106,7 @@ def test_a_pulled_device_is_reopened(tmp_path: Path) -> None:
         second = Pty()
         device.unlink()
         device.symlink_to(second.path)
-        assert wait_until(lambda: link.stats.ok, timeout_s=10.0)
+        assert wait_until(lambda: link.stats.ok)
         second.write(sentence("WIMWV,020.0,T,4.0,M,A"))
         assert posted.wait_for(lambda: posted.values().get(WIND_DIR) == 20.0)
         assert link.stats.to_dict()["reopens"] >= 1
@@ -126,7 +126,7 @@ def test_a_missing_device_is_retried_until_it_appears(tmp_path: Path) -> None:
         assert wait_until(lambda: link.stats.to_dict()["state"].startswith("cannot open"))
         assert not link.stats.ok
         device.symlink_to(pty.path)
-        assert wait_until(lambda: link.stats.ok, timeout_s=10.0)
+        assert wait_until(lambda: link.stats.ok)
         pty.write(sentence("GPZDA,134322.00,12,06,1987,00,00"))
         assert posted.wait_for(lambda: any(u.time_utc for u in posted.updates))
     finally:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from daemon_harness import running_daemon
+from daemon_harness import HANG_S, running_daemon
 
 from wxsky.app.snapshot import LAYER_NAMES
 from wxsky.host.client import RemoteError
@@ -105,11 +105,11 @@ def test_a_host_gets_the_front_layer_after_set_aircraft(tmp_path: Path) -> None:
         cam = host.call("status")["camera"]
         ahead = [cam["position_m"][0], cam["position_m"][1] - 3000.0, cam["position_m"][2] + 500]
         assert host.call("set_aircraft", {"position_m": ahead})["position_m"] == ahead
-        frame = host.wait_frame(host.reader.frame_number + 2)
+        frame = host.wait_frame(host.reader.frame_number + 2, timeout_s=HANG_S)
         assert frame.layers.near_front is not None
         assert frame.layers.near_front.shape == frame.layers.near.shape
         host.call("set_aircraft", {"position_m": None})
-        frame = host.wait_frame(host.reader.frame_number + 2)
+        frame = host.wait_frame(host.reader.frame_number + 2, timeout_s=HANG_S)
         assert frame.layers.near_front is None
 
 
@@ -118,7 +118,7 @@ def test_run_trace_records_the_daemons_ring_cycle(tmp_path: Path) -> None:
     trace = tmp_path / "ring.jsonl"
     extra = "[scene]\nring_fade_s = 0.2\n"
     with running_daemon(tmp_path, extra_config=extra, args=("--trace", str(trace))) as d:
-        deadline = time.monotonic() + 30.0
+        deadline = time.monotonic() + HANG_S
         while time.monotonic() < deadline:
             text = trace.read_text() if trace.exists() else ""
             if "crossfade_done" in text:

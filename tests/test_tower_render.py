@@ -20,6 +20,9 @@ from wxsky.settings.presets import load_preset
 from wxsky.towers.volume import TowerSpec
 from wxsky.weather.state import WeatherState
 
+# Every test makes renderers of its own.
+pytestmark = pytest.mark.gl
+
 # A box of exactly 1 km a side: cells of 1000/64 m in every direction.
 SPEC = TowerSpec(weather_seed=3, block=(0, 0), cell=0, width_m=600.0, height_m=900.0)
 CENTRE = (0.0, 20_000.0, 3000.0)

@@ -11,6 +11,7 @@ from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from wxsky.app.snapshot import LAYER_NAMES, picture
 from wxsky.cli import main as cli_main
@@ -21,6 +22,9 @@ from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
+
+# Every test draws, with a renderer of its own or a `wxsky snapshot` process.
+pytestmark = pytest.mark.gl
 
 HEADINGS = (14.0, 104.0, 194.0, 284.0)
 CALM_MINUTES = (10, 20)

@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -21,7 +20,7 @@ from typing import Any
 import msgpack
 import numpy as np
 import pytest
-from daemon_harness import running_daemon
+from daemon_harness import HANG_S, running_daemon
 from host_kit import gl_program, host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
 from server_thread import ServerThread
 
@@ -308,7 +307,7 @@ def daemon_composite(
             "set_camera",
             {"heading_deg": 200.0, "pitch_deg": 6.0, "fov_deg": 75.0, "width": 320, "height": 180},
         )
-        host.wait_settled_frame(after=host.reader.frame_number + 2, timeout_s=60)
+        host.wait_settled_frame(after=host.reader.frame_number + 2, timeout_s=HANG_S)
         proc = subprocess.Popen(
             [str(exe), d.address, d.shm_name, str(out), "--wait-stdin", *extra],
             stdin=subprocess.PIPE,
@@ -318,12 +317,12 @@ def daemon_composite(
         )
         assert proc.stdout is not None and proc.stdin is not None
         textures = proc.stdout.readline().strip()
-        d.proc.send_signal(signal.SIGSTOP)
+        d.pause()
         try:
             ref_frame = host.read_latest()
             stdout, stderr = proc.communicate("go\n", timeout=60)
         finally:
-            d.proc.send_signal(signal.SIGCONT)
+            d.resume()
     if proc.returncode == 2:
         pytest.skip(f"no headless EGL context: {stdout.strip()}")
     assert proc.returncode == 0, textures + "\n" + stdout + stderr
