@@ -169,6 +169,8 @@ class SkyEngine:
         self.rates = rates
         self.transition_step_s = transition_step_s
         self._wall_s = 0.0
+        self._live = ring_build == "async"  # a daemon's engine: inputs stamped in real time
+        self._advanced_at = time.monotonic()
         self._cockpit_date: tuple[date, float] | None = None  # (date, wall_s it arrived)
         self._since_step_s = 0.0
         # The clouds' drift is a function of the time: each layer has moved with its wind
@@ -234,8 +236,20 @@ class SkyEngine:
 
     @property
     def wall_s(self) -> float:
-        """Wall-clock seconds the engine has advanced (the time base of cockpit holds)."""
-        return self._wall_s
+        """Wall-clock seconds the engine has run (the time base of cockpit and CIGI holds):
+        the seconds it has advanced, and in a daemon's engine those since the last frame
+        began (`_now_s`)."""
+        return self._now_s()
+
+    def _now_s(self) -> float:
+        """The time an input is stamped with. A daemon's engine (async) runs in real time:
+        an input that arrives while a frame is drawn is stamped that much after the frame's
+        start, so a frame that took longer than a hold (a busy machine) does not expire a
+        host or a knob that kept sending meanwhile. A snapshot's or a test's engine runs in
+        the steps it is given, and stamps with them alone."""
+        if not self._live:
+            return self._wall_s
+        return self._wall_s + max(0.0, time.monotonic() - self._advanced_at)
 
     @property
     def camera(self) -> Camera:
@@ -364,28 +378,27 @@ class SkyEngine:
         with self._lock:
             if patch.time_utc is not None:
                 self.set_time(patch.time_utc, source=patch.source)
-            self._stack = self._stack.with_patch(patch, self._wall_s)
+            self._stack = self._stack.with_patch(patch, self._now_s())
             self._retarget()
             return self._target
 
     def heard_cigi(self) -> None:
         """A CIGI host sent a message: the weather it gave stands on (see `SourceStack`)."""
         with self._lock:
-            self._stack = self._stack.heard_cigi(self._wall_s)
+            self._stack = self._stack.heard_cigi(self._now_s())
 
     def apply_cockpit(self, update: CockpitUpdate) -> WeatherState:
         """Lay a cockpit link's values over the weather (each held while it keeps coming),
         set the clock from its time and move the camera to its position; returns the target."""
         with self._lock:
+            now_s = self._now_s()
             if update.values:
-                self._stack = self._stack.with_cockpit_values(update.values, self._wall_s)
+                self._stack = self._stack.with_cockpit_values(update.values, now_s)
                 self._retarget()
             if update.date_utc is not None:
-                self._cockpit_date = (update.date_utc, self._wall_s)
+                self._cockpit_date = (update.date_utc, now_s)
             recent = self._cockpit_date
-            recent_date = (
-                recent[0] if recent and self._wall_s - recent[1] <= DATE_MEMORY_S else None
-            )
+            recent_date = recent[0] if recent and now_s - recent[1] <= DATE_MEMORY_S else None
             when = clock_target(self._state.time_utc, update, recent_date)
             if when is not None:
                 self.set_time(when, source=Source.COCKPIT)
@@ -759,6 +772,7 @@ class SkyEngine:
             return self._state
 
     def _step_weather(self, dt_wall_s: float) -> None:
+        self._advanced_at = time.monotonic()
         if self._following:  # the master moves the weather and the clock
             self._wall_s += max(0.0, dt_wall_s)
             return
