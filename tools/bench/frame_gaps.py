@@ -51,7 +51,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from wxsky.host.client import ControlClient
+from wxsky.host.client import ControlClient, RemoteError
 from wxsky.inputs.cigi_link import CigiHostSocket
 from wxsky.protocols.cigi import encode_datagram, make, timestamp_10us
 from wxsky.weather.geo import geodetic_from_enu
@@ -315,7 +315,7 @@ def run_scenario(
             finish(p)
 
             p = phase("release")
-            client.call("release", {"now": True})
+            _call(client, "release", {"now": True})
             finish(p)
 
             p = phase("feed-change")
@@ -350,6 +350,18 @@ def run_scenario(
                 "frames": watcher.frames.times,
                 "phases": [(ph.name, ph.start, ph.stop) for ph in phases],
             }
+
+
+def _call(client: ControlClient, method: str, params: dict[str, Any]) -> None:
+    """`method`, or for a build from before `now` existed (a base to compare with) the same
+    without it: such a build switched at once anyway."""
+    try:
+        client.call(method, params)
+    except RemoteError as exc:
+        if "now" not in params:
+            raise
+        print(f"({method}: {exc}; sent again without 'now')", file=sys.stderr)
+        client.call(method, {k: v for k, v in params.items() if k != "now"})
 
 
 @contextlib.contextmanager
