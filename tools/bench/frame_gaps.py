@@ -11,8 +11,9 @@ METAR feed file; this process is its host (subscribed to every `frame`) and its 
 Each phase starts one event and watches the frames for `--phase-s` seconds:
 
     steady          nothing happens (the reference)
-    cigi-resite     a CIGI host's first datagrams, its ownship 500 km away (a new site);
-                    the first Start of Frame's latency is timed from the first sendto
+    cigi-resite     a CIGI host's first datagrams: its ownship 500 km away at 3,000 m (a new
+                    site) and its own deck of stratocumulus (a new layer); the first Start of
+                    Frame's latency is timed from the first sendto
     time-jump       `set_time` six hours on (a ring for the new sun, towers aged 6 h)
     preset-apply    `wxsky preset apply thunderstorm` (at the [transition] rates)
     preset-now      `wxsky preset apply overcast-stratus --now` (layers swapped at once)
@@ -62,6 +63,7 @@ FEED_A = "awc_cache_2020-05-02_luasamples.csv"
 FEED_B = "awc_cache_2022-10-23_HackGT-2022.csv"
 RESITE_M = 500_000.0  # how far north of the site the CIGI host's ownship is
 HOST_RATE_HZ = 60.0
+OWNSHIP_ALT_M = 3000.0
 START_TIMEOUT_S = 120.0  # daemon up and its first ring shown: only catches a hang
 CONFIG = """
 [daemon]
@@ -170,9 +172,20 @@ class CigiHost(threading.Thread):
                 yaw_deg=0.0,
                 lat_deg=self.lat_deg,
                 lon_deg=self.lon_deg,
-                alt_m=1500.0,
+                alt_m=OWNSHIP_ALT_M,
             )
-            data = encode_datagram([lead, own])
+            # The host's own weather from its first message on, as a host sets its scene
+            # up: a deck of stratocumulus under the ownship, a new layer to the daemon.
+            deck = make(
+                "weather_control",
+                layer_id=1,
+                weather_enable=1,
+                cloud_type=9,
+                coverage_pct=70.0,
+                base_elevation_m=1200.0,
+                thickness_m=600.0,
+            )
+            data = encode_datagram([lead, own, deck])
             if self.first_send is None:
                 self.first_send = time.monotonic()
             self.sock.send_bytes(data)
@@ -246,7 +259,10 @@ def wait_settled(client: ControlClient) -> None:
         if scene["ring"] is not None and not scene["ring_busy"]:
             return
         time.sleep(0.2)
-    raise SystemExit("the daemon's first ring was not shown in time")
+    # (The idle-class ring worker of builds before issue 39 starves beside stress-ng.)
+    print(
+        f"the first ring was not shown in {START_TIMEOUT_S:g} s: measuring anyway", file=sys.stderr
+    )
 
 
 def run_scenario(
@@ -305,8 +321,8 @@ def run_scenario(
             finish(p)
 
             p = phase("preset-now")
-            client.call(
-                "apply_preset", {"name": "overcast-stratus", "keep_site": True, "now": True}
+            _call(
+                client, "apply_preset", {"name": "overcast-stratus", "keep_site": True, "now": True}
             )
             finish(p)
 
@@ -339,7 +355,8 @@ def run_scenario(
                 {
                     "phase": "channel's own frames",
                     "frames": seen["frames_published"],
-                    "largest_gap_s": seen["frames"]["largest_gap_s"],
+                    # (NaN from a build that does not count its gaps: a base to compare with)
+                    "largest_gap_s": seen.get("frames", {}).get("largest_gap_s", float("nan")),
                     "frames_not_seen": 0,
                     "first_sof_s": None,
                 }
