@@ -52,7 +52,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from wxsky.host.client import ControlClient, RemoteError
+from wxsky.host.client import ControlClient, DaemonUnavailable, RemoteError
 from wxsky.inputs.cigi_link import CigiHostSocket
 from wxsky.protocols.cigi import encode_datagram, make, timestamp_10us
 from wxsky.weather.geo import geodetic_from_enu
@@ -236,7 +236,8 @@ def daemon(
             if time.monotonic() > deadline:
                 raise SystemExit(f"daemon {name} did not start in {START_TIMEOUT_S:g} s")
             if sock.exists():
-                with contextlib.suppress(OSError):
+                # Bound a moment before it listens: refused meanwhile.
+                with contextlib.suppress(OSError, DaemonUnavailable):
                     client = ControlClient.connect(f"unix:{sock}")
             time.sleep(0.05)
         yield proc, client

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import can
 
-from wxsky.host.client import ControlClient
+from wxsky.host.client import ControlClient, DaemonUnavailable
 
 
 @dataclass
@@ -101,7 +101,8 @@ def _connect(sock: Path, proc: subprocess.Popen[bytes]) -> ControlClient:
         if proc.poll() is not None:
             raise SystemExit("daemon exited early")
         if sock.exists():
-            with contextlib.suppress(OSError):
+            # Bound a moment before it listens: refused meanwhile.
+            with contextlib.suppress(OSError, DaemonUnavailable):
                 return ControlClient.connect(f"unix:{sock}")
         time.sleep(0.1)
     raise SystemExit("daemon did not start")

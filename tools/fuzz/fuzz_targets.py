@@ -1191,11 +1191,15 @@ def daemon_session() -> Iterator[FuzzDaemon]:
 
 
 def _wait_started(daemon: FuzzDaemon) -> None:
+    from wxsky.host.client import DaemonUnavailable
+
     deadline = time.monotonic() + 60.0
     while time.monotonic() < deadline:
         daemon.assert_alive()
         if daemon.socket_path.exists():
-            with contextlib.suppress(OSError, ValueError, KeyError):
+            # The socket's file is there from its bind, a moment before it listens: a refused
+            # connection then is the daemon still starting (on a busy machine, a while).
+            with contextlib.suppress(OSError, ValueError, KeyError, DaemonUnavailable):
                 if _status(daemon)["frames_published"] > 0:
                     daemon.new_log()  # start-up lines are not the fuzzer's doing
                     return
