@@ -190,3 +190,27 @@ def test_a_tower_not_lit_yet_stays_the_sprite_cloud_it_grows_from() -> None:
         assert not {t.cloud_id for t in lit.frame.towers} & lit_ids  # now drawn as volumes
     finally:
         engine.close(1.0)
+
+
+@pytest.mark.parametrize("preset", ["fair-cumulus", "overcast-stratus"])
+def test_the_first_frames_show_clouds_while_their_own_set_is_made(preset: str) -> None:
+    """The first ring's blocks are picked with the first frame's drift, which the warm-up
+    cannot know: until that set is made, the first frames show the warm-up's, not an empty
+    sky; and an engine never warmed up makes its first set at once."""
+    engine = _engine(preset, "thread")
+    try:
+        gate = threading.Event()
+        engine.work_gate = gate
+        warm = engine.warm_up()
+        assert warm is not None and len(warm.near) > 0
+        plans = _off_thread(lambda: [engine.advance(DT_S) for _ in range(3)])
+        assert all(len(p.frame.near) > 0 for p in plans)
+    finally:
+        engine.close(1.0)
+    cold = _engine(preset, "thread")
+    try:
+        cold.work_gate = threading.Event()  # held: only the frame itself can make it
+        plan = _off_thread(lambda: cold.advance(DT_S))
+        assert len(plan.frame.near) > 0
+    finally:
+        cold.close(1.0)

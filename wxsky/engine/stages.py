@@ -49,6 +49,7 @@ from wxsky.scene.layout import (
     StageClock,
     build_frame,
     empty_ring,
+    gather_inputs,
 )
 from wxsky.scene.near_sets import NearInputs, install_near, stale_light, warm_near
 from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
@@ -586,7 +587,9 @@ class SkyEngine:
             if gathered is not None:
                 self._last_near = _LastNear(state, drift, towers.epochs, gathered)
             else:
-                drawn_state, drawn_drift, gathered, towers = self._held_near(state, sky, towers)
+                drawn_state, drawn_drift, gathered, towers = self._held_near(
+                    state, drift, near, sky, towers
+                )
         frame = build_frame(
             drawn_state,
             drawn_drift,
@@ -630,15 +633,23 @@ class SkyEngine:
         return FramePlan(state, frame, shown, rings, events)
 
     def _held_near(
-        self, state: WeatherState, sky: SkyParams, towers: TowerClock
+        self,
+        state: WeatherState,
+        drift: Drift,
+        near: tuple[NearRing, ...],
+        sky: SkyParams,
+        towers: TowerClock,
     ) -> tuple[WeatherState, Drift, NearInputs, TowerClock]:
         """The inputs of a frame whose near set is not ready: the last near layer drawn, as
         it stood, lit by this sky's light directions (its rows are the old sun's until the
-        new light comes), its towers aged to this frame's time; before any, no near clouds
-        (the ring and the sky are still this frame's)."""
+        new light comes), its towers aged to this frame's time (the ring and the sky are
+        still this frame's). With none drawn yet (an engine not warmed up), this frame's
+        made now, once, rather than an empty sky."""
         last = self._last_near
         if last is None:
-            return state, zero_drift(state), NearInputs.empty(), towers
+            made = gather_inputs(state, drift, near, sky, self.settings, None, towers)
+            self._last_near = _LastNear(state, drift, towers.epochs, made)
+            return state, drift, made, towers
         gathered = last.gathered
         if gathered.scattered is not None and gathered.blocks is not None:
             relit = stale_light(gathered.blocks, sky)
@@ -652,7 +663,9 @@ class SkyEngine:
         layer's blocks around the camera (where the first ring is built) and light them.
         Returns the frame the first frame will draw, for the renderer's own warm-up
         (`Renderer.warm_up`); None in direct mode. Together they make the first frame cost
-        what later ones do, where it took 100-400 ms on a 2-core CPU renderer."""
+        what later ones do, where it took 100-400 ms on a 2-core CPU renderer. The set it
+        makes is also what the first frames show until their own is made off the frame
+        path."""
         if self.render_mode != "ring":
             return None
         with self._lock:
@@ -663,6 +676,12 @@ class SkyEngine:
         ring = NearRing(camera.position_m, drift, 1.0)
         epochs = tuple(self._epochs.get(k) for k in layer_keys(state.layers))
         warm_near(state, drift, ring, sky, self.settings, epochs)
+        towers = TowerClock(epochs, state.time_utc)
+        gathered = gather_inputs(state, drift, (ring,), sky, self.settings, None, towers)
+        # The first frames' fallback: their own set may be picked a block apart (the first
+        # ring's blocks are picked with the drift of the first frame's clock) and made off
+        # the frame path, and they show this one meanwhile, not an empty sky.
+        self._last_near = _LastNear(state, drift, epochs, gathered)
         return build_frame(
             state,
             drift,
@@ -672,6 +691,7 @@ class SkyEngine:
             self.settings,
             locks=self._locks,
             split_at_m=aircraft_m,
+            gathered=gathered,
         )
 
     # -- several daemons, one sky (docs/channels.md) ---------------------------------------

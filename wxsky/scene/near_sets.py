@@ -57,11 +57,6 @@ class NearInputs:
     scattered: Scattered | None
     found: tuple[Candidate, ...] | None
 
-    @staticmethod
-    def empty() -> NearInputs:
-        """No near clouds at all."""
-        return NearInputs(SpriteBatch.empty(), np.zeros(0, np.float32), None, None, None)
-
 
 # Harris's light on the near layer's particles, per set of near blocks: it depends on the
 # sprites and the light directions only (rounded so that the sun moves them every half
