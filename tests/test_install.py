@@ -5,6 +5,7 @@ importlib.resources), and its built-in cockpit drivers (a static table, no entry
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -13,26 +14,35 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# The wheel is built in the checkout (setuptools' build/ and wxsky.egg-info): one worker
-# builds it, once, never two at the same time.
+# One worker builds the wheel, once, for all three tests.
 pytestmark = pytest.mark.xdist_group("install")
 
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder holding wxsky installed from a freshly built wheel (dependencies stay the
-    venv's own, so no network is needed)."""
+    venv's own, so no network is needed). The wheel is built from a copy of the package:
+    setuptools writes build/ and wxsky.egg-info beside what it builds, and the checkout's
+    may be in use by another build or hold a stale one."""
     tmp = tmp_path_factory.mktemp("install")
+    source = tmp / "source"
+    source.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy2(ROOT / name, source / name)
+    shutil.copytree(
+        ROOT / "wxsky", source / "wxsky", ignore=shutil.ignore_patterns("__pycache__", "*.pyc")
+    )
     wheels = tmp / "wheels"
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
     built = subprocess.run(
-        [*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", str(wheels), str(ROOT)],
+        [*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", str(wheels), str(source)],
         capture_output=True,
         text=True,
         timeout=300,
     )
     if built.returncode != 0:
-        pytest.skip(f"cannot build a wheel here: {built.stderr.strip().splitlines()[-1:]}")
+        said = [ln for ln in built.stderr.splitlines() if "rror" in ln] or built.stderr.splitlines()
+        pytest.skip(f"cannot build a wheel here: {' | '.join(said[-4:])}")
     (wheel,) = wheels.glob("wxsky-*.whl")
     target = tmp / "site"
     subprocess.run(
