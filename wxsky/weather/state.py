@@ -223,6 +223,19 @@ class WeatherPatch:
     seed: int | None = None
 
 
+# The clock's valid range, for every input that sets time (issue 40): wide enough for any
+# training scenario and any replayed archive, far enough inside datetime's years 1..9999 that
+# whatever looks ahead or behind (the sun and moon smoothing, forecasts, channel clocks) never
+# leaves them. Inputs are checked against it at the edge; code that computes ahead clamps.
+EARLIEST_UTC = datetime(1900, 1, 1, tzinfo=UTC)
+LATEST_UTC = datetime(2200, 1, 1, tzinfo=UTC)  # exclusive
+
+
+def time_in_range(time_utc: datetime) -> bool:
+    """Whether an aware time lies in [EARLIEST_UTC, LATEST_UTC)."""
+    return EARLIEST_UTC <= time_utc < LATEST_UTC
+
+
 def _check_utc(time_utc: datetime) -> None:
     if time_utc.tzinfo is None or time_utc.utcoffset() != UTC.utcoffset(None):
         raise ValueError("time_utc must be timezone-aware UTC")
