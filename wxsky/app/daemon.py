@@ -521,6 +521,8 @@ class Daemon:
             "inputs": [s.to_dict() for s in self.inputs.values()],
             "clients": self._server.client_count if self._server else 0,
             "shm_name": self.config.output.shm_name,
+            # Truncations or overwrites of the segment by another process, each written again.
+            "segment": self._writer.segment_status() if self._writer is not None else None,
             "camera": camera_to_dict(self.engine.camera),
             "clock_rate": self.engine.clock_rate,
             "frames": self._frame_times.to_dict(),

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import functools
 import operator
-from collections.abc import Hashable
+from collections.abc import Hashable, Sequence
 from datetime import UTC
 from typing import Protocol
 
@@ -58,7 +58,12 @@ class LayerExport(Protocol):
 
 class LayerSink(Protocol):
     def layer_buffer(
-        self, layer: str, width: int, height: int, content: Hashable | None = None
+        self,
+        layer: str,
+        width: int,
+        height: int,
+        content: Hashable | None = None,
+        rows: Sequence[tuple[int, int]] | None = None,
     ) -> memoryview: ...
 
     def keep_layer(self, layer: str, width: int, height: int, content: Hashable) -> bool: ...
@@ -190,10 +195,9 @@ def publish_layer(renderer: RingRenderer, sink: LayerSink, name: str) -> None:
     if sink.keep_layer(name, width, height, content):
         return
     held = sink.held_layer(name, width, height)
-    buffer = sink.layer_buffer(name, width, height, content)
     old = held[2] if isinstance(held, tuple) and held[:2] == ("layer", name) else None
     if old is None or len(old) != len(bands) or list(map(_ROWS, old)) != list(map(_ROWS, bands)):
-        renderer.read_into(name, buffer)
+        renderer.read_into(name, sink.layer_buffer(name, width, height, content))
         return
     runs: list[list[int]] = []  # the bands drawn since, touching ones as one read
     for band, was in zip(bands, old, strict=True):
@@ -203,7 +207,10 @@ def publish_layer(renderer: RingRenderer, sink: LayerSink, name: str) -> None:
             runs[-1][1] = max(runs[-1][1], band[1])
         else:
             runs.append([band[0], band[1]])
-    for first, stop in runs:
+    # Only those rows go on to the segment's file too (`FrameWriter.layer_buffer`'s rows).
+    rows = [(first, stop) for first, stop in runs]
+    buffer = sink.layer_buffer(name, width, height, content, rows)
+    for first, stop in rows:
         renderer.read_into(name, buffer, (first, stop))
 
 

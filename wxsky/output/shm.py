@@ -69,6 +69,27 @@ it made (the name must still refer to its file's device and inode): if the name 
 and made again by another writer, closing leaves that one alone. Before anything is made, the
 segment's size is checked against the free space of /dev/shm and the memory available
 (`output.memory`), and refused with both figures if it does not fit.
+
+Truncation. Any process of the daemon's user may `ftruncate` /dev/shm/<name>; a store or load
+through a mapping of a page past the new end ends that process with SIGBUS, which Python
+cannot catch (its handler runs after the faulting instruction, which is retried for ever).
+So neither the writer nor the Python reader uses a mapping of the segment: the writer fills a
+private copy (anonymous memory, which no other process can shrink) and writes what each frame
+changed into the file with `pwrite`; a reader copies what it needs with `pread`. Neither can
+fault: a pwrite past the end extends the file, a pread past it reads short (a torn frame,
+retried). Before each frame the writer checks the file's size, that every page is present
+(a truncation that its own writes extended again leaves holes that read as zeros) and its
+header; if anything differs it gives the file its size again and writes the private copy
+whole (both slots, so kept layers hold again), counts it (`segment_status`, the daemon's
+`status.segment`) and logs a line (at most one a minute). A truncation in the middle of a
+frame shows as a torn or zeroed frame until the next one. The private copy doubles the
+memory the segment takes (its pages are touched only where frames use them); pwrite costs
+what the copy into the mapping cost. A host that maps the segment (the C host kit does)
+still faults if it reads a page while the file is short, for up to one frame: the writer's
+checks keep the segment whole, not another process's mapping. The seqlock is unchanged:
+each field is written by its own pwrite, in the order above; a pwrite of an 8-byte counter
+may land byte by byte, which a reader tolerates (`seq` only goes up, odd to even is a
+carry a reader sees as a changed or odd value, and it re-reads `seq` after its copy).
 """
 
 from __future__ import annotations
@@ -92,6 +113,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.errors import RuntimeFailure, WxskyError
+from wxsky.logs import RateLimitedLog
 from wxsky.output import memory
 
 if sys.byteorder != "little":  # pragma: no cover - every supported host is little-endian
@@ -424,14 +446,21 @@ def _create_segment(name: str, size: int) -> int:
 
 
 class FrameWriter:
-    """The daemon's side of a segment. Build with `FrameWriter.create`; not thread-safe."""
+    """The daemon's side of a segment. Build with `FrameWriter.create`; not thread-safe.
 
-    def __init__(self, name: str, fd: int, mm: mmap.mmap, layout: _Layout) -> None:
+    The writer never loads or stores through a mapping of the segment: it fills a private
+    copy (anonymous memory no other process can shrink) and writes what changed into the
+    segment's file with `pwrite`, which extends a truncated file instead of faulting. See
+    "Truncation" in the module docstring."""
+
+    def __init__(self, name: str, fd: int, layout: _Layout) -> None:
         self._name = name
         self._fd = fd
-        self._mm = mm
+        # The writer's copy of the whole segment: what the file must hold. Anonymous, so
+        # another process cannot truncate it, and only the pages a frame uses are touched.
+        self._mm = mmap.mmap(-1, layout.total_size)
         self._layout = layout
-        self._view = memoryview(mm)
+        self._view = memoryview(self._mm)
         self._u32 = self._view.cast("I")
         self._u64 = self._view.cast("Q")
         self._index = {spec.name: i for i, spec in enumerate(layout.layers)}
@@ -450,14 +479,33 @@ class FrameWriter:
         # What each slot's layers hold, where the caller named it (`layer_buffer`'s content):
         # layer index -> (content, width, height), set when the slot is published and dropped
         # as soon as a buffer of that layer in that slot is handed out again. Only this writer
-        # writes the segment (readers map it read-only), so a slot's pixels stay as published.
+        # writes the segment (readers open it read-only), so a slot's pixels stay as published;
+        # a segment changed under it is written again whole from the private copy.
         self._held: tuple[dict[int, tuple[Hashable, int, int]], ...] = tuple(
             {} for _ in range(SLOT_COUNT)
         )
         self._filling: dict[int, tuple[Hashable, int, int]] = {}  # named in the slot being filled
         self._handed_out: list[memoryview] = []
+        # Byte ranges (offset, length) of the private copy written this frame, to go to the file.
+        self._dirty: list[tuple[int, int]] = []
         self._last_frame = -1
         self._closed = False
+        # Truncation and write failures: counted for status, logged at most once a minute.
+        self.restores = 0
+        self.write_errors = 0
+        self.last_problem: str | None = None
+        self._damaged = False  # a write to the file failed: write it whole at the next frame
+        self._log = RateLimitedLog(logger)
+
+    def segment_status(self) -> dict[str, object]:
+        """For the daemon's status: how often the segment was found changed under the writer
+        (truncated, extended, header overwritten) and written again, and failed writes."""
+        return {
+            "size_bytes": self._layout.total_size,
+            "restores": self.restores,
+            "write_errors": self.write_errors,
+            "last_problem": self.last_problem,
+        }
 
     @classmethod
     def create(
@@ -483,13 +531,14 @@ class FrameWriter:
         )
         fd = _create_segment(bare, layout.total_size)
         try:
-            mm = mmap.mmap(fd, layout.total_size)
+            writer = cls(bare, fd, layout)
+            writer._init_header()
         except OSError as exc:
             _unlink_own(bare, fd)
             os.close(fd)
-            raise RuntimeFailure(f"cannot map shared-memory segment {bare!r}: {exc}") from exc
-        writer = cls(bare, fd, mm, layout)
-        writer._init_header()
+            raise RuntimeFailure(
+                f"cannot write shared-memory segment {bare!r}: {exc.strerror}; {_CREATE_HINT}"
+            ) from exc
         return writer
 
     @property
@@ -511,10 +560,84 @@ class FrameWriter:
         return self._target
 
     def _put32(self, offset: int, value: int) -> None:
+        """Store a header field in the private copy and write it to the file."""
         self._u32[offset // 4] = value
+        self._push(offset, 4)
 
     def _put64(self, offset: int, value: int) -> None:
         self._u64[offset // 8] = value
+        self._push(offset, 8)
+
+    def _push(self, offset: int, length: int) -> None:
+        """Write bytes [offset, offset + length) of the private copy to the segment's file.
+        pwrite cannot fault: on a file shrunk under the writer it extends it again (the rest
+        reads as zeros until `_check_segment` writes it whole). A failure (no room left in
+        /dev/shm after pages were freed and taken) is counted and logged, and the next frame
+        writes the segment whole again; the daemon goes on."""
+        end = offset + length
+        try:
+            while offset < end:
+                offset += os.pwrite(self._fd, self._view[offset:end], offset)
+        except OSError as exc:
+            self.write_errors += 1
+            self._damaged = True
+            self.last_problem = f"writing it failed: {exc.strerror}"
+            self._log.log(
+                logging.ERROR,
+                "write",
+                f"frame segment {self._name!r}: writing it failed: {exc.strerror} "
+                f"({self.write_errors} failed writes so far); trying again next frame",
+            )
+
+    def _check_segment(self) -> None:
+        """Before each frame: the segment's file must still be what this writer wrote: its
+        size, every page present (a truncation that later writes extended again leaves holes,
+        which read as zeros) and its header. If not (another process of this user truncated
+        or overwrote it, or a write failed), write it whole from the private copy, count it
+        and log it (at most once a minute)."""
+        total, header_size = self._layout.total_size, self._layout.header_size
+        problem: str | None = None
+        try:
+            info = os.fstat(self._fd)
+            header = os.pread(self._fd, header_size, 0)
+        except OSError as exc:  # pragma: no cover - fstat/pread of an open fd do not fail
+            problem = f"it cannot be read: {exc.strerror}"
+        else:
+            if info.st_size != total:
+                problem = f"it was resized to {info.st_size} bytes (of {total})"
+            elif info.st_blocks * 512 < total:
+                problem = "pages of it were dropped (truncated and extended again)"
+            elif header != self._view[:header_size]:
+                problem = "its header was overwritten"
+        if problem is None and not self._damaged:
+            return
+        if problem is not None:
+            self.restores += 1
+            self.last_problem = problem
+            self._log.warning(
+                "changed",
+                f"frame segment {self._name!r} was changed under the writer: {problem}; "
+                f"wrote it again whole ({self.restores} times so far)",
+            )
+        self._damaged = False
+        try:
+            os.ftruncate(self._fd, total)  # also drops what an extension added past the end
+            if hasattr(os, "posix_fallocate"):
+                os.posix_fallocate(self._fd, 0, total)  # as at creation: no late ENOSPC
+        except OSError as exc:
+            self.write_errors += 1
+            self._damaged = True
+            self.last_problem = f"it could not be given its size again: {exc.strerror}"
+            self._log.log(
+                logging.ERROR,
+                "resize",
+                f"frame segment {self._name!r}: it could not be given its size again: "
+                f"{exc.strerror}; trying again next frame",
+            )
+            return
+        # Both slots as last published (and the one being filled as it was), so what a slot
+        # is known to hold (`keep_layer`) holds in the file again too.
+        self._push(0, total)
 
     def _init_header(self) -> None:
         lay = self._layout
@@ -531,6 +654,7 @@ class FrameWriter:
             self._view[desc + LD_NAME : desc + LD_NAME + LAYER_NAME_SIZE] = spec.name.encode(
                 "ascii"
             ).ljust(LAYER_NAME_SIZE, b"\0")
+            self._push(desc + LD_NAME, LAYER_NAME_SIZE)
             self._put32(desc + LD_MAX_WIDTH, spec.max_width)
             self._put32(desc + LD_MAX_HEIGHT, spec.max_height)
             self._put64(desc + LD_CAPACITY, spec.capacity)
@@ -542,6 +666,7 @@ class FrameWriter:
         self._put32(HDR_STATE, STATE_LIVE)
         # Last, so a reader that sees the magic sees a complete header.
         self._view[HDR_MAGIC : HDR_MAGIC + len(MAGIC)] = MAGIC
+        self._push(HDR_MAGIC, len(MAGIC))
 
     def _check_open(self) -> None:
         if self._closed:
@@ -549,18 +674,25 @@ class FrameWriter:
 
     def _begin(self) -> None:
         if not self._writing:
+            self._check_segment()
             seq = self._layout.slot_base(self._target) + SLOT_SEQ
             self._put64(seq, self._u64[seq // 8] + 1)  # odd: readers of this slot retry
             self._writing = True
 
     def layer_buffer(
-        self, layer: str, width: int, height: int, content: Hashable | None = None
+        self,
+        layer: str,
+        width: int,
+        height: int,
+        content: Hashable | None = None,
+        rows: Sequence[tuple[int, int]] | None = None,
     ) -> memoryview:
         """The writable pixels of `layer` in the slot being filled: width*height*4 contiguous
         bytes (RGBA8, premultiplied, rows top to bottom). Valid until the next `publish`; a layer
         not asked for before `publish` is published as absent (0x0). `content`: a name for
         what the caller writes there, by which a later frame filling this slot again may keep
-        the pixels instead of writing them (`keep_layer`)."""
+        the pixels instead of writing them (`keep_layer`). `rows`: the (first, stop) row ranges
+        the caller writes, the rest holding what the slot held (`held_layer`); None: all."""
         index = self._layer_index(layer, width, height)
         self._begin()
         self._dims[2 * index : 2 * index + 2] = (width, height)
@@ -570,7 +702,15 @@ class FrameWriter:
         else:
             self._filling[index] = (content, width, height)
         start = self._layout.slot_base(self._target) + self._layout.pixel_offsets[index]
-        view = self._view[start : start + width * height * BYTES_PER_PIXEL]
+        row_bytes = width * BYTES_PER_PIXEL
+        if rows is None:
+            self._dirty.append((start, height * row_bytes))
+        else:
+            for first, stop in rows:
+                if not 0 <= first <= stop <= height:
+                    raise ValueError(f"layer {layer!r}: rows {first}..{stop} outside 0..{height}")
+                self._dirty.append((start + first * row_bytes, (stop - first) * row_bytes))
+        view = self._view[start : start + height * row_bytes]
         self._handed_out.append(view)
         return view
 
@@ -631,10 +771,17 @@ class FrameWriter:
         entries[0::3] = self._dims[0::2]  # LE_WIDTH
         entries[1::3] = self._dims[1::2]  # LE_HEIGHT (LE_OFFSET: as _init_header wrote it)
         self._table.pack_into(self._view, base + SLOT_LAYERS, *entries)
-        self._put64(base + SLOT_FRAME, frame_number)
+        self._u64[(base + SLOT_FRAME) // 8] = frame_number
         meta_start = base + self._layout.meta_offset
         self._view[meta_start : meta_start + len(meta)] = meta
-        self._put32(base + SLOT_META_LENGTH, len(meta))
+        self._u32[(base + SLOT_META_LENGTH) // 4] = len(meta)
+        # Into the file, all before the seq turns even: the pixels written this frame, the
+        # slot's frame number, metadata length and layer table, and the metadata.
+        for offset, length in self._dirty:
+            self._push(offset, length)
+        self._dirty.clear()
+        self._push(base + SLOT_FRAME, SLOT_LAYERS - SLOT_FRAME + self._table.size)
+        self._push(meta_start, len(meta))
         self._put64(base + SLOT_SEQ, self._u64[(base + SLOT_SEQ) // 8] + 1)  # even: complete
         self._put32(HDR_ACTIVE_SLOT, self._target)
         self._put64(HDR_LATEST_FRAME, frame_number)
@@ -698,15 +845,24 @@ class FrameWriter:
         self.close()
 
 
-def _parse_header(name: str, mm: mmap.mmap, size: int) -> _Layout:
-    magic = mm[HDR_MAGIC : HDR_MAGIC + len(MAGIC)]
+def _pread_exact(fd: int, length: int, offset: int) -> bytes | None:
+    """`length` bytes of the file at `offset`, or None where the file is shorter (truncated)."""
+    data = os.pread(fd, length, offset)
+    return data if len(data) == length else None
+
+
+def _parse_header(name: str, fd: int, size: int) -> _Layout:
+    fixed = _pread_exact(fd, HDR_FIXED_SIZE, 0)
+    if fixed is None:
+        raise RuntimeFailure(f"shared-memory segment {name!r} was truncated while opening it")
+    magic = fixed[HDR_MAGIC : HDR_MAGIC + len(MAGIC)]
     if magic != MAGIC:
         raise RuntimeFailure(
             f"shared-memory segment {name!r} is not a wxsky frame segment "
             f"(magic {magic!r}; a writer still starting up has none yet)"
         )
     version, header_size, slot_count, layer_count, slot_size, meta_capacity = struct.unpack_from(
-        "<IIIIQI", mm, HDR_VERSION
+        "<IIIIQI", fixed, HDR_VERSION
     )
     if version != VERSION:
         raise RuntimeFailure(
@@ -726,16 +882,20 @@ def _parse_header(name: str, mm: mmap.mmap, size: int) -> _Layout:
         raise bad(f"header_size {header_size}")
     if slot_size % 8 or header_size + SLOT_COUNT * slot_size > size:
         raise bad(f"slot_size {slot_size} does not fit the {size}-byte segment")
+    # The descriptors and slot 0's header (for its meta_offset): within `size`, checked above.
+    head = _pread_exact(fd, header_size + SLOT_LAYERS, 0)
+    if head is None:
+        raise RuntimeFailure(f"shared-memory segment {name!r} was truncated while opening it")
     specs = []
     for i in range(layer_count):
         desc = HDR_LAYERS + i * LAYER_DESC_SIZE
-        raw = mm[desc + LD_NAME : desc + LD_NAME + LAYER_NAME_SIZE].rstrip(b"\0")
-        max_width, max_height, capacity = struct.unpack_from("<IIQ", mm, desc + LD_MAX_WIDTH)
+        raw = head[desc + LD_NAME : desc + LD_NAME + LAYER_NAME_SIZE].rstrip(b"\0")
+        max_width, max_height, capacity = struct.unpack_from("<IIQ", head, desc + LD_MAX_WIDTH)
         spec = LayerSpec(raw.decode("ascii", "replace"), max_width, max_height)
         if capacity != spec.capacity or capacity > slot_size:
             raise bad(f"layer {spec.name!r} capacity {capacity}")
         specs.append(spec)
-    (meta_offset,) = struct.unpack_from("<I", mm, header_size + SLOT_META_OFFSET)
+    (meta_offset,) = struct.unpack_from("<I", head, header_size + SLOT_META_OFFSET)
     if meta_offset + meta_capacity > slot_size:
         raise bad(f"metadata region {meta_offset}+{meta_capacity} exceeds the slot")
     return _Layout(
@@ -748,20 +908,27 @@ def _parse_header(name: str, mm: mmap.mmap, size: int) -> _Layout:
     )
 
 
-class FrameReader:
-    """A host's side of a segment. Build with `FrameReader.open`; not thread-safe."""
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
 
-    def __init__(
-        self, name: str, mm: mmap.mmap, layout: _Layout, identity: tuple[int, int]
-    ) -> None:
+
+class FrameReader:
+    """A host's side of a segment. Build with `FrameReader.open`; not thread-safe.
+
+    It reads the segment with `pread`, never through a mapping: a segment truncated under it
+    (by another process of the user) reads short, which is a torn frame to retry, where a
+    mapped read would end the process with SIGBUS."""
+
+    def __init__(self, name: str, fd: int, layout: _Layout, identity: tuple[int, int]) -> None:
         self._name = name
-        self._mm = mm
+        self._fd = fd
         self._layout = layout
         self._identity = identity
-        self._view = memoryview(mm)
-        self._u32 = self._view.cast("I")
-        self._u64 = self._view.cast("Q")
         self._closed = False
+        self._short = 0  # reads cut short by a truncated segment, since the last frame
+        n = len(layout.layers)
+        self._slot_head = struct.Struct("<QQII" + _ENTRY_FORMAT * n)
+        assert self._slot_head.size == SLOT_LAYERS + LAYER_ENTRY_SIZE * n
 
     @classmethod
     def open(cls, name: str) -> FrameReader:
@@ -783,15 +950,11 @@ class FrameReader:
                 raise RuntimeFailure(
                     f"shared-memory segment {bare!r} is not a wxsky frame segment ({size} bytes)"
                 )
-            mm = mmap.mmap(fd, size, access=mmap.ACCESS_READ)
-        finally:
-            os.close(fd)  # the mapping keeps the segment alive
-        try:
-            layout = _parse_header(bare, mm, size)
+            layout = _parse_header(bare, fd, size)
         except BaseException:
-            mm.close()
+            os.close(fd)
             raise
-        return cls(bare, mm, layout, (info.st_dev, info.st_ino))
+        return cls(bare, fd, layout, (info.st_dev, info.st_ino))
 
     @property
     def name(self) -> str:
@@ -801,23 +964,29 @@ class FrameReader:
     def layers(self) -> tuple[LayerSpec, ...]:
         return self._layout.layers
 
+    def _fixed(self) -> bytes | None:
+        return _pread_exact(self._fd, HDR_FIXED_SIZE, 0)
+
     @property
     def frame_number(self) -> int:
-        """Number of the latest published frame, or -1 if none has been published yet.
+        """Number of the latest published frame, or -1 if none has been published yet (or
+        the segment is truncated just now).
 
         A cheap peek at the header. It is updated just after the slot flip, so it can lag the
         frame `read` returns by one: compare with `>` ("is there a newer frame than mine?").
         """
         self._check_open()
-        if self._u64[HDR_PUBLISH_COUNT // 8] == 0:
+        fixed = self._fixed()
+        if fixed is None or _U64.unpack_from(fixed, HDR_PUBLISH_COUNT)[0] == 0:
             return -1
-        return int(self._u64[HDR_LATEST_FRAME // 8])
+        return int(_U64.unpack_from(fixed, HDR_LATEST_FRAME)[0])
 
     def is_current(self) -> bool:
         """False once the writer has closed this segment or the name now refers to another one
         (a restarted daemon): the cue for a host to close and reopen."""
         self._check_open()
-        if self._u32[HDR_STATE // 4] == STATE_CLOSED:
+        fixed = self._fixed()
+        if fixed is not None and _U32.unpack_from(fixed, HDR_STATE)[0] == STATE_CLOSED:
             return False
         try:
             fd = _shm_open(self._name, os.O_RDONLY)
@@ -837,18 +1006,23 @@ class FrameReader:
         """Copy the latest complete frame, retrying while the writer races this reader.
 
         Raises WxskyError if no complete frame could be copied within `timeout_s` (also when
-        none has been published yet) or when the writer has closed the segment.
+        none has been published yet, or the segment stays truncated) or when the writer has
+        closed the segment.
         """
         self._check_open()
         deadline = time.monotonic() + timeout_s
         attempts = 0
+        self._short = 0
         while True:
             frame = self._try_read()
             if frame is not None:
                 return frame
             attempts += 1
             if time.monotonic() >= deadline:
-                if self._u64[HDR_PUBLISH_COUNT // 8] == 0:
+                fixed = self._fixed()
+                if self._short:
+                    why = f"the segment was shorter than its header says ({self._short} reads)"
+                elif fixed is None or _U64.unpack_from(fixed, HDR_PUBLISH_COUNT)[0] == 0:
                     why = "no frame has been published yet"
                 else:
                     why = f"the writer overwrote it {attempts} times in a row"
@@ -859,30 +1033,32 @@ class FrameReader:
                 time.sleep(0.0005)
 
     def _try_read(self) -> Frame | None:
-        u32, u64, lay = self._u32, self._u64, self._layout
-        if u32[HDR_STATE // 4] == STATE_CLOSED:
-            raise WxskyError(f"the writer has closed frame segment {self._name!r}")
-        if u64[HDR_PUBLISH_COUNT // 8] == 0:
+        fd, lay = self._fd, self._layout
+        fixed = self._fixed()
+        if fixed is None:
+            self._short += 1
             return None
-        active = u32[HDR_ACTIVE_SLOT // 4]
+        if _U32.unpack_from(fixed, HDR_STATE)[0] == STATE_CLOSED:
+            raise WxskyError(f"the writer has closed frame segment {self._name!r}")
+        if _U64.unpack_from(fixed, HDR_PUBLISH_COUNT)[0] == 0:
+            return None
+        active = _U32.unpack_from(fixed, HDR_ACTIVE_SLOT)[0]
         if active >= SLOT_COUNT:
             raise WxskyError(f"segment {self._name!r}: active_slot {active} is out of range")
         base = lay.slot_base(active)
-        seq_index = (base + SLOT_SEQ) // 8
-        seq = u64[seq_index]
+        head = _pread_exact(fd, self._slot_head.size, base)
+        if head is None:
+            self._short += 1
+            return None
+        seq, frame_number, meta_length, _meta_offset, *table = self._slot_head.unpack(head)
         if seq & 1 or seq == 0:
             return None
-        frame_number = int(u64[(base + SLOT_FRAME) // 8])
-        meta_length = u32[(base + SLOT_META_LENGTH) // 4]
         problem = None
         if meta_length > lay.meta_capacity:
             problem = f"meta_length {meta_length}"
         regions = []
         for index, spec in enumerate(lay.layers):
-            entry = base + SLOT_LAYERS + index * LAYER_ENTRY_SIZE
-            width = u32[(entry + LE_WIDTH) // 4]
-            height = u32[(entry + LE_HEIGHT) // 4]
-            offset = int(u64[(entry + LE_OFFSET) // 8])
+            width, height, offset = table[3 * index : 3 * index + 3]
             length = width * height * BYTES_PER_PIXEL
             if (
                 width > spec.max_width
@@ -896,25 +1072,36 @@ class FrameReader:
         layers: dict[str, npt.NDArray[np.uint8]] = {}
         meta = b""
         if problem is None:
-            meta_start = base + lay.meta_offset
-            meta = bytes(self._view[meta_start : meta_start + meta_length])
+            got = _pread_exact(fd, meta_length, base + lay.meta_offset)
+            if got is None:
+                self._short += 1
+                return None
+            meta = got
             for layer, width, height, offset, length in regions:
-                pixels = np.frombuffer(self._view[offset : offset + length], dtype=np.uint8)
-                layers[layer] = pixels.reshape(height, width, BYTES_PER_PIXEL).copy()
-        if u64[seq_index] != seq or u32[HDR_ACTIVE_SLOT // 4] != active:
+                pixels = np.empty((height, width, BYTES_PER_PIXEL), np.uint8)
+                if length and os.preadv(fd, [pixels.data], offset) != length:
+                    self._short += 1
+                    return None
+                layers[layer] = pixels
+        after = self._fixed()
+        again = _pread_exact(fd, 8, base + SLOT_SEQ)
+        if (
+            after is None
+            or again is None
+            or _U64.unpack(again)[0] != seq
+            or _U32.unpack_from(after, HDR_ACTIVE_SLOT)[0] != active
+        ):
             return None  # torn: the writer got to this slot while we copied it
         if problem is not None:
             raise WxskyError(f"segment {self._name!r} slot {active} is corrupt: {problem}")
-        return Frame(frame_number=frame_number, layers=layers, meta=meta)
+        return Frame(frame_number=int(frame_number), layers=layers, meta=meta)
 
     def close(self) -> None:
         """Detach. Idempotent; leaves the segment in place for the writer to unlink."""
         if self._closed:
             return
         self._closed = True
-        for view in (self._u32, self._u64, self._view):
-            view.release()
-        self._mm.close()
+        os.close(self._fd)
 
     def __enter__(self) -> FrameReader:
         return self
