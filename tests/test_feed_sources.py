@@ -376,3 +376,45 @@ def test_a_whole_file_without_a_final_newline_is_read_after_the_longest_hold(
         src.fetch_now()
     once = FileSource(path, settle_s=0.0).fetch_now()
     assert once is not None and once.data == b""
+
+
+def test_a_last_line_cut_mid_group_is_left_out_after_the_longest_hold(tmp_path: Path) -> None:
+    """Issue 40: `... 9999 OVC0` and no newline, for longer than the longest hold, was read as
+    a report with its cloud group garbled; now that line is left out, saying which station
+    and file, and the lines before it are read."""
+    path = tmp_path / "metar.txt"
+    src = FileSource(path, settle_s=0.05, max_settle_s=0.2)
+    path.write_bytes(REPORT + b"EDDF 261555Z 25012KT 9999 OVC0")
+    os.utime(path, ns=(time.time_ns() - 10**10,) * 2)
+    with pytest.raises(FeedChanging, match="its last line has no end"):
+        src.fetch_now()
+    time.sleep(0.25)  # past max_settle_s: held back no longer
+    got = src.fetch_now()
+    assert got is not None and got.data == REPORT
+    assert got.dropped is not None
+    assert str(path) in got.dropped and "EDDF" in got.dropped and "'OVC0'" in got.dropped
+    assert "\n" not in got.dropped
+    # The writer finishes the line: the file changed, read whole.
+    path.write_bytes(REPORT + b"EDDF 261555Z 25012KT 9999 OVC008\n")
+    os.utime(path, ns=(time.time_ns() - 10**10,) * 2)
+    got = src.fetch_now()
+    assert got is not None and got.data.endswith(b"OVC008\n") and got.dropped is None
+
+
+def test_a_last_line_ending_with_a_whole_group_is_still_read(tmp_path: Path) -> None:
+    path = tmp_path / "metar.txt"
+    src = FileSource(path, settle_s=0.05, max_settle_s=0.0)  # held back at most once
+    path.write_bytes(REPORT + b"EDDF 261555Z 25012KT 9999 OVC008")
+    os.utime(path, ns=(time.time_ns() - 10**10,) * 2)
+    with pytest.raises(FeedChanging):
+        src.fetch_now()
+    got = src.fetch_now()
+    assert got is not None and got.data.endswith(b"OVC008") and got.dropped is None
+    # Only a cut line in the file: nothing to read, the file is refused with the reason.
+    path.write_bytes(b"EDDF 261555Z 25012KT 9999 OVC0")
+    os.utime(path, ns=(time.time_ns() - 10**8,) * 2)
+    with pytest.raises(FeedChanging):
+        src.fetch_now()
+    with pytest.raises(FeedError, match=r"EDDF: the last line ends mid-group \('OVC0'"):
+        src.fetch_now()
+    assert src.fetch_now() is None  # refused until it changes

@@ -574,3 +574,36 @@ def test_a_file_whose_ingest_failed_is_read_again_after_the_restart(tmp_path: Pa
     assert [(n, ok) for n, ok, *_ in seen] == [(1, False)] and stats.ok
     layers = applied[0].layers
     assert layers is not None and layers[0].cover_oktas == 2
+
+
+def test_a_feed_line_cut_mid_group_is_not_applied_and_is_warned_about(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Issue 40: `LSZH ... 9999 OVC0` with no newline was applied (as `OVC0` skipped: no
+    overcast) once the longest hold ran out, with no warning. Now the line is left out, the
+    weather stays what the last whole report said, and one warning names station and file."""
+    path = tmp_path / "metar.txt"
+    applied: list[WeatherPatch] = []
+    feed_input = MetarFeedInput(
+        FileSource(path, settle_s=0.01, max_settle_s=0.0),  # held back at most once
+        MetarSettings(age_reference="feed"),
+        InputStats(f"metar:{path}", "metar"),
+        applied.append,
+        lambda: (47.4, 8.5),
+        ZURICH,
+    )
+    _put(path, GOOD, T0)
+    _poll(feed_input)
+    assert len(applied) == 1
+    _put(path, b"LSZH 261620Z 24008KT 9999 OVC0", T0 + 60)
+    with caplog.at_level(logging.WARNING):
+        for _ in range(3):  # held back once, then read: the cut line left out
+            _poll(feed_input)
+    assert len(applied) == 1, [a.layers for a in applied]
+    stats = feed_input.stats
+    assert stats.detail["using"][0]["station"] == "LSZH"
+    assert not stats.ok
+    assert "LSZH: the last line ends mid-group" in stats.last_error
+    assert str(path) in stats.last_error
+    lines = [r.getMessage() for r in caplog.records if "mid-group" in r.getMessage()]
+    assert len(lines) == 1 and "LSZH" in lines[0] and str(path) in lines[0], lines

@@ -27,7 +27,7 @@ from typing import BinaryIO, Protocol
 from wxsky import __version__
 from wxsky.errors import FeedChanging, FeedError, FeedTooLarge, FeedUnavailable
 from wxsky.logs import clip
-from wxsky.weather.feeds import GZIP_MAGIC, MAX_FEED_BYTES, gunzip
+from wxsky.weather.feeds import GZIP_MAGIC, MAX_FEED_BYTES, gunzip, unfinished_last_line
 
 __all__ = [
     "GZIP_MAGIC",
@@ -53,6 +53,9 @@ class Fetched:
     data: bytes
     reference_utc: datetime  # when the feed says it was written (mtime, HTTP Date, arrival)
     format: str = "auto"  # a source that knows its format says so ("lines" for streams)
+    # Why a last line was left out (cut off mid-group and never finished), for the input to
+    # warn about; None when the data is whole.
+    dropped: str | None = None
 
 
 class FeedSource(Protocol):
@@ -147,7 +150,29 @@ class FileSource:
         self._seen = key
         self._held = self._held_since = None
         mtime = datetime.fromtimestamp(st.st_mtime, tz=UTC)
-        return Fetched(gunzip_if_needed(data, self.name), mtime)
+        data, dropped = self._drop_cut_line(gunzip_if_needed(data, self.name))
+        return Fetched(data, mtime, dropped=dropped)
+
+    def _drop_cut_line(self, data: bytes) -> tuple[bytes, str | None]:
+        """Held for `max_settle_s` and its last line still has no end: a line that is cut off
+        in the middle of a group (`... 9999 OVC0`) is a report being written, never taken for
+        one (it would read as a different report); the lines before it are. A last line that
+        ends with a whole group is taken (a file written without a final newline)."""
+        if self.settle_s <= 0 or data.endswith(b"\n"):
+            return data, None
+        cut = unfinished_last_line(data.decode("utf-8", "replace"))
+        if cut is None:
+            return data, None
+        station, why = cut
+        kept = data[: data.rfind(b"\n") + 1]
+        message = (
+            f"{self.name}: {station}: the last line ends mid-group ({clip(why, 80)}) and no "
+            f"newline came for {self.max_settle_s:g} s; left out"
+        )
+        if not kept.strip():
+            # Nothing else in the file: refused (as seen) with the reason, until it changes.
+            raise FeedError(message)
+        return kept, message
 
     def _hold_if_unfinished(self, data: bytes, key: tuple[int, int, int]) -> None:
         """Text whose last line has no end is held back for up to `max_settle_s` (a writer

@@ -404,6 +404,9 @@ class MetarFeedInput:
 
     def _ingest(self, fetched: Fetched) -> bool:
         """Ingests one fetch; returns whether the feed's content is usable now."""
+        if fetched.dropped is not None:
+            self.stats.error(fetched.dropped)
+            self._warn.warning("cut", f"METAR feed {fetched.dropped}")
         fmt = self.settings.format if fetched.format == "auto" else fetched.format
         feed = parse_feed(
             fetched.data, format=fmt, name=self.source.name, reference_utc=fetched.reference_utc

@@ -34,6 +34,7 @@ from wxsky.weather.feed_formats import (
     read_head,
     tgftp_reports,
 )
+from wxsky.weather.metar import decode
 
 __all__ = [
     "FORMATS",
@@ -47,6 +48,7 @@ __all__ = [
     "parse_feed",
     "read_feed",
     "read_reports",
+    "unfinished_last_line",
 ]
 
 FORMATS = ("awc-csv", "awc-xml", "tgftp", "lines")
@@ -106,6 +108,33 @@ def detect_format(text: str, *, name: str = "<feed>") -> str:
     if any(read_head(clean_raw(line)).time is not None for line in head):
         return "lines"
     raise FeedError(f"{name}: not a METAR feed (starts with {_shorten(head[0])})")
+
+
+def unfinished_last_line(text: str) -> tuple[str, str] | None:
+    """For feed text whose last line has no newline: (station, why) when that line is a
+    report cut off in the middle of its final group (`... 9999 OVC0`: a file caught while it
+    is written), else None. Only one-report-per-line and tgftp text is judged: an AWC CSV or
+    XML row cut short is refused by its own parser. A line cut between two groups reads as a
+    shorter report and cannot be told from one; this finds the cut that garbles a group."""
+    if text.endswith("\n"):
+        return None
+    last = text.rsplit("\n", 1)[-1]
+    try:
+        if detect_format(text) not in ("lines", "tgftp"):
+            return None
+    except FeedError:
+        return None
+    report = clean_raw(last)
+    tokens = report.split("=", 1)[0].split()
+    if "=" in report or len(tokens) < 2:
+        return None  # ended by the WMO end mark, or no report at all: judged elsewhere
+    # A fixed date keeps the decoder off the clock: only the groups' shapes matter here.
+    metar = decode(report, year=2000, month=1)
+    prefix = f"group {len(tokens)} {tokens[-1]!r}: "
+    for error in metar.errors:
+        if error.startswith(prefix):
+            return (metar.station or tokens[0], f"{tokens[-1]!r}: {error[len(prefix) :]}")
+    return None
 
 
 def gunzip(
