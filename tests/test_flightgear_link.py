@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import logging
 import socket
 import threading
 import time
@@ -89,7 +90,12 @@ class _PropsPeer:
                 return
             buf += data
             *done, buf = buf.split(b"\r\n")
-            mine.extend(d.decode() for d in done)
+            # FlightGear answers a `get` (the writer's liveness probe) with the value.
+            gets = [d for d in done if d.startswith(b"get ")]
+            if gets:
+                with contextlib.suppress(OSError):
+                    conn.sendall(b"12.5\r\n" * len(gets))
+            mine.extend(d.decode() for d in done if not d.startswith(b"get "))
 
     def drop(self) -> None:
         """The connection goes, as when FlightGear quits; a new one is then accepted."""
@@ -128,7 +134,8 @@ def test_the_weather_is_written_then_only_what_changes(peer: _PropsPeer) -> None
             "set /environment/config/enabled 0",
         ]
         assert first[3:] == [f"set {p} {v}" for p, v in props]
-        assert fg.stats.ok and fg.stats.messages == len(props)
+        _until(lambda: fg.stats.ok)  # at the first answer to its probe
+        assert fg.stats.messages == len(props)
         fg.offer(state)  # the same weather: nothing to write
         clearer = dataclasses.replace(state, visibility_m=9000.0)
         fg.offer(clearer)
@@ -141,8 +148,34 @@ def test_the_weather_is_written_then_only_what_changes(peer: _PropsPeer) -> None
         fg.offer(clearer)
         _until(lambda: len(peer.lines) == 2 and len(peer.lines[1]) >= 3 + len(props))
         assert peer.lines[1][0] == "data"
-        assert fg.stats.ok
+        _until(lambda: fg.stats.ok)
     assert fg.stats.detail["last_write"]["properties"] == len(props)
+
+
+def test_a_props_server_that_reads_nothing_is_not_ok(caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 40: a props server that accepts and then reads nothing took every write into
+    the socket buffers and stayed `ok: true`. Now `ok` waits for an answer to the writer's
+    probe (`get`), and one unanswered for `reply_timeout_s` is an error with the reason, the
+    connection ended and tried again, `ok` false throughout."""
+    mute = socket.create_server(("127.0.0.1", 0))  # connections complete; nothing is read
+    port = mute.getsockname()[1]
+    state = WeatherState().apply(load_preset("thunderstorm"))
+    try:
+        with (
+            caplog.at_level(logging.WARNING, logger="wxsky.inputs.flightgear_link"),
+            FlightGearWeather("127.0.0.1", port, min_interval_s=0.05, reply_timeout_s=0.5) as fg,
+        ):
+            for _ in range(50):  # the weather keeps changing: writes keep going out
+                fg.offer(dataclasses.replace(state, visibility_m=5000.0 + _))
+            _until(lambda: fg.stats.errors >= 2)  # judged mute, reconnected, judged again
+            assert not fg.stats.ok
+            assert "answered nothing" in fg.stats.last_error
+            assert f"127.0.0.1:{port}" in fg.stats.last_error
+            assert fg.stats.detail["connected"] == f"127.0.0.1:{port}"
+        lines = [r.getMessage() for r in caplog.records if "answered nothing" in r.getMessage()]
+        assert len(lines) == 1, lines  # once, not per reconnect
+    finally:
+        mute.close()
 
 
 def test_a_flightgear_not_there_is_retried_and_never_holds_up_the_caller() -> None:

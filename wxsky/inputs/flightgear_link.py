@@ -29,6 +29,17 @@ MAX_DATAGRAM = 2048
 BACKOFF_S = (0.5, 10.0)  # first and longest wait between connection attempts
 CONNECT_TIMEOUT_S = 2.0
 SEND_TIMEOUT_S = 5.0  # a props server stalled this long is treated as gone
+# A props server that accepts and then reads nothing takes every write into the socket buffers
+# for hours: liveness is an answer. Every PROBE_INTERVAL_S the writer asks for a property
+# (FlightGear answers a `get` within a frame, in data mode with just the value), and one
+# unanswered for REPLY_TIMEOUT_S (FlightGear's slowest frames take seconds) ends the connection.
+PROBE = b"get /sim/time/elapsed-sec\r\n"
+PROBE_INTERVAL_S = 5.0
+REPLY_TIMEOUT_S = 15.0
+
+
+class _Unanswered(OSError):
+    """A props server that answered no probe in time: the connection is ended."""
 
 
 class FlightGearPose:
@@ -119,9 +130,13 @@ class FlightGearWeather:
         min_interval_s: float = 2.0,
         name: str = "flightgear",
         stats: InputStats | None = None,
+        reply_timeout_s: float = REPLY_TIMEOUT_S,
     ) -> None:
         self.host, self.port = host, port
         self.min_interval_s = min_interval_s
+        self.reply_timeout_s = reply_timeout_s
+        self._probe_sent: float | None = None  # monotonic time of the unanswered probe
+        self._last_probe = 0.0
         self.stats = stats or InputStats(f"{name}:weather", "flightgear", ok=False)
         self._latest: WeatherState | None = None
         self._offered = 0  # bumped by every offer
@@ -173,6 +188,10 @@ class FlightGearWeather:
                 with conn:
                     conn.settimeout(SEND_TIMEOUT_S)
                     self._serve(conn)
+            except _Unanswered as exc:
+                self._gone(str(exc))
+                if self._sleep(wait_s):
+                    return
             except OSError as exc:
                 self._gone(f"FlightGear's props server went away: {exc.strerror or exc}")
                 if self._sleep(wait_s):
@@ -181,20 +200,22 @@ class FlightGearWeather:
     def _serve(self, conn: socket.socket) -> None:
         """One connection: take FlightGear's weather over, then write what changes."""
         self._sent = {}  # a new connection: FlightGear may have restarted
-        conn.sendall(b"data\r\n" + b"".join(_set(p, v) for p, v in TAKE_OVER))
-        self.stats.ok = True
+        # `ok` turns true at the first answer to the probe sent here, not at the connect: a
+        # server that accepts and reads nothing never answers.
+        conn.sendall(b"data\r\n" + b"".join(_set(p, v) for p, v in TAKE_OVER) + PROBE)
+        self._probe_sent = self._last_probe = time.monotonic()
         self.stats.detail["connected"] = f"{self.host}:{self.port}"
         written = -1  # the latest weather offered is written whole on a new connection
         while True:
             with self._wake:
                 while (self._latest is None or self._offered == written) and not self._closed:
                     self._wake.wait(0.5)
-                    _check_open(conn)  # a FlightGear that quit while nothing changed
+                    self._check_alive(conn)  # a FlightGear that quit while nothing changed
                 if self._closed:
                     return
                 state, written = self._latest, self._offered
             assert state is not None
-            _check_open(conn)
+            self._check_alive(conn)
             changed = [(p, v) for p, v in weather_properties(state) if self._sent.get(p) != v]
             if changed:
                 conn.sendall(b"".join(_set(p, v) for p, v in changed))
@@ -206,6 +227,27 @@ class FlightGearWeather:
                 }
             if self._sleep(self.min_interval_s):
                 return
+
+    def _check_alive(self, conn: socket.socket) -> None:
+        """Raise (an OSError, ending the connection) if the props server closed it or left a
+        probe unanswered for `reply_timeout_s`; send the next probe when one is due. Any
+        answer is life: `ok` turns true."""
+        now = time.monotonic()
+        if _check_open(conn):
+            self._probe_sent = None
+            if not self.stats.ok:
+                self.stats.ok = True
+                log.info("flightgear: the props server at %s:%d answers", self.host, self.port)
+        elif self._probe_sent is not None and now - self._probe_sent >= self.reply_timeout_s:
+            raise _Unanswered(
+                f"FlightGear's props server at {self.host}:{self.port} answered nothing for "
+                f"{self.reply_timeout_s:g} s (it reads nothing, or is stalled); reconnecting"
+            )
+        if self._probe_sent is None and now - self._last_probe >= min(
+            PROBE_INTERVAL_S, self.reply_timeout_s
+        ):
+            conn.sendall(PROBE)
+            self._probe_sent = self._last_probe = now
 
     def _gone(self, why: str) -> None:
         if self.stats.ok or self.stats.last_error != why:
@@ -229,14 +271,15 @@ class FlightGearWeather:
             return True
 
 
-def _check_open(conn: socket.socket) -> None:
-    """Raise ConnectionResetError if the props server has closed the connection; drop what it
-    said (in data mode it says nothing, but an error message is not worth keeping)."""
+def _check_open(conn: socket.socket) -> bool:
+    """Raise ConnectionResetError if the props server has closed the connection; True when
+    it said something (the answer to a probe: what it says is not kept), else False."""
     readable, _, _ = select.select([conn], [], [], 0.0)
     if not readable:
-        return
+        return False
     if not conn.recv(65536):
         raise ConnectionResetError("FlightGear closed the connection")
+    return True
 
 
 def _set(path: str, value: str) -> bytes:
