@@ -35,18 +35,37 @@ THREAD_NICE = 10  # the lighting thread's nice value, over the daemon's
 
 StepKey = tuple[TowerSpec, int]  # a tower and an automaton step
 
+# Memory (issue 40): a thunderstorm or towering-cumulus sky took the daemon from about 216 MB
+# to 540-700 MB, levelling off: these caches, the engine's lit steps (`TowerWork`) and the
+# renderer's tower textures (`render.towers`) filling up to their bounds, plus the lighting
+# thread's transient arrays (tens of MB, kept by the allocator). A lit step is 8 * grid^3
+# bytes (2 MiB at 64^3; a cloud model's grid 128 makes it 16 MiB) and an automaton 6 * grid^3
+# (1.5 MiB and 12 MiB), so the process-wide caches below are bounded in bytes, not counts:
+# at most 96 MiB of automata and 64 MiB of shared lit steps, whatever the grid
+# (docs/reliability.md, Limits: "tower caches").
+
 # Every tower's automaton in this process, shared by the engines in it (a snapshot tool's
 # pictures at several times step the same towers on rather than from their births again); each
-# is stepped under its own lock.
-VOLUMES_KEPT = 64
+# is stepped under its own lock. The least recently asked for goes first once the bytes pass
+# VOLUMES_KEPT_BYTES, keeping at least MIN_VOLUMES_KEPT (as many towers as a frame shows).
+VOLUMES_KEPT_BYTES = 96 << 20
+MIN_VOLUMES_KEPT = 8
 _volumes: OrderedDict[TowerSpec, tuple[TowerVolume, threading.Lock]] = OrderedDict()
+_volumes_bytes = 0
 _volumes_lock = threading.Lock()
 
 
+def automaton_bytes(spec: TowerSpec) -> int:
+    """What an automaton of `spec` holds at most: two states of three boolean fields."""
+    return 6 * spec.grid**3
+
+
 # Lit steps made in this process, shared too: engines for the same weather at the same time
-# (a snapshot tool's headings, its calm and windy skies) light each step once. 2 MiB each.
-LIT_SHARED = 32
+# (a snapshot tool's headings, its calm and windy skies) light each step once; bounded by
+# their bytes, the most recent one always kept.
+LIT_SHARED_BYTES = 64 << 20
 _shared_lit: OrderedDict[tuple[object, ...], LitVolume] = OrderedDict()
+_shared_lit_bytes = 0
 
 
 def shared_lit(key: tuple[object, ...]) -> LitVolume | None:
@@ -58,23 +77,43 @@ def shared_lit(key: tuple[object, ...]) -> LitVolume | None:
 
 
 def share_lit(lit: LitVolume) -> None:
+    global _shared_lit_bytes
     with _volumes_lock:
+        old = _shared_lit.pop(lit.key, None)
+        if old is not None:
+            _shared_lit_bytes -= old.texels.nbytes
         _shared_lit[lit.key] = lit
-        while len(_shared_lit) > LIT_SHARED:
-            _shared_lit.popitem(last=False)
+        _shared_lit_bytes += lit.texels.nbytes
+        while _shared_lit_bytes > LIT_SHARED_BYTES and len(_shared_lit) > 1:
+            _shared_lit_bytes -= _shared_lit.popitem(last=False)[1].texels.nbytes
 
 
 def tower_volume(spec: TowerSpec) -> tuple[TowerVolume, threading.Lock]:
     """The process's automaton of `spec` and the lock to hold while stepping it."""
+    global _volumes_bytes
     with _volumes_lock:
         found = _volumes.get(spec)
         if found is None:
             found = (TowerVolume(spec), threading.Lock())
             _volumes[spec] = found
-            while len(_volumes) > VOLUMES_KEPT:
-                _volumes.popitem(last=False)
+            _volumes_bytes += automaton_bytes(spec)
+            while _volumes_bytes > VOLUMES_KEPT_BYTES and len(_volumes) > MIN_VOLUMES_KEPT:
+                _volumes_bytes -= automaton_bytes(_volumes.popitem(last=False)[0])
         _volumes.move_to_end(spec)
         return found
+
+
+def cache_info() -> dict[str, int]:
+    """The process-wide tower caches: entries, bytes and bounds (for tests and status)."""
+    with _volumes_lock:
+        return {
+            "automata": len(_volumes),
+            "automata_bytes": _volumes_bytes,
+            "automata_limit_bytes": VOLUMES_KEPT_BYTES,
+            "lit_steps": len(_shared_lit),
+            "lit_bytes": _shared_lit_bytes,
+            "lit_limit_bytes": LIT_SHARED_BYTES,
+        }
 
 
 class TowerWork:

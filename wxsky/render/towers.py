@@ -37,7 +37,11 @@ SIZE_TOLERANCE = 1.5  # texels wanted over texels drawn (or under) before drawin
 IMPOSTOR_MIN_PX = 16
 TEXEL_SHARE = 0.6
 IMPOSTOR_MAX_PX = 256
-VOLUMES_KEPT = 32  # lit steps kept as textures (2 MiB each at 64^3)
+# Lit steps kept as textures, bounded by their bytes (2 MiB each at 64^3, 16 MiB at 128^3; on
+# llvmpipe they are the process's memory): the least recently drawn go first, keeping at
+# least VOLUMES_MIN (a pair for each of the most towers a frame shows, and the next step).
+VOLUMES_KEPT_BYTES = 64 << 20
+VOLUMES_MIN = 3 * 8
 NOISE_TEXELS = 32
 # The detail noise repeats every this many of the tower's cells (500 m for a congestus's
 # 60 m cells): billows a quarter to an eighth of that; a cumulonimbus's are as much larger.
@@ -132,6 +136,7 @@ class TowerPass:
         self._volumes: OrderedDict[tuple[object, ...], tuple[moderngl.Texture3D, ...]] = (
             OrderedDict()
         )
+        self._volume_bytes = 0  # of the textures in _volumes
         self._noise = ctx.texture3d((NOISE_TEXELS,) * 3, 1, detail_noise(NOISE_TEXELS).tobytes())
         self._noise.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self._shown: dict[TowerSpec, _Impostor] = {}  # what each tower shows
@@ -212,6 +217,7 @@ class TowerPass:
             for tex in textures:
                 tex.release()
         self._volumes.clear()
+        self._volume_bytes = 0
         self._noise.release()
 
     # -- internals ---------------------------------------------------------------------------
@@ -229,8 +235,10 @@ class TowerPass:
             tex.repeat_x = tex.repeat_y = tex.repeat_z = False
             made.append(tex)
         self._volumes[volume.key] = tuple(made)
-        while len(self._volumes) > VOLUMES_KEPT:
+        self._volume_bytes += volume.texels.nbytes
+        while self._volume_bytes > VOLUMES_KEPT_BYTES and len(self._volumes) > VOLUMES_MIN:
             for tex in self._volumes.popitem(last=False)[1]:
+                self._volume_bytes -= tex.size[0] * tex.size[1] * tex.size[2] * tex.components
                 tex.release()
         return tuple(made)
 
