@@ -152,3 +152,13 @@ def test_a_daemon_survives_truncations_of_its_segment(tmp_path: Path) -> None:
         code, _ = daemon.stop(signal.SIGTERM)
         assert code == 0, daemon.log()
         assert not daemon.socket_path.exists()
+
+
+def test_a_fatal_signal_leaves_a_line_in_the_daemons_log(tmp_path: Path) -> None:
+    """Whatever still ends the daemon by a fatal signal (here SIGBUS sent by hand) leaves a
+    line and the stacks in its log; before, the truncation's SIGBUS left nothing."""
+    with running_daemon(tmp_path) as daemon:
+        daemon.proc.send_signal(signal.SIGBUS)
+        code = daemon.proc.wait(timeout=HANG_S)
+        assert code == -signal.SIGBUS
+        assert "Fatal Python error: Bus error" in daemon.log()

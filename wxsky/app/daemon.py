@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import faulthandler
 import inspect
 import logging
 import os
@@ -617,6 +618,12 @@ class Daemon:
             yield
             return
         loop = asyncio.get_running_loop()
+        # A fatal signal that can still happen (a driver's SIGSEGV; SIGBUS from memory other
+        # than the frame segment, which is never mapped) leaves "Fatal Python error" and every
+        # thread's stack on stderr, the daemon's log, rather than nothing at all.
+        if not faulthandler.is_enabled():
+            with contextlib.suppress(ValueError, OSError, AttributeError):
+                faulthandler.enable(all_threads=True)
         sigs = (signal.SIGINT, signal.SIGTERM)
         original = {sig: signal.getsignal(sig) for sig in sigs}
 
