@@ -1,7 +1,8 @@
 """The daemon's life in three phases: startup -> main loop -> shutdown.
 
 The asyncio loop owns the engine and the control channel; one render thread owns the GL
-context and writes each frame straight into the shared-memory slot the host will read.
+context and writes each frame into the shared-memory slot the host will read (through the
+writer's private copy and pwrite: `wxsky/output/shm.py`, "Truncation").
 The main loop waits on an Event between ticks: a signal wakes it at once.
 """
 
