@@ -256,10 +256,14 @@ def _frames_go_on(d: RunningDaemon, count: int = 10) -> None:
 @pytest.mark.gl
 def test_control_set_time_at_the_ends_of_the_range(daemon: RunningDaemon) -> None:
     _set_normal_clock(daemon)
+    errors = _input(_status(daemon), "control")["errors"]
     for text in (END, FIRST_BAD, "1899-12-31T23:59:59Z"):
         message = _refused(daemon, "set_time", {"time_utc": text})
         assert message.startswith("set_time: time_utc:") and "outside the clock's range" in message
-    assert _status(daemon)["weather"]["time_utc"].startswith("2026-06-21")
+    st = _status(daemon)
+    assert st["weather"]["time_utc"].startswith("2026-06-21")
+    control = _input(st, "control")
+    assert control["errors"] == errors + 3 and "1899-12-31" in control["last_error"]
     _frames_go_on(daemon)
     # The last second of the range is taken, and a clock at the highest rate runs up to the
     # end and stops there, one log line, while the frames go on.
