@@ -67,6 +67,8 @@ def test_what_computes_ahead_or_behind_stays_inside_the_range() -> None:
     assert clamped_time(EARLIEST_UTC, 1e300) == LAST_UTC
     assert clamped_time(LAST_UTC, -1e300) == EARLIEST_UTC
     assert clamped_time(LAST_UTC, float("inf")) == LAST_UTC
+    assert clamped_time(LAST_UTC, float("-inf")) == EARLIEST_UTC
+    assert clamped_time(LAST_UTC, float("nan")) == LAST_UTC
     start = datetime(2026, 1, 1, tzinfo=UTC)
     assert clamped_time(start, 60.0) == start + timedelta(seconds=60)
 
@@ -105,7 +107,7 @@ def test_the_engine_refuses_a_time_outside_and_its_clock_stops_at_the_end(
         with caplog.at_level("WARNING", logger="wxsky.engine.stages"):
             engine.run_weather(3.0)  # 30,000 s of sim time asked for: 1 s was left
             engine.run_weather(3.0)
-        assert engine.state.time_utc == LAST_UTC
+        assert engine.state.time_utc == LAST_UTC and engine.clock_at_end
         ends = [r for r in caplog.records if "end of its range" in r.getMessage()]
         assert len(ends) == 1  # one line, not one a frame
         # The towers' epochs are moved back by a drift as long as you like, and stay inside.
@@ -273,9 +275,12 @@ def test_control_set_time_at_the_ends_of_the_range(daemon: RunningDaemon) -> Non
         lambda: daemon.log().count("reached the end of its range") > ends, "the clock at the end"
     )
     _frames_go_on(daemon, 30)
-    assert _status(daemon)["weather"]["time_utc"] == LAST_GOOD  # 2199-12-31T23:59:59.999999
+    st = _status(daemon)
+    assert st["weather"]["time_utc"] == LAST_GOOD  # 2199-12-31T23:59:59.999999
+    assert st["clock_at_end"] is True and st["clock_rate"] == 10_000.0
     assert daemon.log().count("reached the end of its range") == ends + 1
     _set_normal_clock(daemon)
+    assert _status(daemon)["clock_at_end"] is False
     _frames_go_on(daemon)
 
 

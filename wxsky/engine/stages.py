@@ -766,6 +766,12 @@ class SkyEngine:
                 self.weather_version += 1
                 self.target_version += 1
 
+    @property
+    def clock_at_end(self) -> bool:
+        """The clock ran up to the end of its range (`LAST_UTC`) and stands there until a
+        clock set moves it."""
+        return self._clock_at_end
+
     def follow_time(self, time_utc: datetime) -> None:
         """Set a following engine's clock (every frame, from the master's); a step of more
         than CLOCK_JUMP_S rebuilds the ring as a clock set does."""

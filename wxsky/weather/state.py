@@ -260,9 +260,9 @@ def clamped_time(time_utc: datetime, ahead_s: float) -> datetime:
     """`time_utc` moved by ahead_s (negative: back), held inside [EARLIEST_UTC, LAST_UTC]: what
     computes ahead or behind of the clock (its own running, a drift, a tower's age) can never
     leave datetime's years, whatever the rate or the step."""
-    if not math.isfinite(ahead_s):
-        return LAST_UTC if ahead_s > 0 else EARLIEST_UTC
     t = min(max(time_utc, EARLIEST_UTC), LAST_UTC)
+    if math.isnan(ahead_s):
+        return t
     if ahead_s >= (LAST_UTC - t).total_seconds():
         return LAST_UTC
     if -ahead_s >= (t - EARLIEST_UTC).total_seconds():
