@@ -17,6 +17,7 @@ import struct
 import time
 from collections.abc import Callable, Iterator
 from datetime import UTC, date, datetime, timedelta
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -169,6 +170,24 @@ def test_a_metar_report_dated_outside_the_range_is_not_used() -> None:
         if not used:
             assert any("outside the clock's years" in p for p in got.problems)
             assert got.stations == {}
+
+
+def test_allow_from_is_checked_by_the_settings_checker(tmp_path: Path) -> None:
+    """[flightgear] allow_from (new) and [cigi] allow_from (before: only when the daemon
+    opened its socket) name the file, line and key of an item that is no address."""
+    from wxsky.errors import ConfigError
+    from wxsky.settings.config import FlightGearSection, load_config
+
+    path = tmp_path / "wxsky.toml"
+    for table in ("flightgear", "cigi"):
+        path.write_text(f'[{table}]\nallow_from = ["127.0.0.1/32", "10.0.0.300"]\n')
+        with pytest.raises(ConfigError) as info:
+            load_config(path)
+        message = str(info.value)
+        assert f"{path}:2: {table}.allow_from" in message and "'10.0.0.300'" in message
+    path.write_text('[flightgear]\nallow_from = ["192.0.2.0/24", "::1"]\n')
+    assert load_config(path).flightgear.allow_from == ("192.0.2.0/24", "::1")
+    assert FlightGearSection().allow_from == ("127.0.0.0/8", "::1")  # loopback by default
 
 
 # -- a real daemon: control, CIGI, FlightGear, NMEA, a preset file ----------------------------

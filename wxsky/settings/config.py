@@ -391,7 +391,7 @@ class CigiSection(_Section):
     # Where replies go; empty: the source address of the host's datagrams.
     host_address: str = _opt("", Text(pattern=rf"({_UDP})?", pattern_desc="empty or udp:HOST:PORT"))
     # Host addresses (or networks) accepted; anything else is dropped and counted.
-    allow_from: tuple[str, ...] = _opt(("127.0.0.0/8", "::1"))
+    allow_from: tuple[str, ...] = _opt(("127.0.0.0/8", "::1"), ALLOW_FROM)
     view_id: int = _opt(0, _int(0, 65_535))  # the View Control/Definition wxsky renders
     # The host's weather is handed back to the sources below after this long without a word.
     hold_s: float = _opt(10.0, _num(0.1, 86_400.0, "s"))
