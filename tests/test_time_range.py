@@ -172,6 +172,32 @@ def test_a_metar_report_dated_outside_the_range_is_not_used() -> None:
             assert got.stations == {}
 
 
+@pytest.mark.parametrize("command", ["sun", "snapshot"])
+@pytest.mark.parametrize("when", [END, FIRST_BAD, "1899-12-31T23:59:59Z"])
+def test_a_command_line_time_outside_the_range_is_a_usage_error(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, command: str, when: str
+) -> None:
+    from wxsky.cli import main
+
+    args = {
+        "sun": ["sun", "--lat", "47.46", "--lon", "8.55", "--time", when],
+        "snapshot": [
+            "snapshot",
+            "--preset",
+            "clear",
+            "--time",
+            when,
+            "--out",
+            str(tmp_path / "x.png"),
+        ],
+    }[command]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("wxsky: error: --time"), err
+    assert "outside the clock's range" in err[0]
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_allow_from_is_checked_by_the_settings_checker(tmp_path: Path) -> None:
     """[flightgear] allow_from (new) and [cigi] allow_from (before: only when the daemon
     opened its socket) name the file, line and key of an item that is no address."""
@@ -427,7 +453,9 @@ def test_a_pose_from_an_address_outside_allow_from_is_dropped_and_counted(
 
 
 @pytest.mark.gl
-def test_nmea_zda_and_rmc_dates_outside_the_range(daemon: RunningDaemon, pty: Pty) -> None:
+def test_nmea_zda_dates_outside_the_range(daemon: RunningDaemon, pty: Pty) -> None:
+    """ZDA carries a four-digit year; RMC's two digits always land within 50 years of the
+    reference year, inside the range."""
     _set_normal_clock(daemon)
     before = _input(_status(daemon), "serial")
     pty.write(sentence("GPZDA,235958.00,31,12,9999,00,00"))
