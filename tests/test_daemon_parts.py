@@ -41,6 +41,7 @@ STATUS_KEYS = {
     "shm_name",
     "camera",
     "clock_rate",
+    "clock_at_end",
     "frames",
     "scene_work",
     "block_cache",

@@ -30,7 +30,15 @@ from wxsky.schema import (
 )
 from wxsky.settings.config import CLOCK_RATE, PRESET_NAME
 from wxsky.weather.metar_clouds import FIELD_ELEVATION_M
-from wxsky.weather.state import ALT_M, LAT_DEG, LON_DEG, Source, parse_time_utc
+from wxsky.weather.state import (
+    ALT_M,
+    EARLIEST_UTC,
+    LAT_DEG,
+    LATEST_UTC,
+    LON_DEG,
+    Source,
+    parse_time_utc,
+)
 
 
 class ControlError(ProtocolError):
@@ -106,7 +114,7 @@ APPLY_METAR = Table(
     {
         "report": Field(Text(max_len=METAR_MAX_CHARS)),
         "field_elevation_m": Field(FIELD_ELEVATION_M),
-        "year": Field(Number(1, 9999, integer=True)),
+        "year": Field(Number(EARLIEST_UTC.year, LATEST_UTC.year - 1, integer=True)),
         "month": Field(Number(1, 12, integer=True)),
     }
 )

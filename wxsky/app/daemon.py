@@ -527,6 +527,7 @@ class Daemon:
             "segment": self._writer.segment_status() if self._writer is not None else None,
             "camera": camera_to_dict(self.engine.camera),
             "clock_rate": self.engine.clock_rate,
+            "clock_at_end": self.engine.clock_at_end,
             "frames": self._frame_times.to_dict(),
             "scene_work": self.engine.scene_work(),
             "block_cache": BLOCK_CACHE.info().to_dict(),

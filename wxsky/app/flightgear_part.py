@@ -22,6 +22,7 @@ from wxsky.engine.stages import SkyEngine
 from wxsky.errors import ConfigError
 from wxsky.inputs.cigi_link import parse_udp
 from wxsky.inputs.flightgear_link import FlightGearPose, FlightGearWeather
+from wxsky.inputs.networks import parse_networks
 from wxsky.inputs.stats import InputStats
 from wxsky.protocols.flightgear import FgPose
 from wxsky.settings.config import FlightGearSection
@@ -49,6 +50,7 @@ class FlightGearPart(Part):
         self.pose_at = pose or section.pose
         self._props_addr = parse_tcp(self.props, "--flightgear") if self.props else None
         self._pose_addr = parse_udp(self.pose_at, "--flightgear-pose") if self.pose_at else None
+        self._allow_from = parse_networks(section.allow_from, "flightgear.allow_from")
         self._pose: FlightGearPose | None = None
         self._weather: FlightGearWeather | None = None
         self._pose_stats = InputStats("flightgear:pose", "flightgear")
@@ -87,6 +89,7 @@ class FlightGearPart(Part):
                 port,
                 to_loop,
                 stats=self._pose_stats,  # the daemon lists these stats
+                allow_from=self._allow_from,
             )
             log.info("FlightGear pose stream on udp:%s:%d", host, self._pose.address[1])
         if self._props_addr is not None:

@@ -20,11 +20,12 @@ ring build. The ring cache is touched by `advance` alone.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
 import time
 from dataclasses import dataclass
-from datetime import date, datetime, timedelta
+from datetime import date, datetime
 from typing import NamedTuple
 
 from wxsky.engine.near_work import NearWork
@@ -57,10 +58,20 @@ from wxsky.scene.tower_field import LayerEpoch, TowerClock
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
 from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
 from wxsky.weather.precedence import DEFAULT_CIGI_HOLD_S, DEFAULT_COCKPIT_HOLD_S, SourceStack
-from wxsky.weather.state import Observer, Source, WeatherPatch, WeatherState
+from wxsky.weather.state import (
+    LAST_UTC,
+    Observer,
+    Source,
+    WeatherPatch,
+    WeatherState,
+    check_time_range,
+    clamped_time,
+)
 from wxsky.weather.transition import INSTANT, TransitionRates, settled, step_toward
 
 __all__ = ["FramePlan", "SharedSky", "SkyEngine", "enu_from_geodetic", "geodetic_from_enu"]
+
+log = logging.getLogger(__name__)
 
 RENDER_MODES = ("ring", "direct")  # far clouds as impostors, or every cloud as sprites
 RING_WORKERS = ("process", "thread")  # where an async ring build runs
@@ -182,6 +193,7 @@ class SkyEngine:
         self._anchor_drift: Drift = self._drift
         self._clock_jumps = 0  # bumped by each clock set that moves it more than CLOCK_JUMP_S
         self._clock_jumps_seen = 0
+        self._clock_at_end = False  # the clock ran up to LAST_UTC and stands there
         self.render_mode = render_mode
         self._build_times: list[float] | None = None
         self._schedule = RingSchedule(
@@ -448,7 +460,12 @@ class SkyEngine:
     def set_time(
         self, time_utc: datetime, rate: float | None = None, source: Source = Source.CONTROL
     ) -> None:
+        """Set the clock. A time outside the clock's range (`weather.state.EARLIEST_UTC` ..
+        `LATEST_UTC`) is a ValueError and leaves the clock as it was: every input checks it
+        at its edge, and this is the last line behind them."""
+        check_time_range("time_utc", time_utc)
         with self._lock:
+            self._clock_at_end = False
             if abs((time_utc - self._state.time_utc).total_seconds()) > CLOCK_JUMP_S:
                 self._clock_jumps += 1
             sources = dataclasses.replace(self._state.sources, time_utc=source)
@@ -749,10 +766,19 @@ class SkyEngine:
                 self.weather_version += 1
                 self.target_version += 1
 
+    @property
+    def clock_at_end(self) -> bool:
+        """The clock ran up to the end of its range (`LAST_UTC`) and stands there until a
+        clock set moves it."""
+        return self._clock_at_end
+
     def follow_time(self, time_utc: datetime) -> None:
         """Set a following engine's clock (every frame, from the master's); a step of more
         than CLOCK_JUMP_S rebuilds the ring as a clock set does."""
         with self._lock:
+            # The master's clock is checked where its ticks arrive; held in range here too,
+            # so nothing a channel computes from it can leave datetime's years.
+            time_utc = clamped_time(time_utc, 0.0)
             if abs((time_utc - self._state.time_utc).total_seconds()) > CLOCK_JUMP_S:
                 self._clock_jumps += 1
             self._state = dataclasses.replace(self._state, time_utc=time_utc)
@@ -767,13 +793,15 @@ class SkyEngine:
             self._anchor_drift = advance_drift(self._state, self._anchor_drift, seconds)
             self._drift = self._drift_at(self._state.time_utc)
             # The towers have grown for as long (their weather was set that much earlier).
-            back = timedelta(seconds=seconds)
+            # Held in the clock's range: however long `seconds`, no epoch leaves its years.
             self._epochs = {
                 k: dataclasses.replace(
                     e,
-                    set_utc=e.set_utc - back,
-                    sun_elevation_deg=_sun_elevation(self._state, e.set_utc - back),
-                    cut_utc=None if e.cut_utc is None else e.cut_utc - back,
+                    set_utc=clamped_time(e.set_utc, -seconds),
+                    sun_elevation_deg=_sun_elevation(
+                        self._state, clamped_time(e.set_utc, -seconds)
+                    ),
+                    cut_utc=None if e.cut_utc is None else clamped_time(e.cut_utc, -seconds),
                 )
                 for k, e in self._epochs.items()
             }
@@ -798,8 +826,18 @@ class SkyEngine:
             return
         self._transition(max(0.0, dt_wall_s))
         dt_sim = max(0.0, dt_wall_s) * self.clock_rate
-        if dt_sim > 0.0:
-            self._state = self._state.at_time(self._state.time_utc + timedelta(seconds=dt_sim))
+        if dt_sim > 0.0 and not self._clock_at_end:
+            # A fast clock stops at the range's last moment rather than run out of datetime's
+            # years (the frames go on; a set_time moves it again).
+            now = clamped_time(self._state.time_utc, dt_sim)
+            if now == LAST_UTC:
+                self._clock_at_end = True
+                log.warning(
+                    "the sim clock reached the end of its range (%s) and stopped there; "
+                    "set_time moves it again",
+                    LAST_UTC.isoformat(),
+                )
+            self._state = self._state.at_time(now)
             self._drift = self._drift_at(self._state.time_utc)
 
     def _drift_at(self, time_utc: datetime) -> Drift:

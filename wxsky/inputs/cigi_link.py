@@ -30,6 +30,7 @@ from datetime import datetime
 from typing import Any, Protocol, cast
 
 from wxsky.errors import ConfigError, RuntimeFailure
+from wxsky.inputs.networks import parse_networks as parse_networks  # cigi_part imports it here
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog
 from wxsky.protocols.cigi import (
@@ -73,18 +74,6 @@ def parse_udp(text: str, what: str = "--cigi") -> Address:
     except ValueError:
         raise ConfigError(f"{what} {text!r}: {host!r} is not an IP address") from None
     return host, number
-
-
-def parse_networks(
-    items: Sequence[str],
-) -> tuple[ipaddress.IPv4Network | ipaddress.IPv6Network, ...]:
-    out = []
-    for item in items:
-        try:
-            out.append(ipaddress.ip_network(item, strict=False))
-        except ValueError:
-            raise ConfigError(f"cigi.allow_from: {item!r} is not an address or network") from None
-    return tuple(out)
 
 
 class CigiHandler(Protocol):

@@ -16,10 +16,12 @@ import select
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 from wxsky.errors import RuntimeFailure
+from wxsky.inputs.networks import Network, address_allowed
 from wxsky.inputs.stats import InputStats
+from wxsky.logs import RateLimitedLog
 from wxsky.protocols.flightgear import TAKE_OVER, FgPose, parse_pose, weather_properties
 from wxsky.weather.state import WeatherState
 
@@ -44,7 +46,9 @@ class _Unanswered(OSError):
 
 class FlightGearPose:
     """Receives FlightGear's pose lines on a UDP socket and hands each good pose to
-    `on_pose` (on this object's thread); bad lines are counted, with the last reason."""
+    `on_pose` (on this object's thread); bad lines are counted, with the last reason.
+    Datagrams from outside `allow_from` (empty: anywhere) are dropped unread and counted in
+    the status as `not_allowed`: a pose moves the camera and may set the clock."""
 
     def __init__(
         self,
@@ -53,8 +57,13 @@ class FlightGearPose:
         on_pose: Callable[[FgPose], None],
         name: str = "flightgear",
         stats: InputStats | None = None,
+        allow_from: Sequence[Network] = (),
     ) -> None:
         self.stats = stats or InputStats(f"{name}:pose", "flightgear")
+        self.name = name
+        self._allow_from = tuple(allow_from)
+        self.stats.detail["not_allowed"] = 0
+        self._warn = RateLimitedLog(log)
         self._on_pose = on_pose
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -89,13 +98,19 @@ class FlightGearPose:
     def _run(self) -> None:
         while not self._closed.is_set():
             try:
-                data = self._sock.recv(MAX_DATAGRAM)
+                data, source = self._sock.recvfrom(MAX_DATAGRAM)
             except TimeoutError:
                 continue
             except OSError:
                 if self._closed.is_set():
                     return
                 raise
+            if not address_allowed(source[0], self._allow_from):
+                self.stats.detail["not_allowed"] += 1
+                message = f"pose datagram from {source[0]}:{source[1]}, not in allow_from"
+                self.stats.error(message)
+                self._warn.warning("not_allowed", f"{self.name}: {message}")
+                continue
             # A datagram holds one line, or a few if FlightGear's frames bunched up.
             for line in data.splitlines():
                 if not line.strip():

@@ -52,7 +52,7 @@ from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog, clip
 from wxsky.weather.feeds import Feed, parse_feed
 from wxsky.weather.metar import MetarInternalError, decode
-from wxsky.weather.state import WeatherPatch
+from wxsky.weather.state import CLOCK_YEARS, WeatherPatch, time_in_range
 from wxsky.weather.stations import StationWeather, blend, nearest, split_by_age
 
 if TYPE_CHECKING:
@@ -169,6 +169,14 @@ def ingest(
                 f"observation time {_iso(report.feed_utc)}; dated by the feed"
             )
             observed = report.feed_utc
+        if observed is not None and not time_in_range(observed):
+            # Ages and the feed's newest time are worked out from it: kept, a report of year
+            # 9999 would make every other station stale.
+            problems.append(
+                f"{where}: report time {_iso(observed)} is outside the clock's years "
+                f"{CLOCK_YEARS}; not used"
+            )
+            continue
         pos = _position(report.lat_deg, report.lon_deg, report.elevation_m)
         pos = pos or positions.get(station)
         if pos is None:

@@ -29,6 +29,7 @@ from wxsky.weather.cockpit import (
     CockpitUpdate,
     layer_key,
 )
+from wxsky.weather.state import CLOCK_YEARS, year_in_range
 
 MAX_STANDARD_ID = 0x7FF  # CANaerospace runs on CAN 2.0A only
 USER_RANGE = range(1500, 1800)  # "unassigned and may be used at the user's discretion" (§5)
@@ -199,9 +200,12 @@ def _utc(hour: int, minute: int, second: int, _reserved: int) -> CockpitUpdate:
 def _date(day: int, month: int, century: int, year: int) -> CockpitUpdate:
     full_year = century * 100 + year
     try:
-        return CockpitUpdate(date_utc=date(full_year, month, day))
+        when = date(full_year, month, day)
     except ValueError:
         raise ValueError(f"{full_year:04d}-{month:02d}-{day:02d} is not a calendar date") from None
+    if not year_in_range(full_year):
+        raise ValueError(f"{when.isoformat()} is outside the clock's years {CLOCK_YEARS}")
+    return CockpitUpdate(date_utc=when)
 
 
 UTC_CHAR4 = Char4(

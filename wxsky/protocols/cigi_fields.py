@@ -12,6 +12,8 @@ from functools import cached_property
 from types import MappingProxyType
 from typing import Literal
 
+from wxsky.weather.state import CLOCK_YEARS, year_in_range
+
 Kind = Literal["u8", "s8", "u16", "u32", "f32", "f64", "bits"]
 Direction = Literal["host_to_ig", "ig_to_host"]
 
@@ -140,6 +142,8 @@ def calendar_mmddyyyy(value: int) -> str:
         date(year, month, day)
     except ValueError:
         return f"{value} is not a calendar date (month {month}, day {day}, year {year})"
+    if not year_in_range(year):  # the clock's range, wxsky.weather.state
+        return f"{value}: year {year} is outside the clock's years {CLOCK_YEARS}"
     return ""
 
 

@@ -116,7 +116,7 @@ CELESTIAL_SPHERE_CONTROL = PacketSpec(
             8,
             when=("date_time_valid", 1),
             rule=calendar_mmddyyyy,
-            rule_text="a calendar date",
+            rule_text="a calendar date in the clock's years 1900..2199",
             note="MM·1 000 000 + DD·10 000 + YYYY; a calendar date when date_time_valid = 1",
         ),
         f32("star_field_intensity_pct", 12, 0.0, 100.0),

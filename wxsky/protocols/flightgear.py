@@ -19,7 +19,14 @@ from datetime import UTC, datetime
 
 from wxsky.units import FT_TO_M, INHG_TO_HPA, KT_TO_MPS
 from wxsky.weather.geo import enu_from_geodetic
-from wxsky.weather.state import CloudLayer, CloudType, WeatherState, dir_from_deg
+from wxsky.weather.state import (
+    TIME_RANGE_TEXT,
+    CloudLayer,
+    CloudType,
+    WeatherState,
+    dir_from_deg,
+    time_in_range,
+)
 
 # The generic protocol's chunks, in the order Protocol/wxsky.xml writes them.
 OLD_FIELDS = 11  # before the viewer's place and view-internal
@@ -167,6 +174,10 @@ def parse_pose(line: str | bytes) -> PoseLine:
     when = _gmt(parts[-1].strip())
     if when is None:
         return PoseLine(error=f"pose gmt is not a time: {parts[-1].strip()[:32]!r}")
+    if not time_in_range(when):
+        return PoseLine(
+            error=f"pose gmt {parts[-1].strip()} is outside the clock's range {TIME_RANGE_TEXT}"
+        )
     return PoseLine(
         FgPose(
             lat_deg=lat,

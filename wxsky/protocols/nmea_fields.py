@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from datetime import UTC, date, time
 from typing import NamedTuple
 
+from wxsky.weather.state import CLOCK_YEARS, year_in_range
+
 # NMEA numbers are plain decimals: no exponent, and none of the nan/inf/1_000 that float() takes.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)")
 _HHMMSS = re.compile(r"([0-9]{2})([0-9]{2})([0-9]{2})(?:\.([0-9]*))?")
@@ -121,11 +123,16 @@ def calendar_date(day: int, month: int, year: int, where: str) -> date:
     if not 1 <= month <= 12:
         raise SentenceError(f"{where} (date) month {month} out of range 1..12")
     try:
-        return date(year, month, day)
+        when = date(year, month, day)
     except ValueError:
         raise SentenceError(
             f"{where} (date) {year:04d}-{month:02d}-{day:02d} is not a calendar date"
         ) from None
+    if not year_in_range(year):
+        raise SentenceError(
+            f"{where} (date) {when.isoformat()} is outside the clock's years {CLOCK_YEARS}"
+        )
+    return when
 
 
 def coordinate(f: Sequence[str], n: int, what: str, max_deg: float, sides: str) -> float | None:

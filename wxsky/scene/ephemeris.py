@@ -468,6 +468,10 @@ def sun_and_moon(
 # exact places misses the true path by under a millionth of a degree, where working the
 # ephemeris out each frame cost 0.5 ms of a 2 ms frame budget.
 SMOOTH_STEP_S = 2.0
+# The Unix times the two exact places must lie between: datetime's years, a second inside
+# either end so that a float's rounding cannot carry a moment out of them.
+_FIRST_S = datetime(1, 1, 1, 0, 0, 1, tzinfo=UTC).timestamp()
+_LAST_S = datetime(9999, 12, 31, 23, 59, 58, tzinfo=UTC).timestamp()
 
 
 def sun_and_moon_smooth(
@@ -485,6 +489,10 @@ def sun_and_moon_smooth(
     ts = time_utc.timestamp()
     t0 = math.floor(ts / step_s) * step_s
     frac = (ts - t0) / step_s
+    if t0 < _FIRST_S or t0 + step_s > _LAST_S:
+        # The step's ends would leave datetime's years (a clock at 9999-12-31T23:59:58
+        # looked 2 s ahead into year 10000): work this moment out exactly instead.
+        return sun_and_moon(time_utc, lat_deg, lon_deg, height_m)
     if frac == 0.0:
         return _exact_bodies(t0, lat_deg, lon_deg, height_m)
     (sun_a, moon_a) = _exact_bodies(t0, lat_deg, lon_deg, height_m)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import ipaddress
 import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -63,6 +64,22 @@ FEED_FORMATS = ("auto", "awc-csv", "awc-xml", "tgftp", "lines")
 # The clock's rate, simulation seconds per wall second (also `set_time`'s rate).
 CLOCK_RATE = Number(0.0, 10_000.0)
 FIELD_GROUPS = Items(Text(choices=ALL_GROUPS), what=f"a list of {', '.join(ALL_GROUPS)}")
+
+
+def _network(value: Any) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"must be an address or network such as 127.0.0.1/32, got {value!r}")
+    try:
+        ipaddress.ip_network(value, strict=False)
+    except ValueError:
+        raise ValueError(f"{value!r} is not an address or network such as 127.0.0.1/32") from None
+    return value
+
+
+# Source addresses a UDP input takes datagrams from: addresses or networks, IPv4 or IPv6.
+ALLOW_FROM = Items(
+    Custom(_network, "an address or network"), what="a list of addresses or networks"
+)
 
 _T = TypeVar("_T")
 _UDP = r"udp:(\[[0-9A-Fa-f:.]+\]|[^:\[\]]+):[0-9]{1,5}"
@@ -374,7 +391,7 @@ class CigiSection(_Section):
     # Where replies go; empty: the source address of the host's datagrams.
     host_address: str = _opt("", Text(pattern=rf"({_UDP})?", pattern_desc="empty or udp:HOST:PORT"))
     # Host addresses (or networks) accepted; anything else is dropped and counted.
-    allow_from: tuple[str, ...] = _opt(("127.0.0.0/8", "::1"))
+    allow_from: tuple[str, ...] = _opt(("127.0.0.0/8", "::1"), ALLOW_FROM)
     view_id: int = _opt(0, _int(0, 65_535))  # the View Control/Definition wxsky renders
     # The host's weather is handed back to the sources below after this long without a word.
     hold_s: float = _opt(10.0, _num(0.1, 86_400.0, "s"))
@@ -403,6 +420,9 @@ class FlightGearSection(_Section):
     clock: str = _opt("wxsky", Text(choices=("wxsky", "flightgear")))
     # The weather is written at most this often (FlightGear's props server is slow).
     write_interval_s: float = _opt(2.0, _num(0.1, 60.0, "s"))
+    # Addresses (or networks) the pose stream is taken from; anything else is dropped and
+    # counted (`not_allowed` in the status). Empty: from anywhere.
+    allow_from: tuple[str, ...] = _opt(("127.0.0.0/8", "::1"), ALLOW_FROM)
 
 
 _ZENOH = r"(tcp|udp|quic|tls|unixsock-stream)/[^\s]{1,200}"

@@ -57,6 +57,7 @@ from wxsky.weather.state import (
     WeatherPatch,
     WeatherState,
     WindLayer,
+    check_time_range,
     parse_time_utc,
 )
 
@@ -83,9 +84,9 @@ def _time_utc(value: Any) -> datetime:
     # TOML has a native date-time type; accept it as well as a quoted ISO 8601 string.
     if isinstance(value, datetime):
         if value.tzinfo is None:
-            return value.replace(tzinfo=UTC)
+            return check_time_range("time", value.replace(tzinfo=UTC))
         try:
-            return value.astimezone(UTC)
+            return check_time_range("time", value.astimezone(UTC))
         except OverflowError:  # 0001-01-01T00:00+01:00 is in year 0 in UTC
             raise ValueError(f"{value.isoformat()} is outside the years 1..9999 in UTC") from None
     if isinstance(value, str):

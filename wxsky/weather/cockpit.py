@@ -42,6 +42,7 @@ from wxsky.weather.state import (
     Source,
     WeatherState,
     WindLayer,
+    time_in_range,
 )
 
 WIND_SPEED = "wind.speed_mps"
@@ -236,7 +237,9 @@ def clock_target(
         if near_midnight and abs((update.date_utc - sky_date).days) == 1:
             return None
         candidate = datetime.combine(update.date_utc, sky_utc.timetz())
-    if candidate is None:
+    if candidate is None or not time_in_range(candidate):
+        # Out of the clock's range: a decoder refuses such a date, so only a time of day
+        # put on the day after the range's last can land here; the clock keeps its own.
         return None
     ahead_s = (sky_utc - candidate).total_seconds()
     if -CLOCK_TOLERANCE_S <= ahead_s <= update.time_resolution_s + CLOCK_TOLERANCE_S:

@@ -12,7 +12,7 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from wxsky.schema import Number
@@ -231,9 +231,43 @@ EARLIEST_UTC = datetime(1900, 1, 1, tzinfo=UTC)
 LATEST_UTC = datetime(2200, 1, 1, tzinfo=UTC)  # exclusive
 
 
+# The last moment the clock may show: a clock run up to the end stops here.
+LAST_UTC = LATEST_UTC - timedelta(microseconds=1)
+TIME_RANGE_TEXT = "1900-01-01T00:00:00Z up to (not including) 2200-01-01T00:00:00Z"
+CLOCK_YEARS = f"{EARLIEST_UTC.year}..{LATEST_UTC.year - 1}"  # the range as whole years
+
+
 def time_in_range(time_utc: datetime) -> bool:
     """Whether an aware time lies in [EARLIEST_UTC, LATEST_UTC)."""
     return EARLIEST_UTC <= time_utc < LATEST_UTC
+
+
+def year_in_range(year: int) -> bool:
+    """Whether every moment of a calendar year lies in the clock's range (a date's check)."""
+    return EARLIEST_UTC.year <= year < LATEST_UTC.year
+
+
+def check_time_range(what: str, time_utc: datetime) -> datetime:
+    """`time_utc` when it is in the clock's range, else ValueError naming `what` and the range
+    (one line, for an input's error)."""
+    if not time_in_range(time_utc):
+        shown = time_utc.isoformat().replace("+00:00", "Z")
+        raise ValueError(f"{what} {shown} is outside the clock's range {TIME_RANGE_TEXT}")
+    return time_utc
+
+
+def clamped_time(time_utc: datetime, ahead_s: float) -> datetime:
+    """`time_utc` moved by ahead_s (negative: back), held inside [EARLIEST_UTC, LAST_UTC]: what
+    computes ahead or behind of the clock (its own running, a drift, a tower's age) can never
+    leave datetime's years, whatever the rate or the step."""
+    t = min(max(time_utc, EARLIEST_UTC), LAST_UTC)
+    if math.isnan(ahead_s):
+        return t
+    if ahead_s >= (LAST_UTC - t).total_seconds():
+        return LAST_UTC
+    if -ahead_s >= (t - EARLIEST_UTC).total_seconds():
+        return EARLIEST_UTC
+    return t + timedelta(seconds=ahead_s)
 
 
 def _check_utc(time_utc: datetime) -> None:
@@ -465,6 +499,9 @@ def parse_time_utc(text: str) -> datetime:
     if t.tzinfo is None:
         t = t.replace(tzinfo=UTC)
     try:
-        return t.astimezone(UTC)
+        t = t.astimezone(UTC)
     except OverflowError:  # 0001-01-01T00:00+01:00 is in year 0 in UTC
         raise ValueError(f"{text!r} is outside the years 1..9999 in UTC") from None
+    if not time_in_range(t):
+        raise ValueError(f"{text.strip()!r} is outside the clock's range {TIME_RANGE_TEXT}")
+    return t
