@@ -44,6 +44,7 @@ STATUS_KEYS = {
     "clock_at_end",
     "frames",
     "scene_work",
+    "segment",
     "block_cache",
     "zero_copy",
     "sky_id",

@@ -148,7 +148,9 @@ def test_a_daemon_survives_truncations_of_its_segment(tmp_path: Path) -> None:
             assert status["segment"]["restores"] == n
             assert status["segment"]["write_errors"] == 0
         assert daemon.proc.poll() is None
-        assert "was changed under the writer: it was resized to 0 bytes" in daemon.log()
+        # Cut during a frame, the frame's own writes extend it again before the next check:
+        # the size the log gives is whatever the writer then found.
+        assert "was changed under the writer: it was resized to" in daemon.log()
         code, _ = daemon.stop(signal.SIGTERM)
         assert code == 0, daemon.log()
         assert not daemon.socket_path.exists()
