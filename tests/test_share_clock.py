@@ -137,6 +137,7 @@ def test_a_channel_refuses_the_masters_commands_and_the_camera_only_while_it_is_
         assert refused is not None and "sky master at zenoh:tcp/127.0.0.1:7447" in refused
     assert part.refusal("set_camera") is None  # nothing shared yet
     assert part.refusal("status") is None
+    part._master_seen(MASTER, True, 0.0)  # ticks count only from the run whose token is alive
     part._got_tick(pack_data(encode_tick(_tick(1.0, T0))), 1.0)  # a master sharing none
     assert part.refusal("set_camera") is None
     shared = dataclasses.replace(_tick(2.0, T0), camera=cam)
