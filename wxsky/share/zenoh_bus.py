@@ -47,9 +47,6 @@ def _config(role: str, endpoint: str, site: str, credentials: Credentials | None
     cfg = zenoh.Config()
     cfg.insert_json5("mode", json.dumps("peer"))
     cfg.insert_json5("scouting/multicast/enabled", "false")
-    # Gossip would tell channels each other's locators; they listen nowhere, and everything
-    # goes through the master (where the access control sits).
-    cfg.insert_json5("scouting/gossip/enabled", "false")
     if role == "master":
         cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
     else:
