@@ -126,7 +126,7 @@ def test_a_channel_with_the_domes_certificate_joins_and_may_do_only_a_channels_p
         assert [str(r.ok.key_expr) for r in masters if r.ok is not None] == [
             master.key("alive", "master", MASTER_ID)
         ]
-        token.undeclare()
+        token.undeclare()  # type: ignore[no-untyped-call]
 
 
 def _put_until(publish: Any, inbox: Inbox) -> bool:

@@ -76,7 +76,7 @@ def _session(connect: str, mode: str = "peer", listen: str | None = None) -> Ite
     try:
         yield session
     finally:
-        session.close()  # type: ignore[no-untyped-call]
+        session.close()
 
 
 def _one_sample(session: Any, key: str) -> dict[str, Any]:
@@ -94,7 +94,8 @@ def _one_sample(session: Any, key: str) -> dict[str, Any]:
         assert ready.wait(HANG_S), f"nothing on {key}"
     finally:
         sub.undeclare()
-    message: dict[str, Any] = unpack_data(got[0])
+    message = unpack_data(got[0])
+    assert isinstance(message, dict)
     return message
 
 
@@ -125,7 +126,7 @@ def test_a_forged_tick_far_from_the_masters_clock_is_dropped_and_the_channel_liv
 def test_a_forged_state_with_the_largest_sequence_cannot_freeze_the_channel(dome: Dome) -> None:
     s = dome.router
     real = decode_state(_one_sample(s, f"wxsky/{SITE}/state"), SITE)
-    storm = dataclasses.replace(real.applied, layers=load_preset("thunderstorm").layers)
+    storm = dataclasses.replace(real.applied, layers=load_preset("thunderstorm").layers or ())
     forged = dataclasses.replace(
         real,
         sequence=2**63 - 1,
