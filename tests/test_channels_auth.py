@@ -179,6 +179,7 @@ def test_a_session_without_the_domes_certificate_can_neither_subscribe_nor_publi
         session.close()
 
 
+@pytest.mark.gl  # the daemons draw every frame
 def test_a_channel_with_a_wrong_certificate_is_refused_with_one_log_line(
     tmp_path: Path, certs: tuple[Path, Path]
 ) -> None:
@@ -251,6 +252,8 @@ def test_a_bus_beyond_loopback_needs_credentials_or_allow_insecure(tmp_path: Pat
         'private_key = "c"\n',
     )
     assert "share.endpoint" in error and "tls/" in error
+    error = _config_error(tmp_path, '[channel]\njoin = "tcp/127.0.0.1:7447"\nname = "master"\n')
+    assert "channel.name" in error and "sky master" in error
     # The command line goes through the same check: one line, exit status 2.
     run = subprocess.run(
         [sys.executable, "-m", "wxsky", "run", "--share", f"zenoh:tcp/0.0.0.0:{free_port()}"],

@@ -484,6 +484,8 @@ class DaemonConfig:
             )
         if self.channel.join and not self.channel.name:
             problems.append(Problem(("channel", "name"), "a channel needs a name"))
+        if self.channel.name == "master":  # the master's health goes by that name
+            problems.append(Problem(("channel", "name"), "'master' is the sky master's name"))
         problems.extend(_bus_problems("share", "endpoint", self.share))
         problems.extend(_bus_problems("channel", "join", self.channel))
         if cam.width > out.max_width:
