@@ -110,6 +110,8 @@ def test_a_channel_with_the_domes_certificate_joins_and_may_do_only_a_channels_p
     ) as left:
         assert left.master_alive(wait_s=HANG_S)
         assert left.fetch_state() == b"the state"
+        pong = left.ping()
+        assert pong is not None and pong[1] == b"the clock"
         ticks = Inbox()
         left.on_tick(ticks)
         wait_for("the tick subscription", lambda: _put_until(master.publish_tick, ticks))
