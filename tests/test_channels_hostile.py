@@ -9,8 +9,10 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import re
 import signal
 import subprocess
+import sys
 import threading
 from collections.abc import Iterator
 from typing import Any
@@ -178,6 +180,14 @@ def test_a_flood_of_health_names_and_tokens_leaves_the_peer_table_bounded(dome: 
         assert len(m["peers"]) <= most + 1, len(m["peers"])  # its channels, and its own line
         assert set(m["peers"]) <= {"master", "left"} | {f"token{i}" for i in range(100)}
         assert m["peers_max"] == most
+        shown = subprocess.run(
+            [sys.executable, "-m", "wxsky", "status", "--control", dome.master.address],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=True,
+        ).stdout
+        assert re.search(r"dropped \d+ messages, refused [1-9]\d* peers", shown), shown
         for token in tokens:
             token.undeclare()
     # Tokens gone, peers gone: only the real ones are listed.
