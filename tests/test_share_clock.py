@@ -15,9 +15,18 @@ from wxsky.engine.stages import SkyEngine
 from wxsky.scene.camera import Camera, turned
 from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
-from wxsky.share.clock import FAST_PINGS, GOOD_RTT_S, PING_EVERY_S, PING_FAST_S, ClockFollower
+from wxsky.share.clock import (
+    FAST_PINGS,
+    GOOD_RTT_S,
+    MAX_OFFSET_STEP_S,
+    MAX_TICK_AHEAD_S,
+    OFFSET_OUTVOTE,
+    PING_EVERY_S,
+    PING_FAST_S,
+    ClockFollower,
+)
 from wxsky.share.messages import ClockTick
-from wxsky.weather.state import Source, WeatherPatch, WeatherState
+from wxsky.weather.state import EARLIEST_UTC, LATEST_UTC, Source, WeatherPatch, WeatherState
 from wxsky.weather.transition import TransitionRates
 
 T0 = datetime(2026, 6, 21, 13, 0, tzinfo=UTC)
@@ -42,6 +51,50 @@ def test_the_best_round_trip_sets_the_offset_and_time_follows_the_rate() -> None
     # An older tick arriving late changes nothing.
     clock.tick(_tick(111.0, T0 - timedelta(seconds=9)), received_s=12.6)
     assert clock.time_at(12.5) == T0 + timedelta(seconds=1.0)
+
+
+def test_a_tick_far_from_the_masters_clock_is_dropped_and_cannot_hold_back_the_next() -> None:
+    """Issue 40: a copy of the master's tick with `master_mono_s = 1e12` ended a channel
+    (OverflowError); one a day ahead would have held back every real tick for a day."""
+    clock = ClockFollower()
+    clock.ping(sent_s=10.000, master_s=110.001, received_s=10.002, master_id=MASTER)
+    assert clock.tick(_tick(110.5, T0), received_s=10.51) is None
+    for forged in (1e12, 110.6 + 86_400.0, 110.6 + MAX_TICK_AHEAD_S + 0.1, 0.0):
+        reason = clock.tick(_tick(forged, T0 + timedelta(days=3)), received_s=10.6)
+        assert reason is not None and "master's clock" in reason, forged
+    assert clock.latest is not None and clock.latest.master_mono_s == 110.5
+    assert clock.tick(_tick(110.7, T0 + timedelta(seconds=0.2)), received_s=10.71) is None
+    assert clock.time_at(10.7) == T0 + timedelta(seconds=0.2)
+
+
+def test_a_forged_first_tick_gives_way_to_the_masters_own() -> None:
+    clock = ClockFollower()
+    clock.tick(_tick(1e9, T0 + timedelta(days=300)), received_s=10.0)  # nothing to judge by
+    assert clock.tick(_tick(110.0, T0), received_s=10.01) is None  # the first ping decides
+    clock.ping(sent_s=10.02, master_s=110.021, received_s=10.022, master_id=MASTER)
+    assert clock.tick(_tick(1e9, T0 + timedelta(days=300)), received_s=10.03) is not None
+    assert clock.time_at(10.0) == T0
+
+
+def test_one_pong_cannot_move_the_offset_but_several_that_agree_do() -> None:
+    clock = ClockFollower()
+    clock.ping(10.0, 110.001, 10.002, MASTER)
+    far = 100.0 + 50 * MAX_OFFSET_STEP_S
+    assert clock.ping(11.0, 11.0005 + far, 11.001, MASTER) is not None
+    assert clock.offset_s == pytest.approx(100.0)
+    # The estimate was the odd one out (a forged first pong): the master's own outvote it.
+    for i in range(1, OFFSET_OUTVOTE):
+        assert clock.offset_s == pytest.approx(100.0)
+        clock.ping(11.0 + i, 11.0005 + i + far, 11.001 + i, MASTER)
+    assert clock.offset_s == pytest.approx(far)
+
+
+def test_no_tick_rate_or_offset_carries_the_time_out_of_the_clocks_range() -> None:
+    clock = ClockFollower()
+    clock.tick(_tick(0.0, LATEST_UTC - timedelta(seconds=1), rate=10_000.0), received_s=0.0)
+    assert clock.time_at(3.0e9) == LATEST_UTC - timedelta(microseconds=1)
+    clock.tick(_tick(3.0e9, EARLIEST_UTC, rate=10_000.0, master="1" * 16), received_s=3.0e9)
+    assert clock.time_at(0.0) == EARLIEST_UTC
 
 
 def test_before_a_ping_a_ticks_arrival_stands_in_and_a_new_master_starts_afresh() -> None:
@@ -137,6 +190,7 @@ def test_a_channel_refuses_the_masters_commands_and_the_camera_only_while_it_is_
         assert refused is not None and "sky master at zenoh:tcp/127.0.0.1:7447" in refused
     assert part.refusal("set_camera") is None  # nothing shared yet
     assert part.refusal("status") is None
+    part._master_seen(MASTER, True, 0.0)  # ticks count only from the run whose token is alive
     part._got_tick(pack_data(encode_tick(_tick(1.0, T0))), 1.0)  # a master sharing none
     assert part.refusal("set_camera") is None
     shared = dataclasses.replace(_tick(2.0, T0), camera=cam)

@@ -32,9 +32,12 @@ from wxsky.share.messages import (
     time_from_us,
     time_to_us,
 )
-from wxsky.weather.state import WeatherState
+from wxsky.weather.state import EARLIEST_UTC, LATEST_UTC, WeatherState
 
 MASTER = "0123456789abcdef"
+_END_US = time_to_us(LATEST_UTC) - 1  # the last microsecond of the clock's range
+_BEFORE_US = time_to_us(EARLIEST_UTC) - 1
+_Y9999_US = time_to_us(datetime(9999, 12, 31, 23, 59, 58, tzinfo=UTC))
 WHEN = datetime(2026, 6, 21, 13, 0, 0, 123456, tzinfo=UTC)
 
 
@@ -143,7 +146,12 @@ def _with(message: dict[str, Any], path: tuple[Any, ...], value: object) -> dict
         (("target", "layers", 0, "type"), "kumulus", "target"),
         (("tower_epochs",), [None], "tower_epochs has 1 entries for 3 layers"),
         (("tower_epochs", 2), [1, 2], "tower_epochs[2] must be [set_us"),
-        (("tower_epochs", 2, 0), -5, "tower_epochs[2]: set_us = -5 is outside"),
+        (("tower_epochs", 2, 0), _BEFORE_US, f"tower_epochs[2]: set_us = {_BEFORE_US} is outside"),
+        # The clock's range, years 1900-2199 (weather.state; issue 40): its ends and beyond.
+        (("applied_time_us",), _END_US + 1, "applied_time_us"),
+        (("target_time_us",), _BEFORE_US, "target_time_us"),
+        (("anchor_us",), _Y9999_US, "anchor_us"),
+        (("tower_epochs", 2, 2), _END_US + 1, "cut_us"),
         (("tower_epochs", 2, 1), 95.0, "sun_elevation_deg = 95.0 is outside"),
         (("tower_epochs", 2, 2), "soon", "cut_us must be an integer"),
         (("tower_epochs", 2, 3), float("nan"), "cover_oktas = nan is outside"),
@@ -169,6 +177,10 @@ def test_a_bad_state_is_refused_with_one_line_naming_the_field(
         (("camera",), [1, 2], "camera is not a map"),
         (("aircraft_m",), [0.0, float("nan"), 1.0], "aircraft_m must hold three finite"),
         (("master_mono_s",), -1.0, "master_mono_s = -1.0 is outside"),
+        (("master_mono_s",), 1e12, "master_mono_s = 1000000000000.0 is outside"),
+        (("time_us",), _Y9999_US, "time_us"),
+        (("time_us",), _END_US + 1, "time_us"),
+        (("time_us",), _BEFORE_US, "time_us"),
         (("rate",), True, "rate must be a number"),
     ],
 )
@@ -207,3 +219,13 @@ def test_microseconds_round_trip_across_the_years() -> None:
         datetime(9999, 12, 31, 23, 59, 59, 999999, tzinfo=UTC),
     ):
         assert time_from_us(time_to_us(t)) == t
+
+
+def test_the_ends_of_the_clocks_range_pass() -> None:
+    for us in (time_to_us(EARLIEST_UTC), _END_US):
+        tick = decode_tick(
+            {**encode_tick(_tick()), "time_us": us, "master_mono_s": 3.0e9}, "default"
+        )
+        assert tick.time_utc == time_from_us(us)
+        state = decode_state({**encode_state(_state()), "anchor_us": us}, "default")
+        assert state.anchor_utc == time_from_us(us)

@@ -28,6 +28,7 @@ from wxsky.output.wire import WireError, pack_data, unpack_data
 from wxsky.scene.camera import Camera, turned
 from wxsky.settings.config import DaemonConfig
 from wxsky.share.clock import ClockFollower
+from wxsky.share.credentials import Credentials
 from wxsky.share.errors import BusError
 from wxsky.share.messages import (
     ClockTick,
@@ -52,6 +53,19 @@ log = logging.getLogger(__name__)
 MASTER_SILENT_S = 2.0
 STATE_REPEAT_S = 1.0  # the state is sent again this often (a partition heals by itself)
 HEALTH_EVERY_S = 1.0
+# How many channels a site may have: peers beyond it are refused and counted. A dome has 3
+# to 12; 64 leaves room and keeps `status` small (each peer is a few dozen bytes).
+MAX_PEERS = 64
+# A master's sequence bumps once per change of its weather, at most once a frame: a state
+# further ahead of the last than this (plus this per second since) is not the master's
+# (issue 40: one forged state with sequence 2^63-1 froze every channel on its weather).
+MAX_SEQUENCE_STEP = 1000
+# A state older than the latest is a repeat overtaken by it only this soon after; later, the
+# latest was not the master's (it repeats its own every second) and the older one is taken.
+OVERTAKEN_WITHIN_S = 1.5
+# A channel that sees no master this long after joining says so, once (not started, or it
+# refused this channel's certificate: Zenoh does not tell the refused side why).
+NO_MASTER_WARN_S = 5.0
 WEATHER_COMMANDS = ("apply_preset", "apply_metar", "release", "set_time")
 
 
@@ -74,6 +88,11 @@ class SharePart(Part):
         self._fov_deg = channel.fov_deg or config.camera.fov_deg
         self._size_px = (config.camera.width, config.camera.height)
         self._master_id = secrets.token_hex(8)
+        section = share if share.endpoint else channel
+        self._credentials = Credentials.of(
+            section.ca_certificate, section.certificate, section.private_key
+        )
+        self._section = "share" if share.endpoint else "channel"
         self._bus: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -85,9 +104,16 @@ class SharePart(Part):
         self._follower = ClockFollower()
         self._tick_at: float | None = None  # local monotonic of the latest tick
         self._fetching = False  # a state query in flight
-        self._token_alive = False
+        # The masters' tokens on the site (run id -> when seen), and the one followed: the
+        # earliest still alive. Ticks, states and pongs of any other run are dropped.
+        self._masters: dict[str, float] = {}
+        self._live_master: str | None = None
+        self._state_at = 0.0  # local monotonic of the latest state taken
         self._drops: dict[str, int] = {}
         self._drop_log = RateLimitedLog(log)
+        # The peers: channels whose token is alive, at most MAX_PEERS; their health.
+        self._channels: set[str] = set()
+        self._refused = 0
         self._health: dict[str, dict[str, Any]] = {}
         self._frames = 0
         self._last_frame: tuple[float, datetime] | None = None  # (monotonic, sim time)
@@ -114,8 +140,14 @@ class SharePart(Part):
         from wxsky.share.zenoh_bus import ShareBus
 
         loop = self._loop = asyncio.get_running_loop()
+        self._check_credentials()
         open_bus = functools.partial(
-            ShareBus, self.endpoint, role=self.role, site=self.site, name=self.channel_name
+            ShareBus,
+            self.endpoint,
+            role=self.role,
+            site=self.site,
+            name=self.channel_name,
+            credentials=self._credentials,
         )
         try:
             self._bus = await loop.run_in_executor(None, open_bus)
@@ -126,7 +158,7 @@ class SharePart(Part):
         bus = self._bus
         if self.role == "master":
             try:
-                await loop.run_in_executor(None, bus.claim_master)
+                await loop.run_in_executor(None, bus.claim_master, self._master_id)
             except BaseException:
                 bus.close()
                 self._bus = None
@@ -139,10 +171,12 @@ class SharePart(Part):
             bus.on_master(self._hop(self._master_seen))
             bus.announce_channel()
             self._tasks.append(asyncio.create_task(self._pinger()))
+            self._tasks.append(asyncio.create_task(self._warn_without_master()))
             first = await loop.run_in_executor(None, bus.fetch_state)
             if first is not None:
                 self._got_state(first, time.monotonic())
-        bus.on_health(self._hop2(self._got_health))
+        bus.on_channel(self._hop(self._channel_seen))
+        bus.on_health(self._hop(self._got_health))
         self._tasks.append(asyncio.create_task(self._heartbeat()))
         log.info(
             "sky %s on zenoh:%s, site %r%s",
@@ -232,7 +266,7 @@ class SharePart(Part):
     def master_alive(self) -> bool:
         if self.role == "master":
             return True
-        if self.role != "channel" or not self._token_alive or self._tick_at is None:
+        if self.role != "channel" or self._live_master is None or self._tick_at is None:
             return False
         return time.monotonic() - self._tick_at <= MASTER_SILENT_S
 
@@ -259,6 +293,8 @@ class SharePart(Part):
                 "rtt_ms": None if self._follower.rtt_s is None else 1000.0 * self._follower.rtt_s,
                 "dropped": dict(self._drops),
                 "peers": dict(self._health),
+                "peers_max": MAX_PEERS,
+                "refused_peers": self._refused,
             },
             # The sim time at this instant of this process's monotonic clock: two daemons'
             # readings compared at one instant give their clock skew.
@@ -307,7 +343,13 @@ class SharePart(Part):
         """BusError if a master of this site answers on the endpoint (as a channel would)."""
         from wxsky.share.zenoh_bus import ShareBus
 
-        with ShareBus(self.endpoint, role="channel", site=self.site, name="probe") as probe:
+        with ShareBus(
+            self.endpoint,
+            role="channel",
+            site=self.site,
+            name="probe",
+            credentials=self._credentials,
+        ) as probe:
             if probe.master_alive(wait_s=1.0):
                 raise BusError(
                     f"zenoh:{self.endpoint}: site {self.site!r} already has a sky master there"
@@ -318,37 +360,46 @@ class SharePart(Part):
 
     # -- a channel ------------------------------------------------------------------------
 
-    def _hop(self, handler: Callable[[Any, float], None]) -> Callable[[Any], None]:
-        """A bus callback (Zenoh's thread) that runs `handler(value, arrival)` on the loop."""
+    def _hop(self, handler: Callable[..., None]) -> Callable[..., None]:
+        """A bus callback (Zenoh's thread) that runs `handler(*values, arrival)` on the loop."""
 
-        def deliver(value: Any) -> None:
+        def deliver(*values: Any) -> None:
             loop = self._loop
             if loop is not None and not loop.is_closed():
-                loop.call_soon_threadsafe(handler, value, time.monotonic())
+                loop.call_soon_threadsafe(functools.partial(handler, *values, time.monotonic()))
 
         return deliver
 
-    def _hop2(self, handler: Callable[[str, bytes], None]) -> Callable[[str, bytes], None]:
-        def deliver(name: str, payload: bytes) -> None:
-            loop = self._loop
-            if loop is not None and not loop.is_closed():
-                loop.call_soon_threadsafe(handler, name, payload)
+    def _from_live_master(self, what: str, master_id: str) -> bool:
+        """Whether a message's run id is the followed master's token's; if not, counted."""
+        if master_id == self._live_master:
+            return True
+        live = "none" if self._live_master is None else repr(self._live_master)
+        self._drop(what, f"from master run {master_id!r}, not the live master's token ({live})")
+        return False
 
-        return deliver
-
-    def _got_state(self, payload: bytes, _arrived: float) -> None:
+    def _got_state(self, payload: bytes, arrived: float) -> None:
         try:
             state = decode_state(unpack_data(payload), self.site)
         except (WireError, ShareError) as exc:
             self._drop("state", exc)
             return
-        if (
-            self._state is not None
-            and state.master_id == self._state.master_id
-            and state.sequence < self._state.sequence
-        ):
-            return  # overtaken (a repeat from before a newer one)
-        self._state = state
+        if not self._from_live_master("state", state.master_id):
+            return
+        latest = self._state
+        if latest is not None and state.master_id == latest.master_id:
+            ahead = state.sequence - latest.sequence
+            bound = MAX_SEQUENCE_STEP * (1.0 + max(0.0, arrived - self._state_at))
+            if ahead > bound:
+                self._drop(
+                    "state",
+                    f"sequence {state.sequence} jumps {ahead} past {latest.sequence} "
+                    f"(at most {bound:.0f} now)",
+                )
+                return
+            if ahead < 0 and arrived - self._state_at < OVERTAKEN_WITHIN_S:
+                return  # overtaken (a repeat from before a newer one)
+        self._state, self._state_at = state, arrived
         self.engine.follow(
             SharedSky(
                 applied=state.applied,
@@ -369,7 +420,12 @@ class SharePart(Part):
         except (WireError, ShareError) as exc:
             self._drop("clock", exc)
             return
-        self._follower.tick(tick, arrived)
+        if not self._from_live_master("clock", tick.master_id):
+            return
+        dropped = self._follower.tick(tick, arrived)
+        if dropped is not None:
+            self._drop("clock", dropped)
+            return
         self._tick_at = arrived
         new_master = self._state is None or self._state.master_id != tick.master_id
         if new_master and self._bus is not None and not self._fetching:
@@ -377,18 +433,58 @@ class SharePart(Part):
             self._fetching = True
             self._tasks.append(asyncio.create_task(self._fetch_state()))
 
-    def _master_seen(self, alive: bool, _arrived: float) -> None:
-        if alive != self._token_alive:
-            log.info("sky master %s", "joined" if alive else "gone: keeping the last sky")
-        self._token_alive = alive
+    def _master_seen(self, master_id: str, alive: bool, arrived: float) -> None:
+        """A master's token came or went: the one followed is the earliest still alive."""
+        if alive:
+            if master_id not in self._masters and len(self._masters) >= MAX_PEERS:
+                self._refuse(f"a master token {master_id!r}: {MAX_PEERS} are there already")
+                return
+            self._masters.setdefault(master_id, arrived)
+        else:
+            self._masters.pop(master_id, None)
+        live = min(self._masters, key=self._masters.__getitem__, default=None)
+        if live != self._live_master:
+            if live is None:
+                log.info("sky master gone: keeping the last sky")
+            else:
+                log.info("sky master joined (run %s)", live)
+            self._live_master = live
+            self._tick_at = None  # alive again only by a tick of the new run
+            self._health.pop("master", None)
 
-    def _got_health(self, name: str, payload: bytes) -> None:
+    def _channel_seen(self, name: str, alive: bool, _arrived: float) -> None:
+        """A channel's token came or went: the peer table holds the live ones, MAX_PEERS."""
+        if not alive:
+            self._channels.discard(name)
+            self._health.pop(name, None)
+            return
+        if name in self._channels:
+            return
+        if len(self._channels) >= MAX_PEERS:
+            self._refuse(f"channel {name!r}: the site has {MAX_PEERS} channels already")
+            return
+        self._channels.add(name)
+
+    def _refuse(self, why: str) -> None:
+        self._refused += 1
+        self._drop_log.warning("share-refused", f"refused a peer on the bus: {why}")
+
+    def _got_health(self, name: str, payload: bytes, _arrived: float) -> None:
         from wxsky.share.messages import decode_health
 
+        master = self.role == "master" or self._live_master is not None
+        if name not in self._channels and not (name == "master" and master):
+            # Only a peer whose token is alive is kept: a stranger's names cannot grow the
+            # table (issue 40: 100,000 names made `status` too big to send).
+            self._drop("health", f"from {name[:64]!r}, which has no token on the bus")
+            return
         try:
             health = decode_health(unpack_data(payload), self.site)
         except (WireError, ShareError) as exc:
             self._drop("health", exc)
+            return
+        if health.name != name or (health.role == "master") != (name == "master"):
+            self._drop("health", f"{health.role} {health.name!r} on the key of {name[:64]!r}")
             return
         self._health[name] = {
             "role": health.role,
@@ -421,7 +517,10 @@ class SharePart(Part):
                     except (WireError, ShareError) as exc:
                         self._drop("pong", exc)
                     else:
-                        self._follower.ping(sent, mono_s, received, master_id)
+                        if self._from_live_master("pong", master_id):
+                            dropped = self._follower.ping(sent, mono_s, received, master_id)
+                            if dropped is not None:
+                                self._drop("pong", dropped)
             await asyncio.sleep(self._follower.wait_before_ping_s())
 
     async def _heartbeat(self) -> None:
@@ -450,7 +549,41 @@ class SharePart(Part):
             height_px=self._size_px[1],
         )
 
-    def _drop(self, what: str, exc: Exception) -> None:
+    async def _warn_without_master(self) -> None:
+        """One line when no master is seen soon after joining: Zenoh tells the side whose
+        certificate is refused nothing, so this is where a wrong one shows."""
+        await asyncio.sleep(NO_MASTER_WARN_S)
+        if self._live_master is None:
+            cause = (
+                "it refused this channel's certificate (channel.ca_certificate, certificate, "
+                "private_key)"
+                if self._credentials is not None
+                else "it is on another site or endpoint"
+            )
+            log.warning(
+                "no sky master on zenoh:%s site %r after %g s: it is not running, or %s",
+                self.endpoint,
+                self.site,
+                NO_MASTER_WARN_S,
+                cause,
+            )
+
+    def _check_credentials(self) -> None:
+        creds = self._credentials
+        if creds is None:
+            return
+        for key, path in (
+            ("ca_certificate", creds.ca_certificate),
+            ("certificate", creds.certificate),
+            ("private_key", creds.private_key),
+        ):
+            try:
+                with open(path, "rb") as f:
+                    f.read(1)
+            except OSError as exc:
+                raise BusError(f"{self._section}.{key}: {path}: {exc.strerror or exc}") from None
+
+    def _drop(self, what: str, exc: Exception | str) -> None:
         self._drops[what] = self._drops.get(what, 0) + 1
         self._drop_log.warning(f"share-{what}", f"dropped a {what} message from the bus: {exc}")
 

@@ -454,6 +454,9 @@ def _cmd_status(args: argparse.Namespace) -> int:
             line += ", peers " + ", ".join(
                 f"{n} ({p['role']}, {p['fps']:.0f} fps)" for n, p in sorted(peers.items())
             )
+        dropped = sum((ch.get("dropped") or {}).values())
+        if dropped or ch.get("refused_peers"):
+            line += f", dropped {dropped} messages, refused {ch.get('refused_peers', 0)} peers"
         print(line)
     for inp in status["inputs"]:
         state = "ok" if inp["ok"] else "FAILING"

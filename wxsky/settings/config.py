@@ -448,6 +448,11 @@ class ShareSection(_Section):
     endpoint: str = _opt("", ZENOH_ENDPOINT)  # empty: no sharing
     site: str = _opt("default", SHARE_SITE)  # one key space per site: wxsky/<site>/...
     camera: bool = _opt(True)  # share the camera (the ownship's) with the channels
+    # The bus's mutual TLS (a tls/ endpoint; tools/generate/dome_certs.py): PEM paths.
+    ca_certificate: str = _opt("")
+    certificate: str = _opt("")
+    private_key: str = _opt("")
+    allow_insecure: bool = _opt(False)  # share beyond loopback without credentials
 
 
 @dataclass(frozen=True)
@@ -463,6 +468,10 @@ class ChannelSection(_Section):
     # The channel's view turned from the shared camera, as CIGI View Control turns a view.
     view_offset_deg: tuple[float, float, float] = _opt((0.0, 0.0, 0.0), VIEW_OFFSET)
     fov_deg: float = _opt(0.0, _num(0.0, 170.0, "deg"))  # 0: the [camera] fov_deg
+    ca_certificate: str = _opt("")  # the bus's mutual TLS, as in [share]
+    certificate: str = _opt("")
+    private_key: str = _opt("")
+    allow_insecure: bool = _opt(False)
 
 
 @dataclass(frozen=True)
@@ -494,6 +503,10 @@ class DaemonConfig:
             )
         if self.channel.join and not self.channel.name:
             problems.append(Problem(("channel", "name"), "a channel needs a name"))
+        if self.channel.name == "master":  # the master's health goes by that name
+            problems.append(Problem(("channel", "name"), "'master' is the sky master's name"))
+        problems.extend(_bus_problems("share", "endpoint", self.share))
+        problems.extend(_bus_problems("channel", "join", self.channel))
         if cam.width > out.max_width:
             problems.append(
                 Problem(
@@ -518,6 +531,65 @@ class DaemonConfig:
             problems.extend(_scene_block_problems(scene))
         if problems:
             raise Invalid(problems)
+
+
+def _bus_problems(section: str, key: str, s: ShareSection | ChannelSection) -> list[Problem]:
+    """The channel bus's credentials: all three PEM files or none; with them a tls/ endpoint;
+    without them loopback only, unless allow_insecure (docs/channels.md)."""
+    endpoint = s.endpoint if isinstance(s, ShareSection) else s.join
+    files = {
+        "ca_certificate": s.ca_certificate,
+        "certificate": s.certificate,
+        "private_key": s.private_key,
+    }
+    if not endpoint:
+        return []
+    missing = [k for k, v in files.items() if not v]
+    if missing and len(missing) < len(files):
+        return [
+            Problem(
+                (section, missing[0]),
+                "the bus's credentials need all three of "
+                "ca_certificate, certificate and private_key",
+            )
+        ]
+    secured = not missing
+    if secured and not endpoint.startswith("tls/"):
+        return [
+            Problem((section, key), f"{endpoint}: with certificates the endpoint is tls/HOST:PORT")
+        ]
+    if not secured and endpoint.startswith("tls/"):
+        return [
+            Problem(
+                (section, "certificate"),
+                f"{endpoint}: a tls/ endpoint needs "
+                f"{section}.ca_certificate, certificate and private_key",
+            )
+        ]
+    if not secured and not s.allow_insecure and not _loopback(endpoint):
+        return [
+            Problem(
+                (section, key),
+                f"{endpoint} is not a loopback address: without {section}.ca_certificate, "
+                "certificate and private_key anyone on that network may join or forge the "
+                "sky; set them (docs/channels.md) or write allow_insecure = true",
+            )
+        ]
+    return []
+
+
+def _loopback(endpoint: str) -> bool:
+    """Whether a Zenoh locator stays on this machine (a unix socket, or a loopback host)."""
+    proto, _, address = endpoint.partition("/")
+    if proto == "unixsock-stream":
+        return True
+    host = address.split("#", 1)[0].rsplit(":", 1)[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def _scene_block_problems(scene: SceneSection) -> list[Problem]:

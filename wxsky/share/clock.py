@@ -9,6 +9,14 @@ come back, a tick's arrival stands in for one (its one-way delay taken as zero: 
 machine or a LAN, well under a millisecond).
 
 Sim time at local monotonic t: tick.time + rate * (t + offset - tick.master_mono).
+
+Nothing on the bus is trusted to move the clock far (issue 40: a forged tick with
+`master_mono_s = 1e12` ended a channel with an OverflowError). A tick whose monotonic reading
+is more than MAX_TICK_AHEAD_S ahead of, or MAX_TICK_BEHIND_S behind, the master's clock as
+estimated is dropped; a pong that would move the offset by more than MAX_OFFSET_STEP_S is
+dropped, unless OFFSET_OUTVOTE pongs in a row agree with each other against the estimate (the
+estimate was the odd one out); and a time computed from all this is clamped into the clock's
+range (`weather.state.EARLIEST_UTC`..`LATEST_UTC`).
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 
 from wxsky.share.messages import ClockTick
+from wxsky.weather.state import EARLIEST_UTC, LATEST_UTC
 
 PING_MEMORY = 16  # round trips kept for the clock filter
 PING_EVERY_S = 0.5
@@ -27,6 +36,15 @@ PING_EVERY_S = 0.5
 GOOD_RTT_S = 0.004
 PING_FAST_S = 0.05
 FAST_PINGS = 64
+# The bounds on what one message may move. A master's tick is read at its frame's start and
+# arrives a bus trip later (p99 75 ms here, docs/channels.md): one from more than a second in
+# the master's future is not the master's. One from further back than the silence limit is
+# stale. The two monotonic clocks drift by parts per million: a second is generous.
+MAX_TICK_AHEAD_S = 1.0
+MAX_TICK_BEHIND_S = 5.0
+MAX_OFFSET_STEP_S = 1.0
+OFFSET_OUTVOTE = 3
+_LATEST_S = (LATEST_UTC - EARLIEST_UTC).total_seconds()
 
 
 @dataclass(frozen=True)
@@ -52,15 +70,37 @@ class ClockFollower:
         self._tick_offset_s: float | None = None  # from the latest tick's arrival
         self._master_id: str | None = None
         self._fast_left = FAST_PINGS  # quick pings left before a good round trip
+        self._outvoters: list[Ping] = []  # pongs in a row that disagree with the estimate
 
-    def ping(self, sent_s: float, master_s: float, received_s: float, master_id: str) -> None:
+    def ping(self, sent_s: float, master_s: float, received_s: float, master_id: str) -> str | None:
         """A round trip: sent and received on the local monotonic clock, and the master's
-        monotonic reading in its answer. Pings of an earlier master run are forgotten."""
+        monotonic reading in its answer. Pings of an earlier master run are forgotten.
+        Returns why the ping was dropped, or None when it was taken."""
         if received_s < sent_s:
-            return
+            return "a pong received before its ping was sent"
         if master_id != self._master_id:
             self._restart(master_id)
-        self._pings.append(Ping(sent_s, master_s, received_s))
+        ping = Ping(sent_s, master_s, received_s)
+        best = self.offset_s if self._pings else None
+        if best is not None and abs(ping.offset_s - best) > MAX_OFFSET_STEP_S:
+            self._outvoters.append(ping)
+            agree = all(
+                abs(p.offset_s - ping.offset_s) <= MAX_OFFSET_STEP_S for p in self._outvoters
+            )
+            if not agree:
+                self._outvoters = [ping]
+            if len(self._outvoters) < OFFSET_OUTVOTE:
+                return (
+                    f"a pong that would move the clock offset by {ping.offset_s - best:+.3g} s "
+                    f"(at most {MAX_OFFSET_STEP_S:g} s)"
+                )
+            self._pings.clear()  # outvoted: the estimate was the odd one out
+            self._pings.extend(self._outvoters)
+            self._outvoters = []
+            return None
+        self._outvoters = []
+        self._pings.append(ping)
+        return None
 
     def wait_before_ping_s(self) -> float:
         """How long the pinger waits before its next ping (each call is one ping's wait):
@@ -72,13 +112,30 @@ class ClockFollower:
             return PING_FAST_S
         return PING_EVERY_S
 
-    def tick(self, tick: ClockTick, received_s: float) -> None:
+    def tick(self, tick: ClockTick, received_s: float) -> str | None:
+        """Take a tick that arrived at local `received_s`. Returns why it was dropped (too far
+        from the master's clock as estimated), or None (taken, or an older one overtaken)."""
         if tick.master_id != self._master_id:
             self._restart(tick.master_id)
-        if self._tick is not None and tick.master_mono_s < self._tick.master_mono_s:
-            return  # an older tick overtaken by a newer one
+        offset = self.offset_s
+        if offset is not None:
+            master_now_s = received_s + offset
+            ahead_s = tick.master_mono_s - master_now_s
+            if ahead_s > MAX_TICK_AHEAD_S or ahead_s < -MAX_TICK_BEHIND_S:
+                if self._pings or self._tick is None:
+                    return (
+                        f"a tick {ahead_s:+.3g} s from the master's clock as estimated "
+                        f"(at most {MAX_TICK_AHEAD_S:g} s ahead, {MAX_TICK_BEHIND_S:g} s behind)"
+                    )
+                # No ping yet: the estimate is the latest tick's own arrival, which may be the
+                # bad one; a tick far from it replaces it (the first pong decides).
+            elif self._tick is not None and tick.master_mono_s < self._tick.master_mono_s:
+                latest_ahead_s = self._tick.master_mono_s - master_now_s
+                if latest_ahead_s <= MAX_TICK_AHEAD_S:
+                    return None  # an older tick overtaken by a newer one
         self._tick = tick
         self._tick_offset_s = tick.master_mono_s - received_s
+        return None
 
     @property
     def offset_s(self) -> float | None:
@@ -100,12 +157,16 @@ class ClockFollower:
         tick, offset = self._tick, self.offset_s
         if tick is None or offset is None:
             return None
-        ahead_s = local_s + offset - tick.master_mono_s
-        return tick.time_utc + timedelta(seconds=tick.rate * ahead_s)
+        ahead_s = tick.rate * (local_s + offset - tick.master_mono_s)
+        # Clamped: no tick, offset or rate may carry the time out of the clock's range.
+        ahead_s = max(-_LATEST_S, min(_LATEST_S, ahead_s))
+        when = tick.time_utc + timedelta(seconds=ahead_s)
+        return max(EARLIEST_UTC, min(LATEST_UTC - timedelta(microseconds=1), when))
 
     def _restart(self, master_id: str) -> None:
         self._master_id = master_id
         self._pings.clear()
         self._fast_left = FAST_PINGS
+        self._outvoters = []
         self._tick = None
         self._tick_offset_s = None

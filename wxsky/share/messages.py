@@ -25,7 +25,13 @@ from wxsky.errors import ProtocolError
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import Drift
 from wxsky.scene.tower_field import LayerEpoch
-from wxsky.weather.state import WeatherState, weather_from_dict, weather_to_dict
+from wxsky.weather.state import (
+    EARLIEST_UTC,
+    LATEST_UTC,
+    WeatherState,
+    weather_from_dict,
+    weather_to_dict,
+)
 
 SHARE_VERSION = 1
 SITE_PATTERN = r"[a-z0-9][a-z0-9_-]{0,63}"
@@ -33,7 +39,13 @@ NAME_PATTERN = r"[a-z0-9][a-z0-9_-]{0,63}"
 ROLES = ("master", "channel")
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 _MAX_LAYERS = 64  # drift entries: more than any weather holds
-_MAX_US = 253_402_300_799_000_000  # 9999-12-31T23:59:59Z
+# Every time on the bus lies in the clock's range (weather.state, issue 40): a time near the
+# end of year 9999 once killed a daemon that computed ahead of it.
+_MIN_US = (EARLIEST_UTC - _EPOCH) // timedelta(microseconds=1)
+_MAX_US = (LATEST_UTC - _EPOCH) // timedelta(microseconds=1) - 1
+# A master's monotonic reading: a clock that starts near boot; a century of uptime is plenty.
+MAX_MONO_S = 3.2e9
+SEQUENCE_MAX = 2**63 - 1
 
 
 class ShareError(ProtocolError):
@@ -125,8 +137,10 @@ def _decode_epoch(value: object, where: str) -> LayerEpoch | None:
         raise ShareError(shape)
     m = dict(zip(("set_us", "sun_elevation_deg", "cut_us", "cover_oktas"), value, strict=True))
     m["kind"] = f"state: {where}"
-    set_us = _int(m, "set_us", 0, _MAX_US)
+    set_us = _int(m, "set_us", _MIN_US, _MAX_US)
     cut_us = _int(m, "cut_us", -1, _MAX_US)
+    if 0 <= cut_us < _MIN_US:
+        raise ShareError(f"state: {where}: cut_us = {cut_us} is before {EARLIEST_UTC:%Y}")
     return LayerEpoch(
         set_utc=time_from_us(set_us),
         sun_elevation_deg=_float(m, "sun_elevation_deg", -90.0, 90.0),
@@ -139,8 +153,8 @@ def decode_state(data: object, site: str) -> SkyState:
     m = _message(data, "state", site)
     applied = _weather(m, "applied")
     target = _weather(m, "target")
-    applied = _replace_time(applied, time_from_us(_int(m, "applied_time_us", 0, _MAX_US)))
-    target = _replace_time(target, time_from_us(_int(m, "target_time_us", 0, _MAX_US)))
+    applied = _replace_time(applied, time_from_us(_int(m, "applied_time_us", _MIN_US, _MAX_US)))
+    target = _replace_time(target, time_from_us(_int(m, "target_time_us", _MIN_US, _MAX_US)))
     drift_items = _list(m, "anchor_drift", _MAX_LAYERS)
     drift = tuple(_pair(v, f"anchor_drift[{i}]") for i, v in enumerate(drift_items))
     if len(drift) != len(applied.layers):
@@ -158,11 +172,11 @@ def decode_state(data: object, site: str) -> SkyState:
     return SkyState(
         site=site,
         master_id=_text(m, "master_id", r"[0-9a-f]{8,64}"),
-        sequence=_int(m, "sequence", 0, 2**63 - 1),
-        weather_version=_int(m, "weather_version", 0, 2**63 - 1),
+        sequence=_int(m, "sequence", 0, SEQUENCE_MAX),
+        weather_version=_int(m, "weather_version", 0, SEQUENCE_MAX),
         applied=applied,
         target=target,
-        anchor_utc=time_from_us(_int(m, "anchor_us", 0, _MAX_US)),
+        anchor_utc=time_from_us(_int(m, "anchor_us", _MIN_US, _MAX_US)),
         anchor_drift=drift,
         clock_rate=_float(m, "clock_rate", 0.0, 10_000.0),
         tower_epochs=epochs,
@@ -189,10 +203,10 @@ def decode_tick(data: object, site: str) -> ClockTick:
     return ClockTick(
         site=site,
         master_id=_text(m, "master_id", r"[0-9a-f]{8,64}"),
-        master_mono_s=_float(m, "master_mono_s", 0.0, 1e12),
-        time_utc=time_from_us(_int(m, "time_us", 0, _MAX_US)),
+        master_mono_s=_float(m, "master_mono_s", 0.0, MAX_MONO_S),
+        time_utc=time_from_us(_int(m, "time_us", _MIN_US, _MAX_US)),
         rate=_float(m, "rate", 0.0, 10_000.0),
-        sequence=_int(m, "sequence", 0, 2**63 - 1),
+        sequence=_int(m, "sequence", 0, SEQUENCE_MAX),
         camera=None if camera_data is None else _camera(camera_data),
         aircraft_m=None if aircraft is None else _vec3(aircraft, "aircraft_m"),
     )
@@ -205,7 +219,7 @@ def encode_pong(site: str, master_id: str, mono_s: float) -> dict[str, Any]:
 
 def decode_pong(data: object, site: str) -> tuple[str, float]:
     m = _message(data, "pong", site)
-    return _text(m, "master_id", r"[0-9a-f]{8,64}"), _float(m, "mono_s", 0.0, 1e12)
+    return _text(m, "master_id", r"[0-9a-f]{8,64}"), _float(m, "mono_s", 0.0, MAX_MONO_S)
 
 
 def encode_health(h: Health) -> dict[str, Any]:
@@ -228,7 +242,7 @@ def decode_health(data: object, site: str) -> Health:
         role=role,
         fps=_float(m, "fps", 0.0, 100_000.0),
         lag_ms=_float(m, "lag_ms", -1e9, 1e9),
-        frames=_int(m, "frames", 0, 2**63 - 1),
+        frames=_int(m, "frames", 0, SEQUENCE_MAX),
     )
 
 
