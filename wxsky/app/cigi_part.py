@@ -2,6 +2,11 @@
 engine changes, and its CIGI weather source (`[cigi] send_to`, `--cigi-send`) fed from each
 published frame. Everything runs on the event loop.
 
+The hosts' Environmental Conditions Requests are answered after each published frame, at most
+`[cigi] requests_per_frame` of them across the listeners (the rest wait for the next frame, in
+a bounded queue), so a flood of requests costs each frame a bounded amount of work and never
+stops the frames (issue 40).
+
 What a host sets lands where the other inputs' changes land: the weather in the `cigi` slot
 of the precedence stack (`engine.apply`), the camera as `set_camera` places it (a far place
 becomes a new site), the clock as `set_time` sets it. The answers to Environmental Conditions
@@ -31,7 +36,6 @@ from wxsky.inputs.cigi_link import (
     parse_udp,
 )
 from wxsky.inputs.stats import InputStats
-from wxsky.logs import RateLimitedLog
 from wxsky.protocols.cigi import ByteOrder, Packet
 from wxsky.protocols.cigi_eye import Eye
 from wxsky.protocols.cigi_session import responses
@@ -71,14 +75,20 @@ class CigiPart(Part):
         METAR stations blended into the weather now; with `region_slots` (the most that can be
         blended) the source sends them as regions."""
         self._clock_rate = clock_rate
-        self._warn = RateLimitedLog(log)
         host = (
             parse_udp(section.host_address, "cigi.host_address") if section.host_address else None
         )
         allow = parse_networks(section.allow_from)
         self.igs = [
             CigiIg(
-                IgSettings(parse_udp(spec), host, allow, section.view_id),
+                IgSettings(
+                    parse_udp(spec),
+                    host,
+                    allow,
+                    section.view_id,
+                    section.requests_per_frame,
+                    section.max_regions,
+                ),
                 self,
             )
             for spec in dict.fromkeys((*section.listen, *listen))
@@ -93,6 +103,8 @@ class CigiPart(Part):
         self._region_slots = region_slots
         self._started = False
         self._host_frames: list[int | None] = [None] * len(self.igs)
+        self._requests_per_frame = section.requests_per_frame
+        self._first_ig = 0  # the listener served first this frame: turn about
 
     @property
     def listens(self) -> bool:
@@ -131,6 +143,7 @@ class CigiPart(Part):
         self._host_frames = [ig.last_host_frame for ig in self.igs]
 
     def after_frame(self, frame: PublishedFrame) -> None:
+        self._answer_requests()
         for ig, host_frame in zip(self.igs, self._host_frames, strict=True):
             ig.start_of_frame(frame.number, host_frame)
         now = time.monotonic()
@@ -138,6 +151,17 @@ class CigiPart(Part):
             if now - sender.sent_at >= self._send_period_s:
                 regions = self._blended() if self._region_slots else ()
                 sender.send(frame.state, self._byte_order, now, regions, self._region_slots)
+
+    def _answer_requests(self) -> None:
+        """This frame's share of the queued conditions requests: `requests_per_frame` across
+        the listeners, each in turn served first."""
+        if not self.igs:
+            return
+        budget = self._requests_per_frame
+        n = len(self.igs)
+        for k in range(n):
+            budget -= self.igs[(self._first_ig + k) % n].answer_queued(budget)
+        self._first_ig = (self._first_ig + 1) % n
 
     def status(self) -> dict[str, Any]:
         """No keys of its own: brings its inputs' detail up to date."""
@@ -162,7 +186,7 @@ class CigiPart(Part):
             self._engine.settle()
         self._publish_target()
 
-    def cigi_camera(self, eye: Eye) -> None:
+    def cigi_camera(self, eye: Eye) -> str | None:
         params: dict[str, Any] = {
             "lat_deg": eye.lat_deg,
             "lon_deg": eye.lon_deg,
@@ -176,15 +200,15 @@ class CigiPart(Part):
         try:
             self._set_camera(params)
         except WxskyError as exc:
-            self._warn.warning("camera", f"CIGI ownship not placed: {exc}")
-            return
+            return str(exc)  # the listener counts it (`camera_refused`) and logs it
         if eye.offset_m < EXTERNAL_VIEW_M:
             # The pilot's eye: nothing of the aircraft to draw between clouds, and a split
             # would cost a near_front layer every frame for nothing.
             self._engine.set_aircraft(None)
-            return
+            return None
         obs = self._engine.state.observer
         self._engine.set_aircraft(enu_from_geodetic(obs.lat_deg, obs.lon_deg, *eye.ownship))
+        return None
 
     def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None:
         if time_utc is not None:
