@@ -376,3 +376,36 @@ def test_blended_stations_sent_as_regions_give_each_station_its_own_clouds() -> 
     later = host_message(blended, SourceFrame(2), (zurich,), region_slots=3)
     gone = absorb(got.state, decode_datagram(encode_datagram(later)))
     assert sorted(gone.state.regions) == [1]
+
+
+def _region_packet(rid: int, state: int = 1) -> Packet:
+    return make(
+        "environmental_region_control",
+        region_id=rid,
+        region_state=state,
+        lat_deg=ZRH[0],
+        lon_deg=ZRH[1],
+        size_x_m=1000.0,
+        size_y_m=1000.0,
+    )
+
+
+def test_regions_past_the_cap_go_least_recently_touched_first_with_their_layers() -> None:
+    """Issue 40: a host's regions were kept without end."""
+    first = make("ig_control", ig_mode=1, host_frame_number=7)
+
+    def go(state: HostState, *packets: Packet) -> Absorbed:
+        return absorb(state, decode_datagram(encode_datagram([first, *packets])), 0, 3)
+
+    s = go(HostState(), *(_region_packet(r) for r in (1, 2, 3))).state
+    s = go(s, layer(1, scope=1, entity_or_region_id=1)).state  # region 1 touched again
+    got = go(s, _region_packet(4))
+    assert got.evicted == 1 and set(got.state.regions) == {1, 3, 4}
+    # A layer with no region of its own takes a place too; region 3 goes, then 1 and its layer.
+    got = go(got.state, layer(2, scope=1, entity_or_region_id=9), _region_packet(5))
+    assert got.evicted == 2 and set(got.state.regions) == {4, 5}
+    assert set(got.state.layers) == {(9, 2)} and got.weather_changed
+    # Destroyed regions free their places and their layers at once.
+    got = go(got.state, _region_packet(5, state=2), layer(2, scope=1, entity_or_region_id=9))
+    assert got.evicted == 0 and set(got.state.regions) == {4}
+    assert got.state.region_order == (4, 9)

@@ -41,7 +41,7 @@ from wxsky.protocols.cigi_eye import Eye
 from wxsky.protocols.cigi_session import responses
 from wxsky.protocols.cigi_source import SourceFrame, host_message
 from wxsky.protocols.cigi_weather import answer_layer_ids
-from wxsky.scene.conditions import conditions_at
+from wxsky.scene.conditions import conditions_many
 from wxsky.settings.config import CigiSection
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
 from wxsky.weather.stations import StationWeather
@@ -51,6 +51,10 @@ log = logging.getLogger("wxsky.app.cigi")
 # A view this far or farther from the ownship looks at it from outside (a chase or tower
 # view): the near clouds are split at the ownship so the host can draw it between them.
 EXTERNAL_VIEW_M = 10.0
+# The share of a daemon tick the conditions answers may take after a frame: the frame loop
+# sleeps out the rest of the tick, so on a renderer that fills it the rate falls at most by
+# this much (issue 40: a host asking 20 a frame keeps 0.9 of the rate).
+ANSWER_TICK_SHARE = 0.1
 
 
 class CigiPart(Part):
@@ -70,6 +74,7 @@ class CigiPart(Part):
         send_to: Sequence[str] = (),
         blended: Callable[[], Sequence[StationWeather]] = tuple,
         region_slots: int = 0,
+        tick_hz: float = 30.0,
     ) -> None:
         """`listen`, `send_to`: the command line's, besides the section's. `blended` gives the
         METAR stations blended into the weather now; with `region_slots` (the most that can be
@@ -104,6 +109,7 @@ class CigiPart(Part):
         self._started = False
         self._host_frames: list[int | None] = [None] * len(self.igs)
         self._requests_per_frame = section.requests_per_frame
+        self._answer_budget_s = ANSWER_TICK_SHARE / tick_hz
         self._first_ig = 0  # the listener served first this frame: turn about
 
     @property
@@ -154,13 +160,15 @@ class CigiPart(Part):
 
     def _answer_requests(self) -> None:
         """This frame's share of the queued conditions requests: `requests_per_frame` across
-        the listeners, each in turn served first."""
+        the listeners, each in turn served first, and no more once ANSWER_TICK_SHARE of a
+        tick is spent (a batch begun is finished)."""
         if not self.igs:
             return
         budget = self._requests_per_frame
+        deadline_s = time.perf_counter() + self._answer_budget_s
         n = len(self.igs)
         for k in range(n):
-            budget -= self.igs[(self._first_ig + k) % n].answer_queued(budget)
+            budget -= self.igs[(self._first_ig + k) % n].answer_queued(budget, deadline_s)
         self._first_ig = (self._first_ig + 1) % n
 
     def status(self) -> dict[str, Any]:
@@ -222,16 +230,19 @@ class CigiPart(Part):
         state, drift = engine.state, engine.drift
         ids = answer_layer_ids(state.layers, engine.target.layers, [ig.state for ig in self.igs])
         obs = state.observer
-        out: list[Packet] = []
-        for request in requests:
-            point = enu_from_geodetic(
+        points = [
+            enu_from_geodetic(
                 obs.lat_deg,
                 obs.lon_deg,
                 float(request["lat_deg"]),
                 float(request["lon_deg"]),
                 float(request["alt_m"]),
             )
-            out += responses(request, conditions_at(state, drift, point), ids)
+            for request in requests
+        ]
+        out: list[Packet] = []
+        for request, weather in zip(requests, conditions_many(state, drift, points), strict=True):
+            out += responses(request, weather, ids)
         return out
 
 
@@ -255,6 +266,7 @@ class _Sender:
         now: float,
         stations: Sequence[StationWeather] = (),
         region_slots: int = 0,
+        tick_hz: float = 30.0,
     ) -> None:
         self.frame = self.frame.next()
         message = host_message(state, self.frame, stations, region_slots)

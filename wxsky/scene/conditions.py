@@ -9,7 +9,7 @@ sees, and a point above or below every layer is never in cloud. Pure.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, MutableMapping, Sequence
 from types import MappingProxyType
 
 import numpy as np
@@ -49,11 +49,28 @@ CLEAR_AIR_MAX_HUMIDITY_PCT = 95.0
 FOG_VISIBILITY_M = 1000.0
 
 
+# A batch's blocks, each drifted block's sprites by (layer index, block x, block y).
+BlockMemo = MutableMapping[tuple[int, int, int], SpriteBatch]
+
+
+def conditions_many(
+    state: WeatherState, drift: Drift, points_m: Sequence[tuple[float, float, float]]
+) -> list[PointWeather]:
+    """`conditions_at` for each point, the drifted blocks looked up once for the batch: a
+    host's aircraft share their blocks, and the lookup is most of an answer's cost."""
+    memo: BlockMemo = {}
+    return [conditions_at(state, drift, point, memo) for point in points_m]
+
+
 def conditions_at(
-    state: WeatherState, drift: Drift, point_m: tuple[float, float, float]
+    state: WeatherState,
+    drift: Drift,
+    point_m: tuple[float, float, float],
+    memo: BlockMemo | None = None,
 ) -> PointWeather:
     """The weather at `point_m` (east, north, alt MSL in the scene frame) with the clouds
-    of `state` drifted by `drift`."""
+    of `state` drifted by `drift`. `memo`: drifted blocks already looked up for this state
+    and drift (`conditions_many`), added to."""
     east, north, alt = point_m
     temperature, humidity, pressure = air_at(state, alt)
     keys = layer_keys(state.layers)
@@ -71,10 +88,14 @@ def conditions_at(
             water.append(0.0)
             continue
         qx, qy = east - dx, north - dy
-        parts = [
-            layer_block(bx, by, key, layer, state.seed, (dx, dy))
-            for bx, by in blocks_within(qx, qy, 0.0, SPRITE_REACH_M)
-        ]
+        parts = []
+        for bx, by in blocks_within(qx, qy, 0.0, SPRITE_REACH_M):
+            found = memo.get((i, bx, by)) if memo is not None else None
+            if found is None:
+                found = layer_block(bx, by, key, layer, state.seed, (dx, dy))
+                if memo is not None:
+                    memo[(i, bx, by)] = found
+            parts.append(found)
         batch = SpriteBatch.concat(parts)
         depth = float(sprite_depths(batch, point_m, spans).max()) if len(batch) else 0.0
         water.append(CLOUD_WATER_GPM3[layer.type] * min(1.0, max(0.0, depth)))
