@@ -5,6 +5,7 @@ the real encoder and decoder, in both byte orders."""
 from __future__ import annotations
 
 import math
+import random
 from datetime import UTC, datetime
 
 import pytest
@@ -12,7 +13,7 @@ import pytest
 from wxsky.protocols.cigi import Packet, decode_datagram, encode_datagram, make
 from wxsky.protocols.cigi_eye import eye
 from wxsky.protocols.cigi_session import Absorbed, HostState, Region, absorb, responses
-from wxsky.protocols.cigi_weather import region_weight, weather_patch
+from wxsky.protocols.cigi_weather import _beyond, region_weight, weather_patch
 from wxsky.weather.atmosphere import PointWeather
 from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
 from wxsky.weather.state import CloudType, PrecipKind, Source
@@ -409,3 +410,38 @@ def test_regions_past_the_cap_go_least_recently_touched_first_with_their_layers(
     got = go(got.state, _region_packet(5, state=2), layer(2, scope=1, entity_or_region_id=9))
     assert got.evicted == 0 and set(got.state.regions) == {4}
     assert got.state.region_order == (4, 9)
+
+
+def test_the_quick_reach_check_never_leaves_out_a_region_that_holds() -> None:
+    """Issue 40: `_region_at` skips regions surely out of reach before weighing them; a place
+    any region weighs more than 0 at is never skipped, near the poles and the antimeridian too."""
+    rng = random.Random(40)
+    held = 0
+    for _ in range(20_000):
+        lat = rng.choice([rng.uniform(-89.0, 89.0), rng.uniform(80.0, 89.9), 0.0])
+        lon = rng.choice([rng.uniform(-180.0, 180.0), 179.99, -179.99])
+        sx, sy = rng.uniform(0.0, 200_000.0), rng.uniform(0.0, 200_000.0)
+        region = Region(
+            1,
+            True,
+            lat,
+            lon,
+            sx,
+            sy,
+            rng.uniform(0.0, 5000.0),
+            rng.uniform(-180.0, 180.0),
+            rng.uniform(0.0, 50_000.0),
+        )
+        reach = sx + sy + region.transition_perimeter_m
+        east, north = rng.uniform(-reach, reach), rng.uniform(-reach, reach)
+        plat, plon = geodetic_from_enu(lat, lon, east, north)
+        if not -90.0 < plat < 90.0:
+            continue
+        if region_weight(region, plat, plon) > 0.0:
+            held += 1
+            assert not _beyond(region, plat, plon, math.cos(math.radians(plat))), (
+                region,
+                plat,
+                plon,
+            )
+    assert held > 1000
