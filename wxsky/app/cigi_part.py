@@ -51,10 +51,13 @@ log = logging.getLogger("wxsky.app.cigi")
 # A view this far or farther from the ownship looks at it from outside (a chase or tower
 # view): the near clouds are split at the ownship so the host can draw it between them.
 EXTERNAL_VIEW_M = 10.0
-# The share of a daemon tick the conditions answers may take after a frame: the frame loop
-# sleeps out the rest of the tick, so on a renderer that fills it the rate falls at most by
-# this much (issue 40: a host asking 20 a frame keeps 0.9 of the rate).
-ANSWER_TICK_SHARE = 0.1
+# The time the conditions answers may take after a frame, in shares of a daemon tick: what the
+# frame left of its tick (the loop would sleep it out; the frame's start plus 0.9 of a tick),
+# at least ANSWER_TICK_MIN, so on a renderer that fills its ticks the rate falls by at most
+# that (issue 40: a host asking 20 a frame keeps 0.9 of the rate), and at most
+# ANSWER_TICK_MAX, so the loop's other inputs wait no longer than that for it.
+ANSWER_TICK_MIN = 0.1
+ANSWER_TICK_MAX = 0.5
 
 
 class CigiPart(Part):
@@ -109,7 +112,7 @@ class CigiPart(Part):
         self._started = False
         self._host_frames: list[int | None] = [None] * len(self.igs)
         self._requests_per_frame = section.requests_per_frame
-        self._answer_budget_s = ANSWER_TICK_SHARE / tick_hz
+        self._tick_s = 1.0 / tick_hz
         self._first_ig = 0  # the listener served first this frame: turn about
 
     @property
@@ -149,7 +152,7 @@ class CigiPart(Part):
         self._host_frames = [ig.last_host_frame for ig in self.igs]
 
     def after_frame(self, frame: PublishedFrame) -> None:
-        self._answer_requests()
+        self._answer_requests(frame.started_s)
         for ig, host_frame in zip(self.igs, self._host_frames, strict=True):
             ig.start_of_frame(frame.number, host_frame)
         now = time.monotonic()
@@ -158,14 +161,18 @@ class CigiPart(Part):
                 regions = self._blended() if self._region_slots else ()
                 sender.send(frame.state, self._byte_order, now, regions, self._region_slots)
 
-    def _answer_requests(self) -> None:
+    def _answer_requests(self, frame_started_s: float) -> None:
         """This frame's share of the queued conditions requests: `requests_per_frame` across
-        the listeners, each in turn served first, and no more once ANSWER_TICK_SHARE of a
-        tick is spent (a batch begun is finished)."""
+        the listeners, each in turn served first, and none begun once the frame's time for
+        them (ANSWER_TICK_MIN..MAX) is spent (a batch begun is finished)."""
         if not self.igs:
             return
         budget = self._requests_per_frame
-        deadline_s = time.perf_counter() + self._answer_budget_s
+        now = time.monotonic()
+        tick = self._tick_s
+        idle_s = frame_started_s + (1.0 - ANSWER_TICK_MIN) * tick - now
+        allowed_s = min(ANSWER_TICK_MAX * tick, max(ANSWER_TICK_MIN * tick, idle_s))
+        deadline_s = time.perf_counter() + allowed_s
         n = len(self.igs)
         for k in range(n):
             budget -= self.igs[(self._first_ig + k) % n].answer_queued(budget, deadline_s)
