@@ -22,6 +22,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
@@ -41,7 +42,8 @@ from wxsky.protocols.cigi_eye import Eye
 from wxsky.protocols.cigi_session import responses
 from wxsky.protocols.cigi_source import SourceFrame, host_message
 from wxsky.protocols.cigi_weather import answer_layer_ids
-from wxsky.scene.conditions import conditions_many
+from wxsky.scene.conditions import BlockMemo, conditions_many
+from wxsky.scene.gather import Drift
 from wxsky.settings.config import CigiSection
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
 from wxsky.weather.stations import StationWeather
@@ -114,6 +116,8 @@ class CigiPart(Part):
         self._requests_per_frame = section.requests_per_frame
         self._tick_s = 1.0 / tick_hz
         self._first_ig = 0  # the listener served first this frame: turn about
+        self._answering = False  # a frame's requests are being answered
+        self._batch: _Batch | None = None  # what they share meanwhile
 
     @property
     def listens(self) -> bool:
@@ -174,8 +178,12 @@ class CigiPart(Part):
         allowed_s = min(ANSWER_TICK_MAX * tick, max(ANSWER_TICK_MIN * tick, idle_s))
         deadline_s = time.perf_counter() + allowed_s
         n = len(self.igs)
-        for k in range(n):
-            budget -= self.igs[(self._first_ig + k) % n].answer_queued(budget, deadline_s)
+        self._answering = True
+        try:
+            for k in range(n):
+                budget -= self.igs[(self._first_ig + k) % n].answer_queued(budget, deadline_s)
+        finally:
+            self._answering, self._batch = False, None
         self._first_ig = (self._first_ig + 1) % n
 
     def status(self) -> dict[str, Any]:
@@ -235,7 +243,17 @@ class CigiPart(Part):
     def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]:
         engine = self._engine
         state, drift = engine.state, engine.drift
-        ids = answer_layer_ids(state.layers, engine.target.layers, [ig.state for ig in self.igs])
+        # Within one frame's answering the weather stands still: its layer ids and drifted
+        # blocks are worked out once for all the frame's requests.
+        batch = self._batch
+        if batch is None or batch.state is not state or batch.drift is not drift:
+            ids = answer_layer_ids(
+                state.layers, engine.target.layers, [ig.state for ig in self.igs]
+            )
+            batch = _Batch(state, drift, ids, BlockMemo())
+            if self._answering:
+                self._batch = batch
+        ids = batch.ids
         obs = state.observer
         points = [
             enu_from_geodetic(
@@ -248,9 +266,20 @@ class CigiPart(Part):
             for request in requests
         ]
         out: list[Packet] = []
-        for request, weather in zip(requests, conditions_many(state, drift, points), strict=True):
+        answered = conditions_many(state, drift, points, batch.memo)
+        for request, weather in zip(requests, answered, strict=True):
             out += responses(request, weather, ids)
         return out
+
+
+@dataclass
+class _Batch:
+    """What one frame's answers share: the weather they read, its layer ids, its blocks."""
+
+    state: WeatherState
+    drift: Drift
+    ids: tuple[int, ...]
+    memo: BlockMemo
 
 
 class _Sender:

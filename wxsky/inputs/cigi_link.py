@@ -57,9 +57,6 @@ MAX_PENDING_RESPONSES = 256  # answers waiting for the next frame; more are drop
 # Conditions requests answered after each frame by default (`[cigi] requests_per_frame`): a
 # 60 Hz host asking for 20 aircraft a frame sends 40 a frame of the daemon's 30.
 REQUESTS_PER_FRAME = 64
-# Requests answered together (their blocks looked up once); the time budget is checked
-# between batches.
-ANSWER_BATCH = 16
 # Requests waiting to be answered, in frames' worth: more are dropped (counted per request)
 # rather than answered ever later.
 QUEUED_FRAMES = 4
@@ -281,19 +278,18 @@ class CigiIg(asyncio.DatagramProtocol):
         return len(self._requests)
 
     def answer_queued(self, budget: int, deadline_s: float = math.inf) -> int:
-        """Answer up to `budget` of the queued conditions requests, oldest first, in batches
-        of ANSWER_BATCH, starting no batch after `deadline_s` (`time.perf_counter()`) but
-        always the first; the answers go with the next Start of Frame. Returns how many
-        were answered."""
+        """Answer up to `budget` of the queued conditions requests, oldest first, starting
+        none after `deadline_s` (`time.perf_counter()`) but always the first; the answers go
+        with the next Start of Frame. Returns how many were answered. One at a time, so the
+        deadline is overrun by one answer at most (a point far from the sky on show makes
+        its blocks: milliseconds)."""
         done = 0
         while done < budget and self._requests:
             if done and time.perf_counter() >= deadline_s:
                 break
-            n = min(ANSWER_BATCH, budget - done, len(self._requests))
-            batch = [self._requests.popleft() for _ in range(n)]
-            answers = self._handler.cigi_answers(batch)
-            done += n
-            self._requests_answered += n
+            answers = self._handler.cigi_answers([self._requests.popleft()])
+            done += 1
+            self._requests_answered += 1
             room = max(0, MAX_PENDING_RESPONSES - len(self._pending))
             if len(answers) > room:
                 self._drop_many("responses_full", len(answers) - room, "answers left out")

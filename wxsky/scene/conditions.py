@@ -63,11 +63,15 @@ class BlockMemo:
 
 
 def conditions_many(
-    state: WeatherState, drift: Drift, points_m: Sequence[tuple[float, float, float]]
+    state: WeatherState,
+    drift: Drift,
+    points_m: Sequence[tuple[float, float, float]],
+    memo: BlockMemo | None = None,
 ) -> list[PointWeather]:
     """`conditions_at` for each point, the drifted blocks looked up once for the batch: a
-    host's aircraft share their blocks, and the lookup is most of an answer's cost."""
-    memo = BlockMemo()
+    host's aircraft share their blocks, and the lookup is most of an answer's cost. `memo`:
+    one to go on with, of the same state and drift."""
+    memo = BlockMemo() if memo is None else memo
     return [conditions_at(state, drift, point, memo) for point in points_m]
 
 
