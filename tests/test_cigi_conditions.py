@@ -9,12 +9,16 @@ import numpy as np
 import pytest
 
 from wxsky.scene.camera import Camera
+from wxsky.scene.clouds import layer_keys
 from wxsky.scene.conditions import (
     CLEAR_AIR_MAX_HUMIDITY_PCT,
     FOG_VISIBILITY_M,
+    _drifted,
+    _placed_block,
     conditions_at,
     conditions_many,
 )
+from wxsky.scene.formation import layer_block
 from wxsky.scene.gather import Drift, NearRing, zero_drift
 from wxsky.scene.in_cloud import INSIDE_FRAC
 from wxsky.scene.layout import FrameScene, SceneSettings, build_frame
@@ -139,3 +143,16 @@ def test_a_batch_of_points_gets_each_points_own_answer() -> None:
         )
     ]
     assert conditions_many(state, drift, points) == [conditions_at(state, drift, p) for p in points]
+
+
+def test_a_block_kept_at_its_height_and_drifted_is_the_frames_own() -> None:
+    """Issue 40: the answers keep each layer's blocks across frames and add the drift after;
+    the sprites are the very ones `layer_block` places with the drift."""
+    state, _ = preset_state("thunderstorm")
+    for layer, key in zip(state.layers, layer_keys(state.layers), strict=True):
+        for bx, by in ((0, 0), (-1, 2), (3, -4)):
+            want = layer_block(bx, by, key, layer, state.seed, DRIFT_M)
+            got = _drifted(_placed_block(bx, by, key, layer, state.seed), DRIFT_M)
+            assert np.array_equal(got.centre_m, want.centre_m)
+            assert np.array_equal(got.slab_m, want.slab_m, equal_nan=True)
+            assert np.array_equal(got.opacity, want.opacity)

@@ -9,6 +9,7 @@ sees, and a point above or below every layer is never in cloud. Pure.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -44,6 +45,9 @@ CLOUD_WATER_GPM3: Mapping[CloudType, float] = MappingProxyType(
 # sprites are under 1.5 km across), so the blocks within it of the point hold every sprite
 # the point can be in.
 SPRITE_REACH_M = 1500.0
+# Blocks kept at their height across frames for the answers (8-22 KiB each: 3 MiB at most): a
+# host's aircraft read the same blocks frame after frame.
+PLACED_BLOCKS_KEPT = 128
 # Clear air is not saturated: the lapse rates alone would bring the dew point to the
 # temperature a few kilometres up. Out of cloud and out of fog the humidity stays below this.
 CLEAR_AIR_MAX_HUMIDITY_PCT = 95.0
@@ -147,7 +151,22 @@ def _block(
 ) -> SpriteBatch:
     found = memo.blocks.get((i, bx, by)) if memo is not None else None
     if found is None:
-        found = layer_block(bx, by, key, layer, seed, drift_m)
+        found = _drifted(_placed_block(bx, by, key, layer, seed), drift_m)
         if memo is not None:
             memo.blocks[(i, bx, by)] = found
     return found
+
+
+@functools.lru_cache(maxsize=PLACED_BLOCKS_KEPT)
+def _placed_block(bx: int, by: int, key: int, layer: CloudLayer, seed: int) -> SpriteBatch:
+    """A block of a layer at its height, not drifted: the same from frame to frame while
+    the layer stands (the drift moves every frame with the wind)."""
+    return layer_block(bx, by, key, layer, seed)
+
+
+def _drifted(batch: SpriteBatch, drift_m: tuple[float, float]) -> SpriteBatch:
+    """`layer_block`'s drift added after its height: the same sums, adding 0.0 being exact
+    (x + dx, y + dy, z + base either way)."""
+    if not len(batch) or drift_m == (0.0, 0.0):
+        return batch
+    return batch.with_centres(batch.centre_m + np.array((drift_m[0], drift_m[1], 0.0)))
