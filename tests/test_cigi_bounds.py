@@ -7,16 +7,20 @@ asserted: the frames' own numbers show the frames went on."""
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from datetime import datetime
 from typing import Any
 
 import pytest
 from daemon_harness import HANG_S, RunningDaemon, running_daemon
 
-from wxsky.inputs.cigi_link import CigiHostSocket
+from wxsky.inputs.cigi_link import CigiHostSocket, CigiIg, IgSettings
 from wxsky.protocols.cigi import Packet, encode_datagram, make
+from wxsky.protocols.cigi_eye import Eye
+from wxsky.weather.state import WeatherPatch
 
 LSZH = (47.4647, 8.5492)
 REQUESTS_PER_FRAME = 64  # [cigi] requests_per_frame's default
@@ -233,3 +237,57 @@ def test_an_ownship_the_camera_refuses_is_counted(daemon: RunningDaemon) -> None
     assert refused == 1
     assert after["errors"] > before["errors"]
     assert "ownship not placed" in after["last_error"]
+
+
+class _Answers:
+    """The daemon's side of an in-process listener: one request id is a wxsky defect."""
+
+    def cigi_weather(self, patch: WeatherPatch) -> None:
+        pass
+
+    def cigi_heard(self) -> None:
+        pass
+
+    def cigi_camera(self, eye: Eye) -> str | None:
+        return None
+
+    def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None:
+        pass
+
+    def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]:
+        if any(r["request_id"] == 13 for r in requests):
+            raise RuntimeError("a defect")
+        return [make("weather_conditions_response", request_id=r["request_id"]) for r in requests]
+
+
+def test_answering_is_bounded_per_call_and_a_defect_in_one_answer_is_counted() -> None:
+    """The queue a listener keeps, on a real socket in this process: requests wait until
+    the daemon asks for answers (after a frame), at most as many as it asks; an answer that
+    raises is counted as `internal_error` and the others still go."""
+
+    async def run() -> tuple[list[int], dict[str, Any]]:
+        ig = CigiIg(IgSettings(("127.0.0.1", 0)), _Answers())
+        await ig.start()
+        try:
+            with CigiHostSocket(("127.0.0.1", ig.port)) as host:
+                host.send(
+                    [
+                        make("ig_control", ig_mode=1, host_frame_number=1),
+                        *map(request, (12, 13, 14)),
+                    ]
+                )
+                for _ in range(int(HANG_S / 0.01)):
+                    await asyncio.sleep(0.01)
+                    if ig.stats.messages:
+                        break
+                waiting = [ig.queued_requests]
+                waiting.append(ig.answer_queued(2))  # 12, then 13 raises
+                waiting.append(ig.answer_queued(5))  # 14: what is left
+                waiting.append(ig.queued_requests)
+            return waiting, ig.detail()
+        finally:
+            ig.close()
+
+    waiting, detail = asyncio.run(run())
+    assert waiting == [3, 2, 1, 0]
+    assert detail["requests_answered"] == 2 and detail["dropped"] == {"internal_error": 1}

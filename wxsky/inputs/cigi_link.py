@@ -287,8 +287,14 @@ class CigiIg(asyncio.DatagramProtocol):
         while done < budget and self._requests:
             if done and time.perf_counter() >= deadline_s:
                 break
-            answers = self._handler.cigi_answers([self._requests.popleft()])
+            request = self._requests.popleft()
             done += 1
+            try:
+                answers = self._handler.cigi_answers([request])
+            except Exception as exc:  # a wxsky defect: a host's request must not end the daemon
+                log.debug("CIGI conditions request %r", request, exc_info=True)
+                self._drop("internal_error", f"conditions request: {exc!r}")
+                continue
             self._requests_answered += 1
             room = max(0, MAX_PENDING_RESPONSES - len(self._pending))
             if len(answers) > room:
