@@ -302,7 +302,6 @@ class _Sender:
         now: float,
         stations: Sequence[StationWeather] = (),
         region_slots: int = 0,
-        tick_hz: float = 30.0,
     ) -> None:
         self.frame = self.frame.next()
         message = host_message(state, self.frame, stations, region_slots)

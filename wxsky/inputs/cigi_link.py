@@ -13,6 +13,14 @@ by one), and the daemon answers at most `[cigi] requests_per_frame` of them afte
 (`answer_queued`), the rest after the next; it stops early once the frame's share of time
 for answers is spent (an answer far from the sky on show makes its cloud blocks, ~2.5 ms
 each on a CPU). The host's regions are capped (`max_regions`).
+
+`CigiHostSocket` is the other end: wxsky (or the host emulator, or a test) as a CIGI host
+sending to an IG and reading its answers; `wxsky cigi send` and the daemon's `[cigi] send_to`
+use it.
+
+Bad input never raises out of here: each dropped packet is counted by reason in the input's
+status (`protocols.cigi.REASONS`, plus `not_allowed` and the weather checks' `out_of_range`),
+logged rate-limited, and the daemon goes on with the last good state.
 """
 
 from __future__ import annotations
