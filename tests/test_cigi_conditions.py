@@ -9,7 +9,16 @@ import numpy as np
 import pytest
 
 from wxsky.scene.camera import Camera
-from wxsky.scene.conditions import CLEAR_AIR_MAX_HUMIDITY_PCT, FOG_VISIBILITY_M, conditions_at
+from wxsky.scene.clouds import layer_keys
+from wxsky.scene.conditions import (
+    CLEAR_AIR_MAX_HUMIDITY_PCT,
+    FOG_VISIBILITY_M,
+    _drifted,
+    _placed_block,
+    conditions_at,
+    conditions_many,
+)
+from wxsky.scene.formation import layer_block
 from wxsky.scene.gather import Drift, NearRing, zero_drift
 from wxsky.scene.in_cloud import INSIDE_FRAC
 from wxsky.scene.layout import FrameScene, SceneSettings, build_frame
@@ -118,3 +127,32 @@ def test_a_point_in_a_drawn_cloud_is_in_cloud_and_agrees_with_the_frame(name: st
                 assert got.in_cloud and got.humidity_pct == 100.0, (name, point)
                 assert max(got.cloud_water_gpm3) > 0.0
     assert inside >= len(picks)
+
+
+def test_a_batch_of_points_gets_each_points_own_answer() -> None:
+    """Issue 40: a batch looks each drifted block up once; the answers are the points' own."""
+    state, drift = preset_state("thunderstorm")
+    rng = np.random.default_rng(40)
+    points = [
+        (float(e), float(n), float(a))
+        for e, n, a in zip(
+            rng.uniform(-9000.0, 9000.0, 30),
+            rng.uniform(-9000.0, 9000.0, 30),
+            rng.uniform(0.0, 9000.0, 30),
+            strict=True,
+        )
+    ]
+    assert conditions_many(state, drift, points) == [conditions_at(state, drift, p) for p in points]
+
+
+def test_a_block_kept_at_its_height_and_drifted_is_the_frames_own() -> None:
+    """Issue 40: the answers keep each layer's blocks across frames and add the drift after;
+    the sprites are the very ones `layer_block` places with the drift."""
+    state, _ = preset_state("thunderstorm")
+    for layer, key in zip(state.layers, layer_keys(state.layers), strict=True):
+        for bx, by in ((0, 0), (-1, 2), (3, -4)):
+            want = layer_block(bx, by, key, layer, state.seed, DRIFT_M)
+            got = _drifted(_placed_block(bx, by, key, layer, state.seed), DRIFT_M)
+            assert np.array_equal(got.centre_m, want.centre_m)
+            assert np.array_equal(got.slab_m, want.slab_m, equal_nan=True)
+            assert np.array_equal(got.opacity, want.opacity)

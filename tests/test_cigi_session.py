@@ -5,6 +5,7 @@ the real encoder and decoder, in both byte orders."""
 from __future__ import annotations
 
 import math
+import random
 from datetime import UTC, datetime
 
 import pytest
@@ -12,7 +13,7 @@ import pytest
 from wxsky.protocols.cigi import Packet, decode_datagram, encode_datagram, make
 from wxsky.protocols.cigi_eye import eye
 from wxsky.protocols.cigi_session import Absorbed, HostState, Region, absorb, responses
-from wxsky.protocols.cigi_weather import region_weight, weather_patch
+from wxsky.protocols.cigi_weather import _beyond, region_weight, weather_patch
 from wxsky.weather.atmosphere import PointWeather
 from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
 from wxsky.weather.state import CloudType, PrecipKind, Source
@@ -376,3 +377,71 @@ def test_blended_stations_sent_as_regions_give_each_station_its_own_clouds() -> 
     later = host_message(blended, SourceFrame(2), (zurich,), region_slots=3)
     gone = absorb(got.state, decode_datagram(encode_datagram(later)))
     assert sorted(gone.state.regions) == [1]
+
+
+def _region_packet(rid: int, state: int = 1) -> Packet:
+    return make(
+        "environmental_region_control",
+        region_id=rid,
+        region_state=state,
+        lat_deg=ZRH[0],
+        lon_deg=ZRH[1],
+        size_x_m=1000.0,
+        size_y_m=1000.0,
+    )
+
+
+def test_regions_past_the_cap_go_least_recently_touched_first_with_their_layers() -> None:
+    """Issue 40: a host's regions were kept without end."""
+    first = make("ig_control", ig_mode=1, host_frame_number=7)
+
+    def go(state: HostState, *packets: Packet) -> Absorbed:
+        return absorb(state, decode_datagram(encode_datagram([first, *packets])), 0, 3)
+
+    s = go(HostState(), *(_region_packet(r) for r in (1, 2, 3))).state
+    s = go(s, layer(1, scope=1, entity_or_region_id=1)).state  # region 1 touched again
+    got = go(s, _region_packet(4))
+    assert got.evicted == 1 and set(got.state.regions) == {1, 3, 4}
+    # A layer with no region of its own takes a place too; region 3 goes, then 1 and its layer.
+    got = go(got.state, layer(2, scope=1, entity_or_region_id=9), _region_packet(5))
+    assert got.evicted == 2 and set(got.state.regions) == {4, 5}
+    assert set(got.state.layers) == {(9, 2)} and got.weather_changed
+    # Destroyed regions free their places and their layers at once.
+    got = go(got.state, _region_packet(5, state=2), layer(2, scope=1, entity_or_region_id=9))
+    assert got.evicted == 0 and set(got.state.regions) == {4}
+    assert got.state.region_order == (4, 9)
+
+
+def test_the_quick_reach_check_never_leaves_out_a_region_that_holds() -> None:
+    """Issue 40: `_region_at` skips regions surely out of reach before weighing them; a place
+    any region weighs more than 0 at is never skipped, near the poles and the antimeridian too."""
+    rng = random.Random(40)
+    held = 0
+    for _ in range(20_000):
+        lat = rng.choice([rng.uniform(-89.0, 89.0), rng.uniform(80.0, 89.9), 0.0])
+        lon = rng.choice([rng.uniform(-180.0, 180.0), 179.99, -179.99])
+        sx, sy = rng.uniform(0.0, 200_000.0), rng.uniform(0.0, 200_000.0)
+        region = Region(
+            1,
+            True,
+            lat,
+            lon,
+            sx,
+            sy,
+            rng.uniform(0.0, 5000.0),
+            rng.uniform(-180.0, 180.0),
+            rng.uniform(0.0, 50_000.0),
+        )
+        reach = sx + sy + region.transition_perimeter_m
+        east, north = rng.uniform(-reach, reach), rng.uniform(-reach, reach)
+        plat, plon = geodetic_from_enu(lat, lon, east, north)
+        if not -90.0 < plat < 90.0:
+            continue
+        if region_weight(region, plat, plon) > 0.0:
+            held += 1
+            assert not _beyond(region, plat, plon, math.cos(math.radians(plat))), (
+                region,
+                plat,
+                plon,
+            )
+    assert held > 1000

@@ -2,6 +2,11 @@
 engine changes, and its CIGI weather source (`[cigi] send_to`, `--cigi-send`) fed from each
 published frame. Everything runs on the event loop.
 
+The hosts' Environmental Conditions Requests are answered after each published frame, at most
+`[cigi] requests_per_frame` of them across the listeners (the rest wait for the next frame, in
+a bounded queue), so a flood of requests costs each frame a bounded amount of work and never
+stops the frames (issue 40).
+
 What a host sets lands where the other inputs' changes land: the weather in the `cigi` slot
 of the precedence stack (`engine.apply`), the camera as `set_camera` places it (a far place
 becomes a new site), the clock as `set_time` sets it. The answers to Environmental Conditions
@@ -17,6 +22,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
@@ -31,13 +37,13 @@ from wxsky.inputs.cigi_link import (
     parse_udp,
 )
 from wxsky.inputs.stats import InputStats
-from wxsky.logs import RateLimitedLog
 from wxsky.protocols.cigi import ByteOrder, Packet
 from wxsky.protocols.cigi_eye import Eye
 from wxsky.protocols.cigi_session import responses
 from wxsky.protocols.cigi_source import SourceFrame, host_message
 from wxsky.protocols.cigi_weather import answer_layer_ids
-from wxsky.scene.conditions import conditions_at
+from wxsky.scene.conditions import BlockMemo, conditions_many
+from wxsky.scene.gather import Drift
 from wxsky.settings.config import CigiSection
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
 from wxsky.weather.stations import StationWeather
@@ -47,6 +53,13 @@ log = logging.getLogger("wxsky.app.cigi")
 # A view this far or farther from the ownship looks at it from outside (a chase or tower
 # view): the near clouds are split at the ownship so the host can draw it between them.
 EXTERNAL_VIEW_M = 10.0
+# The time the conditions answers may take after a frame, in shares of a daemon tick: what the
+# frame left of its tick (the loop would sleep it out; the frame's start plus 0.9 of a tick),
+# at least ANSWER_TICK_MIN, so on a renderer that fills its ticks the rate falls by at most
+# that (issue 40: a host asking 20 a frame keeps 0.9 of the rate), and at most
+# ANSWER_TICK_MAX, so the loop's other inputs wait no longer than that for it.
+ANSWER_TICK_MIN = 0.1
+ANSWER_TICK_MAX = 0.5
 
 
 class CigiPart(Part):
@@ -66,19 +79,26 @@ class CigiPart(Part):
         send_to: Sequence[str] = (),
         blended: Callable[[], Sequence[StationWeather]] = tuple,
         region_slots: int = 0,
+        tick_hz: float = 30.0,
     ) -> None:
         """`listen`, `send_to`: the command line's, besides the section's. `blended` gives the
         METAR stations blended into the weather now; with `region_slots` (the most that can be
         blended) the source sends them as regions."""
         self._clock_rate = clock_rate
-        self._warn = RateLimitedLog(log)
         host = (
             parse_udp(section.host_address, "cigi.host_address") if section.host_address else None
         )
         allow = parse_networks(section.allow_from)
         self.igs = [
             CigiIg(
-                IgSettings(parse_udp(spec), host, allow, section.view_id),
+                IgSettings(
+                    parse_udp(spec),
+                    host,
+                    allow,
+                    section.view_id,
+                    section.requests_per_frame,
+                    section.max_regions,
+                ),
                 self,
             )
             for spec in dict.fromkeys((*section.listen, *listen))
@@ -93,6 +113,11 @@ class CigiPart(Part):
         self._region_slots = region_slots
         self._started = False
         self._host_frames: list[int | None] = [None] * len(self.igs)
+        self._requests_per_frame = section.requests_per_frame
+        self._tick_s = 1.0 / tick_hz
+        self._first_ig = 0  # the listener served first this frame: turn about
+        self._answering = False  # a frame's requests are being answered
+        self._batch: _Batch | None = None  # what they share meanwhile
 
     @property
     def listens(self) -> bool:
@@ -131,6 +156,7 @@ class CigiPart(Part):
         self._host_frames = [ig.last_host_frame for ig in self.igs]
 
     def after_frame(self, frame: PublishedFrame) -> None:
+        self._answer_requests(frame.started_s)
         for ig, host_frame in zip(self.igs, self._host_frames, strict=True):
             ig.start_of_frame(frame.number, host_frame)
         now = time.monotonic()
@@ -138,6 +164,27 @@ class CigiPart(Part):
             if now - sender.sent_at >= self._send_period_s:
                 regions = self._blended() if self._region_slots else ()
                 sender.send(frame.state, self._byte_order, now, regions, self._region_slots)
+
+    def _answer_requests(self, frame_started_s: float) -> None:
+        """This frame's share of the queued conditions requests: `requests_per_frame` across
+        the listeners, each in turn served first, and none begun once the frame's time for
+        them (ANSWER_TICK_MIN..MAX) is spent (a batch begun is finished)."""
+        if not self.igs:
+            return
+        budget = self._requests_per_frame
+        now = time.monotonic()
+        tick = self._tick_s
+        idle_s = frame_started_s + (1.0 - ANSWER_TICK_MIN) * tick - now
+        allowed_s = min(ANSWER_TICK_MAX * tick, max(ANSWER_TICK_MIN * tick, idle_s))
+        deadline_s = time.perf_counter() + allowed_s
+        n = len(self.igs)
+        self._answering = True
+        try:
+            for k in range(n):
+                budget -= self.igs[(self._first_ig + k) % n].answer_queued(budget, deadline_s)
+        finally:
+            self._answering, self._batch = False, None
+        self._first_ig = (self._first_ig + 1) % n
 
     def status(self) -> dict[str, Any]:
         """No keys of its own: brings its inputs' detail up to date."""
@@ -162,7 +209,7 @@ class CigiPart(Part):
             self._engine.settle()
         self._publish_target()
 
-    def cigi_camera(self, eye: Eye) -> None:
+    def cigi_camera(self, eye: Eye) -> str | None:
         params: dict[str, Any] = {
             "lat_deg": eye.lat_deg,
             "lon_deg": eye.lon_deg,
@@ -176,15 +223,15 @@ class CigiPart(Part):
         try:
             self._set_camera(params)
         except WxskyError as exc:
-            self._warn.warning("camera", f"CIGI ownship not placed: {exc}")
-            return
+            return str(exc)  # the listener counts it (`camera_refused`) and logs it
         if eye.offset_m < EXTERNAL_VIEW_M:
             # The pilot's eye: nothing of the aircraft to draw between clouds, and a split
             # would cost a near_front layer every frame for nothing.
             self._engine.set_aircraft(None)
-            return
+            return None
         obs = self._engine.state.observer
         self._engine.set_aircraft(enu_from_geodetic(obs.lat_deg, obs.lon_deg, *eye.ownship))
+        return None
 
     def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None:
         if time_utc is not None:
@@ -196,19 +243,43 @@ class CigiPart(Part):
     def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]:
         engine = self._engine
         state, drift = engine.state, engine.drift
-        ids = answer_layer_ids(state.layers, engine.target.layers, [ig.state for ig in self.igs])
+        # Within one frame's answering the weather stands still: its layer ids and drifted
+        # blocks are worked out once for all the frame's requests.
+        batch = self._batch
+        if batch is None or batch.state is not state or batch.drift is not drift:
+            ids = answer_layer_ids(
+                state.layers, engine.target.layers, [ig.state for ig in self.igs]
+            )
+            batch = _Batch(state, drift, ids, BlockMemo())
+            if self._answering:
+                self._batch = batch
+        ids = batch.ids
         obs = state.observer
-        out: list[Packet] = []
-        for request in requests:
-            point = enu_from_geodetic(
+        points = [
+            enu_from_geodetic(
                 obs.lat_deg,
                 obs.lon_deg,
                 float(request["lat_deg"]),
                 float(request["lon_deg"]),
                 float(request["alt_m"]),
             )
-            out += responses(request, conditions_at(state, drift, point), ids)
+            for request in requests
+        ]
+        out: list[Packet] = []
+        answered = conditions_many(state, drift, points, batch.memo)
+        for request, weather in zip(requests, answered, strict=True):
+            out += responses(request, weather, ids)
         return out
+
+
+@dataclass
+class _Batch:
+    """What one frame's answers share: the weather they read, its layer ids, its blocks."""
+
+    state: WeatherState
+    drift: Drift
+    ids: tuple[int, ...]
+    memo: BlockMemo
 
 
 class _Sender:

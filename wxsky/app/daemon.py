@@ -584,7 +584,7 @@ class Daemon:
         self._frame_times.published(published_s)
 
     def fps(self) -> float:
-        return self._frame_times.fps()
+        return self._frame_times.fps(time.monotonic())
 
     def status_line(self) -> str:
         inputs = ", ".join(

@@ -41,11 +41,19 @@ class FrameTimes:
         while self._recent and at_s - self._recent[0][0] > RECENT_S:
             self._recent.popleft()
 
-    def fps(self) -> float:
+    def fps(self, now_s: float | None = None) -> float:
+        """Frames published a second over the last FPS_WINDOW_S up to `now_s` (the
+        monotonic clock; the last frame's time if None). Measured to now, not to the last
+        frame: while frames have stopped the rate falls, where a window ending at the last
+        frame would go on reporting the rate before the stall (issue 40)."""
         times = self._window
+        if now_s is not None:
+            while times and now_s - times[0] > FPS_WINDOW_S:
+                times.popleft()
         if len(times) < 2:
             return 0.0
-        return (len(times) - 1) / max(times[-1] - times[0], 1e-6)
+        end = times[-1] if now_s is None else max(now_s, times[-1])
+        return (len(times) - 1) / max(end - times[0], 1e-6)
 
     def to_dict(self) -> dict[str, Any]:
         """`status`'s `frames`: the largest gap since the start (and the frame after it) and

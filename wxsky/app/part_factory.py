@@ -55,6 +55,7 @@ def parts_from_config(config: DaemonConfig, options: PartOptions | None = None) 
         send_to=opt.cigi_send,
         blended=feeds.blended,
         region_slots=blend if blend > 1 else 0,
+        tick_hz=config.daemon.tick_hz,
     )
     flightgear = FlightGearPart(config.flightgear, props=opt.flightgear, pose=opt.flightgear_pose)
     share = SharePart(config)

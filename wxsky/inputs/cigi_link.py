@@ -7,6 +7,13 @@ publishes, carrying the answers to the host's Environmental Conditions Requests.
 the source address of the host's datagrams (each starts with IG Control) unless a host
 address is configured. Datagrams from addresses outside `allow_from` are dropped and counted.
 
+The work a datagram makes is bounded before it is done (issue 40): a conditions request is
+only queued when it arrives (at most `max_queued` waiting; more are dropped and counted one
+by one), and the daemon answers at most `[cigi] requests_per_frame` of them after each frame
+(`answer_queued`), the rest after the next; it stops early once the frame's share of time
+for answers is spent (an answer far from the sky on show makes its cloud blocks, ~2.5 ms
+each on a CPU). The host's regions are capped (`max_regions`).
+
 `CigiHostSocket` is the other end: wxsky (or the host emulator, or a test) as a CIGI host
 sending to an IG and reading its answers; `wxsky cigi send` and the daemon's `[cigi] send_to`
 use it.
@@ -19,8 +26,10 @@ logged rate-limited, and the daemon goes on with the last good state.
 from __future__ import annotations
 
 import asyncio
+import collections
 import ipaddress
 import logging
+import math
 import socket
 import time
 from collections import Counter
@@ -43,7 +52,7 @@ from wxsky.protocols.cigi import (
     timestamp_10us,
 )
 from wxsky.protocols.cigi_eye import Eye, eye
-from wxsky.protocols.cigi_session import Absorbed, HostState, absorb
+from wxsky.protocols.cigi_session import MAX_REGIONS, Absorbed, HostState, absorb
 from wxsky.protocols.cigi_weather import weather_patch
 from wxsky.weather.state import WeatherPatch
 
@@ -54,6 +63,12 @@ MAX_DATAGRAM = 65_535
 # the 1472-byte UDP payload of an Ethernet frame, so no host sees a fragmented reply.
 MAX_REPLY_BYTES = 1400
 MAX_PENDING_RESPONSES = 256  # answers waiting for the next frame; more are dropped, counted
+# Conditions requests answered after each frame by default (`[cigi] requests_per_frame`): a
+# 60 Hz host asking for 20 aircraft a frame sends 40 a frame of the daemon's 30.
+REQUESTS_PER_FRAME = 64
+# Requests waiting to be answered, in frames' worth: more are dropped (counted per request)
+# rather than answered ever later.
+QUEUED_FRAMES = 4
 Address = tuple[str, int]
 
 
@@ -81,7 +96,7 @@ class CigiHandler(Protocol):
 
     def cigi_weather(self, patch: WeatherPatch) -> None: ...
     def cigi_heard(self) -> None: ...
-    def cigi_camera(self, eye: Eye) -> None: ...
+    def cigi_camera(self, eye: Eye) -> str | None: ...  # why it was refused, or None
     def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None: ...
     def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]: ...
 
@@ -92,6 +107,13 @@ class IgSettings:
     host_address: Address | None = None
     allow_from: tuple[ipaddress.IPv4Network | ipaddress.IPv6Network, ...] = ()
     view_id: int = 0
+    requests_per_frame: int = REQUESTS_PER_FRAME
+    max_regions: int = MAX_REGIONS
+
+    @property
+    def max_queued(self) -> int:
+        """Conditions requests that may wait to be answered; more are dropped."""
+        return max(MAX_PENDING_RESPONSES, QUEUED_FRAMES * self.requests_per_frame)
 
 
 class CigiIg(asyncio.DatagramProtocol):
@@ -110,6 +132,9 @@ class CigiIg(asyncio.DatagramProtocol):
         self._dropped: Counter[str] = Counter()
         self._ignored: Counter[str] = Counter()
         self._pending: list[Packet] = []
+        self._requests: collections.deque[Packet] = collections.deque()
+        self._requests_answered = 0
+        self._regions_evicted = 0
         self._datagrams = 0
         self._sof_sent = 0
         self._responses_sent = 0
@@ -202,8 +227,17 @@ class CigiIg(asyncio.DatagramProtocol):
         self.byte_order = decoded.byte_order
         if self.settings.host_address is None:
             self.reply_to = source
-        done: Absorbed = absorb(self.state, decoded, self.settings.view_id)
+        done: Absorbed = absorb(
+            self.state, decoded, self.settings.view_id, self.settings.max_regions
+        )
         self.state = done.state
+        if done.evicted:
+            self._regions_evicted += done.evicted
+            self._warn.warning(
+                "regions_evicted",
+                f"{self.name}: {done.evicted} regions evicted, least recently touched first: "
+                f"more than max_regions = {self.settings.max_regions}",
+            )
         self.stats.message()
         for reason, message in done.dropped:
             self._drop(reason, message)
@@ -214,15 +248,56 @@ class CigiIg(asyncio.DatagramProtocol):
             h.cigi_clock(done.clock_utc, done.clock_running)
         view = eye(self.state)
         if done.camera_changed and view is not None:
-            h.cigi_camera(view)
+            refused = h.cigi_camera(view)
+            if refused is not None:
+                self._drop("camera_refused", f"ownship not placed: {refused}")
         if done.weather_changed:
             self._weather(view)
         if done.requests:
-            answers = h.cigi_answers(done.requests)
-            room = MAX_PENDING_RESPONSES - len(self._pending)
+            # Only queued here: answering costs a cloud lookup each, and a datagram holds
+            # up to 2,046 requests (`answer_queued` does the work, a bounded amount a frame).
+            room = self.settings.max_queued - len(self._requests)
+            self._requests.extend(done.requests[: max(0, room)])
+            if len(done.requests) > room:
+                self._drop_many(
+                    "requests_full",
+                    len(done.requests) - room,
+                    f"conditions requests dropped: {self.settings.max_queued} already wait",
+                )
+
+    def _drop_many(self, reason: str, count: int, message: str) -> None:
+        self._dropped[reason] += count
+        self.stats.error(f"{count} {message}", count)
+        self._warn.warning(reason, f"{self.name}: {count} {message}")
+
+    @property
+    def queued_requests(self) -> int:
+        return len(self._requests)
+
+    def answer_queued(self, budget: int, deadline_s: float = math.inf) -> int:
+        """Answer up to `budget` of the queued conditions requests, oldest first, starting
+        none after `deadline_s` (`time.perf_counter()`) but always the first; the answers go
+        with the next Start of Frame. Returns how many were answered. One at a time, so the
+        deadline is overrun by one answer at most (a point far from the sky on show makes
+        its blocks: milliseconds)."""
+        done = 0
+        while done < budget and self._requests:
+            if done and time.perf_counter() >= deadline_s:
+                break
+            request = self._requests.popleft()
+            done += 1
+            try:
+                answers = self._handler.cigi_answers([request])
+            except Exception as exc:  # a wxsky defect: a host's request must not end the daemon
+                log.debug("CIGI conditions request %r", request, exc_info=True)
+                self._drop("internal_error", f"conditions request: {exc!r}")
+                continue
+            self._requests_answered += 1
+            room = max(0, MAX_PENDING_RESPONSES - len(self._pending))
             if len(answers) > room:
-                self._drop("responses_full", f"{len(answers) - room} answers left out: too many")
-            self._pending += answers[: max(0, room)]
+                self._drop_many("responses_full", len(answers) - room, "answers left out")
+            self._pending += answers[:room]
+        return done
 
     def _weather(self, view: Eye | None) -> None:
         """The host's weather at the rendered view's eye, to the daemon when it differs from
@@ -285,6 +360,9 @@ class CigiIg(asyncio.DatagramProtocol):
             "ignored": dict(self._ignored),
             "regions": len(s.regions),
             "layers": len(s.layers),
+            "regions_evicted": self._regions_evicted,
+            "requests_queued": len(self._requests),
+            "requests_answered": self._requests_answered,
             "start_of_frame_sent": self._sof_sent,
             "responses_sent": self._responses_sent,
             "send_errors": self._send_errors,

@@ -7,6 +7,12 @@ decoded datagram into a `HostState` (immutable) and says what changed; `response
 conditions request. The weather the state makes at a place is `cigi_weather`'s, the camera of
 the view wxsky renders `cigi_eye`'s.
 
+The host's regions are capped (`absorb`'s `max_regions`, `[cigi] max_regions`): a region id
+counts from its first Environmental Region Control or region-scoped Weather Control, and
+past the cap the least recently touched one goes with its layers, counted in
+`Absorbed.evicted`. So the state, and the work of every datagram that reads it, stays bounded
+whatever a host sends.
+
 Packets are checked twice: the decoder holds each to the CIGI table's ranges, and here to
 what the weather can hold (a cloud layer needs a thickness, a temperature must be weather on
 Earth). A packet failing either is dropped whole and counted; nothing out of range reaches
@@ -44,6 +50,11 @@ TOP_LIMIT_M = float(LAYER_HEIGHT_M.hi or 25_000.0)
 MIN_THICKNESS_M = 1.0
 # The fog veils a place within its layer and fades out across the layer's transition band.
 FOG_CODE_BELOW_M = 1000.0  # a fog layer thinner in visibility than this is FG, else BR
+
+# The most regions (each with its layers) a host keeps by default; `[cigi] max_regions`.
+MAX_REGIONS = 256
+# Weather Control layer ids wxsky keeps (higher ones are ignored): a region has at most these.
+KEPT_LAYER_IDS = range(8)
 
 # Things a host may send that wxsky does not use; counted in status, never errors.
 IGNORED: Mapping[str, str] = MappingProxyType(
@@ -142,6 +153,9 @@ class HostState:
     # The host has sent Weather Control: from then on its clouds are what it says, none
     # included, rather than left to the sources below.
     sent_layers: bool = False
+    # Every region id holding a region or a layer, least recently touched first (the cap's
+    # eviction order).
+    region_order: tuple[int, ...] = ()
 
     @property
     def has_weather(self) -> bool:
@@ -161,11 +175,15 @@ class Absorbed:
     requests: tuple[Packet, ...] = ()
     dropped: tuple[tuple[str, str], ...] = ()
     ignored: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
+    evicted: int = 0  # regions (with their layers) evicted to keep within max_regions
 
 
-def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorbed:
+def absorb(
+    state: HostState, datagram: CigiDatagram, view_id: int = 0, max_regions: int = MAX_REGIONS
+) -> Absorbed:
     """Fold a decoded host→IG datagram into the host's state. A refused datagram (or one
-    from an IG) changes nothing."""
+    from an IG) changes nothing. Past `max_regions` region ids the least recently touched
+    go, with their layers."""
     if datagram.refused or datagram.direction != "host_to_ig":
         return Absorbed(state)
     s = state
@@ -177,6 +195,20 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
     ignored: Counter[str] = Counter()
     layers = dict(s.layers)
     regions = dict(s.regions)
+    order = dict.fromkeys(s.region_order)  # insertion order: least recently touched first
+
+    def touch(rid: int) -> None:
+        order.pop(rid, None)
+        order[rid] = None
+
+    def forget(rid: int) -> None:
+        # A region's layers by their ids, not by a scan of every layer: a datagram of region
+        # packets costs the same with 10 regions kept as with the cap's worth.
+        regions.pop(rid, None)
+        order.pop(rid, None)
+        for lid in KEPT_LAYER_IDS:
+            layers.pop((rid, lid), None)
+
     for p in datagram.packets:
         key = p.key
         if key == "ig_control":
@@ -184,7 +216,7 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
                 # Reset/standby after operating: the IG forgets the host's world, as the
                 # host will send it again (ICD: the host re-initialises the IG after a reset).
                 weather = weather or s.has_weather or bool(regions)
-                layers, regions = {}, {}
+                layers, regions, order = {}, {}, {}
                 s = HostState(clock_running=s.clock_running)
             s = dataclasses.replace(
                 s,
@@ -263,13 +295,13 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
         elif key == "environmental_region_control":
             rid = int(p["region_id"])
             if p["region_state"] == 2:  # destroyed: the region and its weather go
-                weather = weather or rid in regions
-                regions.pop(rid, None)
-                layers = {k: v for k, v in layers.items() if k[0] != rid}
+                weather = weather or rid in order
+                forget(rid)
             else:
                 region = _region(p)
                 weather = weather or regions.get(rid) != region
                 regions[rid] = region
+                touch(rid)
         elif key == "weather_control":
             scope = int(p["scope"])
             layer_id = int(p["layer_id"])
@@ -299,12 +331,28 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
             layer = _layer(p)
             weather = weather or layers.get(slot) != layer
             layers[slot] = layer
+            if slot[0] is not None:
+                touch(slot[0])
         elif key == "environmental_conditions_request":
             if p["request_weather"] or p["request_aerosol"]:
                 requests.append(p)
             if p["request_maritime"] or p["request_terrestrial"]:
                 ignored["surface_request"] += 1
-    s = dataclasses.replace(s, layers=MappingProxyType(layers), regions=MappingProxyType(regions))
+    evicted = 0
+    # At the end, not per packet: one datagram holds at most ~1,400 region packets, so the
+    # overshoot is bounded, and an id touched again later in the same datagram stays.
+    while len(order) > max_regions:
+        oldest = next(iter(order))
+        held = oldest in regions or any((oldest, lid) in layers for lid in KEPT_LAYER_IDS)
+        weather = weather or held
+        forget(oldest)
+        evicted += 1
+    s = dataclasses.replace(
+        s,
+        layers=MappingProxyType(layers),
+        regions=MappingProxyType(regions),
+        region_order=tuple(order),
+    )
     return Absorbed(
         s,
         weather,
@@ -314,6 +362,7 @@ def absorb(state: HostState, datagram: CigiDatagram, view_id: int = 0) -> Absorb
         tuple(requests),
         tuple(dropped),
         MappingProxyType(dict(ignored)),
+        evicted,
     )
 
 

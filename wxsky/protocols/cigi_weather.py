@@ -43,6 +43,11 @@ from wxsky.weather.transition import pair_layers
 # from here while any layer carries one of the host's ids (1-3), so none is taken for its.
 IG_LAYER_IDS_FROM = 10
 MAX_LAYER_ID = 255
+# Metres a degree spans at least (of latitude: 110.57 km at the equator; of longitude, this
+# times the cosine of the latitude), and the slack `_beyond` adds to a region's reach for its
+# flat-Earth distance.
+M_PER_DEG = 110_500.0
+BEYOND_SLACK_M = 1000.0
 
 
 def region_weight(region: Region, lat_deg: float, lon_deg: float) -> float:
@@ -71,11 +76,29 @@ def _region_at(host: HostState, lat_deg: float, lon_deg: float) -> tuple[int | N
     """The region whose weather holds at a place and how much (None, 0 for none): the one
     weighing most; of equal ones the higher id (CIGI's "use last" of overlapping regions)."""
     best: tuple[float, int] | None = None
+    cos_lat = math.cos(math.radians(lat_deg))
     for rid, region in host.regions.items():
+        if not region.active or _beyond(region, lat_deg, lon_deg, cos_lat):
+            continue
         w = region_weight(region, lat_deg, lon_deg)
         if w > 0.0 and (best is None or (w, rid) > best):
             best = (w, rid)
     return (None, 0.0) if best is None else (best[1], best[0])
+
+
+def _beyond(region: Region, lat_deg: float, lon_deg: float, cos_lat: float) -> bool:
+    """Whether a place is surely beyond a region's reach: a few multiplications, where the
+    exact weight takes a projection, so a host's many regions cost each datagram little
+    (issue 40). Conservative: the reach is widened, the east distance taken at the latitude
+    nearer a pole."""
+    reach_m = 1.05 * (region.size_x_m + region.size_y_m + region.transition_perimeter_m)
+    reach_m += BEYOND_SLACK_M
+    north_m = abs(lat_deg - region.lat_deg) * M_PER_DEG
+    if north_m > reach_m:
+        return True
+    dlon = abs(lon_deg - region.lon_deg) % 360.0
+    cos_min = min(cos_lat, math.cos(math.radians(region.lat_deg)))
+    return min(dlon, 360.0 - dlon) * M_PER_DEG * cos_min > reach_m
 
 
 def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float) -> WeatherPatch:

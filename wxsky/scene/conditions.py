@@ -9,7 +9,9 @@ sees, and a point above or below every layer is never in cloud. Pure.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import functools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
@@ -17,9 +19,9 @@ import numpy as np
 from wxsky.scene.clouds import SpriteBatch, layer_keys
 from wxsky.scene.formation import layer_block
 from wxsky.scene.gather import Drift, blocks_within
-from wxsky.scene.in_cloud import in_cloud, layer_spans, sprite_depths
+from wxsky.scene.in_cloud import OUTSIDE, in_cloud, layer_spans, sprite_depths
 from wxsky.weather.atmosphere import PointWeather, air_at
-from wxsky.weather.state import CloudType, WeatherState, dir_from_deg
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState, dir_from_deg
 
 # Liquid (or ice) water in the dense part of each kind of cloud, g/m³: typical figures of
 # the cloud-physics literature (cumulus 0.3-1, cumulonimbus up to 2-3, stratiform 0.1-0.5,
@@ -43,23 +45,55 @@ CLOUD_WATER_GPM3: Mapping[CloudType, float] = MappingProxyType(
 # sprites are under 1.5 km across), so the blocks within it of the point hold every sprite
 # the point can be in.
 SPRITE_REACH_M = 1500.0
+# Blocks kept at their height across frames for the answers (8-22 KiB each: 3 MiB at most): a
+# host's aircraft read the same blocks frame after frame.
+PLACED_BLOCKS_KEPT = 128
 # Clear air is not saturated: the lapse rates alone would bring the dew point to the
 # temperature a few kilometres up. Out of cloud and out of fog the humidity stays below this.
 CLEAR_AIR_MAX_HUMIDITY_PCT = 95.0
 FOG_VISIBILITY_M = 1000.0
 
 
+Blocks = tuple[tuple[int, int], ...]
+
+
+@dataclass
+class BlockMemo:
+    """What a batch of points has looked up (one state, one drift): each drifted block's
+    sprites, and the sprites of each set of blocks a point reaches, by layer index."""
+
+    blocks: dict[tuple[int, int, int], SpriteBatch] = field(default_factory=dict)
+    reached: dict[tuple[int, Blocks], SpriteBatch] = field(default_factory=dict)
+
+
+def conditions_many(
+    state: WeatherState,
+    drift: Drift,
+    points_m: Sequence[tuple[float, float, float]],
+    memo: BlockMemo | None = None,
+) -> list[PointWeather]:
+    """`conditions_at` for each point, the drifted blocks looked up once for the batch: a
+    host's aircraft share their blocks, and the lookup is most of an answer's cost. `memo`:
+    one to go on with, of the same state and drift."""
+    memo = BlockMemo() if memo is None else memo
+    return [conditions_at(state, drift, point, memo) for point in points_m]
+
+
 def conditions_at(
-    state: WeatherState, drift: Drift, point_m: tuple[float, float, float]
+    state: WeatherState,
+    drift: Drift,
+    point_m: tuple[float, float, float],
+    memo: BlockMemo | None = None,
 ) -> PointWeather:
     """The weather at `point_m` (east, north, alt MSL in the scene frame) with the clouds
-    of `state` drifted by `drift`."""
+    of `state` drifted by `drift`. `memo`: drifted blocks already looked up for this state
+    and drift (`conditions_many`), added to."""
     east, north, alt = point_m
     temperature, humidity, pressure = air_at(state, alt)
     keys = layer_keys(state.layers)
     spans = layer_spans(state.layers)
     water: list[float] = []
-    batches: list[SpriteBatch] = []
+    deepest: tuple[float, SpriteBatch] | None = None
     for i, (layer, key) in enumerate(zip(state.layers, keys, strict=True)):
         dx, dy = drift[i] if i < len(drift) else (0.0, 0.0)
         # A layer's sprites have their centres within it: they count only while the point is
@@ -70,16 +104,24 @@ def conditions_at(
         ):
             water.append(0.0)
             continue
-        qx, qy = east - dx, north - dy
-        parts = [
-            layer_block(bx, by, key, layer, state.seed, (dx, dy))
-            for bx, by in blocks_within(qx, qy, 0.0, SPRITE_REACH_M)
-        ]
-        batch = SpriteBatch.concat(parts)
+        reached = tuple(blocks_within(east - dx, north - dy, 0.0, SPRITE_REACH_M))
+        batch = memo.reached.get((i, reached)) if memo is not None else None
+        if batch is None:
+            batch = SpriteBatch.concat(
+                [_block(memo, i, bx, by, key, layer, state.seed, (dx, dy)) for bx, by in reached]
+            )
+            if memo is not None:
+                memo.reached[(i, reached)] = batch
         depth = float(sprite_depths(batch, point_m, spans).max()) if len(batch) else 0.0
         water.append(CLOUD_WATER_GPM3[layer.type] * min(1.0, max(0.0, depth)))
-        batches.append(batch)
-    inside = in_cloud(SpriteBatch.concat(batches), point_m, state.visibility_m, spans_m=spans)
+        if deepest is None or depth > deepest[0]:
+            deepest = (depth, batch)
+    # In cloud by the deepest sprite of any layer: the layer holding it decides.
+    inside = (
+        in_cloud(deepest[1], point_m, state.visibility_m, spans_m=spans)
+        if deepest is not None
+        else OUTSIDE
+    )
     ve, vn = state.wind_at(alt)
     speed = float(np.hypot(ve, vn))
     direction = dir_from_deg(ve, vn) if speed > 0.0 else 0.0
@@ -95,3 +137,36 @@ def conditions_at(
         in_cloud=inside.inside,
         cloud_water_gpm3=tuple(water),
     )
+
+
+def _block(
+    memo: BlockMemo | None,
+    i: int,
+    bx: int,
+    by: int,
+    key: int,
+    layer: CloudLayer,
+    seed: int,
+    drift_m: tuple[float, float],
+) -> SpriteBatch:
+    found = memo.blocks.get((i, bx, by)) if memo is not None else None
+    if found is None:
+        found = _drifted(_placed_block(bx, by, key, layer, seed), drift_m)
+        if memo is not None:
+            memo.blocks[(i, bx, by)] = found
+    return found
+
+
+@functools.lru_cache(maxsize=PLACED_BLOCKS_KEPT)
+def _placed_block(bx: int, by: int, key: int, layer: CloudLayer, seed: int) -> SpriteBatch:
+    """A block of a layer at its height, not drifted: the same from frame to frame while
+    the layer stands (the drift moves every frame with the wind)."""
+    return layer_block(bx, by, key, layer, seed)
+
+
+def _drifted(batch: SpriteBatch, drift_m: tuple[float, float]) -> SpriteBatch:
+    """`layer_block`'s drift added after its height: the same sums, adding 0.0 being exact
+    (x + dx, y + dy, z + base either way)."""
+    if not len(batch) or drift_m == (0.0, 0.0):
+        return batch
+    return batch.with_centres(batch.centre_m + np.array((drift_m[0], drift_m[1], 0.0)))

@@ -399,6 +399,11 @@ class CigiSection(_Section):
     send_to: tuple[str, ...] = _opt((), CIGI_ADDRESSES)
     send_rate_hz: float = _opt(0.0, _num(0.0, 240.0, "Hz"))  # 0: with every published frame
     send_byte_order: str = _opt("big", Text(choices=("big", "little")))
+    # Environmental Conditions Requests answered after each frame, across listeners; the rest
+    # wait (up to 4 frames' worth, at least 256) or are dropped and counted (issue 40).
+    requests_per_frame: int = _opt(64, _int(1, 4096))
+    # Regions (each with its layers) a host keeps; the least recently touched go past it.
+    max_regions: int = _opt(256, _int(1, 65_536))
 
 
 _TCP = r"tcp:(\[[0-9A-Fa-f:.]+\]|[^:\[\]\s]+):[0-9]{1,5}"
