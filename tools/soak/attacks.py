@@ -71,6 +71,24 @@ UDP_MAX = 65_507
 # --- the daemons an attack aims at -----------------------------------------------------------
 
 
+def latest_frame(shm_name: str) -> int | None:
+    """A segment's latest frame number, by pread: never a mapping, which faults (SIGBUS) the
+    process reading it once another process truncates the segment."""
+    try:
+        fd = os.open(f"/dev/shm/{shm_name}", os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        head = os.pread(fd, HDR_LATEST_FRAME + 8, 0)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    if len(head) < HDR_LATEST_FRAME + 8 or head[: len(MAGIC)] != MAGIC:
+        return None
+    return int.from_bytes(head[HDR_LATEST_FRAME:], "little")
+
+
 @dataclass
 class Daemon:
     """A running `wxsky run` (started here or by the soak): its process and where it is."""
@@ -111,18 +129,7 @@ class Daemon:
             return client.call(method, params, timeout_s=timeout_s)
 
     def frame(self) -> int | None:
-        """The segment's latest frame number, by pread (never a mapping: see the docstring)."""
-        try:
-            fd = os.open(f"/dev/shm/{self.shm_name}", os.O_RDONLY)
-        except OSError:
-            return None
-        try:
-            head = os.pread(fd, HDR_LATEST_FRAME + 8, 0)
-        finally:
-            os.close(fd)
-        if len(head) < HDR_LATEST_FRAME + 8 or head[: len(MAGIC)] != MAGIC:
-            return None
-        return int.from_bytes(head[HDR_LATEST_FRAME:], "little")
+        return latest_frame(self.shm_name)
 
     def log_tail(self, lines: int = 3) -> str:
         with contextlib.suppress(OSError):
