@@ -85,11 +85,25 @@ def test_the_harness_reports_what_the_daemon_did(tmp_path: Path) -> None:
         assert line.startswith("year9999_control") and ("survived yes" in line) == r.survived
         assert r.as_dict()["survived"] == r.survived
 
-        if alive:
-            # A daemon that dies under the harness is a failed case, never an exception.
-            os.killpg(master.proc.pid, signal.SIGKILL)
-            master.proc.wait(timeout=60)
-            dead = attacks.AttackResult("killed", "master", frames_before=r.frames_after)
-            attacks.observe(dead, master, master.frame(), after_s=0.5)
-            assert not dead.alive and not dead.status_ok and not dead.survived
-            assert "killed by SIGKILL" in dead.what, dead.what
+
+@pytest.mark.gl
+def test_the_harness_tells_a_live_daemon_from_a_killed_one(tmp_path: Path) -> None:
+    """observe(), the part of every case that judges the daemon: a healthy one survives, one
+    SIGKILLed under it is reported dead with its signal, and nothing raises."""
+    skip_without_gl()
+    with attacks.Dome(tmp_path, share=False, channel=False) as target:
+        master = target.master
+        live = attacks.AttackResult("nothing", "master", frames_before=master.frame())
+        status = attacks.observe(live, master, master.frame(), after_s=1.0)
+        assert status is not None and live.alive and live.status_ok and live.advancing
+        assert live.frames_after is not None and live.frames_before is not None
+        assert live.frames_after > live.frames_before and live.survived, live.line()
+
+        os.killpg(master.proc.pid, signal.SIGKILL)
+        master.proc.wait(timeout=60)
+        dead = attacks.AttackResult("killed", "master", frames_before=live.frames_after)
+        assert attacks.observe(dead, master, master.frame(), after_s=0.5) is None
+        assert not dead.alive and not dead.status_ok and not dead.survived
+        assert dead.frames_after is None
+        assert "killed by SIGKILL" in dead.what, dead.what
+        assert "survived no" in dead.line()
