@@ -99,6 +99,9 @@ class Daemon:
     sock: Path
     shm_name: str
     log_path: Path
+    # Ports once read: an attack can leave status unable to answer (the health flood), and
+    # the cases after it still know where to send.
+    ports: dict[str, int] = field(default_factory=dict)
 
     @property
     def address(self) -> str:
@@ -151,16 +154,20 @@ class Daemon:
         return None
 
     def cigi_port(self) -> int | None:
-        s = self.status()
-        for i in (s or {}).get("inputs", []):
-            if i.get("kind") == "cigi" and i.get("listen"):
-                return int(str(i["listen"]).rsplit(":", 1)[1])
-        return None
+        if "cigi" not in self.ports:
+            s = self.status()
+            for i in (s or {}).get("inputs", []):
+                if i.get("kind") == "cigi" and i.get("listen"):
+                    self.ports["cigi"] = int(str(i["listen"]).rsplit(":", 1)[1])
+        return self.ports.get("cigi")
 
     def pose_port(self) -> int | None:
         """The FlightGear pose port (status does not say it; the daemon's log does)."""
-        m = FG_POSE_LINE.search(self.log_text())
-        return int(m.group(2)) if m else None
+        if "pose" not in self.ports:
+            m = FG_POSE_LINE.search(self.log_text())
+            if m:
+                self.ports["pose"] = int(m.group(2))
+        return self.ports.get("pose")
 
     def stop(self) -> None:
         if self.alive():
@@ -263,13 +270,17 @@ def free_tcp_port() -> int:
 class Target:
     """What an attack aims at: the master, and a channel joined to it where one runs.
     `respawn_channel` starts the channel again (after an attack killed it), where the owner
-    can; `endpoint` is the master's Zenoh locator, empty when it shares nothing."""
+    can; `endpoint` is the master's Zenoh locator, empty when it shares nothing.
+    `weather_is_ours`: an attack may change the master's weather to see a channel follow
+    (False in the soak, whose presets change it every cycle and whose checks would count an
+    attack's preset as theirs)."""
 
     master: Daemon
     channel: Daemon | None = None
     endpoint: str = ""
     site: str = SITE
     respawn_channel: Callable[[], Daemon] | None = None
+    weather_is_ours: bool = True
 
 
 class Dome:
@@ -297,6 +308,8 @@ class Dome:
             self.target.respawn_channel = self._channel
         try:
             wait_started(master)
+            master.cigi_port()  # read while status answers: the ports are kept
+            master.pose_port()
             if self.target.channel is not None:
                 wait_channel(self.target.channel)
         except BaseException:
@@ -667,9 +680,11 @@ def zenoh_state(t: Target, follow_s: float = 20.0) -> AttackResult:
     time.sleep(1.0)
     shown = d.status()
     r.counters["layers_after_forgery"] = _layers(shown)
-    # The real master changes its weather: its next state must reach the channel.
-    with contextlib.suppress(WxskyError, OSError):
-        t.master.call("apply_preset", {"name": "overcast-stratus"})
+    # The real master changes its weather (or its owner does): its next state must reach
+    # the channel.
+    if t.weather_is_ours:
+        with contextlib.suppress(WxskyError, OSError):
+            t.master.call("apply_preset", {"name": "overcast-stratus"})
     followed = False
     deadline = time.monotonic() + follow_s
     master_sky = channel_sky = None
@@ -688,12 +703,18 @@ def zenoh_state(t: Target, follow_s: float = 20.0) -> AttackResult:
         r.counters["dropped"] = ch.get("dropped")
         r.counters["master_alive"] = ch.get("master_alive")
         r.counters["layers"] = _layers(status)
-        r.what = (
-            f"channel sky {channel_sky} vs master {master_sky}"
-            f"{'' if followed else f' after {follow_s:.0f} s: frozen on the forged state'}"
-        )
-    with contextlib.suppress(WxskyError, OSError):
-        t.master.call("release", {})
+        if followed:
+            r.what = f"channel follows the master's sky {master_sky}"
+        elif master_sky is None:
+            r.what = f"the master's status did not answer in {follow_s:.0f} s"
+        else:
+            r.what = (
+                f"channel sky {channel_sky} vs master {master_sky} after {follow_s:.0f} s: "
+                "frozen on the forged state"
+            )
+    if t.weather_is_ours:
+        with contextlib.suppress(WxskyError, OSError):
+            t.master.call("release", {})
     return r
 
 
@@ -1031,12 +1052,17 @@ ATTACKS: dict[str, tuple[Attack, bool, bool]] = {
 def run_attack(name: str, t: Target) -> AttackResult:
     """One attack against running daemons; whatever goes wrong in the harness is the
     result's `what`, never an exception (a daemon that died mid-attack breaks sockets)."""
-    fn = ATTACKS[name][0]
+    fn, needs_channel, _ = ATTACKS[name]
+    aimed = t.channel if needs_channel and t.channel is not None else t.master
+    if not aimed.alive():  # an attack before killed it and it could not be started again
+        r = AttackResult(name, aimed.name)
+        r.what = f"{aimed.name} dead before the attack ({aimed.exit_text()})"
+        r.checks["alive_before"] = False
+        return r
     start = time.monotonic()
     try:
         r = fn(t)
     except Exception as exc:  # the harness's own failure, reported with the daemon's state
-        aimed = t.channel if ATTACKS[name][1] and t.channel is not None else t.master
         r = AttackResult(name, aimed.name)
         r.what = f"harness: {type(exc).__name__}: {str(exc)[:160]}"
         observe(r, aimed, None, after_s=0.5)

@@ -350,6 +350,7 @@ class Soak:
         self.attacking = "attacks" in args.faults
         self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}" if self.attacking else ""
         self.channels: list[Daemon] = []  # every channel started, for the clean-up
+        self.master: Daemon | None = None  # the soak's daemon, as the attacks see it
         self.attack_results: list[tuple[float, AttackResult]] = []
 
     def now(self) -> float:
@@ -366,6 +367,7 @@ class Soak:
         self._start_daemon()
         self._wait_started()
         if self.attacking:
+            self._attack_target()  # reads the CIGI and pose ports while status answers
             self._start_channel()
         self._start_readers()
         self._spawn(self._watch_target, "soak-target")
@@ -797,10 +799,18 @@ name = "{SERIAL_NAME}"
 
     def _attack_target(self) -> Target:
         assert self.proc is not None
-        master = Daemon("master", self.proc, self.sock, self.shm_name, self.log_path)
+        if self.master is None:  # one for the run: it keeps the ports it read
+            self.master = Daemon("master", self.proc, self.sock, self.shm_name, self.log_path)
+            self.master.cigi_port()
+            self.master.pose_port()
+        master = self.master
         channel = self.channels[-1] if self.channels else None
         return Target(
-            master, channel, endpoint=self.endpoint, respawn_channel=self._respawn_channel
+            master,
+            channel,
+            endpoint=self.endpoint,
+            respawn_channel=self._respawn_channel,
+            weather_is_ours=False,  # the preset loop changes it every cycle
         )
 
     def _respawn_channel(self) -> Daemon:
