@@ -433,9 +433,15 @@ class FrameWatch:
 
 
 def _fps_for(d: Daemon, seconds: float) -> float | None:
+    return _undisturbed(d, seconds)[0]
+
+
+def _undisturbed(d: Daemon, seconds: float) -> tuple[float | None, float | None]:
+    """The frame rate and the largest frame gap over `seconds` before an attack: what the
+    machine does without it (llvmpipe beside other work has gaps of its own)."""
     with FrameWatch(d) as w:
         time.sleep(seconds)
-    return w.fps(0.0, float("inf"))
+    return w.fps(0.0, float("inf")), w.largest_gap_s()
 
 
 def observe(
@@ -836,7 +842,7 @@ def conditions_requests(t: Target, host_s: float = 5.0) -> AttackResult:
         return r
     alt_m = _in_cloud_alt_m(d)
     r.counters["request_alt_m"] = alt_m
-    fps_before = _fps_for(d, 2.0)
+    fps_before, gap_before = _undisturbed(d, 4.0)
     big = encode_datagram([_ig_control(1), *(_request(i, alt_m) for i in range(2046))])
     assert len(big) <= UDP_MAX
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -849,8 +855,12 @@ def conditions_requests(t: Target, host_s: float = 5.0) -> AttackResult:
         frame_s = 1.0 / fps_before if fps_before else None
         r.counters["fps_before"] = _round(fps_before)
         r.counters["largest_gap_s"] = _round(gap)
+        r.counters["largest_gap_before_s"] = _round(gap_before)
         if frame_s is not None and gap is not None:
-            r.checks["datagram_gap_le_3_frames"] = gap <= 3 * frame_s + 0.02
+            # Over 3 frames, and over the gaps the machine had without the datagram (a
+            # shared 2-core machine has some): the datagram's doing. 20 ms: sampling.
+            allowed = max(3 * frame_s, gap_before or 0.0) + 0.02
+            r.checks["datagram_gap_le_3_frames"] = gap <= allowed
         # A 60 Hz host, 20 requests a frame.
         frame = 2
         with FrameWatch(d) as watch:
