@@ -107,3 +107,26 @@ def test_the_harness_tells_a_live_daemon_from_a_killed_one(tmp_path: Path) -> No
         assert dead.frames_after is None
         assert "killed by SIGKILL" in dead.what, dead.what
         assert "survived no" in dead.line()
+
+
+def test_a_stall_through_the_whole_watch_counts_as_a_gap() -> None:
+    """The frame gap is measured from the watch's ends too: a daemon that stopped drawing
+    for the whole watch is a gap of its length, not "no gap seen"."""
+    watch = attacks.FrameWatch.__new__(attacks.FrameWatch)
+    watch.samples = [(0.0, 5), (1.0, 5), (4.0, 5)]
+    assert watch.largest_gap_s() == 4.0
+    watch.samples = [(0.0, 5), (0.1, 6), (0.2, 7), (1.2, 8), (1.3, 9)]
+    assert abs(watch.largest_gap_s() - 1.0) < 1e-9
+    assert abs(watch.fps(0.0, 2.0) - 4 / 1.3) < 1e-9
+    watch.samples = [(0.0, 5)]
+    assert watch.largest_gap_s() is None and watch.fps(0.0, 1.0) is None
+
+
+def test_a_failed_case_keeps_its_daemons_logs(tmp_path: Path) -> None:
+    case = tmp_path / "run" / "zenoh_tick"
+    for name, text in (("master", "m\n"), ("channel-ab12", "Fatal Python error: Aborted\n")):
+        (case / name).mkdir(parents=True)
+        (case / name / "daemon.log").write_text(text)
+    kept = attacks.keep_logs(case, tmp_path / "keep" / "zenoh_tick")
+    assert [k.name for k in kept] == ["channel-ab12.log", "master.log"]
+    assert "Aborted" in kept[0].read_text()

@@ -29,7 +29,8 @@ way. Prints inputs run, inputs/s and failures per target; exits 1 when anything 
 scripted case against fresh daemons of its own on loopback (NAME ...: only those; `--list`
 with it names them): one line per attack with whether the daemon survived, its frames before
 and after, its own checks and the counters it read from `status`. A daemon an attack kills is
-a failed case, not the end of the run. Exits 1 when a case failed.
+a failed case, not the end of the run; the daemons' logs of a failed case are kept in
+`--work-dir/attacks/<name>/`. Exits 1 when a case failed.
 """
 
 from __future__ import annotations
@@ -671,8 +672,9 @@ def attacks_main(p: argparse.ArgumentParser, args: argparse.Namespace, extra: li
     unknown = [n for n in names if n not in ATTACKS]
     if unknown:
         p.error(f"unknown attack {', '.join(unknown)} (known: {', '.join(ATTACKS)})")
+    keep = args.work_dir / "attacks"  # the daemons' logs of the failed cases
     with tempfile.TemporaryDirectory(prefix="wxsky-attacks-") as tmp:
-        results = run_all(names, Path(tmp), lambda line: print(line, flush=True))
+        results = run_all(names, Path(tmp), lambda line: print(line, flush=True), keep)
     s = summary(results)
     failed = ", ".join(s["failed"]) or "none"
     print(f"attacks: {s['survived']} of {s['ran']} survived; failed: {failed}")

@@ -36,6 +36,7 @@ import json
 import logging
 import os
 import re
+import shutil
 import signal
 import socket
 import statistics
@@ -1096,14 +1097,34 @@ def run_case(name: str, folder: Path) -> AttackResult:
         return r
 
 
-def run_all(names: list[str], folder: Path, echo: Callable[[str], None]) -> list[AttackResult]:
-    """Each named attack once, each against fresh daemons; a line per attack to `echo`."""
+def run_all(
+    names: list[str], folder: Path, echo: Callable[[str], None], keep: Path | None = None
+) -> list[AttackResult]:
+    """Each named attack once, each against fresh daemons in `folder`; a line per attack to
+    `echo`. The daemons' logs of a failed case are copied to `keep`/<name>/ (its folder's
+    own go with it): a crash seen once is worth its traceback."""
     results = []
     for name in names:
         r = run_case(name, folder)
         echo(r.line())
+        if keep is not None and not r.survived and not r.skipped:
+            kept = keep_logs(folder / name, keep / name)
+            if kept:
+                echo(f"{'':22s} logs: {', '.join(str(k) for k in kept)}")
         results.append(r)
     return results
+
+
+def keep_logs(case: Path, dest: Path) -> list[Path]:
+    """Every daemon.log under `case`, as `dest`/<daemon folder>.log."""
+    kept = []
+    for log_path in sorted(case.glob("*/daemon.log")):
+        dest.mkdir(parents=True, exist_ok=True)
+        target = dest / f"{log_path.parent.name}.log"
+        with contextlib.suppress(OSError):
+            shutil.copyfile(log_path, target)
+            kept.append(target)
+    return kept
 
 
 def summary(results: list[AttackResult]) -> dict[str, Any]:
