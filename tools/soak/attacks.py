@@ -14,16 +14,24 @@ never raises for a daemon that died: the result says so, with its exit status an
 
 1. `year9999_control`, `year9999_cigi`, `year9999_flightgear`: the clock at 9999-12-31T23:59
    from control `set_time`, a CIGI Celestial Sphere Control with the ephemeris on (the clock
-   runs into year 10000 a minute later, so this case watches for 65 s), a FlightGear pose;
+   runs into year 10000 a minute later, so this case watches for 65 s), a FlightGear pose
+   while the clock follows FlightGear;
 2. `zenoh_tick`: a copy of the master's clock tick with master_mono_s = 1e12, to the channel;
 3. `zenoh_state`: the master's state with its id, sequence 2**63-1 and an 8/8 cumulonimbus;
-   then the real master changes its weather and the channel must follow;
-4. `health_flood`: 100,000 `health/<name>` messages to the master, then the channel SIGKILLed
-   and looked for in the master's peers;
-5. `conditions_requests`: one 64 KB CIGI datagram of 2,046 Environmental Conditions Requests,
-   then a 60 Hz host asking 20 a frame;
-6. `regions_flood`: 20,000 CIGI environmental regions with a layer each, then a normal host;
+   then the master's weather changes and the channel must show the master's sky (sky_id);
+4. `health_flood`: 100,000 `health/<name>` messages to the master: its status must answer
+   and list at most MAX_PEERS_SEEN peers; then the channel SIGKILLed must leave them;
+5. `conditions_requests`: one 64 KB CIGI datagram of 2,046 Environmental Conditions Requests
+   (no frame gap over 3 frames), then a 60 Hz host asking 20 a frame (frame rate >= 0.9x,
+   status's fps within 30 % of the segment's);
+6. `regions_flood`: 20,000 CIGI environmental regions with a layer each, then a normal host
+   (frame rate >= 0.8x, status's fps true);
 7. `shm_truncate`: `os.truncate('/dev/shm/<name>', 0)` from this process.
+
+The Zenoh cases publish from a session of their own with no credentials (a stranger), which
+listens on a loopback port as well as connecting to the master: Zenoh's peers gossip their
+locators, so a channel (listening on nothing) connects to the stranger and takes what it
+publishes, as it would on a real network.
 
 Everything is bounded in count and time; the Zenoh cases need eclipse-zenoh and skip without.
 """
@@ -33,7 +41,6 @@ from __future__ import annotations
 import contextlib
 import itertools
 import json
-import logging
 import os
 import re
 import shutil
@@ -55,8 +62,6 @@ from wxsky.host.client import ControlClient
 from wxsky.output.shm import HDR_LATEST_FRAME, MAGIC
 from wxsky.output.wire import pack_data, unpack_data
 from wxsky.protocols.cigi import Packet, encode_datagram, make
-
-log = logging.getLogger("attacks")
 
 SITE = "default"
 START_TIMEOUT_S = 120.0  # a daemon's first frame on a busy 2-core machine; only catches hangs
