@@ -47,6 +47,7 @@ import shutil
 import signal
 import socket
 import statistics
+import struct
 import subprocess
 import sys
 import threading
@@ -515,18 +516,8 @@ def year9999_cigi(t: Target, watch_s: float = 65.0) -> AttackResult:
     if port is None:
         r.skipped = "the daemon has no CIGI port"
         return r
-    packet = make(
-        "celestial_sphere_control",
-        hour=23,
-        minute=59,
-        ephemeris_enable=1,
-        sun_enable=1,
-        moon_enable=1,
-        date_time_valid=1,
-        date_mmddyyyy=12_31_9999,
-    )
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.sendto(encode_datagram([_ig_control(1), packet]), ("127.0.0.1", port))
+        s.sendto(encode_datagram([_ig_control(1)]) + celestial_9999(), ("127.0.0.1", port))
     r.counters["datagrams"] = 1
     status = observe(r, d, d.frame(), after_s=watch_s)
     if status is not None:
@@ -535,6 +526,14 @@ def year9999_cigi(t: Target, watch_s: float = 65.0) -> AttackResult:
         r.counters["cigi_dropped"] = cigi.get("dropped")
         r.what = f"clock at {r.counters['time_utc']} after {watch_s:.0f} s"
     return r
+
+
+def celestial_9999() -> bytes:
+    """A Celestial Sphere Control (opcode 9, 16 bytes, big-endian) at 23:59 on 12/31/9999,
+    ephemeris, sun and moon on, date valid: packed here, not by wxsky's encoder, which (as it
+    should) may refuse a date outside the clock's years; a hostile host has no such scruple."""
+    flags = 0b1_0111  # bit 0 ephemeris, 1 sun, 2 moon, 4 date/time valid
+    return struct.pack(">BBBBB3xIf", 9, 16, 23, 59, flags, 12_31_9999, 0.0)
 
 
 def year9999_flightgear(t: Target) -> AttackResult:
