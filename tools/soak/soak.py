@@ -88,7 +88,7 @@ from pathlib import Path
 from typing import Any
 
 from wxsky.errors import WxskyError
-from wxsky.host.client import ControlClient, DaemonUnavailable, RemoteError
+from wxsky.host.client import ControlClient
 from wxsky.output.shm import FrameReader
 from wxsky.settings.presets import load_preset
 
@@ -759,25 +759,47 @@ name = "{SERIAL_NAME}"
                         self.links["can"].stalled += 1
 
     def _preset_loop(self) -> None:
-        with self._client() as client:
+        client: ControlClient | None = None
+
+        def call(method: str, params: dict[str, Any]) -> None:
+            """The call, once again on a new connection if the first one fails: the daemon
+            closes the longest idle client to make room in a burst of connections (the
+            control faults make them) and says to connect again."""
+            nonlocal client
+            for attempt in (1, 2):
+                try:
+                    client = client or self._client()
+                    client.call(method, params)
+                    return
+                except (WxskyError, OSError):
+                    if client is not None:
+                        client.close()
+                    client = None
+                    if attempt == 2:
+                        raise
+
+        try:
             for k in self._cycles(3.0):
                 name = self.preset_names[k % len(self.preset_names)]
                 record: dict[str, Any] = {"name": name, "applied_at": self.now()}
                 try:
-                    client.call("apply_preset", {"name": name})
+                    call("apply_preset", {"name": name})
                     record["apply_ok"] = True
-                except (RemoteError, DaemonUnavailable) as exc:
+                except (WxskyError, OSError) as exc:
                     record["apply_ok"] = False
-                    record["error"] = str(exc)
+                    record["error"] = f"apply: {exc}"
                 self.stop.wait(self.plan.offset(4.0))  # released even when the soak ends
                 record["released_at"] = self.now()
                 try:
-                    client.call("release", {})
+                    call("release", {})
                     record["release_ok"] = True
-                except (RemoteError, DaemonUnavailable) as exc:
+                except (WxskyError, OSError) as exc:
                     record["release_ok"] = False
-                    record["error"] = str(exc)
+                    record["error"] = f"{record.get('error', '')} release: {exc}".strip()
                 self.presets.append(record)
+        finally:
+            if client is not None:
+                client.close()
 
     # -- issue 40's attacks -------------------------------------------------------------
 
@@ -1014,6 +1036,11 @@ name = "{SERIAL_NAME}"
         n = len(self.presets)
         out["presets"] = {"sent": 2 * n, "applied": applied + released}
         out["presets"]["detail"] = {"applied": applied, "released": released, "of": n}
+        out["presets"]["errors"] = [
+            f"{p['name']} at {p['applied_at']:.0f} s: {p['error']}"[:300]
+            for p in self.presets
+            if p.get("error")
+        ][:10]
         return out
 
     def _invalid_reaching(self) -> dict[str, Any]:
@@ -1329,6 +1356,8 @@ def _print_summary(r: dict[str, Any]) -> bool:
     for kind, v in r["valid"].items():
         if isinstance(v, dict) and v.get("missed"):
             print(f"  valid missed ({kind}): {', '.join(v['missed'][:5])}")
+    for what in r["valid"]["presets"].get("errors", [])[:5]:
+        print(f"  preset error: {what}")
     for problem in f["problems"][:5]:
         print(f"  frames: {problem}")
     print(f"  links: {r['links']}")
