@@ -3,6 +3,7 @@
     .venv/bin/python tools/fuzz/fuzz.py TARGET|all [--runs N | --minutes M] [--engine ENGINE]
     .venv/bin/python tools/fuzz/fuzz.py --list
     .venv/bin/python tools/fuzz/fuzz.py TARGET --replay FILE...
+    .venv/bin/python tools/fuzz/fuzz.py --attacks [NAME ...] [--json]
 
 The targets are in `tools/fuzz/fuzz_targets.py` (METAR, each feed format and detection, NMEA,
 CANaerospace, CIGI 3.3 datagrams, the control channel against a real daemon, config, preset
@@ -23,6 +24,13 @@ Every failing input is saved as `--crash-dir/<target>/crash-<hash>` (default
 `tests/data/fuzz/`, the regression corpus `tests/test_fuzz.py` replays), at most two per
 distinct cause; libFuzzer's own crash, timeout and out-of-memory artifacts are saved the same
 way. Prints inputs run, inputs/s and failures per target; exits 1 when anything failed.
+
+`--attacks` runs the seven attacks of issue 40 instead (tools/soak/attacks.py), each once as a
+scripted case against fresh daemons of its own on loopback (NAME ...: only those; `--list`
+with it names them): one line per attack with whether the daemon survived, its frames before
+and after, its own checks and the counters it read from `status`. A daemon an attack kills is
+a failed case, not the end of the run; the daemons' logs of a failed case are kept in
+`--work-dir/attacks/<name>/`. Exits 1 when a case failed.
 """
 
 from __future__ import annotations
@@ -599,8 +607,17 @@ def main() -> int:
     p.add_argument("--list", action="store_true", help="list the targets")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("--replay", type=Path, nargs="+", metavar="FILE", help="run these inputs once")
+    p.add_argument(
+        "--attacks",
+        action="store_true",
+        help="run issue 40's attacks against real daemons, each once (target: their names)",
+    )
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
-    args = p.parse_args()
+    args, extra = p.parse_known_args()
+    if args.attacks:
+        return attacks_main(p, args, extra)
+    if extra:
+        p.error(f"unrecognized arguments: {' '.join(extra)}")
     if args.runs is None and args.minutes is None:
         args.runs = DEFAULT_RUNS
     args.work_dir, args.crash_dir = args.work_dir.resolve(), args.crash_dir.resolve()
@@ -637,6 +654,33 @@ def main() -> int:
             for cause, n in sorted(r.causes.items(), key=lambda kv: -kv[1]):
                 print(f"    {n:8d} x {cause}")
     return 1 if any(r.failures for r in results) else 0
+
+
+def attacks_main(p: argparse.ArgumentParser, args: argparse.Namespace, extra: list[str]) -> int:
+    """`--attacks [NAME ...]`: each attack once against its own daemons."""
+    import logging
+    import tempfile
+
+    from tools.soak.attacks import ATTACKS, run_all, summary
+
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s: %(message)s")
+    if args.list:
+        for name, (fn, _, _) in ATTACKS.items():
+            print(f"{name:22s} {(fn.__doc__ or '').strip().splitlines()[0]}")
+        return 0
+    names = [n for n in [args.target, *extra] if n not in (None, "all")] or list(ATTACKS)
+    unknown = [n for n in names if n not in ATTACKS]
+    if unknown:
+        p.error(f"unknown attack {', '.join(unknown)} (known: {', '.join(ATTACKS)})")
+    keep = args.work_dir / "attacks"  # the daemons' logs of the failed cases
+    with tempfile.TemporaryDirectory(prefix="wxsky-attacks-") as tmp:
+        results = run_all(names, Path(tmp), lambda line: print(line, flush=True), keep)
+    s = summary(results)
+    failed = ", ".join(s["failed"]) or "none"
+    print(f"attacks: {s['survived']} of {s['ran']} survived; failed: {failed}")
+    if args.json:
+        print(json.dumps([r.as_dict() for r in results], indent=1, default=str))
+    return 1 if s["failed"] else 0
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
     .venv/bin/python tools/soak/soak.py --minutes 60 --out soak-out        # the figures
     .venv/bin/python tools/soak/soak.py --seconds 20 --cycle-s 5 --out DIR   # a smoke run
+    .venv/bin/python tools/soak/soak.py --minutes 60 --attacks --out DIR     # issue 40's run
 
 The daemon runs on a private socket, segment and config (640x360, METAR polled every 0.5 s)
 with a METAR feed file, an NMEA line on a pty and a CANaerospace bus on an slcan adapter (a
@@ -21,6 +22,14 @@ separate threads, each bounded in count and time:
   bursts of connections);
 * apply a preset and release it;
 * fork shared-memory readers and SIGKILL them mid-read (tools/soak/soak_shm.py farm);
+* with `--attacks [NAME,...]`: one of issue 40's seven attacks a cycle, in turn
+  (tools/soak/attacks.py: a year-9999 clock from control, CIGI and FlightGear, a forged Zenoh
+  tick and state, a health flood and a channel SIGKILLed, CIGI conditions requests, a CIGI
+  regions flood, the segment truncated). For them the daemon also listens for a CIGI host and
+  a FlightGear pose (its clock following FlightGear's) on loopback ports and is a sky master
+  on a loopback Zenoh endpoint with one small display channel joined (restarted when an
+  attack kills it). Each attack's result (the daemon it aimed at alive, publishing, `status`
+  answering, its own checks) is in the report, with a target of its own: all survived;
 
 while a checking reader (tools/soak/soak_shm.py check) reads every frame, a client follows the
 `target` notifications, and a sampler records the daemon's RSS, descriptors, threads, frame
@@ -43,7 +52,9 @@ Targets (exit 1 when one is missed; 0 when all hold):
   half of it; at most 5 min): growth < 5 %;
 * descriptors and threads at the end / at the end of the baseline: at most 2 more;
 * log volume during the soak: at most 120 lines and 32 KiB a minute, no line over 2,000
-  characters.
+  characters;
+* with `--attacks`: every attack survived (a channel's death counts here; the master's is a
+  crash above).
 
 The log budget is this tool's, not the issue's: a log a person can read (rate-limited
 warnings, a status line every 5 s, a line per link state change).
@@ -77,11 +88,24 @@ from pathlib import Path
 from typing import Any
 
 from wxsky.errors import WxskyError
-from wxsky.host.client import ControlClient, DaemonUnavailable, RemoteError
+from wxsky.host.client import ControlClient
 from wxsky.output.shm import FrameReader
 from wxsky.settings.presets import load_preset
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the checkout, for `tools.*`
+from tools.soak.attacks import (
+    ATTACKS,
+    AttackError,
+    AttackResult,
+    Daemon,
+    Target,
+    channel_config,
+    free_tcp_port,
+    latest_frame,
+    run_attack,
+    start_daemon,
+    wait_channel,
+)
 from tools.soak.cockpit_faults import (
     FOREIGN_CAN_ID,
     bad_can_frames,
@@ -122,7 +146,8 @@ REOPEN_TIMEOUT_S = 15.0
 START_TIMEOUT_S = 90.0
 STOP_TIMEOUT_S = 15.0
 SETTLE_S = 4.0
-FAULTS = ("feed", "links", "cockpit", "presets", "kills", "control")
+FAULTS = ("feed", "links", "cockpit", "presets", "kills", "control", "attacks")
+DEFAULT_FAULTS = FAULTS[:-1]  # the attacks need a CIGI port, a pose port and a channel: opt in
 
 TARGETS = {
     "fps_ratio_min": 0.8,
@@ -158,14 +183,30 @@ def main() -> int:
     p.add_argument(
         "--faults",
         type=lambda text: set(text.split(",")),
-        default=set(FAULTS),
-        help=f"which to run, comma-separated (default all: {','.join(FAULTS)})",
+        default=set(DEFAULT_FAULTS),
+        help=f"which to run, comma-separated (default: {','.join(DEFAULT_FAULTS)})",
+    )
+    p.add_argument(
+        "--attacks",
+        nargs="?",
+        const="all",
+        metavar="NAME,...",
+        help="add issue 40's attacks to the faults, one a cycle in turn (default: all seven "
+        f"cases: {','.join(ATTACKS)})",
     )
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("-v", "--verbose", action="store_true", help="log each fault action")
     args = p.parse_args()
     if args.faults - set(FAULTS):
         p.error(f"--faults: unknown {', '.join(sorted(args.faults - set(FAULTS)))}")
+    if args.attacks is not None:
+        args.faults.add("attacks")
+    if "attacks" in args.faults:
+        names = args.attacks.split(",") if args.attacks not in (None, "all") else list(ATTACKS)
+        unknown = [n for n in names if n not in ATTACKS]
+        if unknown:
+            p.error(f"--attacks: unknown {', '.join(unknown)} (known: {', '.join(ATTACKS)})")
+        args.attack_names = names
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s soak: %(message)s",
@@ -284,6 +325,7 @@ class Soak:
         self.proc: subprocess.Popen[bytes] | None = None
         self.checker: subprocess.Popen[bytes] | None = None
         self.farm: subprocess.Popen[str] | None = None
+        self.checker_stats: list[Path] = []  # one per checker run (an attack may kill one)
         self.t0 = 0.0
         self.quit = threading.Event()  # monitors
         self.stop = threading.Event()  # fault threads
@@ -305,6 +347,11 @@ class Soak:
         self.marks: dict[str, float] = {}
         self.died_at: float | None = None
         self.exit: dict[str, Any] = {}
+        self.attacking = "attacks" in args.faults
+        self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}" if self.attacking else ""
+        self.channels: list[Daemon] = []  # every channel started, for the clean-up
+        self.master: Daemon | None = None  # the soak's daemon, as the attacks see it
+        self.attack_results: list[tuple[float, AttackResult]] = []
 
     def now(self) -> float:
         return time.monotonic() - self.t0
@@ -319,6 +366,9 @@ class Soak:
             self.can.plug()
         self._start_daemon()
         self._wait_started()
+        if self.attacking:
+            self._attack_target()  # reads the CIGI and pose ports while status answers
+            self._start_channel()
         self._start_readers()
         self._spawn(self._watch_target, "soak-target")
         self._spawn(self._sample, "soak-sampler")
@@ -338,6 +388,7 @@ class Soak:
             ("presets", self._preset_loop, "soak-presets"),
             ("kills", self._kill_loop, "soak-kills"),
             ("control", lambda: self.control.run(self.stop, self.args.control_period_s), "ctl"),
+            ("attacks", self._attack_loop, "soak-attacks"),
         ]
         if self.can is not None:
             can_dev = self.can
@@ -414,6 +465,9 @@ name = "{SERIAL_NAME}"
             text += f'[[can]]\ninterface = "udp_multicast"\nchannel = "{self.can.group}"\n'
         if self.can is not None:
             text += f'name = "{CAN_NAME}"\n'
+        if self.attacking:
+            text += '[cigi]\nlisten = ["udp:127.0.0.1:0"]\n'
+            text += '[flightgear]\npose = "udp:127.0.0.1:0"\nclock = "flightgear"\n'
         return text
 
     def _start_daemon(self) -> None:
@@ -421,6 +475,8 @@ name = "{SERIAL_NAME}"
         cfg.write_text(self._config())
         cmd = [sys.executable, "-m", "wxsky", "run", "--config", str(cfg)]
         cmd += ["--control", f"unix:{self.sock}", "--trace", str(self.trace_path)]
+        if self.attacking:
+            cmd += ["--share", f"zenoh:{self.endpoint}"]
         with open(self.log_path, "wb") as out:
             self.proc = subprocess.Popen(
                 cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
@@ -484,11 +540,20 @@ name = "{SERIAL_NAME}"
     # -- shared-memory readers ----------------------------------------------------------
 
     def _start_readers(self) -> None:
-        script = str(TOOLS / "soak_shm.py")
-        stats = self.tmp / "checker.json"
+        self._start_checker()
+        self._start_farm()
+        time.sleep(1.0)
+
+    def _start_checker(self) -> None:
+        stats = self.tmp / f"checker-{len(self.checker_stats)}.json"
+        self.checker_stats.append(stats)
         self.checker = subprocess.Popen(
-            [sys.executable, script, "check", self.shm_name, str(stats)], start_new_session=True
+            [sys.executable, str(TOOLS / "soak_shm.py"), "check", self.shm_name, str(stats)],
+            start_new_session=True,
         )
+
+    def _start_farm(self) -> None:
+        script = str(TOOLS / "soak_shm.py")
         self.farm = subprocess.Popen(
             [sys.executable, script, "farm", self.shm_name, "--seed", str(self.args.seed)],
             stdin=subprocess.PIPE,
@@ -496,7 +561,6 @@ name = "{SERIAL_NAME}"
             text=True,
             start_new_session=True,
         )
-        time.sleep(1.0)
 
     def _stop_readers(self) -> dict[str, Any]:
         procs: list[subprocess.Popen[Any]] = [p for p in (self.checker, self.farm) if p]
@@ -512,18 +576,18 @@ name = "{SERIAL_NAME}"
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait(timeout=5.0)
-        try:
-            return dict(json.loads((self.tmp / "checker.json").read_text()))
-        except (OSError, ValueError):
-            return {}
+        return _merged_checker_stats(self.checker_stats)
 
     def _kill_loop(self) -> None:
-        farm = self.farm
-        assert farm is not None and farm.stdin is not None and farm.stdout is not None
         for _ in self._cycles(1.0):
-            farm.stdin.write(f"kill 3 {min(2.0, self.plan.cycle_s / 4):.2f}\n")
-            farm.stdin.flush()
-            answer = json.loads(farm.stdout.readline() or "{}")
+            farm = self.farm  # the attack loop starts another when an attack killed it
+            assert farm is not None and farm.stdin is not None and farm.stdout is not None
+            try:
+                farm.stdin.write(f"kill 3 {min(2.0, self.plan.cycle_s / 4):.2f}\n")
+                farm.stdin.flush()
+                answer = json.loads(farm.stdout.readline() or "{}")
+            except (OSError, ValueError):
+                continue  # the farm died (a truncated segment faults its readers too)
             self.kills.update({k: v for k, v in answer.items() if isinstance(v, int)})
 
     # -- monitors -----------------------------------------------------------------------
@@ -572,14 +636,18 @@ name = "{SERIAL_NAME}"
                 fds = len(os.listdir(f"/proc/{pid}/fd"))
             except (OSError, ValueError):
                 return  # the daemon is gone
-            try:
-                if reader is None or not reader.is_current():
-                    if reader is not None:
-                        reader.close()
-                    reader = FrameReader.open(self.shm_name)
-                frame = reader.frame_number
-            except WxskyError:
-                reader, frame = None, -1
+            if self.attacking:  # a segment an attack truncates would fault a mapping here
+                latest = latest_frame(self.shm_name)
+                frame = -1 if latest is None else latest
+            else:
+                try:
+                    if reader is None or not reader.is_current():
+                        if reader is not None:
+                            reader.close()
+                        reader = FrameReader.open(self.shm_name)
+                    frame = reader.frame_number
+                except WxskyError:
+                    reader, frame = None, -1
             fps = clients = cache_kib = None
             try:
                 client = client or self._client()
@@ -691,31 +759,122 @@ name = "{SERIAL_NAME}"
                         self.links["can"].stalled += 1
 
     def _preset_loop(self) -> None:
-        with self._client() as client:
+        client: ControlClient | None = None
+
+        def call(method: str, params: dict[str, Any]) -> None:
+            """The call, once again on a new connection if the first one fails: the daemon
+            closes the longest idle client to make room in a burst of connections (the
+            control faults make them) and says to connect again."""
+            nonlocal client
+            for attempt in (1, 2):
+                try:
+                    client = client or self._client()
+                    client.call(method, params)
+                    return
+                except (WxskyError, OSError):
+                    if client is not None:
+                        client.close()
+                    client = None
+                    if attempt == 2:
+                        raise
+
+        try:
             for k in self._cycles(3.0):
                 name = self.preset_names[k % len(self.preset_names)]
                 record: dict[str, Any] = {"name": name, "applied_at": self.now()}
                 try:
-                    client.call("apply_preset", {"name": name})
+                    call("apply_preset", {"name": name})
                     record["apply_ok"] = True
-                except (RemoteError, DaemonUnavailable) as exc:
+                except (WxskyError, OSError) as exc:
                     record["apply_ok"] = False
-                    record["error"] = str(exc)
+                    record["error"] = f"apply: {exc}"
                 self.stop.wait(self.plan.offset(4.0))  # released even when the soak ends
                 record["released_at"] = self.now()
                 try:
-                    client.call("release", {})
+                    call("release", {})
                     record["release_ok"] = True
-                except (RemoteError, DaemonUnavailable) as exc:
+                except (WxskyError, OSError) as exc:
                     record["release_ok"] = False
-                    record["error"] = str(exc)
+                    record["error"] = f"{record.get('error', '')} release: {exc}".strip()
                 self.presets.append(record)
+        finally:
+            if client is not None:
+                client.close()
+
+    # -- issue 40's attacks -------------------------------------------------------------
+
+    def _start_channel(self) -> Daemon:
+        """A small display channel joined to the soak's daemon (the Zenoh attacks' target)."""
+        tag = uuid.uuid4().hex[:8]
+        d = start_daemon(
+            self.tmp / f"channel-{tag}",
+            "channel",
+            channel_config(f"wxsky-soak-ch-{tag}"),
+            ("--join", f"zenoh:{self.endpoint}", "--channel", "left"),
+        )
+        self.channels.append(d)
+        try:
+            wait_channel(d)
+        except AttackError as exc:
+            log.warning("%s", exc)
+        return d
+
+    def _attack_target(self) -> Target:
+        assert self.proc is not None
+        if self.master is None:  # one for the run: it keeps the ports it read
+            self.master = Daemon("master", self.proc, self.sock, self.shm_name, self.log_path)
+            self.master.cigi_port()
+            self.master.pose_port()
+        master = self.master
+        channel = self.channels[-1] if self.channels else None
+        return Target(
+            master,
+            channel,
+            endpoint=self.endpoint,
+            respawn_channel=self._respawn_channel,
+            weather_is_ours=False,  # the preset loop changes it every cycle
+        )
+
+    def _respawn_channel(self) -> Daemon:
+        return self._start_channel()
+
+    def _attack_loop(self) -> None:
+        names: list[str] = self.args.attack_names
+        for k in self._cycles(5.0):
+            if self.proc is None or self.proc.poll() is not None:
+                return
+            if self.channels and not self.channels[-1].alive():
+                self._start_channel()  # an attack before killed it
+            name = names[k % len(names)]
+            at = self.now()
+            result = run_attack(name, self._attack_target())
+            # The shared-memory readers map the segment: an attack on it can kill them too.
+            if self.checker is not None and self.checker.poll() is not None:
+                result.counters["checker_died"] = self.checker.returncode
+                self._start_checker()
+            if self.farm is not None and self.farm.poll() is not None:
+                result.counters["farm_died"] = self.farm.returncode
+                self._start_farm()
+            self.attack_results.append((at, result))
+            log.info("attack at %.0f s: %s", at, result.line())
+
+    def _attacks_report(self) -> dict[str, Any]:
+        ran = [(t, r) for t, r in self.attack_results if not r.skipped]
+        return {
+            "names": list(self.args.attack_names),
+            "ran": len(ran),
+            "survived": sum(r.survived for _, r in ran),
+            "failed": [f"{t:.0f} s {r.name}: {r.what}" for t, r in ran if not r.survived][:20],
+            "results": [{"t": t} | r.as_dict() for t, r in self.attack_results],
+        }
 
     # -- clean-up -----------------------------------------------------------------------
 
     def cleanup(self) -> None:
         self.stop.set()
         self.quit.set()
+        for channel in self.channels:
+            channel.stop()
         for proc in (self.checker, self.farm, self.proc):
             if proc is not None and proc.poll() is None:
                 with contextlib.suppress(ProcessLookupError):
@@ -840,6 +999,8 @@ name = "{SERIAL_NAME}"
             "samples": [list(vars(s).values()) for s in self.samples],
             "sample_fields": list(Sample.__dataclass_fields__),
         }
+        if self.attacking:
+            report["attacks"] = self._attacks_report()
         report["targets"] = _judge(report)
         return report
 
@@ -875,6 +1036,11 @@ name = "{SERIAL_NAME}"
         n = len(self.presets)
         out["presets"] = {"sent": 2 * n, "applied": applied + released}
         out["presets"]["detail"] = {"applied": applied, "released": released, "of": n}
+        out["presets"]["errors"] = [
+            f"{p['name']} at {p['applied_at']:.0f} s: {p['error']}"[:300]
+            for p in self.presets
+            if p.get("error")
+        ][:10]
         return out
 
     def _invalid_reaching(self) -> dict[str, Any]:
@@ -939,6 +1105,30 @@ class StatusProbe:
         if self._client is not None:
             self._client.close()
         self._client = None
+
+
+def _merged_checker_stats(paths: list[Path]) -> dict[str, Any]:
+    """The checking readers' stats, summed over every run of the checker (one an attack
+    killed is followed by another)."""
+    runs = []
+    for path in paths:
+        with contextlib.suppress(OSError, ValueError):
+            runs.append(dict(json.loads(path.read_text())))
+    if not runs:
+        return {}
+    out: dict[str, Any] = dict(runs[0])
+    for run in runs[1:]:
+        for key, value in run.items():
+            if isinstance(value, list):
+                out[key] = list(out.get(key) or []) + value
+            elif key == "first_frame":
+                continue
+            elif key == "last_frame" or not isinstance(value, int):
+                out[key] = value
+            else:
+                out[key] = (out.get(key) or 0) + value
+    out["runs"] = len(runs)
+    return out
 
 
 def _until(predicate: Callable[[], bool], timeout_s: float) -> bool:
@@ -1112,6 +1302,10 @@ def _judge(r: dict[str, Any]) -> dict[str, dict[str, Any]]:
         and (log["kib_per_min"] or 0) <= T["log_kib_per_min_max"]
         and log["longest_line"] <= T["log_line_chars_max"],
     }
+    attacks = r.get("attacks")
+    if attacks is not None:  # only in a soak with --attacks
+        judged["attacks_survived"] = (f"{attacks['survived']}/{attacks['ran']}", "all")
+        oks["attacks_survived"] = attacks["ran"] > 0 and attacks["survived"] == attacks["ran"]
     return {k: {"value": v, "target": t, "ok": bool(oks[k])} for k, (v, t) in judged.items()}
 
 
@@ -1162,11 +1356,18 @@ def _print_summary(r: dict[str, Any]) -> bool:
     for kind, v in r["valid"].items():
         if isinstance(v, dict) and v.get("missed"):
             print(f"  valid missed ({kind}): {', '.join(v['missed'][:5])}")
+    for what in r["valid"]["presets"].get("errors", [])[:5]:
+        print(f"  preset error: {what}")
     for problem in f["problems"][:5]:
         print(f"  frames: {problem}")
     print(f"  links: {r['links']}")
     print(f"  feed writes: {r['feed_writes']}; reader kills: {r['reader_kills']}")
     print(f"  control: {r['control']['actions']}")
+    attacks = r.get("attacks")
+    if attacks is not None:
+        print(f"  attacks: {attacks['survived']} of {attacks['ran']} survived")
+        for what in attacks["failed"][:10]:
+            print(f"  attack failed: {what}")
     for problem in r["control"]["problems"][:5]:
         print(f"  control problem: {problem}")
     ok = all(t["ok"] for t in r["targets"].values())
