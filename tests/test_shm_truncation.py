@@ -117,6 +117,31 @@ def test_a_truncation_during_a_frame_is_found_at_the_next(shm_name: str) -> None
         np.testing.assert_array_equal(got.layers["ring"], ring)
 
 
+def test_a_mended_slot_moves_its_seq_on(shm_name: str) -> None:
+    """A reader that copied a slot while the file was short or holed read zeros under an
+    unchanged seq; the mend moves every published slot's seq on (odd while it is written
+    again), so that reader's second look at the seq sends it back, not off with a torn frame."""
+    import struct
+
+    def seqs() -> list[int]:
+        with open(f"/dev/shm/{shm_name}", "rb") as f:
+            data = f.read()
+        return [struct.unpack_from("<Q", data, writer._layout.slot_base(s))[0] for s in (0, 1)]
+
+    with FrameWriter.create(shm_name, LAYERS) as writer:
+        ring = np.full((32, 32, 4), 9, np.uint8)
+        for frame in (1, 2):
+            publish(writer, frame, np.full((32, 64, 4), frame, np.uint8), ring)
+        before = seqs()
+        assert all(s and not s & 1 for s in before)
+        truncate_from_another_process(shm_name, writer.segment_size // 2)
+        writer.layer_buffer("clouds", 64, 32)  # the next frame's check mends the segment
+        after = seqs()
+        # Both moved on by the mend; the slot now being filled is odd again, as every frame.
+        assert all(a >= b + 2 for a, b in zip(after, before, strict=True))
+        assert not after[1 - writer.target_slot] & 1
+
+
 def test_a_daemon_survives_truncations_of_its_segment(tmp_path: Path) -> None:
     """The attack against a real daemon: truncated to 0 and to half by a second process,
     the daemon keeps running and publishing (a reader sees frame numbers advance), its

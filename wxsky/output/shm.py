@@ -637,8 +637,17 @@ class FrameWriter:
             )
             return
         # Both slots as last published (and the one being filled as it was), so what a slot
-        # is known to hold (`keep_layer`) holds in the file again too.
+        # is known to hold (`keep_layer`) holds in the file again too. Each published slot's
+        # seq is odd while it is written again and moves on after: a reader that copied the
+        # slot while the file was short or holed (zeros under an unchanged seq) sees the seq
+        # change and retries, instead of taking a torn frame.
+        seqs = [self._layout.slot_base(slot) + SLOT_SEQ for slot in range(SLOT_COUNT)]
+        mended = [off for off in seqs if self._u64[off // 8] and not self._u64[off // 8] & 1]
+        for off in mended:
+            self._u64[off // 8] += 1
         self._push(0, total)
+        for off in mended:
+            self._put64(off, self._u64[off // 8] + 1)
 
     def _init_header(self) -> None:
         lay = self._layout
