@@ -39,6 +39,7 @@ from datetime import datetime
 from typing import Any, Protocol, cast
 
 from wxsky.errors import ConfigError, RuntimeFailure
+from wxsky.inputs.networks import address_allowed
 from wxsky.inputs.networks import parse_networks as parse_networks  # cigi_part imports it here
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog
@@ -207,16 +208,7 @@ class CigiIg(asyncio.DatagramProtocol):
             self._drop("internal_error", f"datagram from {source[0]}:{source[1]}: {exc!r}")
 
     def _allowed(self, host: str) -> bool:
-        nets = self.settings.allow_from
-        if not nets:
-            return True
-        try:
-            ip = ipaddress.ip_address(host.split("%", 1)[0])
-        except ValueError:
-            return False
-        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
-            ip = ip.ipv4_mapped
-        return any(ip in net for net in nets)
+        return address_allowed(host, self.settings.allow_from)
 
     def _drop(self, reason: str, message: str) -> None:
         self._dropped[reason] += 1
