@@ -580,15 +580,20 @@ class FrameWriter:
             while offset < end:
                 offset += os.pwrite(self._fd, self._view[offset:end], offset)
         except OSError as exc:
-            self.write_errors += 1
-            self._damaged = True
-            self.last_problem = f"writing it failed: {exc.strerror}"
-            self._log.log(
-                logging.ERROR,
-                "write",
-                f"frame segment {self._name!r}: writing it failed: {exc.strerror} "
-                f"({self.write_errors} failed writes so far); trying again next frame",
-            )
+            self._failed("write", f"writing it failed: {exc.strerror}")
+
+    def _failed(self, kind: str, problem: str) -> None:
+        """A write or resize of the segment failed: counted, logged (rate-limited per kind),
+        and the whole segment written again at the next frame's check."""
+        self.write_errors += 1
+        self._damaged = True
+        self.last_problem = problem
+        self._log.log(
+            logging.ERROR,
+            kind,
+            f"frame segment {self._name!r}: {problem} ({self.write_errors} failed writes so "
+            "far); trying again next frame",
+        )
 
     def _check_segment(self) -> None:
         """Before each frame: the segment's file must still be what this writer wrote: its
@@ -626,15 +631,7 @@ class FrameWriter:
             if hasattr(os, "posix_fallocate"):
                 os.posix_fallocate(self._fd, 0, total)  # as at creation: no late ENOSPC
         except OSError as exc:
-            self.write_errors += 1
-            self._damaged = True
-            self.last_problem = f"it could not be given its size again: {exc.strerror}"
-            self._log.log(
-                logging.ERROR,
-                "resize",
-                f"frame segment {self._name!r}: it could not be given its size again: "
-                f"{exc.strerror}; trying again next frame",
-            )
+            self._failed("resize", f"it could not be given its size again: {exc.strerror}")
             return
         # Both slots as last published (and the one being filled as it was), so what a slot
         # is known to hold (`keep_layer`) holds in the file again too. Each published slot's
