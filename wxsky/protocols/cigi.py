@@ -22,9 +22,8 @@ import struct
 from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from functools import cache
 from types import MappingProxyType
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from wxsky.protocols.cigi_fields import (
     BYTE_SWAP_MAGIC,
@@ -120,7 +119,12 @@ def _outside(f: Field, low: bool) -> str:
 
 def _checked(spec: PacketSpec, raw: Mapping[str, object]) -> tuple[Value, ...]:
     """The packet's stored values from raw ones, or `_Bad` naming the first field wrong."""
-    values = {f.name: _converted(f, raw[f.name]) for f in spec.value_fields}
+    return _ranged(spec, {f.name: _converted(f, raw[f.name]) for f in spec.value_fields})
+
+
+def _ranged(spec: PacketSpec, values: Mapping[str, Value]) -> tuple[Value, ...]:
+    """`values` (already typed and rounded) as a tuple once each is within its field's range
+    and rule, or `_Bad` naming the first that is not."""
     for f in spec.value_fields:
         if f.when is not None and values[f.when[0]] != f.when[1]:
             continue
@@ -216,10 +220,34 @@ class _Layout:
     structs: Mapping[str, struct.Struct]  # byte order -> header and slots, reserved as pad
     slot_of: tuple[int, ...]  # per spec field, its slot (bit fields of one byte share one)
     slot_count: int  # slots 0 and 1 are the header
+    reads: tuple[_Read, ...]  # how to read each value field from the slots, in order
 
 
-@cache
+class _Read(NamedTuple):
+    """One value field as decoding reads it: its slot, its bits, and what wire values need
+    checking (a struct's integers always fit their type; its f32s are already f32)."""
+
+    name: str
+    slot: int
+    bit: int
+    mask: int | None  # bit fields: the width's mask
+    is_float: bool
+    wrap: Field | None  # angles: the field, to wrap into its range
+
+
+_LAYOUTS: dict[int, _Layout] = {}
+
+
 def _layout(spec: PacketSpec) -> _Layout:
+    # Keyed by opcode, not by the spec: hashing a frozen spec hashes every field, a fifth
+    # of a 64 KB datagram's decoding (issue 40).
+    layout = _LAYOUTS.get(spec.opcode)
+    if layout is None:
+        layout = _LAYOUTS[spec.opcode] = _make_layout(spec)
+    return layout
+
+
+def _make_layout(spec: PacketSpec) -> _Layout:
     slots: dict[int, str] = {0: "B", 1: "B"}  # the header
     for f in spec.fields:
         slots[f.offset] = STRUCT_CODES[f.kind]
@@ -229,10 +257,23 @@ def _layout(spec: PacketSpec) -> _Layout:
         at = offset + struct.calcsize("<" + slots[offset])
     fmt += "x" * (spec.size - at)
     order = sorted(slots)
+    reads = tuple(
+        _Read(
+            f.name,
+            order.index(f.offset),
+            f.bit,
+            (1 << f.width) - 1 if f.kind == "bits" else None,
+            f.is_float,
+            f if f.wrap else None,
+        )
+        for f in spec.fields
+        if f.fixed is None
+    )
     return _Layout(
         MappingProxyType({"big": struct.Struct(">" + fmt), "little": struct.Struct("<" + fmt)}),
         tuple(order.index(f.offset) for f in spec.fields),
         len(order),
+        reads,
     )
 
 
@@ -368,14 +409,23 @@ def _start(data: bytes, out: _Collector) -> tuple[ByteOrder, PacketSpec] | None:
 
 
 def _unpack(spec: PacketSpec, data: bytes, pos: int, order: ByteOrder) -> tuple[Value, ...]:
+    """The packet's values from the wire: what `_checked` would make of them, without its
+    type and width checks, which a struct's output always passes (a 64 KB datagram of
+    conditions requests decodes in a third of the time: issue 40)."""
     layout = _layout(spec)
     slots = layout.structs[order].unpack_from(data, pos)
-    raw: dict[str, object] = {}
-    for f, slot in zip(spec.fields, layout.slot_of, strict=True):
-        if f.fixed is None:
-            v = slots[slot]
-            raw[f.name] = (v >> f.bit) & ((1 << f.width) - 1) if f.kind == "bits" else v
-    return _checked(spec, raw)
+    values: dict[str, Value] = {}
+    for r in layout.reads:
+        v = slots[r.slot]
+        if r.mask is not None:
+            v = (v >> r.bit) & r.mask
+        elif r.is_float:
+            if not math.isfinite(v):
+                raise _Bad("not_finite", f"{r.name} is {v}")
+            if r.wrap is not None:
+                v = _wrapped(r.wrap, v)
+        values[r.name] = v
+    return _ranged(spec, values)
 
 
 def decode_datagram(data: bytes | bytearray | memoryview) -> CigiDatagram:
@@ -396,6 +446,20 @@ def decode_datagram(data: bytes | bytearray | memoryview) -> CigiDatagram:
             break
         opcode, size = buf[pos], buf[pos + 1]
         spec = BY_OPCODE.get(opcode)
+        if (
+            spec is not None
+            and size == spec.size
+            and size <= left
+            and not (spec.starts_message and pos > 0)
+            and spec.direction == direction
+        ):  # the usual packet, before any problem text is made
+            try:
+                packets.append(_trusted(opcode, _unpack(spec, buf, pos, order)))
+            except _Bad as bad:
+                what = f"{spec.name} at byte {pos}"
+                out.add(bad.reason, pos, f"{what}: {_at(spec, pos, bad.detail)}")
+            pos += size
+            continue
         what = f"{spec.name if spec else f'opcode {opcode}'} at byte {pos}"
         if size < HEADER_SIZE:
             out.add("zero_size", pos, f"{what}: size byte {size}; {left} bytes not read")
