@@ -4,7 +4,8 @@ them, its engine taking the master's weather, drift anchor and clock, its camera
 camera turned by its view offset.
 
 Zenoh delivers on its own threads; everything here runs on the daemon's event loop
-(callbacks hop over with `call_soon_threadsafe`), and the frame hooks run between frames. A
+(callbacks hop over through a bounded inbox, `bus_inbox.py`), and the frame hooks run
+between frames. A
 daemon part (`parts.py`), always in the daemon's list: a standalone daemon's `status` has its
 keys too.
 """
@@ -21,6 +22,7 @@ from collections.abc import Callable
 from datetime import datetime, timedelta
 from typing import Any
 
+from wxsky.app.bus_inbox import INBOX_LIMIT, BusInbox
 from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.engine.stages import SharedSky, SkyEngine
 from wxsky.logs import RateLimitedLog
@@ -110,6 +112,7 @@ class SharePart(Part):
         self._live_master: str | None = None
         self._state_at = 0.0  # local monotonic of the latest state taken
         self._drops: dict[str, int] = {}
+        self._inbox: BusInbox | None = None
         self._drop_log = RateLimitedLog(log)
         # The peers: channels whose token is alive, at most MAX_PEERS; their health.
         self._channels: set[str] = set()
@@ -140,6 +143,7 @@ class SharePart(Part):
         from wxsky.share.zenoh_bus import ShareBus
 
         loop = self._loop = asyncio.get_running_loop()
+        self._inbox = BusInbox(loop, self._inbox_full)
         self._check_credentials()
         open_bus = functools.partial(
             ShareBus,
@@ -166,17 +170,17 @@ class SharePart(Part):
             bus.serve(lambda: self._latest_state, self._pong)
             self._publish_state(time.monotonic(), force=True)
         else:
-            bus.on_state(self._hop(self._got_state))
-            bus.on_tick(self._hop(self._got_tick))
-            bus.on_master(self._hop(self._master_seen))
+            bus.on_state(self._hop("state", self._got_state))
+            bus.on_tick(self._hop("tick", self._got_tick))
+            bus.on_master(self._hop("master", self._master_seen, droppable=False))
             bus.announce_channel()
             self._tasks.append(asyncio.create_task(self._pinger()))
             self._tasks.append(asyncio.create_task(self._warn_without_master()))
             first = await loop.run_in_executor(None, bus.fetch_state)
             if first is not None:
                 self._got_state(first, time.monotonic())
-        bus.on_channel(self._hop(self._channel_seen))
-        bus.on_health(self._hop(self._got_health))
+        bus.on_channel(self._hop("channel", self._channel_seen, droppable=False))
+        bus.on_health(self._hop("health", self._got_health))
         self._tasks.append(asyncio.create_task(self._heartbeat()))
         log.info(
             "sky %s on zenoh:%s, site %r%s",
@@ -196,6 +200,8 @@ class SharePart(Part):
         self._tasks.clear()
         bus, self._bus = self._bus, None
         self._loop = None
+        if self._inbox is not None:
+            self._inbox.close()
         if bus is None:
             return
         leave = asyncio.get_running_loop().run_in_executor(None, bus.close)
@@ -360,15 +366,26 @@ class SharePart(Part):
 
     # -- a channel ------------------------------------------------------------------------
 
-    def _hop(self, handler: Callable[..., None]) -> Callable[..., None]:
-        """A bus callback (Zenoh's thread) that runs `handler(*values, arrival)` on the loop."""
+    def _hop(
+        self, kind: str, handler: Callable[..., None], droppable: bool = True
+    ) -> Callable[..., None]:
+        """A bus callback (Zenoh's thread) that runs `handler(*values, arrival)` on the loop,
+        through the bounded inbox (`bus_inbox.py`): a `droppable` message that finds it full
+        is dropped and counted as a `kind` drop."""
 
         def deliver(*values: Any) -> None:
-            loop = self._loop
-            if loop is not None and not loop.is_closed():
-                loop.call_soon_threadsafe(functools.partial(handler, *values, time.monotonic()))
+            inbox = self._inbox
+            if inbox is not None:
+                inbox.put(kind, handler, values, droppable)
 
         return deliver
+
+    def _inbox_full(self, kind: str, count: int) -> None:
+        self._drops[kind] = self._drops.get(kind, 0) + count
+        self._drop_log.warning(
+            f"share-{kind}",
+            f"dropped {count} {kind} messages from the bus: {INBOX_LIMIT} were waiting already",
+        )
 
     def _from_live_master(self, what: str, master_id: str) -> bool:
         """Whether a message's run id is the followed master's token's; if not, counted."""
