@@ -46,6 +46,7 @@ STATUS_KEYS = {
     "scene_work",
     "segment",
     "block_cache",
+    "memory",
     "zero_copy",
     "sky_id",
     "channel",

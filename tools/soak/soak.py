@@ -281,6 +281,10 @@ class Sample:
     status_fps: float | None
     clients: int | None
     block_cache_kib: int | None  # the daemon's generated cloud blocks (status block_cache)
+    # What RSS is made of (status memory): glibc heap in use (live C and Python memory) and
+    # Python's live blocks. Flat while RSS climbs: the allocator keeping freed pages.
+    heap_in_use_kib: int | None = None
+    python_blocks: int | None = None
 
 
 @dataclass
@@ -648,19 +652,34 @@ name = "{SERIAL_NAME}"
                     frame = reader.frame_number
                 except WxskyError:
                     reader, frame = None, -1
-            fps = clients = cache_kib = None
+            fps = clients = cache_kib = heap_kib = blocks = None
             try:
                 client = client or self._client()
                 status = client.call("status", timeout_s=2.0)
                 fps, clients = status["fps"], status["clients"]
                 cache_kib = status["block_cache"]["bytes"] // 1024
+                memory = status.get("memory") or {}
+                heap_kib = (memory.get("heap") or {}).get("in_use_kib")
+                blocks = memory.get("python_blocks")
             except (WxskyError, OSError):
                 if client is not None:
                     client.close()
                 client = None
             log_bytes = self.log_path.stat().st_size
             self.samples.append(
-                Sample(self.now(), rss, fds, threads, frame, log_bytes, fps, clients, cache_kib)
+                Sample(
+                    self.now(),
+                    rss,
+                    fds,
+                    threads,
+                    frame,
+                    log_bytes,
+                    fps,
+                    clients,
+                    cache_kib,
+                    heap_kib,
+                    blocks,
+                )
             )
             time.sleep(max(0.0, next_t - time.monotonic()))
         if reader is not None:
@@ -965,6 +984,10 @@ name = "{SERIAL_NAME}"
                 # filling, not a leak.
                 "block_cache_warm": _median_of(warm, "block_cache_kib"),
                 "block_cache_end": _median_of(end_samples, "block_cache_kib"),
+                "heap_in_use_warm": _median_of(warm, "heap_in_use_kib"),
+                "heap_in_use_end": _median_of(end_samples, "heap_in_use_kib"),
+                "python_blocks_warm": _median_of(warm, "python_blocks"),
+                "python_blocks_end": _median_of(end_samples, "python_blocks"),
             },
             "fds": {
                 "start": quiet_start.fds,
@@ -1336,6 +1359,12 @@ def _print_summary(r: dict[str, Any]) -> bool:
         print(
             f"  block cache: after warm-up {_fmt_kib(rss['block_cache_warm'])}, "
             f"end {_fmt_kib(rss['block_cache_end'])}"
+        )
+    if rss.get("heap_in_use_end") is not None:
+        print(
+            f"  heap in use: after warm-up {_fmt_kib(rss['heap_in_use_warm'])}, "
+            f"end {_fmt_kib(rss['heap_in_use_end'])}; python blocks "
+            f"{_fmt(rss['python_blocks_warm'])} -> {_fmt(rss['python_blocks_end'])}"
         )
     rb = r.get("ring_rebuilds")
     if rb:

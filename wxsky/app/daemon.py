@@ -39,6 +39,8 @@ from wxsky.app.control import (
 )
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.frame_times import FrameTimes
+from wxsky.app.memory import TRIM_EVERY_S, memory_status
+from wxsky.app.memory import trim as trim_heap
 from wxsky.app.part_factory import parts_from_config
 from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.app.trace import TraceWriter
@@ -182,6 +184,10 @@ class Daemon:
         self._export_failed: str | None = None
         self._slot_textures: Any = None
         self._preview_task: asyncio.Future[None] | None = None
+        # Freed heap given back once a minute on a worker (`memory.py`): counts for status.
+        self._trim_task: asyncio.Future[None] | None = None
+        self._trims = 0
+        self._trimmed_kib = 0
         self._control_log = RateLimitedLog(log)
         self._commands: dict[str, Callable[[dict[str, Any]], Any]] = {
             "status": lambda p: no_params("status", p) or self.status(),
@@ -257,6 +263,7 @@ class Daemon:
         next_tick = last
         next_status = last + self.config.daemon.status_interval_s
         next_preview = last + 0.5
+        next_trim = last + TRIM_EVERY_S
         weather_version = self.engine.weather_version
         shown_ring = None
         while not self._stop.is_set():
@@ -288,6 +295,9 @@ class Daemon:
             if self.preview_dir is not None and now >= next_preview and self._preview_idle():
                 next_preview = now + self.config.preview.interval_s
                 self._preview_task = loop.run_in_executor(None, self._write_preview)
+            if now >= next_trim and (self._trim_task is None or self._trim_task.done()):
+                next_trim = now + TRIM_EVERY_S
+                self._trim_task = loop.run_in_executor(None, self._trim_heap)
             # A late frame starts the next one at once but never tries to catch up a backlog.
             next_tick = max(next_tick + period, loop.time())
             with contextlib.suppress(TimeoutError):
@@ -531,6 +541,7 @@ class Daemon:
             "frames": self._frame_times.to_dict(),
             "scene_work": self.engine.scene_work(),
             "block_cache": BLOCK_CACHE.info().to_dict(),
+            "memory": memory_status(self._trims, self._trimmed_kib),
             "zero_copy": {
                 "supported": self._export_probe is not None and self._export_probe.supported,
                 "reason": self._export_failed
@@ -598,6 +609,12 @@ class Daemon:
 
     def _preview_idle(self) -> bool:
         return self._preview_task is None or self._preview_task.done()
+
+    def _trim_heap(self) -> None:
+        given = trim_heap()
+        if given is not None:
+            self._trims += 1
+            self._trimmed_kib += given
 
     def _write_preview(self) -> None:
         """Composite the latest published frame the way a host does: from shared memory."""

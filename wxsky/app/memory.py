@@ -1,0 +1,109 @@
+"""What the daemon's memory is, for `status`, and giving freed heap back to the system.
+
+A long-running daemon with a few dozen threads (render, workers, Zenoh, readers) allocates
+from several glibc malloc arenas. Bursts (a 100,000-message flood, a 20,000-region CIGI
+datagram, a thunderstorm's towers) free what they took, but glibc keeps freed pages inside
+its heaps until something asks it to give them back, so RSS steps up with each burst and
+never comes down: issue 40's hour-long soak saw +18 % that way while the Python objects
+alive stayed level. `status` tells the two apart (`python_blocks` and the heap's
+`in_use_kib` against `rss_kib`), and `trim` (glibc's `malloc_trim(0)`, which also returns
+free pages in the middle of a heap) runs once a minute on a worker thread, never on the
+frame path. Elsewhere than glibc both are absent and say so.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import logging
+import os
+import resource
+import sys
+from functools import cache
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+TRIM_EVERY_S = 60.0
+_PAGE_KIB = os.sysconf("SC_PAGE_SIZE") // 1024 if hasattr(os, "sysconf") else 4
+
+
+class _Mallinfo2(ctypes.Structure):
+    # glibc >= 2.33; every field a size_t.
+    _fields_ = [
+        (name, ctypes.c_size_t)
+        for name in (
+            "arena",  # bytes from sbrk (the main arena)
+            "ordblks",
+            "smblks",
+            "hblks",
+            "hblkhd",  # bytes in mmapped chunks
+            "usmblks",
+            "fsmblks",
+            "uordblks",  # bytes in use
+            "fordblks",  # bytes free inside the heaps
+            "keepcost",
+        )
+    ]
+
+
+@cache
+def _libc() -> Any | None:
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.malloc_trim.argtypes = [ctypes.c_size_t]
+        libc.malloc_trim.restype = ctypes.c_int
+        libc.mallinfo2.restype = _Mallinfo2
+    except (OSError, AttributeError):  # not glibc, or one older than 2.33
+        return None
+    return libc
+
+
+def rss_kib() -> int | None:
+    """Resident set size now (not the peak), from /proc."""
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * _PAGE_KIB
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def memory_status(trims: int = 0, trimmed_kib: int = 0) -> dict[str, Any]:
+    """`status`'s `memory`: RSS now and at most, Python's live blocks, glibc's heap (bytes
+    in use, free inside it, in mmapped chunks) where it is glibc, and the caller's count of
+    trims and what they gave back."""
+    out: dict[str, Any] = {
+        "rss_kib": rss_kib(),
+        "peak_rss_kib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+        "python_blocks": sys.getallocatedblocks(),
+        "heap": None,
+        "trims": trims,
+        "trimmed_kib": trimmed_kib,
+    }
+    libc = _libc()
+    if libc is not None:
+        info = libc.mallinfo2()
+        out["heap"] = {
+            "in_use_kib": info.uordblks // 1024,
+            "free_kib": info.fordblks // 1024,
+            "mmapped_kib": info.hblkhd // 1024,
+        }
+    return out
+
+
+def trim() -> int | None:
+    """Give the heaps' free pages back to the system (glibc); returns the RSS given back in
+    KiB, None where there is no `malloc_trim`. Takes milliseconds, holding each arena's lock
+    in turn: call it off the frame path."""
+    libc = _libc()
+    if libc is None:
+        return None
+    before = rss_kib()
+    libc.malloc_trim(0)
+    after = rss_kib()
+    given = max(0, before - after) if before is not None and after is not None else 0
+    if given >= 16 * 1024:
+        log.debug("memory: gave %d MiB of freed heap back", given // 1024)
+    return given
