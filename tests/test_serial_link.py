@@ -162,3 +162,17 @@ def test_loop_url_echoes_what_the_port_writes() -> None:
         assert posted.values()[WIND_SPEED] == pytest.approx(20.0 * 1852.0 / 3600.0)
     finally:
         link.close()
+
+
+def test_two_values_of_a_field_in_one_read_count_one_superseded(pty: Pty) -> None:
+    link, posted = open_link(pty.path)
+    try:
+        # One write: the reader gets both winds in one read, as a reader that fell behind does.
+        pty.write(sentence("WIMWV,090.0,T,10.0,M,A") + sentence("WIMWV,120.0,T,12.0,M,A"))
+        assert posted.wait_for(lambda: posted.values().get(WIND_DIR) == 120.0)
+        pty.write(sentence("WIMWV,130.0,T,13.0,M,A"))  # a later read refreshes the detail
+        assert posted.wait_for(lambda: posted.values().get(WIND_DIR) == 130.0)
+        # The first wind (direction and speed, one update) was replaced before being applied.
+        assert link.stats.to_dict()["superseded"] == 1
+    finally:
+        link.close()

@@ -42,7 +42,7 @@ class CockpitPart(Part):
         self._publish_target = ctx.publish_target
         mailbox = Mailbox(asyncio.get_running_loop(), self._apply)
         for link in self.links:
-            link.start(mailbox.post)
+            link.start(mailbox.poster(link))
             log.info("cockpit input %s (%s)", link.name, link.kind)
 
     async def close(self, deadline_s: float) -> None:

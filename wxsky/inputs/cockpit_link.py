@@ -30,7 +30,12 @@ MAX_RETRY_S = 5.0
 
 
 class Mailbox:
-    """Hands updates from reader threads to the event loop, merged, without blocking either."""
+    """Hands updates from reader threads to the event loop, merged, without blocking either.
+
+    A value replaced by a newer one of the same field before the loop took it (the loop was
+    busy longer than the sender's period) is counted against the link that sent it
+    (`superseded` in its status, per update): the newer value is applied, the older never
+    shows."""
 
     def __init__(
         self, loop: asyncio.AbstractEventLoop, apply: Callable[[CockpitUpdate], None]
@@ -39,11 +44,22 @@ class Mailbox:
         self._apply = apply
         self._lock = threading.Lock()
         self._pending: CockpitUpdate | None = None
+        self._owners: dict[str, CockpitLink] = {}  # pending key -> the link that set it
 
-    def post(self, update: CockpitUpdate) -> None:
+    def poster(self, link: CockpitLink) -> Callable[[CockpitUpdate], None]:
+        """`post` for one link's reader thread."""
+        return lambda update: self.post(update, link)
+
+    def post(self, update: CockpitUpdate, source: CockpitLink | None = None) -> None:
         """Called from any thread."""
         with self._lock:
             first = self._pending is None
+            if source is not None:
+                # Per update replaced (wholly or partly), not per field: a wind is one value.
+                replaced = {self._owners[k] for k in update.fields_set() if k in self._owners}
+                for earlier in replaced:
+                    earlier.superseded += 1
+                self._owners.update(dict.fromkeys(update.fields_set(), source))
             self._pending = update if first else self._pending.merged(update)  # type: ignore[union-attr]
         if first:
             # RuntimeError: the loop has closed because the daemon is shutting down.
@@ -53,6 +69,7 @@ class Mailbox:
     def _drain(self) -> None:
         with self._lock:
             update, self._pending = self._pending, None
+            self._owners.clear()
         if update is not None:
             self._apply(update)
 
@@ -74,6 +91,9 @@ class CockpitLink(abc.ABC):
         self.stats.ok = False
         self.ignored = 0
         self.reopens = 0
+        # Values replaced by a newer one of the same field before they were applied (in one
+        # read, or waiting in the mailbox): latest wins, the older never shows.
+        self.superseded = 0
         self._state = "starting"
         self.stats.detail = self._detail()
         self._warn = RateLimitedLog(log)
@@ -136,7 +156,11 @@ class CockpitLink(abc.ABC):
             if allowed.empty:
                 self.ignored += 1
                 continue
-            merged = allowed if merged is None else merged.merged(allowed)
+            if merged is None:
+                merged = allowed
+            else:  # one read with two values of a field (the reader fell behind): latest wins
+                self.superseded += bool(merged.fields_set() & allowed.fields_set())
+                merged = merged.merged(allowed)
         self.stats.detail = self._detail()
         return merged
 
@@ -213,6 +237,7 @@ class CockpitLink(abc.ABC):
             "state": self._state,
             "ignored": self.ignored,
             "reopens": self.reopens,
+            "superseded": self.superseded,
             "fields": list(self.fields),
         }
 

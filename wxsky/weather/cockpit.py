@@ -169,6 +169,17 @@ class CockpitUpdate:
             position_deg=self.position_deg if "position" in allowed else None,
         )
 
+    def fields_set(self) -> frozenset[str]:
+        """What this update sets: its value names, plus "time", "date" and "position"."""
+        out = set(self.values)
+        if self.time_utc is not None or self.time_of_day_s is not None:
+            out.add("time")
+        if self.date_utc is not None:
+            out.add("date")
+        if self.position_deg is not None:
+            out.add("position")
+        return frozenset(out)
+
     def merged(self, later: CockpitUpdate) -> CockpitUpdate:
         """One update saying what this one and then `later` said (later wins per value)."""
         return CockpitUpdate(
