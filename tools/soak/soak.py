@@ -194,6 +194,12 @@ def main() -> int:
         help="add issue 40's attacks to the faults, one a cycle in turn (default: all seven "
         f"cases: {','.join(ATTACKS)})",
     )
+    p.add_argument(
+        "--tracemalloc",
+        action="store_true",
+        help="run the daemon with PYTHONTRACEMALLOC=1 and have it log where Python memory grew "
+        "(SIGUSR2) after the warm-up and at the end: for hunting a leak (slows the daemon)",
+    )
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("-v", "--verbose", action="store_true", help="log each fault action")
     args = p.parse_args()
@@ -401,7 +407,13 @@ class Soak:
             can_dev = self.can
             streams.append(("links", lambda: self._link_loop("can", can_dev, 6.0), "soak-can"))
         faults = [self._spawn(run, name) for kind, run, name in streams if kind in on]
-        self._wait(plan.soak_s)
+        if self.args.tracemalloc:  # the daemon's first snapshot after the warm-up
+            self._wait(min(plan.warmup_s, plan.soak_s))
+            self._memory_report()
+            self._wait(max(0.0, plan.soak_s - plan.warmup_s))
+            self._memory_report()
+        else:
+            self._wait(plan.soak_s)
         self.marks["soak_end"] = self.now()
         self.stop.set()
         for thread in faults:
@@ -484,12 +496,20 @@ name = "{SERIAL_NAME}"
         cmd += ["--control", f"unix:{self.sock}", "--trace", str(self.trace_path)]
         if self.attacking:
             cmd += ["--share", f"zenoh:{self.endpoint}"]
+        env = dict(os.environ)
+        if self.args.tracemalloc:
+            env["PYTHONTRACEMALLOC"] = "1"
         with open(self.log_path, "wb") as out:
             self.proc = subprocess.Popen(
-                cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+                cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True, env=env
             )
         self.t0 = time.monotonic()
         log.info("daemon pid %d; files in %s", self.proc.pid, self.tmp)
+
+    def _memory_report(self) -> None:
+        """Has the daemon log its tracemalloc growth (memory.TraceReport)."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGUSR2)
 
     def _wait_started(self) -> None:
         """Until the daemon publishes frames, both links are open and the feed's first

@@ -39,7 +39,7 @@ from wxsky.app.control import (
 )
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.frame_times import FrameTimes
-from wxsky.app.memory import TRIM_EVERY_S, memory_status
+from wxsky.app.memory import TRIM_EVERY_S, TraceReport, memory_status
 from wxsky.app.memory import trim as trim_heap
 from wxsky.app.part_factory import parts_from_config
 from wxsky.app.parts import Part, PartContext, PublishedFrame
@@ -649,6 +649,10 @@ class Daemon:
         def on_signal(sig: int, frame: FrameType | None) -> None:
             loop.call_soon_threadsafe(self._on_signal, sig)
 
+        # SIGUSR2 logs where Python memory grew, when tracemalloc is on (memory.TraceReport).
+        traces = TraceReport()
+        if hasattr(signal, "SIGUSR2"):
+            loop.add_signal_handler(signal.SIGUSR2, lambda: log.info("memory: %s", traces.report()))
         try:
             for sig in sigs:
                 signal.signal(sig, on_signal)
@@ -656,6 +660,8 @@ class Daemon:
         finally:
             for sig, handler in original.items():
                 signal.signal(sig, handler)
+            if hasattr(signal, "SIGUSR2"):
+                loop.remove_signal_handler(signal.SIGUSR2)
 
     def _on_signal(self, sig: int) -> None:
         self._signals += 1
