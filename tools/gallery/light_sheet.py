@@ -61,10 +61,10 @@ ISSUE_41_START = "b4dd2e9"
 # (label, the sun's elevation or None for the day's highest), top row first.
 MOMENTS: tuple[tuple[str, float | None], ...] = (
     ("noon", None),
-    ("sun +20", 20.0),
-    ("sun +5", 5.0),
-    ("sun -4", -4.0),
-    ("sun -10", -10.0),
+    ("sun+20", 20.0),
+    ("sun+5", 5.0),
+    ("sun-4", -4.0),
+    ("sun-10", -10.0),
 )
 FACINGS = ("toward the sun", "away from the sun")
 GROUND_EYE_AGL_M = 2.0
@@ -327,8 +327,12 @@ def preset_sheet(
         y = HEADER_H_PX + r * (h + GAP_PX)
         _label(
             sheet,
-            [preset, f"{moment}, {eye} eye", f"{sun.time_utc:%Y-%m-%d %H:%M}Z",
-             f"sun el {sun.elevation_deg:+.1f} az {sun.azimuth_deg:.0f}"],
+            [
+                preset,
+                f"{moment}, {eye} eye",
+                f"{sun.time_utc:%Y-%m-%d %H:%M}Z",
+                f"sun el {sun.elevation_deg:+.1f} az {sun.azimuth_deg:.0f}",
+            ],
             4,
             y + 4,
             11,
@@ -367,13 +371,15 @@ def _index(
         f"Eyes: {', '.join(eyes)}. Times are on the morning of each preset's own date at its",
         "site, found by bisection on the sun's apparent elevation (wxsky.scene.ephemeris).",
         "",
-        f"All presets, cells at half size: [light-sheet.png](light-sheet.png)",
+        "All presets, cells at half size: [light-sheet.png](light-sheet.png)",
         "",
         "| preset | sheet | " + " | ".join(m for m, _ in MOMENTS) + " |",
         "|---|---|" + "---|" * len(MOMENTS),
     ]
     for name in names:
-        times = [f"{suns[(name, m)].time_utc:%H:%M}Z" for m, _ in MOMENTS if (name, m) in suns]
+        times = [
+            f"{suns[(name, m)].time_utc:%H:%M}Z" if (name, m) in suns else "-" for m, _ in MOMENTS
+        ]
         lines.append(
             f"| {name} | [light-sheet-{name}.png](light-sheet-{name}.png) | "
             + " | ".join(times)
@@ -386,13 +392,24 @@ def _index(
 
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--before", default=ISSUE_41_START, metavar="REF",
-                   help=f"the revision on the left of each pair (default {ISSUE_41_START}, "
-                   "where issue 41 started)")
+    p.add_argument(
+        "--before",
+        default=ISSUE_41_START,
+        metavar="REF",
+        help=f"the revision on the left of each pair (default {ISSUE_41_START}, "
+        "where issue 41 started)",
+    )
     p.add_argument("--preset", action="append", help="only these presets (repeatable)")
+    p.add_argument(
+        "--moment",
+        action="append",
+        choices=[m for m, _ in MOMENTS],
+        help="only these moments (repeatable; default all)",
+    )
     p.add_argument("--size", default="320x180", help="each cell, WxH (default 320x180)")
-    p.add_argument("--eye", default="ground",
-                   help="comma-separated: ground (2 m above the observer), cruise")
+    p.add_argument(
+        "--eye", default="ground", help="comma-separated: ground (2 m above the observer), cruise"
+    )
     p.add_argument("--pitch-deg", type=float, default=8.0, help="ground eye's pitch (8)")
     p.add_argument("--cruise-alt-m", type=float, default=10000.0, help="MSL (10000)")
     p.add_argument("--cruise-pitch-deg", type=float, default=0.0, help="cruise pitch (0)")
@@ -415,6 +432,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         obs = state.observer
         cells[name], rows[name] = {}, []
         for moment, elevation in MOMENTS:
+            if args.moment and moment not in args.moment:
+                continue
             try:
                 sun = sun_time(state.time_utc, obs.lat_deg, obs.lon_deg, elevation)
             except ValueError as exc:
@@ -445,8 +464,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     before_title = f"before: {args.before} ({commit[:7]})"
     if before_key == after_key:
         after_title += ", same wxsky/ as before"
-    print(f"{len(every)} cells a side; before {commit[:10]} (wxsky {before_key}), "
-          f"after {after_key}")
+    print(
+        f"{len(every)} cells a side; before {commit[:10]} (wxsky {before_key}), after {after_key}"
+    )
     after = render_all(ROOT, after_key, every, args.cache_dir, args.jobs)
     if before_key == after_key:
         before = after
@@ -458,7 +478,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     args.out_dir.mkdir(parents=True, exist_ok=True)
     titles = (before_title, after_title)
-    sheets = []
+    sheets: list[U8] = []
     for name in names:
         sheet = preset_sheet(name, rows[name], before, after, cells[name], size, titles)
         write_png(args.out_dir / f"light-sheet-{name}.png", sheet)
@@ -477,8 +497,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     _index(args.out_dir, names, titles, command.strip(), suns, eyes, seconds)
     failed = [c for c in every if isinstance(after[c], str) or isinstance(before[c], str)]
-    print(f"wrote {len(names)} sheets, light-sheet.png and light-sheet.md into {args.out_dir} "
-          f"in {seconds:.0f} s; {len(failed)} cells without a picture")
+    print(
+        f"wrote {len(names)} sheets, light-sheet.png and light-sheet.md into {args.out_dir} "
+        f"in {seconds:.0f} s; {len(failed)} cells without a picture"
+    )
     return 1 if failed else 0
 
 
