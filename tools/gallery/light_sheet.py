@@ -19,8 +19,10 @@ Cells are cached under `--cache-dir` by the revision's `wxsky/` tree (plus any u
 change to it) and the cell's arguments, so a rerun draws only what changed; when both sides
 have the same `wxsky/` tree they share their cells and the sheet says so.
 
-Writes `light-sheet-PRESET.png` per preset, `light-sheet.png` (every preset, cells halved)
-and `light-sheet.md` (the index, with the times and headings) into `--out-dir`.
+Writes `light-sheet-PRESET.png` per preset, `light-sheet.png` (every preset's low-sun row,
+`--overview-moment`) and `light-sheet.md` (the index, with the times) into `--out-dir`.
+`--palette` writes them as 256-colour, dithered PNGs, about a third the size: the committed
+sheets are made so (`--size 320x180 --palette`); the cached cells are always full colour.
 """
 
 from __future__ import annotations
@@ -241,6 +243,9 @@ def render_cell(checkout: Path, cell: Cell, out: Path) -> str:
     return ""
 
 
+DRAWN: list[int] = []  # how many cells each `render_all` of this run drew (the rest: cached)
+
+
 def render_all(
     checkout: Path, key: str, cells: Sequence[Cell], cache: Path, jobs: int
 ) -> dict[Cell, Path | str]:
@@ -254,6 +259,7 @@ def render_all(
         result[cell] = path
         if not path.is_file():
             todo.append((cell, path))
+    DRAWN.append(len(todo))
     with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         futures = {pool.submit(render_cell, checkout, c, p): c for c, p in todo}
         for n, future in enumerate(concurrent.futures.as_completed(futures), 1):
@@ -345,12 +351,19 @@ def preset_sheet(
     return sheet
 
 
-def halved(image: U8) -> U8:
-    """The image at half size, 2x2 means (for the overview)."""
-    h, w = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
-    quads = image[:h, :w].astype(np.uint16).reshape(h // 2, 2, w // 2, 2, image.shape[2])
-    out: U8 = (quads.sum(axis=(1, 3)) // 4).astype(np.uint8)
-    return out
+def write_sheet(path: Path, image: U8, palette: bool) -> None:
+    """The sheet as an opaque PNG: full colour by wxsky's own writer, or (`palette`) 256
+    colours from a median cut, Floyd-Steinberg dithered so the skies' gradients do not band."""
+    if not palette:
+        write_png(path, image)
+        return
+    from PIL import Image
+
+    rgb = Image.fromarray(np.ascontiguousarray(image[..., :3]))
+    colours = rgb.quantize(256, method=Image.Quantize.MEDIANCUT)
+    rgb.quantize(palette=colours, dither=Image.Dither.FLOYDSTEINBERG).save(
+        path, "PNG", optimize=True
+    )
 
 
 def _index(
@@ -361,17 +374,20 @@ def _index(
     suns: dict[tuple[str, str], SunMoment],
     eyes: Sequence[str],
     seconds: float,
+    overview: str,
 ) -> str:
     lines = [
         "# Light sheet: every preset under noon, low and twilight suns, before | after",
         "",
-        f"Made by `{command}` in {seconds:.0f} s (tools/gallery/light_sheet.py, issue 41 item 6).",
+        f"Made by `{command}` (tools/gallery/light_sheet.py, issue 41 item 6) in {seconds:.0f} s,",
+        f"drawing {sum(DRAWN)} cells and taking the rest from its cache. From an empty cache",
+        "each cell is one `wxsky snapshot` process: 2-8 s at 320x180 on one llvmpipe core.",
         f"Each cell pair is **{titles[0]}** (left) | **{titles[1]}** (right); the left pair of",
         "columns faces the sun (heading = its azimuth), the right pair faces away.",
         f"Eyes: {', '.join(eyes)}. Times are on the morning of each preset's own date at its",
         "site, found by bisection on the sun's apparent elevation (wxsky.scene.ephemeris).",
         "",
-        "All presets, cells at half size: [light-sheet.png](light-sheet.png)",
+        f"Every preset at {overview}, on one sheet: [light-sheet.png](light-sheet.png)",
         "",
         "| preset | sheet | " + " | ".join(m for m, _ in MOMENTS) + " |",
         "|---|---|" + "---|" * len(MOMENTS),
@@ -413,6 +429,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--pitch-deg", type=float, default=8.0, help="ground eye's pitch (8)")
     p.add_argument("--cruise-alt-m", type=float, default=10000.0, help="MSL (10000)")
     p.add_argument("--cruise-pitch-deg", type=float, default=0.0, help="cruise pitch (0)")
+    p.add_argument(
+        "--overview-moment",
+        default="sun+5",
+        choices=[m for m, _ in MOMENTS],
+        help="the row of each preset in light-sheet.png (default sun+5)",
+    )
+    p.add_argument("--palette", action="store_true", help="256-colour dithered PNGs (smaller)")
     p.add_argument("--jobs", type=int, default=1, help="snapshots at once (default 1)")
     p.add_argument("--out-dir", type=Path, default=ROOT / "docs" / "gallery")
     p.add_argument("--cache-dir", type=Path, default=ROOT / "build" / "light-sheet")
@@ -478,24 +501,30 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     args.out_dir.mkdir(parents=True, exist_ok=True)
     titles = (before_title, after_title)
-    sheets: list[U8] = []
+    low_sun: list[U8] = []
     for name in names:
         sheet = preset_sheet(name, rows[name], before, after, cells[name], size, titles)
-        write_png(args.out_dir / f"light-sheet-{name}.png", sheet)
-        sheets.append(halved(sheet[HEADER_H_PX:] if sheets else sheet))
-    overview = np.full(
-        (sum(s.shape[0] for s in sheets), max(s.shape[1] for s in sheets), 4), BACKGROUND, np.uint8
-    )
-    y = 0
-    for s in sheets:
-        overview[y : y + s.shape[0], : s.shape[1]] = s
-        y += s.shape[0]
-    write_png(args.out_dir / "light-sheet.png", overview)
+        write_sheet(args.out_dir / f"light-sheet-{name}.png", sheet, args.palette)
+        chosen = [r for r in rows[name] if r[1] == args.overview_moment]
+        if chosen:
+            row = preset_sheet(name, chosen, before, after, cells[name], size, titles)
+            low_sun.append(row[HEADER_H_PX:] if low_sun else row)
+    if low_sun:
+        overview = np.full(
+            (sum(s.shape[0] for s in low_sun), max(s.shape[1] for s in low_sun), 4),
+            BACKGROUND,
+            np.uint8,
+        )
+        y = 0
+        for s in low_sun:
+            overview[y : y + s.shape[0], : s.shape[1]] = s
+            y += s.shape[0]
+        write_sheet(args.out_dir / "light-sheet.png", overview, args.palette)
     seconds = time.monotonic() - started
     command = "tools/gallery/light_sheet.py " + " ".join(
         a for a in (argv if argv is not None else sys.argv[1:])
     )
-    _index(args.out_dir, names, titles, command.strip(), suns, eyes, seconds)
+    _index(args.out_dir, names, titles, command.strip(), suns, eyes, seconds, args.overview_moment)
     failed = [c for c in every if isinstance(after[c], str) or isinstance(before[c], str)]
     print(
         f"wrote {len(names)} sheets, light-sheet.png and light-sheet.md into {args.out_dir} "
