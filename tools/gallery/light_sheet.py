@@ -389,6 +389,12 @@ def _index(
         "",
         f"Every preset at {overview}, on one sheet: [light-sheet.png](light-sheet.png)",
         "",
+        # Notes written by whoever looked at a sheet (light-sheet-before.md, ...), kept.
+        *(
+            line
+            for note in sorted(out_dir.glob("light-sheet-*.md"))
+            for line in (f"What a pilot saw: [{note.name}]({note.name}).", "")
+        ),
         "| preset | sheet | " + " | ".join(m for m, _ in MOMENTS) + " |",
         "|---|---|" + "---|" * len(MOMENTS),
     ]
@@ -482,11 +488,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     every = [c for per in cells.values() for c in per.values()]
 
     after_key = checkout_key(ROOT)
-    after_title = f"after: this checkout ({_git('rev-parse', '--short', 'HEAD')})"
+    # Labelled by the wxsky/ tree, not the commit: a commit that leaves wxsky/ alone (this
+    # sheet's own, say) redraws nothing and changes no pixel of the sheets.
+    after_title = f"after: this checkout (wxsky/ {after_key[:7]})"
     commit, before_key = revision_key(args.before)
-    before_title = f"before: {args.before} ({commit[:7]})"
+    before_title = f"before: {args.before} (wxsky/ {before_key[:7]})"
     if before_key == after_key:
-        after_title += ", same wxsky/ as before"
+        after_title += ", the same"
     print(
         f"{len(every)} cells a side; before {commit[:10]} (wxsky {before_key}), after {after_key}"
     )
