@@ -71,7 +71,7 @@ def test_before_and_after_are_drawn_by_their_own_revisions(
     before_trees = _worktrees()
     argv = [
         "--preset", "clear", "--moment", "sun+5", "--size", "64x36", "--before", old,
-        "--out-dir", str(tmp_path / "out"), "--cache-dir", str(tmp_path / "cache"),
+        "--out-dir", str(tmp_path / "out"), "--cache-dir", str(tmp_path / "cache"), "--jobs", "2",
     ]  # fmt: skip
     assert sheet.main(argv) == 0
     first = capsys.readouterr().out
