@@ -210,15 +210,15 @@ def _distance_to_ground(r: F64, mu: F64) -> F64:
 
 
 def _hits_ground(r: F64, mu: F64) -> npt.NDArray[np.bool_]:
-    out: npt.NDArray[np.bool_] = (mu < 0.0) & (
-        r * r * (mu * mu - 1.0) + EARTH_RADIUS_M**2 >= 0.0
-    )
+    out: npt.NDArray[np.bool_] = (mu < 0.0) & (r * r * (mu * mu - 1.0) + EARTH_RADIUS_M**2 >= 0.0)
     return out
 
 
 def _horizon_mu(r: F64) -> F64:
     """Cosine of the zenith angle of the horizon from radius r (below 0 above the ground)."""
-    out: F64 = -np.sqrt(np.maximum(0.0, 1.0 - (EARTH_RADIUS_M / np.maximum(r, EARTH_RADIUS_M)) ** 2))
+    out: F64 = -np.sqrt(
+        np.maximum(0.0, 1.0 - (EARTH_RADIUS_M / np.maximum(r, EARTH_RADIUS_M)) ** 2)
+    )
     return out
 
 
@@ -259,7 +259,9 @@ def _optical_depth(med: Medium, r: F64, mu: F64, length: F64, steps: int) -> F64
 def transmittance_table(med: Medium) -> F64:
     """(rows radii, cols view angles, 3) transmittance to the top of the atmosphere."""
     rows, cols = TRANSMITTANCE_SIZE
-    v, u = np.meshgrid((np.arange(rows) + 0.5) / rows, (np.arange(cols) + 0.5) / cols, indexing="ij")
+    v, u = np.meshgrid(
+        (np.arange(rows) + 0.5) / rows, (np.arange(cols) + 0.5) / cols, indexing="ij"
+    )
     r, mu = _transmittance_rmu(u, v)
     depth = _optical_depth(med, r, mu, _distance_to_top(r, mu), TRANSMITTANCE_STEPS)
     out: F64 = np.exp(-depth)
@@ -380,17 +382,17 @@ def multiscatter_table(med: Medium, t_table: F64) -> F64:
     dirs = _sphere_directions(MULTISCATTER_DIRECTIONS)
     r = (EARTH_RADIUS_M + alt)[:, None, None]
     ms = mu_s[None, :, None]
-    sun = np.stack(
-        [np.sqrt(1.0 - mu_s * mu_s), np.zeros_like(mu_s), mu_s], axis=-1
-    )  # (cols, 3)
+    sun = np.stack([np.sqrt(1.0 - mu_s * mu_s), np.zeros_like(mu_s), mu_s], axis=-1)  # (cols, 3)
     mu = dirs[None, None, :, 2]
     nu = (sun @ dirs.T)[None, :, :]
     m = _march(med, t_table, None, r, mu, ms, nu, MULTISCATTER_STEPS, isotropic=True)
     # The ground under a ray that meets it, lit by the sun (Lambertian).
-    ground_sun = _sun_transmittance(t_table, m.end_r, m.end_mu_s) * np.maximum(m.end_mu_s, 0.0)[
-        ..., None
-    ]
-    ground = np.where(m.ground[..., None], m.transmittance * ground_sun * GROUND_ALBEDO / math.pi, 0.0)
+    ground_sun = (
+        _sun_transmittance(t_table, m.end_r, m.end_mu_s) * np.maximum(m.end_mu_s, 0.0)[..., None]
+    )
+    ground = np.where(
+        m.ground[..., None], m.transmittance * ground_sun * GROUND_ALBEDO / math.pi, 0.0
+    )
     l2 = (m.luminance + ground).mean(axis=-2)  # the mean over the sphere: the 1 / 4 pi phase
     f_ms = m.multi.mean(axis=-2)
     out: F64 = l2 / np.maximum(1.0 - f_ms, 1e-3)
@@ -398,7 +400,6 @@ def multiscatter_table(med: Medium, t_table: F64) -> F64:
 
 
 def _multiscatter_at(table: F64, r: F64, mu_s: F64) -> F64:
-    rows, _ = table.shape[:2]
     v = (r - EARTH_RADIUS_M) / (TOP_RADIUS_M - EARTH_RADIUS_M)
     u = 0.5 * (mu_s + 1.0)
     return _bilinear(table, np.clip(u, 0.0, 1.0), np.clip(v, 0.0, 1.0))
@@ -427,7 +428,6 @@ def ambient_table(med: Medium, t_table: F64, ms_table: F64) -> F64:
     cos_el = np.sqrt(1.0 - q)
     az = (np.arange(n_az) + 0.5) / n_az * 2.0 * math.pi
     dx = (cos_el[:, None] * np.cos(az)[None, :]).ravel()
-    dy = (cos_el[:, None] * np.sin(az)[None, :]).ravel()
     dz = (sin_el[:, None] * np.ones(n_az)[None, :]).ravel()
     r = (EARTH_RADIUS_M + alt)[:, None, None]
     ms = mu_s[None, :, None]
@@ -440,9 +440,10 @@ def ambient_table(med: Medium, t_table: F64, ms_table: F64) -> F64:
         lum = m.luminance
         if sign < 0.0:
             # The ground: sun on it, and the sky's light above it (this table's first row).
-            sun_on = _sun_transmittance(t_table, m.end_r, m.end_mu_s) * np.maximum(
-                m.end_mu_s, 0.0
-            )[..., None]
+            sun_on = (
+                _sun_transmittance(t_table, m.end_r, m.end_mu_s)
+                * np.maximum(m.end_mu_s, 0.0)[..., None]
+            )
             sky_on = _bilinear_rows(out[:, :, 0], np.zeros_like(m.end_r), m.end_mu_s)
             ground = m.transmittance * (sun_on + sky_on) * GROUND_ALBEDO / math.pi
             lum = lum + np.where(m.ground[..., None], ground, 0.0)
@@ -472,8 +473,12 @@ def horizon_elevation_rad(eye_alt_m: float) -> float:
 def sky_view_v(elevation_rad: F64, horizon_rad: float) -> F64:
     """Row coordinate 0..1 of the sky-view table for an elevation: 0.5 at the horizon, the
     square root of the angle from it either way, 1 at the zenith and 0 at the nadir."""
-    above = np.sqrt(np.clip((elevation_rad - horizon_rad) / (0.5 * math.pi - horizon_rad), 0.0, 1.0))
-    below = np.sqrt(np.clip((horizon_rad - elevation_rad) / (horizon_rad + 0.5 * math.pi), 0.0, 1.0))
+    above = np.sqrt(
+        np.clip((elevation_rad - horizon_rad) / (0.5 * math.pi - horizon_rad), 0.0, 1.0)
+    )
+    below = np.sqrt(
+        np.clip((horizon_rad - elevation_rad) / (horizon_rad + 0.5 * math.pi), 0.0, 1.0)
+    )
     out: F64 = np.where(elevation_rad >= horizon_rad, 0.5 + 0.5 * above, 0.5 - 0.5 * below)
     return out
 
@@ -506,7 +511,9 @@ def sky_view_table(
     mu_s = np.array(math.sin(sun_el))
     nu = np.cos(el) * np.cos(az) * math.cos(sun_el) + np.sin(el) * math.sin(sun_el)
     m = _march(med, t_table, ms_table, r, mu, mu_s, nu, SKY_VIEW_STEPS)
-    sun_on = _sun_transmittance(t_table, m.end_r, m.end_mu_s) * np.maximum(m.end_mu_s, 0.0)[..., None]
+    sun_on = (
+        _sun_transmittance(t_table, m.end_r, m.end_mu_s) * np.maximum(m.end_mu_s, 0.0)[..., None]
+    )
     ground = m.transmittance * sun_on * GROUND_ALBEDO / math.pi
     out: F64 = m.luminance + np.where(m.ground[..., None], ground, 0.0)
     return out
@@ -691,14 +698,20 @@ def moon_irradiance(
 ) -> F64:
     """The moon's transmitted light (klx, RGB): sunlight scaled by MOON_TO_SUN and the phase
     (illuminated_fraction^3: a half moon gives about a tenth of a full one)."""
-    frac = min(max(float(illuminated_fraction), 0.0), 1.0) if math.isfinite(illuminated_fraction) else 0.0
+    frac = (
+        min(max(float(illuminated_fraction), 0.0), 1.0)
+        if math.isfinite(illuminated_fraction)
+        else 0.0
+    )
     return sun_irradiance(luts, alt_m, moon_elevation_deg) * (MOON_TO_SUN * frac**3)
 
 
 def vertical_rayleigh_optical_depth() -> F64:
     """tau of the Rayleigh air straight up from the ground: beta * H (for the tests)."""
-    out: F64 = RAYLEIGH_SCATTERING_PER_M * RAYLEIGH_SCALE_HEIGHT_M * (
-        1.0 - math.exp(-(TOP_RADIUS_M - EARTH_RADIUS_M) / RAYLEIGH_SCALE_HEIGHT_M)
+    out: F64 = (
+        RAYLEIGH_SCATTERING_PER_M
+        * RAYLEIGH_SCALE_HEIGHT_M
+        * (1.0 - math.exp(-(TOP_RADIUS_M - EARTH_RADIUS_M) / RAYLEIGH_SCALE_HEIGHT_M))
     )
     return out
 

@@ -45,13 +45,17 @@ def relative_luminance(sky: CieSkyType, directions: F64, sun_direction: F64) -> 
     zs = math.acos(min(max(float(s[2]), -1.0), 1.0))
 
     def phi(cos_zenith: F64 | float) -> F64:
-        return 1.0 + sky.a * np.exp(sky.b / np.asarray(cos_zenith))
+        out: F64 = 1.0 + sky.a * np.exp(sky.b / np.asarray(cos_zenith, np.float64))
+        return out
 
     def f(angle: F64 | float) -> F64:
-        a = np.asarray(angle)
-        return 1.0 + sky.c * (np.exp(sky.d * a) - math.exp(sky.d * math.pi / 2.0)) + sky.e * np.cos(
-            a
-        ) ** 2
+        a = np.asarray(angle, np.float64)
+        out: F64 = (
+            1.0
+            + sky.c * (np.exp(sky.d * a) - math.exp(sky.d * math.pi / 2.0))
+            + sky.e * np.cos(a) ** 2
+        )
+        return out
 
     out: F64 = f(chi) * phi(cos_z) / (f(zs) * phi(1.0))
     return out
@@ -95,7 +99,10 @@ class CieComparison:
 
 
 def compare(
-    luminance: F64, zenith_luminance: float, directions: F64, sun_direction: F64,
+    luminance: F64,
+    zenith_luminance: float,
+    directions: F64,
+    sun_direction: F64,
     sky: CieSkyType = CLEAR_LOW_TURBIDITY,
 ) -> CieComparison:
     """Compare luminances (N,) at directions (N, 3) (zenith_luminance: the model's at the
