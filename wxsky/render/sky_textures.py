@@ -107,6 +107,7 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "SKY_MOON": str(int(feats.moon)),
         "SKY_DOME": str(int(feats.dome)),
         "SKY_PHYSICAL": str(int(feats.physical)),
+        "SKY_SCENE_LINEAR": str(int(feats.scene_linear)),
     }
 
 
@@ -167,6 +168,9 @@ class SkyFeatures:
     dome: bool
     # The physical atmosphere's sky-view table instead of Roden & Parberry's gradient.
     physical: bool = False
+    # With `physical`: the radiance itself (kcd/m^2) into a float target, no exposure or tone
+    # map (tests/test_atmosphere.py reads it back; the hook for scene-linear render targets).
+    scene_linear: bool = False
 
 
 class SkyPass:

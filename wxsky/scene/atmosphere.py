@@ -640,7 +640,9 @@ def build_luts(key: AtmosphereKey) -> AtmosphereLuts:
     if last is not None and last[0] == key.medium_key:
         med, t_table, ms_table, amb = last[1]
     else:
-        med = medium(math.exp(key.visibility_q * VISIBILITY_STEP), key.humidity_pct)
+        # The key's step may land a hair outside the range the visibility was checked against.
+        vis_lo, vis_hi = VISIBILITY_M.bounds
+        med = medium(min(max(key.visibility_m, vis_lo), vis_hi), key.humidity_pct)
         t_table = transmittance_table(med)
         ms_table = multiscatter_table(med, t_table)
         amb = ambient_table(med, t_table, ms_table)

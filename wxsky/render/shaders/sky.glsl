@@ -270,7 +270,9 @@ void main() {
     vec2 ndc = gl_FragCoord.xy / u_target_size * 2.0 - 1.0;
     vec3 ray = normalize(u_forward + ndc.x * u_tan_half_fov.x * u_right
                          - ndc.y * u_tan_half_fov.y * u_up);
-#if SKY_PHYSICAL
+#if SKY_PHYSICAL && SKY_SCENE_LINEAR
+    vec3 col = physical_sky(ray);  // into a float target: radiance, kcd/m^2
+#elif SKY_PHYSICAL
     vec3 col = display_from_scene(physical_sky(ray));
 #else
     vec3 col = sky_colour(ray, u_sun_dir, u_zenith, u_horizon, u_ground, u_sun_rgb);
@@ -307,6 +309,10 @@ void main() {
     col = mix(col, vec3(1.0, 0.98, 0.9) * 1.2, disc * step(-0.01, ray.z) * length(u_sun_rgb));
 #endif
     col = mix(col, dome.rgb, dome.a);
+#if SKY_PHYSICAL && SKY_SCENE_LINEAR
+    f_colour = vec4(max(col, 0.0), 1.0);
+#else
     f_colour = vec4(clamp(col, 0.0, 1.0), 1.0);
+#endif
 }
 #endif
