@@ -18,6 +18,7 @@ import pytest
 
 from wxsky.engine.atmosphere_work import AtmosphereWork
 from wxsky.engine.stages import SkyEngine
+from wxsky.errors import ConfigError
 from wxsky.render import sky_textures
 from wxsky.scene import atmosphere as atm
 from wxsky.scene import cie_sky
@@ -25,7 +26,6 @@ from wxsky.scene.camera import Camera
 from wxsky.scene.ephemeris import SunPosition
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.sky import sky_params
-from wxsky.errors import ConfigError
 from wxsky.settings.config import load_config
 from wxsky.weather.state import WeatherState
 
