@@ -102,7 +102,7 @@ def main() -> int:
         bar = np.full((4, panels[0].shape[1], 4), 255, np.uint8)
         sheet = np.concatenate([p for panel in panels for p in (panel, bar)][:-1], axis=0)
         write_png(args.png, np.ascontiguousarray(sheet))
-        print(f"wrote {args.png}: per sun elevation (10, 30, 60 deg, top down): model | CIE | ratio")
+        print(f"wrote {args.png}: per sun (10, 30, 60 deg, top down): model | CIE | ratio")
     return 0
 
 
