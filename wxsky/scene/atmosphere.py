@@ -80,10 +80,11 @@ HUMIDITY_REF_PCT = 50.0
 HUMIDITY_CAP_PCT = 95.0
 HANEL_EXPONENT = 0.25
 GROUND_ALBEDO = 0.1  # Bruneton's; vegetated land is 0.1-0.2
-# The sun at the top of the atmosphere: illuminance (klx) and a colour of luminance 1 (a
-# 5900 K body, a touch warmer than D65's white, which holds the sky's blue as well).
+# The sun at the top of the atmosphere: illuminance (klx) and its colour, white: the picture is
+# white-balanced to sunlight above the air, as an eye adapted to daylight sees it (the 5900 K
+# body itself, a touch warmer than D65, tinted every sky grey-yellow in 8-bit).
 SUN_ILLUMINANCE_KLX = 128.0
-SUN_COLOUR = np.array([1.0, 0.965, 0.925]) / (0.2126 + 0.7152 * 0.965 + 0.0722 * 0.925)
+SUN_COLOUR = np.array([1.0, 1.0, 1.0])
 SUN_ANGULAR_RADIUS_RAD = math.radians(0.2667)
 # Full moon against the sun (0.25 lx against 128 klx); a half moon gives about a tenth of a
 # full one (the opposition surge), which illuminated_fraction^3 follows closely enough.
@@ -721,7 +722,7 @@ def vertical_rayleigh_optical_depth() -> F64:
 def display_exposure(luts: AtmosphereLuts) -> float:
     """A scale from kcd/m^2 to the display's 0..1 before the tone map (`u_exposure`): the
     stand-in for the renderer's exposure (issue 41's scene-linear work replaces it). From the
-    mean luminance of the sky above the horizon, adapting only partly (a power of 0.6), so
+    mean luminance of the sky above the horizon, adapting only partly (a power of 0.5), so
     that noon is bright, the low sun golden and twilight dark blue rather than lifted to
     noon's brightness; capped so the night stays night."""
     rows = luts.sky_view.shape[0]
@@ -730,6 +731,6 @@ def display_exposure(luts: AtmosphereLuts) -> float:
     return float(EXPOSURE_KEY / max(y, EXPOSURE_FLOOR_KCD) ** EXPOSURE_ADAPT)
 
 
-EXPOSURE_KEY = 0.30
-EXPOSURE_ADAPT = 0.6
+EXPOSURE_KEY = 0.25
+EXPOSURE_ADAPT = 0.5
 EXPOSURE_FLOOR_KCD = 1e-4
