@@ -216,12 +216,18 @@ class SkyPass:
         the texture keeps the last table until then."""
         if luts is None or luts.serial == self._sky_view_serial:
             return
-        table = np.ascontiguousarray(np.nan_to_num(luts.sky_view_radiance(), nan=0.0, posinf=0.0))
-        rows, cols = table.shape[:2]
+        rgb = np.nan_to_num(luts.sky_view_radiance(), nan=0.0, posinf=0.0)
+        rows, cols = rgb.shape[:2]
+        # Half floats, four channels: llvmpipe filters them faster than RGB32F, and 11 bits of
+        # mantissa are finer than any display step (the radiance spans 1e-6..1e3 kcd/m^2).
+        # Scaled by a power of two so the brightest texel is near 1024 (`sky_view_scale`): a
+        # night's 1e-7 kcd/m^2 would be lost below half floats' normal range.
+        table = np.ones((rows, cols, 4), np.float16)
+        table[..., :3] = np.minimum(rgb / sky_view_scale(luts), 60_000.0)
         if self.sky_view is None or self.sky_view.size != (cols, rows):
             if self.sky_view is not None:
                 self.sky_view.release()
-            self.sky_view = self._ctx.texture((cols, rows), 3, dtype="f4")
+            self.sky_view = self._ctx.texture((cols, rows), 4, dtype="f2")
             self.sky_view.filter = (moderngl.LINEAR, moderngl.LINEAR)
             self.sky_view.repeat_x = self.sky_view.repeat_y = False
         self.sky_view.write(table.tobytes())
@@ -564,7 +570,23 @@ AUREOLE_G_HAZE = 0.93
 AUREOLE_HAZE_DEPTH = 1.0  # Mie optical depth to the sun at which g is AUREOLE_G_HAZE
 
 
+@functools.lru_cache(maxsize=4)
+def sky_view_scale(luts: AtmosphereLuts) -> float:
+    """What the sky-view texture's values are multiplied by in the shader (a power of two:
+    the texture holds radiance / this, its brightest texel near 1024)."""
+    peak = float(np.max(luts.sky_view_radiance()))
+    if not math.isfinite(peak) or peak <= 0.0:
+        return 1.0
+    return float(2.0 ** round(math.log2(peak / 1024.0)))
+
+
 def physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
+    """`_physical_uniforms`, made once per set of tables (a frame asks for them per part)."""
+    return dict(_physical_uniforms(luts))
+
+
+@functools.lru_cache(maxsize=4)
+def _physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
     """The physical sky's uniforms: its table's unit and horizon, the exposure (the stand-in
     for the renderer's exposure: `atmosphere.display_exposure`), the sun's disc (radiance at
     its centre, kcd/m^2, transmitted to the eye) and the aureole (strength and g, both from
@@ -590,6 +612,7 @@ def physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
     return {
         "u_sky_view": SkyPass.UNITS["u_sky_view"],
         "u_horizon_rad": luts.horizon_rad,
+        "u_sky_view_scale": sky_view_scale(luts),
         "u_exposure": display_exposure(luts),
         "u_sun_radiance": tuple(float(v) for v in centre),
         "u_limb_darkening": LIMB_DARKENING,
