@@ -27,6 +27,7 @@ from wxsky.scene.ephemeris import SunPosition
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.sky import sky_params
 from wxsky.settings.config import load_config
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 if TYPE_CHECKING:
@@ -383,3 +384,26 @@ def test_physical_sky_layer_is_blue_at_noon_and_differs_from_the_gradient(
     assert float(horizon @ cie_sky.LUMA) > float(top @ cie_sky.LUMA)
     gradient = _sky_layer(renderer, "roden-parberry", noon, 0.0)
     assert float(np.abs(physical - gradient).mean()) > 0.02
+
+
+def test_overcast_veil_greys_and_dims_only_under_cover() -> None:
+    assert sky_textures.overcast_veil(0.0) == (0.0, 1.0)
+    assert sky_textures.overcast_veil(0.5) == (0.0, 1.0)
+    share, dim = sky_textures.overcast_veil(1.0)
+    assert share > 0.5 and dim < 0.5
+
+
+@pytest.mark.gl
+def test_physical_sky_under_overcast_is_grey_not_a_blue_slot(renderer: Renderer) -> None:
+    """Under overcast-stratus the physical sky layer (what shows below the deck at the
+    horizon) is grey: its B/R within 5 % of 1 (the gradient's slot was B/R 1.22)."""
+    state = WeatherState(time_utc=datetime(2026, 6, 21, 12, 0, tzinfo=UTC)).apply(
+        load_preset("overcast-stratus")
+    )
+    cam = Camera((0.0, 0.0, state.observer.alt_m + 2.0), 45.0, 0.0, 0.0, 60.0, 96, 54)
+    with SkyEngine(state, cam, SceneSettings(sky="physical"), render_mode="direct") as engine:
+        plan = engine.advance(0.0)
+    renderer.render_frame(plan.frame)
+    sky = renderer.read("sky")[..., :3].astype(np.float64)
+    band = sky[20:27].mean(axis=(0, 1))  # just above the horizon (the picture's middle row)
+    assert abs(band[2] / band[0] - 1.0) < 0.05, band

@@ -77,6 +77,7 @@ uniform vec3 u_sun_radiance;      // at the disc's centre, transmitted to the ey
 uniform float u_limb_darkening;
 uniform vec4 u_aureole;           // rgb: strength (kcd/m^2 per unit phase), w: HG g
 uniform float u_atmosphere_serial;  // changes with the table (the kept layer redraws)
+uniform vec2 u_overcast;          // share of grey, dimming: cover above the eye (overcast_veil)
 
 float hg_phase(float nu, float g) {
     float k = 1.0 + g * g - 2.0 * g * nu;
@@ -103,6 +104,8 @@ vec3 physical_sky(vec3 ray) {
     float r2 = clamp((1.0 - nu * nu) / max(sin_r2, 1e-12), 0.0, 1.0);
     float limb = 1.0 - u_limb_darkening * (1.0 - sqrt(1.0 - r2));
     radiance += u_sun_radiance * (limb * disc * above);
+    float grey = dot(radiance, vec3(0.2126, 0.7152, 0.0722));
+    radiance = mix(radiance, vec3(grey), u_overcast.x) * u_overcast.y;
     return u_atmosphere_serial < 0.0 ? vec3(0.0) : radiance;
 }
 
