@@ -184,8 +184,10 @@ class Renderer:
         scratch = self._target("sky_warm_up", 16, 16)
         scratch.fbo.use()
         self.ctx.disable(moderngl.BLEND)
+        physical = sky.atmosphere is not None  # the frame's sky mode: its variants only
+        self._sky.use_atmosphere(sky.atmosphere)
         for stars, moon, dome in itertools.product((False, True), repeat=3):
-            feats = sky_textures.SkyFeatures(stars=stars, moon=moon, dome=dome)
+            feats = sky_textures.SkyFeatures(stars=stars, moon=moon, dome=dome, physical=physical)
             uniforms = self._sky_uniforms(cam, sky, feats, sky_textures.FULL_RECT)
             self._sky_draw("sky warm-up", feats, uniforms)
 
