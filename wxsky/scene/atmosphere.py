@@ -684,8 +684,9 @@ def _sun_mu(sun_elevation_deg: F64 | float) -> F64:
 
 
 def sun_irradiance(luts: AtmosphereLuts, alt_m: F64 | float, sun_elevation_deg: F64 | float) -> F64:
-    """The sun's transmitted light (klx, RGB (..., 3)) on a surface facing it at alt_m MSL
-    with the sun at sun_elevation_deg (as seen at the ground; +90 to -90): the atmosphere's
+    """The sun's transmitted light (klx, RGB (..., 3)) on a surface facing it at alt_m above
+    the ground (the model's ground is the observer's, as the engine builds the tables), with
+    the sun at sun_elevation_deg (as seen at the ground; +90 to -90): the atmosphere's
     transmittance along the path, so a deck's top is lit (red) while the ground is in
     twilight. Finite for every finite input."""
     alt = np.clip(np.asarray(alt_m, np.float64), 0.0, MAX_ALT_M)
@@ -699,9 +700,9 @@ def sun_irradiance(luts: AtmosphereLuts, alt_m: F64 | float, sun_elevation_deg: 
 def sky_irradiance(
     luts: AtmosphereLuts, alt_m: F64 | float, sun_elevation_deg: F64 | float
 ) -> tuple[F64, F64]:
-    """The sky's ambient irradiance (klx, RGB (..., 3)) at alt_m MSL on a horizontal surface
-    facing up (the sky above) and facing down (the air and the lit ground below), with the
-    sun at sun_elevation_deg. Finite for every finite input."""
+    """The sky's ambient irradiance (klx, RGB (..., 3)) at alt_m above the ground on a
+    horizontal surface facing up (the sky above) and facing down (the air and the lit ground
+    below), with the sun at sun_elevation_deg. Finite for every finite input."""
     alt = np.clip(np.asarray(alt_m, np.float64), 0.0, 20_000.0)
     mu_s = _sun_mu(sun_elevation_deg)
     alt, mu_s = np.broadcast_arrays(alt, mu_s)
