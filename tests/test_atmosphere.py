@@ -407,3 +407,26 @@ def test_physical_sky_under_overcast_is_grey_not_a_blue_slot(renderer: Renderer)
     sky = renderer.read("sky")[..., :3].astype(np.float64)
     band = sky[20:27].mean(axis=(0, 1))  # just above the horizon (the picture's middle row)
     assert abs(band[2] / band[0] - 1.0) < 0.05, band
+
+
+@pytest.mark.gl
+def test_rendered_twilight_has_the_belt_of_venus_and_a_blue_zenith_at_plus_5(
+    renderer: Renderer,
+    luts_by_case: dict[tuple[float, float], atm.AtmosphereLuts],
+) -> None:
+    """The twilight checks on the sky pass itself (float read-back): sun at -4 deg, facing
+    away, the pixels 5-15 deg up are pinker than those 35-45 deg up; sun at +5 deg, the
+    zenith is blue."""
+    luts = _luts(luts_by_case, -4.0, 30_000.0)
+    sun = SunPosition(luts.sun_elevation_deg, 0.0)
+    cam = Camera((0.0, 0.0, 2.0), 180.0, 25.0, 0.0, 60.0, 64, 64)
+    img = _render_sky_linear(renderer, luts, sun, cam).reshape(-1, 3)
+    el = np.degrees(np.arcsin(_camera_rays(cam).reshape(-1, 3)[:, 2]))
+    low, high = img[(el >= 5.0) & (el <= 15.0)], img[(el >= 35.0) & (el <= 45.0)]
+    assert len(low) > 50 and len(high) > 50
+    assert _red_over_blue(low) > _red_over_blue(high)
+    day = _luts(luts_by_case, 5.0, 30_000.0)
+    up = Camera((0.0, 0.0, 2.0), 0.0, 90.0, 0.0, 20.0, 16, 16)
+    zenith = _render_sky_linear(renderer, day, SunPosition(day.sun_elevation_deg, 0.0), up)
+    mean = zenith.reshape(-1, 3).mean(axis=0)
+    assert mean[2] > mean[0]
