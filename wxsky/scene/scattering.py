@@ -42,9 +42,9 @@ HG_G = 0.8  # asymmetry of cloud droplets (Mie: about 0.85); see hg_phase
 # strong forward lobe (the diffraction peak and forward Mie lobe, Mie's g about 0.85) and a
 # weak backward one (the glory and back-scatter that light a cloud's sunlit face toward a
 # sun-behind eye), fitted as Wrenninge's and Hillaire's production cloud renderers do.
-CLOUD_G_FORWARD = 0.8
+CLOUD_G_FORWARD = 0.85
 CLOUD_G_BACK = -0.3
-CLOUD_FORWARD_WEIGHT = 0.6
+CLOUD_FORWARD_WEIGHT = 0.65
 # Light scattered many times inside a cloud has lost most of its memory of the sun's
 # direction: what leaves the cloud after many events keeps only a weak forward bias.
 CLOUD_G_DIFFUSE = 0.2

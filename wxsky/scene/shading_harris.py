@@ -52,9 +52,13 @@ SHADOW_REACH = 0.55  # a sprite's shadow radius over its edge: its texture is so
 # sun-facing eye (why a cloud's sunlit side is white). Of the key light leaving a particle
 # toward the eye, this share is such light (the multiple-scattering octaves of the beam,
 # through `diffuse_phase`); the rest is the beam itself through the droplets' `cloud_phase`.
-DIFFUSE_SHARE = 0.6
+DIFFUSE_SHARE = 0.55
 OCTAVES, OCTAVE_GAIN = 3, 0.5  # see multiple_scattering (written out for these values)
 EXPOSURE = 2.8  # radiance to display: 1 - exp(-EXPOSURE L) keeps 0..1, rolls off highlights
+# ...raised to this power: the curve's shoulder alone squeezed a sunlit top (L 0.8) and its
+# base in shade (L 0.3) to 0.89 and 0.57, a light grey; a toe keeps the base a darker grey
+# (0.41) and the top white (0.83), as a camera's S-shaped curve does.
+CONTRAST = 1.8
 # A highlight far past white (a silver lining: the forward peak is 27 times a lit face's
 # light) bleaches toward white as film and eyes see it, instead of keeping the hue of the
 # light at full strength: between these exposed peaks (EXPOSURE times the brightest channel)
@@ -64,11 +68,11 @@ WHITEN_FROM, WHITEN_TO = 1.5, 5.0
 # side and two away from it, so sky-lit shadow sides are not black.
 SKY_ELEVATION_DEG = 25.0
 SKY_AZIMUTHS_DEG = (0.0, 120.0, 240.0)  # from the sun's azimuth
-SKY_GAIN = (0.22, 0.14, 0.14, 0.14)  # zenith, then the three; of the sky colour there
+SKY_GAIN = (0.2, 0.1, 0.1, 0.1)  # zenith, then the three; of the sky colour there
 SKY_HORIZON_MIX = 0.6  # the low skylights take this much of the horizon colour
 # Starlight, airglow and the glow of towns: clouds at night are dark, never black.
 NIGHT_FLOOR_RGB = np.array([0.014, 0.016, 0.022])
-AMBIENT_SHARE = 0.12  # Harris's small ambient term, of the mean sky colour
+AMBIENT_SHARE = 0.05  # Harris's small ambient term, of the mean sky colour (the ground apart)
 _QUANTUM = 1e-3
 # Harris's light on a particle changes slowly with the lights' directions, which the sun
 # (and the skylights, set by its azimuth) move 0.1-0.5 degrees a minute: light worked out for
@@ -364,11 +368,12 @@ def exposed_channels(radiance: F64) -> F64:
     bleach toward it (WHITEN_FROM, WHITEN_TO)."""
     r, g, b = radiance
     peak = np.maximum(np.maximum(np.maximum(r, g), b), 1e-6)
-    out: F64 = radiance * ((1.0 - np.exp(-EXPOSURE * peak)) / peak)
+    shown = (1.0 - np.exp(-EXPOSURE * peak)) ** CONTRAST
+    out: F64 = radiance * (shown / peak)
     bleach = np.clip((EXPOSURE * peak - WHITEN_FROM) / (WHITEN_TO - WHITEN_FROM), 0.0, 1.0)
     hot = np.flatnonzero(bleach > 0.0)
     if len(hot):
-        each = 1.0 - np.exp(-EXPOSURE * radiance[:, hot])
+        each = (1.0 - np.exp(-EXPOSURE * radiance[:, hot])) ** CONTRAST
         out[:, hot] += (each - out[:, hot]) * bleach[hot]
     return out
 
