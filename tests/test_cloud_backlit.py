@@ -97,7 +97,9 @@ def test_backlit_cumulus_dark_core_bright_rim(renderer: Renderer) -> None:
     regions = cloud_regions(lum, cut, within=near_sun, whole=False)
     assert regions, "no whole cloud within 20 degrees of the sun in the picture"
     cloud = regions[0]
-    assert cloud["core"] < cloud["sky"], f"the core is not darker than the sky beside it: {cloud}"
+    # A dark body: the issue asks for a core darker than the sky beside it; before issue 41
+    # the orange-lit core was barely so (0.96 of the sky; now about half), so the margin.
+    assert cloud["core"] < 0.7 * cloud["sky"], f"the core is not a dark body: {cloud}"
     assert cloud["rim"] > cloud["sky"], f"the rim is not brighter than the sky beside it: {cloud}"
 
 
@@ -114,8 +116,9 @@ def test_noon_cumulus_tops_twice_their_bases(renderer: Renderer) -> None:
     patch = load_preset("fair-cumulus")
     assert patch.observer is not None and patch.time_utc is not None
     when, _, az = noon_time(patch.time_utc, patch.observer.lat_deg, patch.observer.lon_deg)
-    # Facing away from the sun, from under the clouds' level, looking up at them.
-    lum, alpha, _ = shot(renderer, "fair-cumulus", when, (az + 180.0) % 360.0, 15.0)
+    # Facing away from the sun, from 700 m under the clouds' base, looking up at them: a
+    # cloud a few kilometres off, not in the haze that hides the clouds low in the sky.
+    lum, alpha, _ = shot(renderer, "fair-cumulus", when, (az + 180.0) % 360.0, 30.0, 1200.0)
     regions = cloud_regions(lum, alpha, min_radius_px=6)
     assert regions, "no whole cloud in the picture"
     cloud = regions[0]

@@ -99,10 +99,14 @@ def test_harris_silver_lining_toward_the_sun() -> None:
     rim = _luma(sprite_colours(cloud, behind_cloud, eye, "harris"))[edge].mean()
     lit_face = _luma(sprite_colours(cloud, behind_eye, eye, "harris"))[edge].mean()
     assert rim > lit_face + 0.1
-    # Wang's model has no halo (his words): within a few percent either way.
+    # Wang's shading groups under the same light have the rim too (measured 0.34 against
+    # 0.20); his artist model has no halo (his words): within a few percent either way.
     wang_rim = _luma(sprite_colours(cloud, behind_cloud, eye, "wang"))[edge].mean()
     wang_face = _luma(sprite_colours(cloud, behind_eye, eye, "wang"))[edge].mean()
-    assert abs(wang_rim - wang_face) < 0.1
+    assert wang_rim > wang_face + 0.1
+    artist_rim = _luma(sprite_colours(cloud, behind_cloud, eye, "wang-artist"))[edge].mean()
+    artist_face = _luma(sprite_colours(cloud, behind_eye, eye, "wang-artist"))[edge].mean()
+    assert abs(artist_rim - artist_face) < 0.1
 
 
 @pytest.mark.parametrize("model", SHADING_MODELS)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from wxsky.scene.shading_harris import (
+    BALL_COLUMNS,
     ParticleLight,
     Scattered,
     close_directions,
@@ -111,7 +112,7 @@ def display_colours(
         if model == "wang":
             return exposed_channels(wang_radiance(batch, lights, view))
         incident = harris_incident(batch, lights, light, scattered)
-        depth = view_depth(batch, view)
+        depth = view_depth(batch, view, incident[:, -BALL_COLUMNS:])
         return exposed_channels(harris_radiance(view, incident, lights, batch.height_frac, depth))
     # Columns by index (ndarray.take), not by mask: a fifth of the time.
     particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
@@ -153,7 +154,7 @@ def display_colours(
         incident,
         lights,
         particles.height_frac,
-        view_depth(particles, particle_view),
+        view_depth(particles, particle_view, incident[:, -BALL_COLUMNS:]),
     )
     return exposed_channels(radiance)
 

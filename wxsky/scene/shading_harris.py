@@ -9,7 +9,7 @@ the eye the same particles show their lit faces.
 
 The optical depth toward the eye: the sprites composited back to front (eq. 9's recurrence)
 let a soft sprite's neighbours show through its gaps far more than a cloud's tens of optical
-depths would, and the forward peak (27 times a lit face's light) shines through any gap. So
+depths would, and the forward peak (50 times a lit face's light) shines through any gap. So
 what a sprite sends toward the eye is first dimmed by the cloud between it and the eye
 (`view_depth`: the chord through its cloud, taken as a ball, toward the eye): the beam's
 single scattering by exp(-tau). The multiply scattered light, as bright as a lit face at
@@ -54,12 +54,13 @@ SHADOW_REACH = 0.55  # a sprite's shadow radius over its edge: its texture is so
 # through `diffuse_phase`); the rest is the beam itself through the droplets' `cloud_phase`.
 DIFFUSE_SHARE = 0.55
 OCTAVES, OCTAVE_GAIN = 3, 0.5  # see multiple_scattering (written out for these values)
-EXPOSURE = 2.8  # radiance to display: 1 - exp(-EXPOSURE L) keeps 0..1, rolls off highlights
-# ...raised to this power: the curve's shoulder alone squeezed a sunlit top (L 0.8) and its
-# base in shade (L 0.3) to 0.89 and 0.57, a light grey; a toe keeps the base a darker grey
-# (0.41) and the top white (0.83), as a camera's S-shaped curve does.
-CONTRAST = 1.8
-# A highlight far past white (a silver lining: the forward peak is 27 times a lit face's
+EXPOSURE = 3.2  # radiance to display: 1 - exp(-EXPOSURE L) keeps 0..1, rolls off highlights
+# ...then e -> e (e + TOE) / (1 + TOE): the curve's shoulder alone squeezed a sunlit top
+# (L 0.8) and its base in shade (L 0.3) to 0.89 and 0.57, a light grey; the toe keeps the base
+# a darker grey (0.43) and the top white (0.83), as a camera's S-shaped curve does, and the
+# darkest clouds (night) at 0.43 of their value, not black.
+TOE = 0.6
+# A highlight far past white (a silver lining: the forward peak is 50 times a lit face's
 # light) bleaches toward white as film and eyes see it, instead of keeping the hue of the
 # light at full strength: between these exposed peaks (EXPOSURE times the brightest channel)
 # the colour turns from hue-kept to channel by channel.
@@ -110,7 +111,9 @@ class ParticleLight:
     """Precomputed light per particle, found by particle identity."""
 
     keys: U64  # (M,) sorted
-    incident: F32  # (M, L) share of each light reaching the particle, in key order
+    # (M, L + BALL_COLUMNS) share of each light reaching the particle, in key order, then its
+    # place in its cloud's ball (`cloud_balls`)
+    incident: F32
     directions: F64  # (L, 3) the light directions it was computed for
 
     def lookup(self, batch: SpriteBatch) -> F32 | None:
@@ -131,7 +134,7 @@ class Scattered(NamedTuple):
     shades the same sprites frame after frame (the near layer) works out once."""
 
     directions: F64  # (L, 3) as `Lights.directions`
-    rows: F32  # (N, L) the precompute's light (the beam's share), a row per sprite
+    rows: F32  # (N, L + BALL_COLUMNS) the precompute's light and ball, a row per sprite
 
     def take(self, index: npt.NDArray[np.intp] | npt.NDArray[np.bool_]) -> Scattered:
         rows = np.flatnonzero(index) if index.dtype == np.bool_ else index
@@ -220,6 +223,9 @@ def particle_light(batch: SpriteBatch, lights: Lights) -> ParticleLight:
             _CACHE.move_to_end(digest)
             return hit
     incident = incident_light(rel, radius, tau, cid, lights.directions)
+    # Each particle's place in its whole cloud taken as a ball (`view_depth`), carried in the
+    # light's last BALL_COLUMNS: a bin or a frame's drawn sprites hold only part of a cloud.
+    incident = np.concatenate([incident, cloud_balls(rel, batch.size_m[canon], starts)], axis=1)
     by_key = np.argsort(keys, kind="stable")
     out = ParticleLight(keys[by_key], incident[by_key], lights.directions)
     with _LOCK:
@@ -248,7 +254,8 @@ def harris_incident(
     light: ParticleLight | None = None,
     scattered: Scattered | None = None,
 ) -> F32:
-    """(N, L) the share of each of `lights`' beam reaching each of the batch's sprites:
+    """(N, L + BALL_COLUMNS) the share of each of `lights`' beam reaching each of the batch's
+    sprites, then their place in their clouds (`cloud_balls`):
     `scattered`'s rows where its directions are these within LIGHT_REUSE_DEG, else from
     `light` (a precompute holding these sprites) or a new one."""
     if scattered is not None and close_directions(scattered.directions, lights.directions):
@@ -286,7 +293,7 @@ def harris_radiance(
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.
     cos = lights.directions @ view  # (L, N)
-    beam = incident.T
+    beam = incident[:, : len(lights.directions)].T
     weight = diffuse_phase(cos)
     weight *= multiple_scattering(beam)
     weight[0] *= DIFFUSE_SHARE
@@ -306,30 +313,60 @@ def harris_radiance(
 # distance from it (a uniform ball's RMS distance is sqrt(3/5) of its radius), plus half a
 # sprite (the sprites' own extent).
 BALL_FROM_RMS = math.sqrt(5.0 / 3.0)
+BALL_COLUMNS = 4  # offset from the cloud's centre (x, y, z) and the cloud's radius
 # A sprite's optical depth (`tau_of`) is through its centre; along a chord through a cloud of
 # overlapping soft sprites the mean extinction is about half that over a sprite's size.
 VIEW_EXTINCTION_SHARE = 0.5
 
 
-def view_depth(batch: SpriteBatch, view: F64) -> F64:
+def cloud_balls(rel_m: F64, size_m: F32 | F64, starts: npt.NDArray[np.intp]) -> F32:
+    """(N, BALL_COLUMNS) each sprite's offset (x, y, z) from its cloud's mean centre and the
+    radius of its cloud taken as a ball, for sprites `rel_m` (N, 3) grouped by cloud, each
+    cloud's first at `starts`."""
+    n = len(rel_m)
+    out = np.zeros((n, BALL_COLUMNS), np.float32)
+    if n == 0:
+        return out
+    counts = np.diff(np.r_[starts, n])
+    rel = np.asarray(rel_m, np.float64)
+    mean = np.add.reduceat(rel, starts, axis=0) / counts[:, None]
+    off = rel - np.repeat(mean, counts, axis=0)
+    r2 = np.einsum("ij,ij->i", off, off)
+    radius = BALL_FROM_RMS * np.sqrt(np.add.reduceat(r2, starts) / counts)
+    radius += 0.5 * np.add.reduceat(np.asarray(size_m, np.float64), starts) / counts
+    out[:, :3] = off
+    out[:, 3] = np.repeat(radius, counts)
+    return out
+
+
+def batch_balls(batch: SpriteBatch) -> F32:
+    """`cloud_balls` of the clouds as this batch holds them (Wang's sprites, which have no
+    precompute over whole clouds)."""
+    order = np.argsort(batch.cloud_id, kind="stable")
+    cid = batch.cloud_id[order]
+    starts = np.flatnonzero(np.r_[True, cid[1:] != cid[:-1]]) if len(cid) else np.zeros(0, int)
+    balls = cloud_balls(batch.centre_m[order], batch.size_m[order], starts)
+    out = np.empty_like(balls)
+    out[order] = balls
+    return out
+
+
+def view_depth(batch: SpriteBatch, view: F64, balls: F32 | None = None) -> F64:
     """(N,) optical depth of each sprite's cloud between the sprite and the eye: the chord
-    from the sprite's centre toward the eye (against `view`, (3, N) `view_rays`) to the edge of
-    its cloud taken as a ball, times the sprite's extinction (its optical depth over its
-    size, `tau_of`). Zero for a sprite on its cloud's near face, largest for one behind it."""
+    from the sprite's near side toward the eye (against `view`, (3, N) `view_rays`) to the
+    edge of its cloud taken as a ball (`balls`, (N, BALL_COLUMNS) from the light's precompute
+    over whole clouds; None: `batch_balls`), times the sprite's extinction (its optical
+    depth over its size, `tau_of`). Zero for a sprite on its cloud's near face."""
     n = len(batch)
     if n == 0:
         return np.zeros(0)
-    _, inverse, counts = np.unique(batch.cloud_id, return_inverse=True, return_counts=True)
-    centre = batch.centre_m
-    mean = np.stack([np.bincount(inverse, centre[:, k]) / counts for k in range(3)], axis=1)
-    rel = centre - mean[inverse]  # (N, 3) from the cloud's centre
+    ball = batch_balls(batch) if balls is None else balls
+    rel = ball[:, :3].astype(np.float64)
     r2 = np.einsum("ij,ij->i", rel, rel)
     size = np.asarray(batch.size_m, np.float64)
-    radius = BALL_FROM_RMS * np.sqrt(np.bincount(inverse, r2) / counts)
-    radius += 0.5 * np.bincount(inverse, size) / counts
     # |rel + t d| = R, d toward the eye (-view): t = -(rel.d) + sqrt((rel.d)^2 - |rel|^2 + R^2).
     along = -np.einsum("ij,ji->i", rel, view)
-    disc = along * along - r2 + radius[inverse] ** 2
+    disc = along * along - r2 + ball[:, 3].astype(np.float64) ** 2
     # From the sprite's near side: its own half is in its texture's alpha already.
     chord = np.maximum(-along + np.sqrt(np.maximum(disc, 0.0)) - 0.5 * size, 0.0)
     out: F64 = chord * (VIEW_EXTINCTION_SHARE * tau_of(batch) / np.maximum(size, 1.0))
@@ -368,13 +405,18 @@ def exposed_channels(radiance: F64) -> F64:
     bleach toward it (WHITEN_FROM, WHITEN_TO)."""
     r, g, b = radiance
     peak = np.maximum(np.maximum(np.maximum(r, g), b), 1e-6)
-    shown = (1.0 - np.exp(-EXPOSURE * peak)) ** CONTRAST
+    shown = _toe(1.0 - np.exp(-EXPOSURE * peak))
     out: F64 = radiance * (shown / peak)
     bleach = np.clip((EXPOSURE * peak - WHITEN_FROM) / (WHITEN_TO - WHITEN_FROM), 0.0, 1.0)
     hot = np.flatnonzero(bleach > 0.0)
     if len(hot):
-        each = (1.0 - np.exp(-EXPOSURE * radiance[:, hot])) ** CONTRAST
+        each = _toe(1.0 - np.exp(-EXPOSURE * radiance[:, hot]))
         out[:, hot] += (each - out[:, hot]) * bleach[hot]
+    return out
+
+
+def _toe(e: F64) -> F64:
+    out: F64 = e * (e + TOE) / (1.0 + TOE)
     return out
 
 
