@@ -54,7 +54,7 @@ SHADOW_REACH = 0.55  # a sprite's shadow radius over its edge: its texture is so
 # through `diffuse_phase`); the rest is the beam itself through the droplets' `cloud_phase`.
 DIFFUSE_SHARE = 0.55
 OCTAVES, OCTAVE_GAIN = 3, 0.5  # see multiple_scattering (written out for these values)
-EXPOSURE = 3.2  # radiance to display: 1 - exp(-EXPOSURE L) keeps 0..1, rolls off highlights
+EXPOSURE = 3.3  # radiance to display: 1 - exp(-EXPOSURE L) keeps 0..1, rolls off highlights
 # ...then e -> e (e + TOE) / (1 + TOE): the curve's shoulder alone squeezed a sunlit top
 # (L 0.8) and its base in shade (L 0.3) to 0.89 and 0.57, a light grey; the toe keeps the base
 # a darker grey (0.43) and the top white (0.83), as a camera's S-shaped curve does, and the
@@ -70,7 +70,12 @@ WHITEN_FROM, WHITEN_TO = 1.5, 5.0
 SKY_ELEVATION_DEG = 25.0
 SKY_AZIMUTHS_DEG = (0.0, 120.0, 240.0)  # from the sun's azimuth
 SKY_GAIN = (0.2, 0.1, 0.1, 0.1)  # zenith, then the three; of the sky colour there
-SKY_HORIZON_MIX = 0.6  # the low skylights take this much of the horizon colour
+# The low skylight on the sun's side takes this much of the horizon colour (the glow round a
+# low sun); the two away from the sun SKY_AWAY_MIX of it: the sky opposite a low sun is the
+# blue of the sky overhead more than the sunset horizon's orange, so a cloud's shaded side
+# turns blue-grey, not orange.
+SKY_HORIZON_MIX = 0.6
+SKY_AWAY_MIX = 0.25
 # Starlight, airglow and the glow of towns: clouds at night are dark, never black.
 NIGHT_FLOOR_RGB = np.array([0.014, 0.016, 0.022])
 AMBIENT_SHARE = 0.05  # Harris's small ambient term, of the mean sky colour (the ground apart)
@@ -187,14 +192,15 @@ def _scene_lights(sky: SkyParams, above_cloud: bool) -> Lights:
     # (3,) arrays the numpy calls cost 0.1 ms a set, twice a frame.
     cl = cloud_lights(sky, above_cloud)
     zenith, horizon = cl.sky_zenith_rgb, cl.sky_horizon_rgb
-    low = [z + (h - z) * SKY_HORIZON_MIX for z, h in zip(zenith, horizon, strict=True)]
+    sunward = [z + (h - z) * SKY_HORIZON_MIX for z, h in zip(zenith, horizon, strict=True)]
+    away = [z + (h - z) * SKY_AWAY_MIX for z, h in zip(zenith, horizon, strict=True)]
     dirs = [tuple(cl.key_dir), (0.0, 0.0, 1.0)]
     rgbs = [tuple(cl.key_rgb), tuple(z * SKY_GAIN[0] for z in zenith)]
     el = math.radians(SKY_ELEVATION_DEG)
     for offset, gain in zip(SKY_AZIMUTHS_DEG, SKY_GAIN[1:], strict=True):
         az = math.radians(sky.sun.azimuth_deg + offset)
         dirs.append((math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)))
-        rgbs.append(tuple(c * gain for c in low))
+        rgbs.append(tuple(c * gain for c in (sunward if offset == 0.0 else away)))
     ambient = NIGHT_FLOOR_RGB + AMBIENT_SHARE * 0.5 * (np.asarray(zenith) + np.asarray(horizon))
     return Lights(_quantised(dirs), np.array(rgbs), ambient, np.asarray(cl.ground_rgb))
 
