@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from datetime import datetime
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -20,10 +21,12 @@ from tests.cloud_light_helpers import (
     time_for_sun_elevation,
 )
 from wxsky.app.snapshot import take_snapshot
+from wxsky.errors import ConfigError
 from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
+from wxsky.settings.config import load_config
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
@@ -123,3 +126,12 @@ def test_noon_cumulus_tops_twice_their_bases(renderer: Renderer) -> None:
     assert regions, "no whole cloud in the picture"
     cloud = regions[0]
     assert cloud["top_third"] >= 2.0 * cloud["bottom_tenth"], f"top not twice base: {cloud}"
+
+
+def test_wang_artist_colours_are_a_setting(tmp_path: Path) -> None:
+    cfg = tmp_path / "wxsky.toml"
+    cfg.write_text('[scene]\nshading = "wang-artist"\n', encoding="utf-8")
+    assert load_config(cfg).scene.settings().shading == "wang-artist"
+    cfg.write_text('[scene]\nshading = "artist"\n', encoding="utf-8")
+    with pytest.raises(ConfigError, match="shading"):
+        load_config(cfg)
