@@ -89,8 +89,11 @@ def display_colours(
     light: ParticleLight | None = None,
     scattered: Scattered | None = None,
     dist_m: F64 | None = None,
+    balls: F32 | None = None,
 ) -> F64 | F32:
-    """`sprite_colours`' colours without their alpha, channel by channel: (3, N)."""
+    """`sprite_colours`' colours without their alpha, channel by channel: (3, N). `balls`:
+    for Wang, (N, BALL_COLUMNS) each sprite's place in its whole cloud (`batch_balls` of a
+    batch holding the clouds whole; None: of these sprites' clouds as they are here)."""
     _check(model)
     n = len(batch)
     if n == 0:
@@ -110,7 +113,7 @@ def display_colours(
     if slabs == 0:
         lights = scene_lights(sky)
         if model == "wang":
-            return exposed_channels(wang_radiance(batch, lights, view))
+            return exposed_channels(wang_radiance(batch, lights, view, balls))
         incident = harris_incident(batch, lights, light, scattered)
         depth = view_depth(batch, view, incident[:, -BALL_COLUMNS:])
         return exposed_channels(harris_radiance(view, incident, lights, batch.height_frac, depth))
@@ -133,7 +136,10 @@ def display_colours(
     radiance[:, slabs_at] = slab_radiance
     if model == "wang":
         radiance[:, particle] = wang_radiance(
-            batch.take(particle), lights, view.take(particle, axis=1)
+            batch.take(particle),
+            lights,
+            view.take(particle, axis=1),
+            None if balls is None else balls.take(particle, axis=0),
         )
         return exposed_channels(radiance)
     if scattered is not None and close_directions(scattered.directions, lights.directions):
