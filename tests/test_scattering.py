@@ -174,3 +174,27 @@ def test_a_cloud_too_big_for_one_chunk_gives_the_same_light(
     blocks = incident_light(pts, radius, tau, ids, OBLIQUE)
     np.testing.assert_allclose(blocks, whole, rtol=1e-5)
     assert whole.min() < 0.1  # deep in a 300-particle cloud
+
+
+def test_cloud_phase_is_normalised_with_a_strong_forward_peak() -> None:
+    from wxsky.scene.scattering import cloud_phase, diffuse_phase, two_lobe_phase
+
+    # Over the sphere: 2 pi times the integral over cos theta from -1 to 1 (midpoint rule on
+    # a fine grid: the forward lobe of g 0.85 is narrow).
+    n = 400_000
+    mu = -1.0 + (np.arange(n) + 0.5) * (2.0 / n)
+    assert 2.0 * math.pi * two_lobe_phase(mu).sum() * (2.0 / n) == pytest.approx(1.0, abs=1e-4)
+    assert (cloud_phase(mu).sum() * (2.0 / n)) / 2.0 == pytest.approx(1.0, abs=1e-4)
+    assert (diffuse_phase(mu).sum() * (2.0 / n)) / 2.0 == pytest.approx(1.0, abs=1e-4)
+    # Reference values (closed form): straight on, straight back, at 90 degrees, 4 pi p.
+    forward, back, side = (float(cloud_phase(c)) for c in (1.0, -1.0, 0.0))
+    g1, g2, w = 0.85, -0.3, 0.65
+    hg = lambda c, g: (1 - g * g) / (1 + g * g - 2 * g * c) ** 1.5  # noqa: E731
+    assert forward == pytest.approx(w * hg(1, g1) + (1 - w) * hg(1, g2), rel=1e-12)
+    assert forward == pytest.approx(53.59, abs=0.01)
+    assert back == pytest.approx(0.957, abs=0.001)
+    assert side == pytest.approx(0.360, abs=0.001)
+    # The silver lining's forward peak against a lit face's back-scatter.
+    assert forward / back > 30.0
+    # Multiply scattered light keeps only a weak forward bias.
+    assert 1.0 < float(diffuse_phase(1.0)) / float(diffuse_phase(-1.0)) < 4.0

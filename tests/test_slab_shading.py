@@ -138,7 +138,9 @@ def test_a_deck_seen_from_above_has_one_colour_per_direction(model: str) -> None
     down = -ray[:, 2] / np.linalg.norm(ray, axis=1)
     band = (down > 0.45) & (down < 0.5)
     assert band.sum() > 20
-    assert np.ptp(rgba[band, :3], axis=0).max() < 0.03
+    # (Measured 0.034: the clouds' exposure curve is steeper near white since its toe, issue
+    # 41, so the band's spread of view angles shows a little more; 0.024 before.)
+    assert np.ptp(rgba[band, :3], axis=0).max() < 0.04
     # A deck top in the June noon sun is white, not a blue or grey field.
     rgb = rgba[band, :3].mean(axis=0)
     assert rgb.min() > 0.8 and rgb[2] / rgb[0] < 1.12

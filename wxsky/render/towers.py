@@ -25,7 +25,7 @@ import numpy.typing as npt
 
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.scene.camera import Camera
-from wxsky.scene.shading_harris import EXPOSURE
+from wxsky.scene.shading_harris import EXPOSURE, TOE, WHITEN_FROM, WHITEN_TO
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.tower_field import MAX_LIGHTS, OCCUPIED_FLOOR, LitVolume, TowerShow
 from wxsky.scene.tower_shading import view_weights
@@ -127,6 +127,9 @@ class TowerPass:
             "tower_march.glsl",
             {
                 "EXPOSURE": repr(EXPOSURE),
+                "TOE": repr(TOE),
+                "WHITEN_FROM": repr(WHITEN_FROM),
+                "WHITEN_TO": repr(WHITEN_TO),
                 "DENSITY_FLOOR": repr(OCCUPIED_FLOOR),
             },
         )

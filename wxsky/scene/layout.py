@@ -55,7 +55,7 @@ from wxsky.scene.shading import (
     display_colours,
     prepare_lighting,
 )
-from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, with_alpha
+from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, batch_balls, with_alpha
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.scene.sprites import F64
@@ -273,7 +273,11 @@ def shade_for_eye(
     if scattered is not None:
         scattered = scattered.take(order)
     dist = None if dist_m is None else dist_m[order]
-    colours = display_colours(drawn, sky, eye_m, shading, light, scattered, dist)
+    # Wang has no precompute over whole clouds: the clouds' balls (the depth toward the eye)
+    # from the whole batch, not from the drawn sprites, or a cloud half out of view would
+    # change its shade as the view turns.
+    balls = batch_balls(batch)[order] if shading == "wang" else None
+    colours = display_colours(drawn, sky, eye_m, shading, light, scattered, dist, balls)
     rgba = hazed(colours, drawn.opacity, drawn, eye_m, sky, max_range_m, dist)
     if share is not None and len(share) and share.min() < 1.0:
         rgba[:, 3] *= share[order]

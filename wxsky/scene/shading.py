@@ -1,6 +1,8 @@
-"""Cloud shading, by model: Wang's artist model (`shading_wang`) or Harris's multiple forward
-scattering (`shading_harris`, `scattering`). Both light every sprite from dawn to night from
-the same SkyParams; `[scene] shading` picks one. Sprites of stratiform layers (`slab` models)
+"""Cloud shading, by model: Harris's multiple forward scattering (`shading_harris`,
+`scattering`), Wang's shading groups under the same physical light (`shading_wang`,
+"wang"), or Wang's artist colours ("wang-artist"). All light every sprite from dawn to night
+from the same SkyParams (through `cloud_light.cloud_lights`, except the artist's levels);
+`[scene] shading` picks one. Sprites of stratiform layers (`slab` models)
 are shaded as Bouthors' plane-parallel slab (`shading_slab`) under either: a deck is one sheet
 of cloud, and shading its sprites one by one paints it as a field of lit balls.
 
@@ -14,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from wxsky.scene.shading_harris import (
+    BALL_COLUMNS,
     ParticleLight,
     Scattered,
     close_directions,
@@ -22,18 +25,20 @@ from wxsky.scene.shading_harris import (
     harris_radiance,
     particle_light,
     scene_lights,
+    view_depth,
     view_rays,
     with_alpha,
 )
 from wxsky.scene.shading_slab import slab_view_radiance
-from wxsky.scene.shading_wang import wang_colours
+from wxsky.scene.shading_wang import wang_colours, wang_radiance
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, SpriteBatch
 
-SHADING_MODELS = ("wang", "harris")
-# Harris by default: self-shadowed cumulus with grey bases and silver-lined rims, at a few
-# milliseconds a frame for the near sprites (none while the sun stands still; see
-# shading_harris's cache); "wang" is the lighter fallback.
+SHADING_MODELS = ("wang", "harris", "wang-artist")
+# Harris by default: self-shadowed cumulus with grey bases, dark against a low sun with
+# silver-lined rims, at a few milliseconds a frame for the near sprites (none while the sun
+# stands still; see shading_harris's cache); "wang" is the lighter fallback under the same
+# light, "wang-artist" Wang's own colour levels, the same from every side of the sun.
 DEFAULT_SHADING = "harris"
 
 __all__ = [
@@ -84,15 +89,18 @@ def display_colours(
     light: ParticleLight | None = None,
     scattered: Scattered | None = None,
     dist_m: F64 | None = None,
+    balls: F32 | None = None,
 ) -> F64 | F32:
-    """`sprite_colours`' colours without their alpha, channel by channel: (3, N)."""
+    """`sprite_colours`' colours without their alpha, channel by channel: (3, N). `balls`:
+    for Wang, (N, BALL_COLUMNS) each sprite's place in its whole cloud (`batch_balls` of a
+    batch holding the clouds whole; None: of these sprites' clouds as they are here)."""
     _check(model)
     n = len(batch)
     if n == 0:
         return np.zeros((3, 0))
     slab = batch.slab
     slabs = int(np.count_nonzero(slab))
-    if slabs == 0 and model != "harris":
+    if slabs == 0 and model == "wang-artist":
         out: F32 = wang_colours(batch, sky)[:, :3].T
         return out
     # The view rays once for all sprites, and one exposure over the sprites' radiance: each
@@ -102,10 +110,13 @@ def display_colours(
         return exposed_channels(
             slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2])
         )
-    if slabs == 0:  # Harris
+    if slabs == 0:
         lights = scene_lights(sky)
+        if model == "wang":
+            return exposed_channels(wang_radiance(batch, lights, view, balls))
         incident = harris_incident(batch, lights, light, scattered)
-        return exposed_channels(harris_radiance(view, incident, lights))
+        depth = view_depth(batch, view, incident[:, -BALL_COLUMNS:])
+        return exposed_channels(harris_radiance(view, incident, lights, batch.height_frac, depth))
     # Columns by index (ndarray.take), not by mask: a fifth of the time.
     particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
     slab_radiance = slab_view_radiance(
@@ -115,12 +126,22 @@ def display_colours(
         sky,
         eye_m[2],
     )
-    if model != "harris":
+    if model == "wang-artist":
         mixed = np.empty((3, n))
         mixed[:, slabs_at] = exposed_channels(slab_radiance)
         mixed[:, particle] = wang_colours(batch.take(particle), sky)[:, :3].T
         return mixed
     lights = scene_lights(sky)
+    radiance = np.empty((3, n))
+    radiance[:, slabs_at] = slab_radiance
+    if model == "wang":
+        radiance[:, particle] = wang_radiance(
+            batch.take(particle),
+            lights,
+            view.take(particle, axis=1),
+            None if balls is None else balls.take(particle, axis=0),
+        )
+        return exposed_channels(radiance)
     if scattered is not None and close_directions(scattered.directions, lights.directions):
         # A frame's near layer: the light is known, and only the arrays the eye-dependent
         # half reads are cut, not every field of the batch (which was a third of the stage).
@@ -132,9 +153,15 @@ def display_colours(
             light,
             None if scattered is None else scattered.take(particle),
         )
-    radiance = np.empty((3, n))
-    radiance[:, slabs_at] = slab_radiance
-    radiance[:, particle] = harris_radiance(view.take(particle, axis=1), incident, lights)
+    particles = batch.take(particle)
+    particle_view = view.take(particle, axis=1)
+    radiance[:, particle] = harris_radiance(
+        particle_view,
+        incident,
+        lights,
+        particles.height_frac,
+        view_depth(particles, particle_view, incident[:, -BALL_COLUMNS:]),
+    )
     return exposed_channels(radiance)
 
 

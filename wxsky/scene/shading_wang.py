@@ -1,13 +1,17 @@
-"""Wang's artist shading ("Every Cloud Has a Silver Lining"): five colour levels by height in
-the cloud, an ambient percentage by time of day, and a directional term from the dot product of
-the sprite's shading-group direction with the sun. No light is scattered or shadowed: the
-artist's levels stand in for the darker bottoms that scattering would give.
+"""Wang's shading ("Every Cloud Has a Silver Lining"), two ways: `wang_colours`, his artist
+model (`[scene] shading = "wang-artist"`): five colour levels by height in the cloud, an
+ambient percentage by time of day, and a directional term from the dot product of the
+sprite's shading-group direction with the sun; no light is scattered or shadowed, the
+artist's levels stand in for the darker bottoms that scattering would give. And
+`wang_radiance` (`"wang"`): his shading groups under the physical light every model shares
+(`shading_harris.harris_radiance`), the light reaching a group estimated from its direction.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from wxsky.scene.shading_harris import DARK_TAU, Lights, harris_radiance, view_depth
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, SpriteBatch
 
@@ -71,3 +75,24 @@ def _table(rows: tuple[tuple[float, ...], ...], el_deg: float) -> tuple[float, .
     keys = [r[0] for r in rows]
     columns = range(1, len(rows[0]))
     return tuple(float(np.interp(el_deg, keys, [r[i] for r in rows])) for i in columns)
+
+
+# Optical depth from a cloud's face toward a light straight through it to the far side, for
+# Wang's shading groups under the physical light (`wang_radiance`): a group facing the light
+# has none before it, one facing away has the whole cloud (a fair cumulus: tens; its
+# multiply scattered light, not the beam, is what reaches there).
+WANG_CLOUD_TAU = 6.0
+
+
+def wang_radiance(batch: SpriteBatch, lights: Lights, view: F64, balls: F32 | None = None) -> F64:
+    """(3, N) radiance toward the eye along `view` ((3, N), `view_rays`) under the physical
+    light (the same phase functions, ambient and ground light as Harris's particles): Wang
+    has no particle pass, so the beam reaching a sprite is estimated from its shading group's
+    direction from the cloud's centre (`light_dir`) against each light's: exp(-tau (1 - cos)
+    / 2), tau the cloud's depth, thicker for grey types and thinner for forming clouds.
+    `balls`: the sprites' places in their whole clouds (`view_depth`)."""
+    facing = batch.light_dir.astype(np.float64) @ lights.directions.T  # (N, L)
+    tau = WANG_CLOUD_TAU * batch.opacity * (1.0 + DARK_TAU * batch.darkness)
+    beam = np.exp(-(0.5 * tau)[:, None] * (1.0 - facing)).astype(np.float32)
+    depth = view_depth(batch, view, balls)
+    return harris_radiance(view, beam, lights, batch.height_frac, depth)

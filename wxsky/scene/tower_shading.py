@@ -1,16 +1,17 @@
 """A tower volume lit as the sprite clouds are (issue 17, item 3): the light reaching every cell
 from the sun (or moon) and the four skylights and zenith of Harris's model, by slice lighting
 (`towers.lighting`), spread by the same multiple-scattering octaves, then scattered toward
-the eye with the same phase function and exposed the same way. So a tower beside a sprite
-cumulus has the same silver lining toward the sun, the same grey base and the same blue-grey
-shadow side."""
+the eye with the same phase functions (the key light's beam through the droplets' forward
+peak, the multiply scattered light through the diffuse one) and exposed the same way. So a
+tower beside a sprite cumulus has the same silver lining toward the sun, the same grey base
+and the same blue-grey shadow side."""
 
 from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.scene.scattering import ALBEDO, HG_G, hg_phase
+from wxsky.scene.scattering import ALBEDO, cloud_phase, diffuse_phase
 from wxsky.scene.shading_harris import (
     DIFFUSE_SHARE,
     exposed,
@@ -24,11 +25,11 @@ F32 = npt.NDArray[np.float32]
 
 
 def tower_light(density: F32, sky: SkyParams, extinction: float = EXTINCTION_PER_CELL) -> F32:
-    """(nz, ny, nx, L) light 0..1 reaching every cell of `density` (z up, x east, y north)
-    from each of the sky's L lights (`scene_lights`), multiple scattering included: what does
-    not depend on the eye, worked out once per volume and sky (the renderer keeps it in
-    textures and scatters it toward the eye per view, `view_weights`). `extinction`: per
-    cell at density 1 (`TowerSpec.extinction_per_cell`)."""
+    """(nz, ny, nx, L + 1) light 0..1 reaching every cell of `density` (z up, x east, y north)
+    from each of the sky's L lights (`scene_lights`), multiple scattering included, then the
+    key light's beam alone: what does not depend on the eye, worked out once per volume and
+    sky (the renderer keeps it in textures and scatters it toward the eye per view,
+    `view_weights`). `extinction`: per cell at density 1 (`TowerSpec.extinction_per_cell`)."""
     lights = scene_lights(sky)
     reach = np.stack(
         [
@@ -37,23 +38,29 @@ def tower_light(density: F32, sky: SkyParams, extinction: float = EXTINCTION_PER
         ],
         axis=-1,
     )
-    out: F32 = multiple_scattering(reach.astype(np.float32))
+    reach = reach.astype(np.float32)
+    out: F32 = np.concatenate([multiple_scattering(reach), reach[..., :1]], axis=-1)
     return out
 
 
 def view_weights(
     sky: SkyParams, view_dir: tuple[float, float, float]
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """(L, 3) what each light's reaching light (`tower_light`) adds to the radiance toward an
-    eye looking along `view_dir` (phase and albedo times the light's colour; the phase angle is
-    the same in every cell for a distant eye), and (3,) the ambient radiance."""
+    """(L + 1, 3) what each channel of `tower_light` adds to the radiance toward an eye looking
+    along `view_dir` (phase and albedo times the light's colour; the phase angle is the same in
+    every cell for a distant eye), as `shading_harris.harris_radiance` weighs them, and (3,)
+    the ambient radiance (with the ground's light at a tower's middle height)."""
     lights = scene_lights(sky)
     view = np.asarray(view_dir, np.float64)
     view = view / np.linalg.norm(view)
     cos = lights.directions @ view
-    phase = (1.0 - DIFFUSE_SHARE) * 4.0 * np.pi * hg_phase(cos, HG_G) + DIFFUSE_SHARE
-    weights = ALBEDO * phase[:, None] * np.asarray(lights.rgb, np.float64)
-    return weights, np.asarray(lights.ambient_rgb, np.float64)
+    rgb = np.asarray(lights.rgb, np.float64)
+    phase = diffuse_phase(cos)
+    phase[0] *= DIFFUSE_SHARE
+    beam = (1.0 - DIFFUSE_SHARE) * cloud_phase(float(cos[0])) * rgb[:1]
+    weights = ALBEDO * np.concatenate([phase[:, None] * rgb, beam], axis=0)
+    ambient = np.asarray(lights.ambient_rgb, np.float64) + 0.5 * lights.ground_rgb
+    return weights, ambient
 
 
 def tower_colours(density: F32, sky: SkyParams, view_dir: tuple[float, float, float]) -> F32:

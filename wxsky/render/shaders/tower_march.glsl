@@ -38,7 +38,12 @@ out vec4 f_colour;
 
 vec3 exposed(vec3 r) {
     float peak = max(max(r.r, r.g), max(r.b, 1e-6));
-    return r * ((1.0 - exp(-EXPOSURE * peak)) / peak);
+    float e = 1.0 - exp(-EXPOSURE * peak);
+    vec3 kept = r * (e * (e + TOE) / (1.0 + TOE) / peak);
+    // Far past white (a silver lining) the highlight bleaches toward white.
+    float bleach = clamp((EXPOSURE * peak - WHITEN_FROM) / (WHITEN_TO - WHITEN_FROM), 0.0, 1.0);
+    vec3 each = 1.0 - exp(-EXPOSURE * r);
+    return mix(kept, each * (each + TOE) / (1.0 + TOE), bleach);
 }
 
 void main() {
