@@ -9,14 +9,16 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
 from wxsky.engine.stages import DEFAULT_TRANSITION_STEP_S, FramePlan, SkyEngine
-from wxsky.host.compositor import composite, layers_from_images
+from wxsky.host.compositor import composite, composite_linear, layers_from_images
 from wxsky.output import memory
 from wxsky.render.renderer import Renderer
+from wxsky.scene import exposure
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_shadow import CloudShadow
 from wxsky.scene.layout import SceneSettings
@@ -30,6 +32,7 @@ from wxsky.weather.transition import TransitionRates
 LAYER_NAMES: tuple[str, ...] = ("sky", "near", *(f"ring_{i}" for i in range(RING_SIZE)))
 
 U8 = npt.NDArray[np.uint8]
+F32 = npt.NDArray[np.float32]
 
 Progress = Callable[[str], None]
 """Told what a snapshot is doing now, in a few words ("drawing the far clouds")."""
@@ -57,6 +60,9 @@ class Snapshot:
     ring_quads_m: npt.NDArray[np.float64]  # (8, 4, 3)
     state: WeatherState  # the applied weather the picture shows
     shadow: CloudShadow | None = None  # the ring's cloud-shadow map (layers["shadow"])
+    # (H, W, 3) the composite's scene-linear colour before exposure and tone map, rows top
+    # first (take_snapshot's `linear`); None when not asked for.
+    linear: F32 | None = None
 
 
 @dataclass(frozen=True)
@@ -82,6 +88,8 @@ def take_snapshot(
     mode: str = "ring",
     position_deg: tuple[float, float] | None = None,
     progress: Progress = _quiet,
+    linear: bool = False,
+    exposure_setting: float | str = exposure.AUTO,
 ) -> Snapshot:
     """`drift_s`: how long the wind has blown the clouds since the weather was set (a picture
     later than its preset's time shows them moved on, the same in every process). `mode`:
@@ -89,7 +97,10 @@ def take_snapshot(
     sprite, to compare). `position_deg`: (lat, lon) of the camera, placed as the daemon's
     `set_camera` places it (near the site: under the same sky; far: a new site).
     `progress` is told each step as it starts (the command line shows it: a towering sky
-    takes minutes on a CPU).
+    takes minutes on a CPU). `linear`: also draw the frame into float layers and keep their
+    composite (Snapshot.linear; the same camera and plan as the picture). `exposure_setting`:
+    the `[render] exposure` the picture is drawn with (a renderer passed in gets its own
+    exposure back afterwards).
     Raises RuntimeFailure, before anything is built, if the picture would not fit in the
     memory available (`snapshot_bytes`)."""
     check_snapshot_memory(camera.width_px, camera.height_px, settings)
@@ -114,9 +125,16 @@ def take_snapshot(
     if own:
         progress("starting the renderer")
     r = renderer if renderer is not None else Renderer(settings.ring_texture_px)
+    kept_exposure = r.exposure
     try:
-        return picture(r, plan, progress=progress)
+        r.exposure = exposure.initial_scale(exposure_setting)
+        shot = picture(r, plan, progress=progress)
+        if linear:
+            progress("drawing the scene-linear layers")
+            shot = dataclasses.replace(shot, linear=linear_picture(r, plan, settings))
+        return shot
     finally:
+        r.exposure = kept_exposure
         if own:
             r.close()
 
@@ -163,3 +181,58 @@ def picture(
         state=plan.state,
         shadow=plan.ring.shadow,
     )
+
+
+def linear_picture(renderer: Renderer, plan: FramePlan, settings: SceneSettings) -> F32:
+    """(H, W, 3) float32 scene-linear composite of a plan, rows top first: drawn again, ring
+    and all, by a linear renderer on `renderer`'s context into float layers, and composited
+    as `picture` composites (the host's way), before exposure and tone map."""
+    with Renderer(settings.ring_texture_px, ctx=renderer.ctx, output="linear") as lin:
+        lin.render_ring(plan.ring)
+        lin.render_frame(plan.frame)
+        images = {name: lin.read_linear(name) for name in LAYER_NAMES}
+    quads = plan.ring.geometry.corners_m()
+    out: F32 = composite_linear(layers_from_images(images, quads), plan.frame.camera).astype(
+        np.float32
+    )
+    return out
+
+
+LINEAR_SUFFIXES = (".pfm", ".npy")
+
+
+def write_linear(path: Path, rgb: F32) -> None:
+    """Write (H, W, 3) scene-linear colour, rows top first, by the name's suffix: `.npy`
+    (float32 H x W x 3, rows top first) or `.pfm` (Portable Float Map: "PF", little-endian
+    float32, rows bottom first as the format has them). ValueError for another suffix;
+    OSError if it cannot be written."""
+    data = np.ascontiguousarray(rgb, np.float32)
+    if data.ndim != 3 or data.shape[2] != 3:
+        raise ValueError(f"scene-linear picture must be H x W x 3, got {data.shape}")
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        with path.open("wb") as f:
+            np.save(f, data, allow_pickle=False)
+    elif suffix == ".pfm":
+        h, w = data.shape[:2]
+        # A negative scale says little-endian; the rows go bottom first.
+        header = f"PF\n{w} {h}\n-1.0\n".encode("ascii")
+        body = np.ascontiguousarray(data[::-1]).astype("<f4").tobytes()
+        with path.open("wb") as f:
+            f.write(header + body)
+    else:
+        raise ValueError(f"{path}: give a name ending in .pfm or .npy")
+
+
+def read_pfm(path: Path) -> F32:
+    """(H, W, 3) float32, rows top first, from a colour PFM file (either byte order)."""
+    raw = path.read_bytes()
+    parts = raw.split(b"\n", 3)
+    if len(parts) < 4 or parts[0].strip() != b"PF":
+        raise ValueError(f"{path}: not a colour PFM file")
+    w, h = (int(v) for v in parts[1].split())
+    scale = float(parts[2])
+    dtype = "<f4" if scale < 0 else ">f4"
+    pixels = np.frombuffer(parts[3], dtype, count=w * h * 3).reshape(h, w, 3)
+    out: F32 = pixels[::-1].astype(np.float32)
+    return out

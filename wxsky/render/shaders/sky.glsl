@@ -9,6 +9,7 @@
 // the variant with it over the rectangle where it can be seen (u_rect). Outside a feature the
 // variants give the same colour, bit for bit, so only cost changes.
 #include "common.glsl"
+#include "display.glsl"
 
 #if defined VERTEX_SHADER
 uniform vec4 u_rect;  // NDC x0, y0, x1, y1 of the quad drawn (4 vertices, a strip)
@@ -246,6 +247,6 @@ void main() {
                             dot(ray, u_sun_dir));
     col = mix(col, vec3(1.0, 0.98, 0.9) * 1.2, disc * step(-0.01, ray.z) * length(u_sun_rgb));
     col = mix(col, dome.rgb, dome.a);
-    f_colour = vec4(clamp(col, 0.0, 1.0), 1.0);
+    f_colour = legacy_output(vec4(clamp(col, 0.0, 1.0), 1.0));
 }
 #endif
