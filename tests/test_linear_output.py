@@ -201,11 +201,15 @@ def test_snapshot_command_writes_linear_files(tmp_path: Path) -> None:
 def test_exposure_override_brightens_the_8bit_layers_monotonically(renderer: Renderer) -> None:
     state = state_of("fair-cumulus")
     cam = camera_for(state)
-    pictures = []
+    pictures, skies = [], []
     for ev in (-2.0, -1.0, 0.0, 1.0, 2.0):
-        pictures.append(shot(renderer, state, cam, False, ev).image[..., :3].astype(int))
+        s = shot(renderer, state, cam, False, ev)
+        pictures.append(s.image[..., :3].astype(int))
+        skies.append(float(s.layers["sky"][..., :3].mean()))
     means = [float(p.mean()) for p in pictures]
     assert all(b > a + 1.0 for a, b in itertools.pairwise(means)), means
+    # The kept sky layer is drawn again when the exposure changes (its uniforms hold it).
+    assert all(b > a + 1.0 for a, b in itertools.pairwise(skies)), skies
     for a, b in itertools.pairwise(pictures):
         # Per pixel too (the near layer's stretch and blends allow a level).
         assert (b - a).min() >= -1, (b - a).min()
@@ -224,6 +228,17 @@ def test_exposure_never_takes_nan_or_inf(renderer: Renderer) -> None:
     for ev in (math.nan, math.inf, 21.0):
         with pytest.raises(ValueError, match="exposure"):
             ex.scale_of_ev(ev)
+    # A renderer made for EV 0 only (its legacy round trip compiled out) says so.
+    assert not renderer.variable_exposure
+    with pytest.raises(ValueError, match="EV 0 only"):
+        renderer.exposure = 2.0
+    assert renderer.exposure == before
+    with Renderer(ring_texture_px=16, ctx=renderer.ctx, variable_exposure=True) as variable:
+        variable.exposure = 2.0
+        assert variable.exposure == 2.0
+        with pytest.raises(ValueError, match="exposure scale"):
+            variable.exposure = math.nan
+        assert variable.exposure == 2.0
 
 
 @pytest.mark.parametrize(

@@ -41,7 +41,7 @@ from wxsky.engine.ring_worker import DEFAULT_NICE
 from wxsky.engine.stages import FramePlan, SkyEngine
 from wxsky.output.shm import FrameWriter
 from wxsky.scene.camera import Camera
-from wxsky.scene.exposure import AUTO, initial_scale
+from wxsky.scene.exposure import AUTO, initial_scale, needs_variable
 from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw
 from wxsky.scene.shading_harris import particle_keys
 from wxsky.weather.state import WeatherState
@@ -306,7 +306,9 @@ def run_bench(
     shm_name = f"wxsky-bench-{os.getpid()}"
     specs = frame_layer_specs(width, height, settings.ring_texture_px, settings.shadow_map_px)
     with (
-        Renderer(settings.ring_texture_px) as renderer,
+        Renderer(
+            settings.ring_texture_px, variable_exposure=needs_variable(exposure_setting)
+        ) as renderer,
         FrameWriter.create(shm_name, specs) as writer,
         SkyEngine(
             state,

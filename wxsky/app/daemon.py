@@ -382,15 +382,22 @@ class Daemon:
         from wxsky.render.renderer import Renderer
         from wxsky.render.texture_export import probe
         from wxsky.render.towers import SLICE_TEXELS
-        from wxsky.scene.exposure import AUTO, SCENE_REFERRED, AutoExposure, initial_scale
+        from wxsky.scene.exposure import (
+            AUTO,
+            SCENE_REFERRED,
+            AutoExposure,
+            initial_scale,
+            needs_variable,
+        )
 
-        self._renderer = Renderer(self.config.scene.ring_texture_px)
+        setting = self.config.render.exposure
+        self._renderer = Renderer(
+            self.config.scene.ring_texture_px, variable_exposure=needs_variable(setting)
+        )
         # [render] exposure: a number of EV fixes it; "auto" holds the legacy exposure while
         # the passes' colours are display-referred (scene/exposure.py).
-        self._renderer.exposure = initial_scale(self.config.render.exposure)
-        self._auto_exposure = (
-            AutoExposure() if self.config.render.exposure == AUTO and SCENE_REFERRED else None
-        )
+        self._renderer.exposure = initial_scale(setting)
+        self._auto_exposure = AutoExposure() if setting == AUTO and SCENE_REFERRED else None
         # Towers' images are marched a row band a frame, never a whole one in one frame.
         self._renderer.towers.slice_texels = SLICE_TEXELS
         if self._first_frame is not None:

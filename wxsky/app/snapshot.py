@@ -121,10 +121,22 @@ def take_snapshot(
         engine.apply(change)
         engine.run_weather(transition.elapsed_s)
     plan = engine.advance(0.0)
-    own = renderer is None
+    own = renderer is None or (
+        exposure.needs_variable(exposure_setting) and not renderer.variable_exposure
+    )
     if own:
         progress("starting the renderer")
-    r = renderer if renderer is not None else Renderer(settings.ring_texture_px)
+    # A renderer passed in that draws at EV 0 only lends its context to one that need not.
+    r = (
+        Renderer(
+            settings.ring_texture_px,
+            ctx=None if renderer is None else renderer.ctx,
+            variable_exposure=exposure.needs_variable(exposure_setting),
+        )
+        if own
+        else renderer
+    )
+    assert r is not None
     kept_exposure = r.exposure
     try:
         r.exposure = exposure.initial_scale(exposure_setting)

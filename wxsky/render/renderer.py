@@ -101,19 +101,23 @@ class Renderer:
         near_scale: float = NEAR_SCALE,
         split_sky: bool = True,
         output: str = "display",
+        variable_exposure: bool = False,
     ) -> None:
         """`split_sky=False` draws every sky feature a frame shows over the whole picture in
         one pass: the slow reference the split passes are tested against. `output`: "display"
         (RGBA8 layers, the default) or "linear" (RGBA16F scene-linear layers; `exposure` has no
-        effect on them)."""
+        effect on them). `variable_exposure`: a display renderer that may draw at exposures
+        other than EV 0 (display.glsl: the legacy colours' round trip costs fragment work, so
+        a renderer that never needs it compiles it out and keeps EV 0)."""
         self._own_ctx = ctx is None
         self.ctx = ctx if ctx is not None else create_context()
         self._closed = False
         self.ring_px = ring_texture_px
         self.near_scale = near_scale
         self.split_sky = split_sky
-        self.shaders = ShaderLibrary(self.ctx, output)
+        self.shaders = ShaderLibrary(self.ctx, output, variable_exposure)
         self.output = output
+        self.variable_exposure = variable_exposure or output == "linear"
         # The scale on scene-linear colour (exposure.py); LEGACY_EXPOSURE is today's look.
         self._exposure = exposure.LEGACY_EXPOSURE
         defines = {
@@ -192,8 +196,15 @@ class Renderer:
         """ValueError, and the exposure kept, for a scale that is not finite or outside
         exposure.EXPOSURE_EV: NaN and inf never reach a shader. The kept sky layer is drawn
         again (its uniforms change); ring impostors keep the exposure they were drawn with
-        until they are drawn again."""
-        self._exposure = exposure.check_scale(scale)
+        until they are drawn again. A renderer made without `variable_exposure` takes only
+        LEGACY_EXPOSURE (ValueError otherwise)."""
+        checked = exposure.check_scale(scale)
+        if not self.variable_exposure and checked != exposure.LEGACY_EXPOSURE:
+            raise ValueError(
+                "exposure scale: this renderer draws at EV 0 only (made without "
+                f"variable_exposure), got {scale!r}"
+            )
+        self._exposure = checked
 
     def warm_up(self, frame: FrameScene) -> None:
         """Draw `frame` (`SkyEngine.warm_up`) at startup: a CPU renderer compiles each

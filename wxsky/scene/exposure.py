@@ -95,6 +95,14 @@ def initial_scale(setting: float | str) -> float:
     return LEGACY_EXPOSURE if setting == AUTO else scale_of_ev(float(setting))
 
 
+def needs_variable(setting: float | str) -> bool:
+    """Whether a renderer for this `[render] exposure` must draw at exposures other than EV 0
+    (Renderer's `variable_exposure`): a number other than 0, or "auto" once it meters."""
+    if setting == AUTO:
+        return SCENE_REFERRED
+    return initial_scale(setting) != LEGACY_EXPOSURE
+
+
 def check_scale(scale: float) -> float:
     """`scale` if it is a finite exposure scale within EXPOSURE_EV, else ValueError: what the
     renderer accepts before a value becomes a shader's uniform (NaN and inf never do)."""

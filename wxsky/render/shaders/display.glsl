@@ -7,7 +7,10 @@
 // OUTPUT_LINEAR (defined by the shader library for a linear renderer: float layers for
 // `snapshot --linear-out` and HDR hosts): the layer holds scene-linear colour, no exposure or
 // tone map. Otherwise: display(x) = srgb_encode(tone_map(x * u_exposure)), on the straight
-// colour, alpha kept. A layer blends its fragments (and the host composites its layers) after
+// colour, alpha kept. Legacy colours go through display(from_legacy(c)) only in a renderer
+// made for exposures other than EV 0 (EXPOSURE_VARIABLE): at EV 0 that round trip is c, and
+// compiled out rather than branched over (llvmpipe runs both sides of a uniform branch, and
+// the round trip doubled the sprites' fragment cost). A layer blends its fragments (and the host composites its layers) after
 // this, in display values: tone-mapping each fragment is not tone-mapping the composite, but
 // the curve is the identity's neighbour below the shoulder and the two differ only where
 // translucent edges overlap highlights.
@@ -84,16 +87,14 @@ vec4 layer_output(vec4 c) {
 
 // Premultiplied display-referred legacy colour -> what the layer holds.
 vec4 legacy_output(vec4 c) {
-#if !defined OUTPUT_LINEAR
-    // At the legacy exposure display(from_legacy(x)) is x: skip the round trip (and its cost).
-    if (u_exposure == LEGACY_EXPOSURE) {
-        return c;
-    }
-#endif
+#if defined OUTPUT_LINEAR || defined EXPOSURE_VARIABLE
     if (c.a <= 0.0) {
         return vec4(0.0);
     }
     return layer_output(vec4(from_legacy(c.rgb / c.a) * c.a, c.a));
+#else
+    return c;  // display(from_legacy(c)) at LEGACY_EXPOSURE
+#endif
 }
 
 #endif
