@@ -293,3 +293,25 @@ def test_auto_exposure_gives_a_dark_scene_more_than_a_bright_one(renderer: Rende
     assert math.isfinite(ex.log_average_luminance(np.full((4, 4, 3), np.nan)))
     assert eye.update(math.nan, math.nan) == eye.ev
     assert math.isfinite(eye.update(math.inf, 1.0))
+
+
+@pytest.mark.gl
+def test_the_daemon_draws_at_the_configured_exposure(tmp_path: Path) -> None:
+    from daemon_harness import DaemonSpec, running_daemons
+
+    from wxsky.host.reference import ReferenceHost
+
+    specs = []
+    for name, extra in (("ev0", ""), ("ev1", "[render]\nexposure = 1.0\n")):
+        (tmp_path / name).mkdir()
+        specs.append(DaemonSpec(tmp_path / name, extra_config=extra))
+    skies = []
+    with running_daemons(specs) as daemons:
+        for d in daemons:
+            with ReferenceHost.connect(d.address) as host:
+                frame = host.wait_frame(timeout_s=120.0)
+                skies.append(frame.layers.sky[..., :3].astype(np.float64))
+    # Same preset, camera and sun: the EV +1 daemon's sky is brighter everywhere it is not
+    # already white, and never darker.
+    assert skies[1].mean() > skies[0].mean() + 10.0, (skies[0].mean(), skies[1].mean())
+    assert (skies[1] - skies[0]).min() >= -2.0
