@@ -315,3 +315,14 @@ def test_the_daemon_draws_at_the_configured_exposure(tmp_path: Path) -> None:
     # already white, and never darker.
     assert skies[1].mean() > skies[0].mean() + 10.0, (skies[0].mean(), skies[1].mean())
     assert (skies[1] - skies[0]).min() >= -2.0
+
+
+def test_the_memory_check_counts_the_linear_picture() -> None:
+    from wxsky.app.snapshot import snapshot_bytes
+
+    settings = DaemonConfig().scene.settings()
+    extra = snapshot_bytes(1920, 1080, settings, linear=True) - snapshot_bytes(
+        1920, 1080, settings
+    )
+    # `--linear-out` raised a clear 1920x1080 snapshot's peak by 76 MB (snapshot.py).
+    assert extra >= 76 * 2**20
