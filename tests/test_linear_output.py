@@ -321,8 +321,6 @@ def test_the_memory_check_counts_the_linear_picture() -> None:
     from wxsky.app.snapshot import snapshot_bytes
 
     settings = DaemonConfig().scene.settings()
-    extra = snapshot_bytes(1920, 1080, settings, linear=True) - snapshot_bytes(
-        1920, 1080, settings
-    )
+    extra = snapshot_bytes(1920, 1080, settings, linear=True) - snapshot_bytes(1920, 1080, settings)
     # `--linear-out` raised a clear 1920x1080 snapshot's peak by 76 MB (snapshot.py).
     assert extra >= 76 * 2**20
