@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wxsky.app.snapshot import Snapshot, read_pfm, take_snapshot, write_linear
+from wxsky.app.snapshot import Snapshot, linear_picture, read_pfm, take_snapshot, write_linear
+from wxsky.engine.stages import SkyEngine
 from wxsky.errors import ConfigError
 from wxsky.png import read_png
 from wxsky.render.renderer import Renderer
@@ -96,6 +97,16 @@ def test_linear_snapshot_is_what_the_shaders_computed(renderer: Renderer, tmp_pa
     assert s.linear is not None and s.linear.shape == (H, W, 3) and s.linear.dtype == np.float32
     back = np.round(ex.display(s.linear, ex.LEGACY_EXPOSURE) * 255.0)
     assert np.abs(back - s.image[..., :3]).max() <= 1.0
+    # And it is the float layer the sky shader wrote, unchanged (no clouds: the composite is
+    # the sky layer; half floats widened to float32 exactly).
+    with SkyEngine(state, camera_for(state), SETTINGS, clock_rate=0.0) as engine:
+        plan = engine.advance(0.0)
+    with Renderer(SETTINGS.ring_texture_px, ctx=renderer.ctx, output="linear") as lin:
+        lin.render_ring(plan.ring)
+        lin.render_frame(plan.frame)
+        sky = lin.read_linear("sky")
+    assert np.array_equal(s.linear, sky[..., :3]) and (sky[..., 3] == 1.0).all()
+    assert np.array_equal(linear_picture(renderer, plan, SETTINGS), s.linear)
     # The files hold exactly that array, in either format.
     for name in ("x.npy", "x.pfm"):
         write_linear(tmp_path / name, s.linear)
