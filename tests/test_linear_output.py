@@ -153,56 +153,38 @@ def test_pfm_and_npy_put_the_sun_top_left(renderer: Renderer, tmp_path: Path) ->
     assert np.array_equal(first_row, s.linear[-1])
 
 
+def run_snapshot(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """`wxsky snapshot` of the clear preset at 64x36 with `args`, file names in tmp_path."""
+    command = [sys.executable, "-m", "wxsky", "snapshot", "--preset", "clear", "--size", "64x36"]
+    files = ("--out", "--linear-out")
+    given = [str(tmp_path / a) if i > 0 and args[i - 1] in files else a for i, a in enumerate(args)]
+    return subprocess.run([*command, *given], capture_output=True, text=True, timeout=600)
+
+
 @pytest.mark.gl
 def test_snapshot_command_writes_linear_files(tmp_path: Path) -> None:
     for name in ("sky.pfm", "sky.npy"):
-        out = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "wxsky",
-                "snapshot",
-                "--preset",
-                "clear",
-                "--size",
-                "64x36",
-                "--out",
-                str(tmp_path / "sky.png"),
-                "--linear-out",
-                str(tmp_path / name),
-            ],
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
+        out = run_snapshot(tmp_path, "--out", "sky.png", "--linear-out", name)
         assert out.returncode == 0, out.stderr
     png = read_png(tmp_path / "sky.png")
     for loaded in (read_pfm(tmp_path / "sky.pfm"), np.load(tmp_path / "sky.npy")):
         assert loaded.shape == (36, 64, 3)
         back = np.round(ex.display(loaded, ex.LEGACY_EXPOSURE) * 255.0)
         assert np.abs(back - png[..., :3]).max() <= 1.0
-    bad = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "wxsky",
-            "snapshot",
-            "--preset",
-            "clear",
-            "--size",
-            "64x36",
-            "--out",
-            str(tmp_path / "b.png"),
-            "--linear-out",
-            str(tmp_path / "b.exr"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    bad = run_snapshot(tmp_path, "--out", "b.png", "--linear-out", "b.exr")
     assert bad.returncode == 2
     assert bad.stderr.strip().count("\n") == 0 and "--linear-out" in bad.stderr
     assert ".pfm or .npy" in bad.stderr
+    # --exposure: EV +1 is brighter than the default; out of range, a one-line usage error.
+    brighter = run_snapshot(tmp_path, "--out", "ev1.png", "--exposure", "1")
+    assert brighter.returncode == 0, brighter.stderr
+    ev1 = read_png(tmp_path / "ev1.png")[..., :3].astype(int)
+    assert ev1.mean() > png[..., :3].mean() + 10.0 and (ev1 - png[..., :3]).min() >= 0
+    for value in ("25", "nan", "bright"):
+        refused = run_snapshot(tmp_path, "--out", "x.png", "--exposure", value)
+        assert refused.returncode == 2
+        assert refused.stderr.strip().count("\n") == 0
+        assert '--exposure: must be "auto" or a number of EV in -20..20' in refused.stderr
 
 
 # -- exposure ----------------------------------------------------------------------------------

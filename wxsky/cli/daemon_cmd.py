@@ -284,6 +284,13 @@ def add_commands(sub: Subparsers) -> None:
         help="also write the raw layers there, a LAYER.png each",
     )
     snap.add_argument(
+        "--exposure",
+        type=Checked("--exposure", _exposure_arg),
+        metavar="EV|auto",
+        help="exposure: a number of EV, -20..20 (the scale on scene-linear colour is 2^EV; 0 "
+        'is the look of before), or "auto" (default: the config\'s [render] exposure)',
+    )
+    snap.add_argument(
         "--linear-out",
         type=OutputFile("--linear-out", (".pfm", ".npy")),
         metavar="FILE",
@@ -552,7 +559,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         position_deg=None if args.lat is None else (args.lat, args.lon),
         progress=args.progress,
         linear=args.linear_out is not None,
-        exposure_setting=config.render.exposure,
+        exposure_setting=config.render.exposure if args.exposure is None else args.exposure,
     )
     args.progress(f"writing {args.out}")
     _write_png("--out", args.out, shot.image)
@@ -571,6 +578,18 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     args.progress.done()
     print(f"wrote {args.out} ({width}x{height}): {shot.state.summary()}")
     return 0
+
+
+def _exposure_arg(text: str) -> float | str:
+    """--exposure: "auto" or EV, by the config's own kind (`[render] exposure`)."""
+    from wxsky.scene.exposure import EXPOSURE
+
+    try:
+        value: object = float(text)
+    except ValueError:
+        value = text.strip()
+    checked: float | str = EXPOSURE.validate("--exposure", value)
+    return checked
 
 
 def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any:
