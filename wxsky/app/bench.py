@@ -41,6 +41,7 @@ from wxsky.engine.ring_worker import DEFAULT_NICE
 from wxsky.engine.stages import FramePlan, SkyEngine
 from wxsky.output.shm import FrameWriter
 from wxsky.scene.camera import Camera
+from wxsky.scene.exposure import AUTO, initial_scale, needs_variable
 from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw
 from wxsky.scene.shading_harris import particle_keys
 from wxsky.weather.state import WeatherState
@@ -265,6 +266,7 @@ def run_bench(
     profile: bool = False,
     lead_in: bool = True,
     progress: Callable[[str], None] | None = None,
+    exposure_setting: float | str = AUTO,
 ) -> BenchResult:
     """Render `frames` frames along `path`; `started_s`: the perf_counter reading the process's
     startup is counted from (default: now). `check_order`: also measure what each change in the
@@ -304,7 +306,9 @@ def run_bench(
     shm_name = f"wxsky-bench-{os.getpid()}"
     specs = frame_layer_specs(width, height, settings.ring_texture_px, settings.shadow_map_px)
     with (
-        Renderer(settings.ring_texture_px) as renderer,
+        Renderer(
+            settings.ring_texture_px, variable_exposure=needs_variable(exposure_setting)
+        ) as renderer,
         FrameWriter.create(shm_name, specs) as writer,
         SkyEngine(
             state,
@@ -319,6 +323,8 @@ def run_bench(
             ring_worker_nice=ring_worker_nice,
         ) as engine,
     ):
+        # [render] exposure as the daemon takes it (the display path costs more off EV 0).
+        renderer.exposure = initial_scale(exposure_setting)
         engine.time_ring_builds(build_s)
         if ring_build == "async":
             renderer.towers.slice_texels = SLICE_TEXELS  # as the daemon draws them

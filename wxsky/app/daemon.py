@@ -178,6 +178,9 @@ class Daemon:
         self._server: ControlServer | None = None
         self._render_exec: concurrent.futures.ThreadPoolExecutor | None = None
         self._renderer: Any = None
+        # The automatic exposure, where it meters ([render] exposure "auto" on scene-referred
+        # passes, scene/exposure.py); None: the renderer's exposure stays as set.
+        self._auto_exposure: Any = None
         # Zero-copy textures (docs/protocol.md §6): what the render context offers (probed
         # with the renderer), and the exported slot textures once a host asked for them.
         self._export_probe: Any = None
@@ -379,8 +382,22 @@ class Daemon:
         from wxsky.render.renderer import Renderer
         from wxsky.render.texture_export import probe
         from wxsky.render.towers import SLICE_TEXELS
+        from wxsky.scene.exposure import (
+            AUTO,
+            SCENE_REFERRED,
+            AutoExposure,
+            initial_scale,
+            needs_variable,
+        )
 
-        self._renderer = Renderer(self.config.scene.ring_texture_px)
+        setting = self.config.render.exposure
+        self._renderer = Renderer(
+            self.config.scene.ring_texture_px, variable_exposure=needs_variable(setting)
+        )
+        # [render] exposure: a number of EV fixes it; "auto" holds the legacy exposure while
+        # the passes' colours are display-referred (scene/exposure.py).
+        self._renderer.exposure = initial_scale(setting)
+        self._auto_exposure = AutoExposure() if setting == AUTO and SCENE_REFERRED else None
         # Towers' images are marched a row band a frame, never a whole one in one frame.
         self._renderer.towers.slice_texels = SLICE_TEXELS
         if self._first_frame is not None:
@@ -406,7 +423,14 @@ class Daemon:
         plan, its record and when its slot was flipped (the daemon's monotonic clock)."""
         plan = self.engine.advance(dt_wall_s)
         meta = self._render_and_publish(plan)
-        return plan, meta, time.monotonic()
+        flipped = time.monotonic()
+        if self._auto_exposure is not None and self._renderer is not None:
+            # After the hand-off: the meter's draw and few-kilobyte read-back never delay the
+            # frame it measures; the next frame is drawn with the adapted exposure.
+            ev = self._auto_exposure.update(self._renderer.meter_log_average(), dt_wall_s)
+            self._renderer.exposure = self._auto_exposure.scale
+            log.debug("auto exposure: EV %.2f", ev)
+        return plan, meta, flipped
 
     def _render_and_publish(self, plan: FramePlan) -> FrameMeta:
         r, writer = self._renderer, self._writer

@@ -28,7 +28,7 @@ def add_commands(sub: Subparsers) -> None:
         "--config",
         type=Path,
         metavar="FILE",
-        help="daemon config: its [presets] dirs and [scene] (default: built-in)",
+        help="daemon config: its [presets] dirs, [scene] and [render] exposure (default: built-in)",
     )
     bench.add_argument(
         "--frames",
@@ -143,6 +143,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             profile=args.profile,
             lead_in=not args.from_start,
             progress=args.progress,
+            exposure_setting=config.render.exposure,
         )
     finally:
         if trace is not None:

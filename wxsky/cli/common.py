@@ -294,21 +294,27 @@ def _parse_time(text: str) -> Any:
 class OutputFile(OptionType):
     """A file to write, in a directory that exists (a typo in the path is an error before any
     work is done, not a tree of new folders), with `suffix` when one is given (a name that
-    promises another format must not get PNG data)."""
+    promises another format must not get PNG data); `suffix` may be several, one a format
+    the command writes by the name's suffix."""
 
-    def __init__(self, flag: str, suffix: str | None = None) -> None:
+    def __init__(self, flag: str, suffix: str | tuple[str, ...] | None = None) -> None:
         self.flag = flag
         self.suffix = suffix
+        self._suffixes = (suffix,) if isinstance(suffix, str) else (suffix or ())
 
     def describe(self) -> str:
-        kind = f"a {self.suffix} file" if self.suffix else "a file"
+        kind = f"a {' or '.join(self._suffixes)} file" if self._suffixes else "a file"
         return f"{kind} in an existing directory"
 
     def __call__(self, text: str) -> Path:
         path = Path(text)
-        if self.suffix and path.suffix.lower() != self.suffix:
-            fmt = self.suffix.lstrip(".").upper()
-            raise self.fail(text, f": {fmt} is written: give a name ending in {self.suffix}")
+        if self._suffixes and path.suffix.lower() not in self._suffixes:
+            if len(self._suffixes) == 1:
+                fmt = self._suffixes[0].lstrip(".").upper()
+                raise self.fail(
+                    text, f": {fmt} is written: give a name ending in {self._suffixes[0]}"
+                )
+            raise self.fail(text, f": give a name ending in {' or '.join(self._suffixes)}")
         if path.is_dir():
             raise self.fail(text, ": is a directory: give a file name")
         _check_directory(self, text, path.parent)

@@ -191,8 +191,8 @@ def add_commands(sub: Subparsers) -> None:
         "--config",
         type=Path,
         metavar="FILE",
-        help="daemon config: its [presets] dirs, [scene], [camera] alt_agl_m and [transition] "
-        "rates (default: built-in)",
+        help="daemon config: its [presets] dirs, [scene], [render] exposure, [camera] alt_agl_m "
+        "and [transition] rates (default: built-in)",
     )
     snap.add_argument(
         "--time",
@@ -282,6 +282,20 @@ def add_commands(sub: Subparsers) -> None:
         type=OutputDir("--layers-out"),
         metavar="DIR",
         help="also write the raw layers there, a LAYER.png each",
+    )
+    snap.add_argument(
+        "--exposure",
+        type=Checked("--exposure", _exposure_arg),
+        metavar="EV|auto",
+        help="exposure: a number of EV, -20..20 (the scale on scene-linear colour is 2^EV; 0 "
+        'is the look of before), or "auto" (default: the config\'s [render] exposure)',
+    )
+    snap.add_argument(
+        "--linear-out",
+        type=OutputFile("--linear-out", (".pfm", ".npy")),
+        metavar="FILE",
+        help="also write the picture's scene-linear RGB (before exposure and tone map, the same "
+        "camera): FILE.pfm a Portable Float Map, FILE.npy float32 HxWx3 rows top first",
     )
     snap.set_defaults(func=_cmd_snapshot)
 
@@ -544,15 +558,38 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         mode=args.mode,
         position_deg=None if args.lat is None else (args.lat, args.lon),
         progress=args.progress,
+        linear=args.linear_out is not None,
+        exposure_setting=config.render.exposure if args.exposure is None else args.exposure,
     )
     args.progress(f"writing {args.out}")
     _write_png("--out", args.out, shot.image)
     if args.layers_out:
         for name, image in shot.layers.items():
             _write_png("--layers-out", args.layers_out / f"{name}.png", image)
+    if args.linear_out is not None and shot.linear is not None:
+        from wxsky.app.snapshot import write_linear
+
+        try:
+            write_linear(args.linear_out, shot.linear)
+        except OSError as exc:
+            raise UsageError(
+                f"--linear-out {args.linear_out}: cannot write it ({exc.strerror or exc})"
+            ) from None
     args.progress.done()
     print(f"wrote {args.out} ({width}x{height}): {shot.state.summary()}")
     return 0
+
+
+def _exposure_arg(text: str) -> float | str:
+    """--exposure: "auto" or EV, by the config's own kind (`[render] exposure`)."""
+    from wxsky.scene.exposure import EXPOSURE
+
+    try:
+        value: object = float(text)
+    except ValueError:
+        value = text.strip()
+    checked: float | str = EXPOSURE.validate("--exposure", value)
+    return checked
 
 
 def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any:

@@ -7,11 +7,13 @@ where it is nearer than the ground, then the near layer, each premultiplied-alph
 last. While a rebuilt ring fades in, the
 ring is the old one's and the new one's pictures mixed by the fade weight, each seen through
 its own quads. Pure numpy, so it is an independent check of the protocol rather than a second
-copy of the renderer.
+copy of the renderer. Layers are RGBA8 (display values, 0..255) or float (a linear renderer's
+scene-linear colour, `composite_linear`), composited alike.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,20 +23,30 @@ from wxsky.scene.camera import FAR_M, Camera
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
+# A layer: RGBA8 display values or float scene-linear colour.
+Image = npt.NDArray[np.uint8] | npt.NDArray[np.float32]
+
+
+def unit(image: Image) -> F64:
+    """A layer's values as float64: RGBA8 as 0..1, a float layer as it is."""
+    if image.dtype == np.uint8:
+        scaled: F64 = image.astype(np.float64) / 255.0
+        return scaled
+    return np.asarray(image, np.float64)
 
 
 @dataclass(frozen=True)
 class Layers:
-    sky: U8  # (H, W, 4)
-    near: U8  # (H, W, 4)
-    ring: tuple[U8, ...]  # (8,) of (P, P, 4)
+    sky: Image  # (H, W, 4)
+    near: Image  # (H, W, 4)
+    ring: tuple[Image, ...]  # (8,) of (P, P, 4)
     ring_quads_m: F64  # (8, 4, 3): top-left, top-right, bottom-right, bottom-left
     # The ring fading in, its quads, and its weight; empty when no fade is under way.
-    incoming_ring: tuple[U8, ...] = ()
+    incoming_ring: tuple[Image, ...] = ()
     incoming_quads_m: F64 | None = None
     fade: float = 0.0
     # The near sprites in front of the host's aircraft (drawn after it); None: not split.
-    near_front: U8 | None = None
+    near_front: Image | None = None
     # The cloud-shadow map and where it lies; None: the frame has none (T = 1 everywhere).
     shadow: ShadowMap | None = None
 
@@ -45,7 +57,7 @@ class ShadowMap:
     "Cloud shadows"): R holds T, the share of direct sunlight the clouds let through, over a
     square of size_m on the plane up = centre_m[2], row 0 its north edge, column 0 its west."""
 
-    image: U8  # (N, N, 4)
+    image: Image  # (N, N, 4)
     centre_m: tuple[float, float, float]
     size_m: float
     sun_direction_enu: tuple[float, float, float]  # the sun the map was made for
@@ -83,7 +95,7 @@ class Ground:
 
 
 def layers_from_images(
-    images: dict[str, U8],
+    images: Mapping[str, Image],
     ring_quads_m: F64,
     incoming_quads_m: F64 | None = None,
     fade: float = 0.0,
@@ -116,12 +128,25 @@ def composite(layers: Layers, camera: Camera, ground: Ground | None = None) -> U
     """(H, W, 4) opaque RGBA8 picture for the camera the sky and near layers were drawn for;
     with `ground`, the host's flat ground drawn over the sky and hiding the ring's clouds
     beyond it (as a host's depth buffer does)."""
+    out = _composite(layers, camera, ground)
+    result: U8 = np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
+    return result
+
+
+def composite_linear(layers: Layers, camera: Camera, ground: Ground | None = None) -> F64:
+    """(H, W, 3) the composite of float layers (a linear renderer's: scene-linear colour), as
+    `composite` makes it, unclipped."""
+    out: F64 = _composite(layers, camera, ground)[..., :3]
+    return out
+
+
+def _composite(layers: Layers, camera: Camera, ground: Ground | None) -> F64:
     h, w = camera.height_px, camera.width_px
     if layers.sky.shape[:2] != (h, w):
         raise ValueError(
             f"the sky layer {layers.sky.shape[:2]} must match the camera viewport {(h, w)}"
         )
-    out = layers.sky.astype(np.float64) / 255.0
+    out = unit(layers.sky)
     ring, ring_t = sample_ring_depth(layers.ring, layers.ring_quads_m, camera)
     if layers.incoming_quads_m is not None and layers.fade > 0.0:
         incoming, in_t = sample_ring_depth(layers.incoming_ring, layers.incoming_quads_m, camera)
@@ -140,8 +165,7 @@ def composite(layers: Layers, camera: Camera, ground: Ground | None = None) -> U
         front = stretch(layers.near_front, w, h)
         out = front + (1.0 - front[..., 3:4]) * out
     out[..., 3] = 1.0
-    result: U8 = np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
-    return result
+    return out
 
 
 def ground_colour(ground: Ground, shadow: ShadowMap | None, camera: Camera) -> tuple[F64, F64]:
@@ -165,12 +189,12 @@ def ground_colour(ground: Ground, shadow: ShadowMap | None, camera: Camera) -> t
     return t, colour
 
 
-def sample_ring(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> F64:
+def sample_ring(ring: tuple[Image, ...], quads_m: F64, camera: Camera) -> F64:
     """(H, W, 4) premultiplied colour of a ring (images on their quads) through each pixel."""
     return sample_ring_depth(ring, quads_m, camera)[0]
 
 
-def sample_ring_depth(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> tuple[F64, F64]:
+def sample_ring_depth(ring: tuple[Image, ...], quads_m: F64, camera: Camera) -> tuple[F64, F64]:
     """sample_ring, and (H, W) the distance along each ray to the quad it met (inf: none)."""
     rays = camera.pixel_rays()
     eye = np.asarray(camera.position_m, dtype=np.float64)
@@ -196,19 +220,18 @@ def sample_ring_depth(ring: tuple[U8, ...], quads_m: F64, camera: Camera) -> tup
     return out, best_t
 
 
-def stretch(image: U8, width: int, height: int) -> F64:
+def stretch(image: Image, width: int, height: int) -> F64:
     """(height, width, 4) 0..1: a layer drawn at another size (the near layers are drawn at a
     fraction of the picture) over the viewport, sampled bilinearly at each pixel's centre
     with edges clamped, as a host's GL does; exact when the sizes agree."""
     if image.shape[:2] == (height, width):
-        same: F64 = image.astype(np.float64) / 255.0
-        return same
+        return unit(image)
     a = np.broadcast_to((np.arange(width) + 0.5) / width, (height, width)).reshape(-1)
     b = np.broadcast_to(((np.arange(height) + 0.5) / height)[:, None], (height, width))
     return bilinear(image, a, b.reshape(-1)).reshape(height, width, 4)
 
 
-def bilinear(image: U8, a: F64, b: F64) -> F64:
+def bilinear(image: Image, a: F64, b: F64) -> F64:
     """Sample (N, 4) from an image at normalised (a across, b down), texel centres at
     (i + 0.5) / size and edges clamped, as GL's LINEAR filter with CLAMP_TO_EDGE does."""
     ph, pw = image.shape[:2]
@@ -218,7 +241,7 @@ def bilinear(image: U8, a: F64, b: F64) -> F64:
     y0 = np.minimum(y.astype(int), ph - 2) if ph > 1 else np.zeros_like(y, dtype=int)
     fx = (x - x0)[:, None]
     fy = (y - y0)[:, None]
-    img = image.astype(np.float64) / 255.0
+    img = unit(image)
     x1 = np.minimum(x0 + 1, pw - 1)
     y1 = np.minimum(y0 + 1, ph - 1)
     top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx

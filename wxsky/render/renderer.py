@@ -1,6 +1,8 @@
 """Draws the layers a host composites: the sky, the near sprites, and the 8 ring impostors.
 
-Every layer is RGBA8, premultiplied alpha, top row first. One Renderer owns one GL context
+Every layer is premultiplied alpha, top row first: RGBA8 display values (exposed and
+tone-mapped, shaders/display.glsl) from a display renderer, RGBA16F scene-linear colour from a
+linear one (`output="linear"`: `snapshot --linear-out`). One Renderer owns one GL context
 and must be used from the thread that created it.
 """
 
@@ -24,6 +26,7 @@ from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import CELL_PX, SUPPORT_LEVELS, load_sheet, support_polygons
 from wxsky.render.towers import Drawable, TowerPass
+from wxsky.scene import exposure
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
 from wxsky.scene.ring import RING_SIZE, ring_target_name
@@ -34,6 +37,8 @@ from wxsky.scene.tower_field import TowerShow
 log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.27
+# The automatic exposure meters the frame at this many points (Renderer.meter_log_average).
+METER_SIZE = (64, 36)
 # The near sprites are drawn at this fraction of the viewport and stretched over it by the
 # host as it draws the layer: fill rate is what limits a CPU renderer, soft sprites look the
 # same, and a host uploads a quarter of the pixels.
@@ -95,16 +100,26 @@ class Renderer:
         ctx: moderngl.Context | None = None,
         near_scale: float = NEAR_SCALE,
         split_sky: bool = True,
+        output: str = "display",
+        variable_exposure: bool = False,
     ) -> None:
         """`split_sky=False` draws every sky feature a frame shows over the whole picture in
-        one pass: the slow reference the split passes are tested against."""
+        one pass: the slow reference the split passes are tested against. `output`: "display"
+        (RGBA8 layers, the default) or "linear" (RGBA16F scene-linear layers; `exposure` has no
+        effect on them). `variable_exposure`: a display renderer that may draw at exposures
+        other than EV 0 (display.glsl: the legacy colours' round trip costs fragment work, so
+        a renderer that never needs it compiles it out and keeps EV 0)."""
         self._own_ctx = ctx is None
         self.ctx = ctx if ctx is not None else create_context()
         self._closed = False
         self.ring_px = ring_texture_px
         self.near_scale = near_scale
         self.split_sky = split_sky
-        self.shaders = ShaderLibrary(self.ctx)
+        self.shaders = ShaderLibrary(self.ctx, output, variable_exposure)
+        self.output = output
+        self.variable_exposure = variable_exposure or output == "linear"
+        # The scale on scene-linear colour (exposure.py); LEGACY_EXPOSURE is today's look.
+        self._exposure = exposure.LEGACY_EXPOSURE
         defines = {
             "SHEET_CELLS": str(SHEET_CELLS),
             "FLAT_BOTTOM_SLOT": str(TEX_FLAT_BOTTOM[0]),
@@ -148,6 +163,8 @@ class Renderer:
             mixing: self._make_sprite_vao(prog) for mixing, prog in self._sprite_progs.items()
         }
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
+        self._meter_prog = self.shaders.program("meter.glsl")
+        self._meter_vao = self.ctx.vertex_array(self._meter_prog, [])
         self._targets: dict[str, _Target] = {}
         self._finish = gil_free_finish(self.ctx)
         self._clear_ring_sets: set[int] = set()  # ring sets whose 8 images are all clear
@@ -168,6 +185,26 @@ class Renderer:
         return self._towers
 
     # -- public API -------------------------------------------------------------------
+
+    @property
+    def exposure(self) -> float:
+        """The scale on scene-linear colour the display layers are drawn with."""
+        return self._exposure
+
+    @exposure.setter
+    def exposure(self, scale: float) -> None:
+        """ValueError, and the exposure kept, for a scale that is not finite or outside
+        exposure.EXPOSURE_EV: NaN and inf never reach a shader. The kept sky layer is drawn
+        again (its uniforms change); ring impostors keep the exposure they were drawn with
+        until they are drawn again. A renderer made without `variable_exposure` takes only
+        LEGACY_EXPOSURE (ValueError otherwise)."""
+        checked = exposure.check_scale(scale)
+        if not self.variable_exposure and checked != exposure.LEGACY_EXPOSURE:
+            raise ValueError(
+                "exposure scale: this renderer draws at EV 0 only (made without "
+                f"variable_exposure), got {scale!r}"
+            )
+        self._exposure = checked
 
     def warm_up(self, frame: FrameScene) -> None:
         """Draw `frame` (`SkyEngine.warm_up`) at startup: a CPU renderer compiles each
@@ -226,6 +263,7 @@ class Renderer:
         upsampled under the rest. `towers` go between the sprites at their distances, those in
         the far band into it."""
         size = near_layer_size(cam, self.near_scale)
+        clear_rgba = self._legacy_clear(clear_rgba)
         shown: list[Drawable] = []
         if towers and sky is not None:
             with self._pass("tower impostors", "volume"):
@@ -254,6 +292,22 @@ class Renderer:
             start = 0
         self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
 
+    def _legacy_clear(
+        self, rgba: tuple[float, float, float, float]
+    ) -> tuple[float, float, float, float]:
+        """A premultiplied display-referred legacy colour (the in-cloud veil) as the layer
+        holds it: what display.glsl's legacy_output makes of it."""
+        alpha = float(rgba[3])
+        if alpha <= 0.0 or (
+            self.output == "display" and self._exposure == exposure.LEGACY_EXPOSURE
+        ):
+            return rgba
+        straight = exposure.from_legacy(np.asarray(rgba[:3], np.float64) / alpha)
+        if self.output == "display":
+            straight = exposure.display(straight, self._exposure)
+        r, g, b = (float(v) * alpha for v in straight)
+        return (r, g, b, alpha)
+
     def _draw_run(
         self,
         target: _Target,
@@ -279,6 +333,7 @@ class Renderer:
             cut = max(start, min(item.tower.insert_at, stop))
             self._draw_sprites(target, draw.slice(start, cut), eye, view, proj, None, shape=shape)
             target.fbo.use()
+            _set(self.shaders.program("tower_quad.glsl"), "u_exposure", self._exposure)
             with self._pass(f"towers {_sprite_pass_name(target.name)}", "small_sprites"):
                 self._towers.draw(item, cam, view_rot, projection, sky)
             start = cut
@@ -374,10 +429,47 @@ class Renderer:
         return self._targets[name].fbo
 
     def read(self, name: str) -> npt.NDArray[np.uint8]:
-        """A layer as a (H, W, 4) uint8 array."""
+        """A display layer as a (H, W, 4) uint8 array."""
+        if self.output != "display":
+            raise RenderError(f"read: this renderer's layers are {self.output}: use read_linear")
         w, h = self.layer_size(name)
         data = self._targets[name].fbo.read(components=4, alignment=1)
         return np.frombuffer(data, np.uint8).reshape(h, w, 4).copy()
+
+    def read_linear(self, name: str) -> npt.NDArray[np.float32]:
+        """A linear renderer's layer as a (H, W, 4) float32 array of premultiplied
+        scene-linear colour (the half floats it holds, widened)."""
+        if self.output != "linear":
+            raise RenderError(f"read_linear: this renderer's layers are {self.output}")
+        w, h = self.layer_size(name)
+        data = self._targets[name].fbo.read(components=4, alignment=2, dtype="f2")
+        return np.frombuffer(data, np.float16).reshape(h, w, 4).astype(np.float32)
+
+    def meter_log_average(self) -> float:
+        """The log-average scene-linear luminance of the last frame's sky with its near layer
+        over it (exposure.log_average_luminance), from a METER_SIZE grid of point samples
+        drawn into a small target and read back (a few kilobytes); a display renderer's values
+        are turned back into scene-linear colour at the exposure they were drawn with. For the
+        automatic exposure (exposure.AutoExposure), after `render_frame`."""
+        sky, near = self._targets["sky"], self._targets["near"]
+        meter = self._target("meter", *METER_SIZE)
+        meter.fbo.use()
+        self.ctx.disable(moderngl.BLEND)
+        for unit, source in enumerate((sky, near)):
+            source.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            source.texture.use(unit)
+        _set(self._meter_prog, "u_sky", 0)
+        _set(self._meter_prog, "u_near", 1)
+        _set(self._meter_prog, "u_target_size", (float(METER_SIZE[0]), float(METER_SIZE[1])))
+        with self._pass("meter", "upsample"):
+            self._meter_vao.render(moderngl.TRIANGLES, vertices=3)
+        w, h = METER_SIZE
+        if self.output == "linear":
+            rgb = self.read_linear("meter")[..., :3].astype(np.float64)
+        else:
+            display_rgb = self.read("meter")[..., :3].astype(np.float64) / 255.0
+            rgb = exposure.display_inverse(display_rgb, self._exposure)
+        return exposure.log_average_luminance(rgb.reshape(h, w, 3))
 
     def close(self) -> None:
         if self._closed:
@@ -392,6 +484,7 @@ class Renderer:
         self._sky.release()
         self._towers.release()
         self._upsample_vao.release()
+        self._meter_vao.release()
         self._instance_buf.release()
         self._corner_buf.release()
         self._sheet.release()
@@ -483,6 +576,7 @@ class Renderer:
             "u_ground": sky.ground_rgb,
             "u_sun_rgb": sky.sun_rgb,
             "u_sun_cos_radius": math.cos(math.radians(SUN_RADIUS_DEG)),
+            "u_exposure": self._exposure,
         }
         if feats.physical:
             # The physical sky has no gradient; the dome still fades into the horizon colour
@@ -555,6 +649,7 @@ class Renderer:
             _write(prog, "u_proj", projection)
             _set(prog, "u_sheet", 0)
             _set(prog, "u_viewport_px", float(target.size[0]))
+            _set(prog, "u_exposure", self._exposure)
         self._sheet.filter = (_SHAPES[shape][2], moderngl.LINEAR)
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
@@ -610,7 +705,8 @@ class Renderer:
         if target is not None:
             self._unbind()
             target.release()
-        tex = self.ctx.texture((width, height), 4)
+        # Float layers hold scene-linear colour, beyond 1 (half floats: to 65504).
+        tex = self.ctx.texture((width, height), 4, dtype="f2" if self.output == "linear" else "f1")
         target = _Target(name, tex, self.ctx.framebuffer(color_attachments=[tex]))
         self._targets[name] = target
         return target
@@ -703,7 +799,13 @@ def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
     return member
 
 
+# Uniforms a program may not have: a linear program never reads the exposure (display.glsl).
+_OPTIONAL_UNIFORMS = frozenset({"u_exposure"})
+
+
 def _set(prog: moderngl.Program, name: str, value: object) -> None:
+    if name in _OPTIONAL_UNIFORMS and not isinstance(prog.get(name, None), moderngl.Uniform):
+        return
     _uniform(prog, name).value = value
 
 

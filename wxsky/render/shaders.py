@@ -25,11 +25,25 @@ def shader_source(name: str, _depth: int = 0) -> str:
     return _INCLUDE.sub(lambda m: shader_source(m.group(1), _depth + 1), text)
 
 
-class ShaderLibrary:
-    """Compiles programs on first use and keeps them for the context's life."""
+OUTPUTS = ("display", "linear")
+"""What a library's programs write into their layers (display.glsl): display values (exposed,
+tone-mapped, sRGB-encoded, for RGBA8 layers) or scene-linear colour (for float layers)."""
 
-    def __init__(self, ctx: moderngl.Context) -> None:
+
+class ShaderLibrary:
+    """Compiles programs on first use and keeps them for the context's life. `output` (OUTPUTS)
+    holds for every program the library makes; `variable_exposure`: display programs take
+    their exposure from `u_exposure` for legacy colours too (otherwise those are drawn at
+    EV 0, as they always were, at no cost)."""
+
+    def __init__(
+        self, ctx: moderngl.Context, output: str = "display", variable_exposure: bool = False
+    ) -> None:
+        if output not in OUTPUTS:
+            raise RenderError(f"shader output must be one of {OUTPUTS}, got {output!r}")
         self._ctx = ctx
+        self.output = output
+        self.variable_exposure = variable_exposure
         self._programs: dict[tuple[str, tuple[tuple[str, str], ...]], moderngl.Program] = {}
 
     def program(self, name: str, defines: dict[str, str] | None = None) -> moderngl.Program:
@@ -42,6 +56,10 @@ class ShaderLibrary:
 
     def _compile(self, name: str, defines: dict[str, str]) -> moderngl.Program:
         body = shader_source(name)
+        if self.output == "linear":
+            defines = defines | {"OUTPUT_LINEAR": "1"}
+        elif self.variable_exposure:
+            defines = defines | {"EXPOSURE_VARIABLE": "1"}
         header = "#version 330 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
         vertex, fragment = (
             f"{header}#define {macro} 1\n#line 1\n{body}" for macro in _STAGES.values()

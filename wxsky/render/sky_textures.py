@@ -625,7 +625,7 @@ def _physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
         "u_sky_view": SkyPass.UNITS["u_sky_view"],
         "u_horizon_rad": luts.horizon_rad,
         "u_sky_view_scale": sky_view_scale(luts),
-        "u_exposure": display_exposure(luts),
+        "u_sky_scale": display_exposure(luts),
         "u_sun_radiance": tuple(float(v) for v in centre),
         "u_limb_darkening": LIMB_DARKENING,
         "u_aureole": (*(float(v) for v in strength), g),

@@ -738,7 +738,7 @@ def vertical_rayleigh_optical_depth() -> F64:
 
 
 def display_exposure(luts: AtmosphereLuts) -> float:
-    """A scale from kcd/m^2 to the display's 0..1 before the tone map (`u_exposure`): the
+    """A scale from kcd/m^2 to the display's 0..1 before the tone map (`u_sky_scale`): the
     stand-in for the renderer's exposure (issue 41's scene-linear work replaces it). From the
     mean luminance of the sky above the horizon, adapting only partly (a power of 0.5), so
     that noon is bright, the low sun golden and twilight dark blue rather than lifted to

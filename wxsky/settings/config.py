@@ -24,6 +24,7 @@ from wxsky.protocols.nmea import HEADING_SOURCES
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX
 from wxsky.scene.clouds import BLOCK_SIZE_M
+from wxsky.scene.exposure import AUTO, EXPOSURE
 from wxsky.scene.gather import MAX_NEAR_BLOCKS, MAX_RING_BLOCKS, largest_range, scene_blocks
 from wxsky.scene.layout import SKY_MODELS, SceneSettings
 from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
@@ -235,6 +236,16 @@ class SceneSection(_Section):
             shadow_map_px=self.shadow_map_px,
             max_towers=self.max_towers,
         )
+
+
+@dataclass(frozen=True)
+class RenderSection(_Section):
+    SECTION: ClassVar[str] = "render"
+
+    # "auto" (from the scene's luminance, adapting over about a second) or EV: the scale on
+    # scene-linear colour is 2^EV, -20..20; 0 is the look of before issue 41
+    # (wxsky/scene/exposure.py).
+    exposure: float | str = _opt(AUTO, EXPOSURE)
 
 
 @dataclass(frozen=True)
@@ -488,6 +499,7 @@ class DaemonConfig:
     daemon: DaemonSection = field(default_factory=DaemonSection)
     camera: CameraSection = field(default_factory=CameraSection)
     scene: SceneSection = field(default_factory=SceneSection)
+    render: RenderSection = field(default_factory=RenderSection)
     clock: ClockSection = field(default_factory=ClockSection)
     output: OutputSection = field(default_factory=OutputSection)
     preview: PreviewSection = field(default_factory=PreviewSection)

@@ -9,6 +9,7 @@
 // the variant with it over the rectangle where it can be seen (u_rect). Outside a feature the
 // variants give the same colour, bit for bit, so only cost changes.
 #include "common.glsl"
+#include "display.glsl"
 
 #if defined VERTEX_SHADER
 uniform vec4 u_rect;  // NDC x0, y0, x1, y1 of the quad drawn (4 vertices, a strip)
@@ -72,7 +73,7 @@ const float PI = 3.14159265358979;
 uniform sampler2D u_sky_view;     // rows: sky_view_v (0.5 at the horizon); cols: 0..pi from the sun
 uniform float u_sky_view_scale;   // the texture holds radiance / this (half floats)
 uniform float u_horizon_rad;      // elevation of the horizon from the eye (<= 0)
-uniform float u_exposure;         // kcd/m^2 -> display, set from Python (display_exposure)
+uniform float u_sky_scale;        // kcd/m^2 -> display, set from Python (display_exposure)
 uniform vec3 u_sun_radiance;      // at the disc's centre, transmitted to the eye, kcd/m^2
 uniform float u_limb_darkening;
 uniform vec4 u_aureole;           // rgb: strength (kcd/m^2 per unit phase), w: HG g
@@ -110,11 +111,11 @@ vec3 physical_sky(vec3 ray) {
 }
 
 // The stand-in for the scene-linear exposure and tone map (issue 41's render-target work
-// replaces this function and u_exposure): exposure, a shoulder on the luminance that keeps
+// replaces this function and u_sky_scale): exposure, a shoulder on the luminance that keeps
 // the hue (a low sun stays orange, not white), white where a channel still overflows, and
 // the display's gamma (the layers hold display values, as the gradient mode's).
 vec3 display_from_scene(vec3 radiance) {
-    vec3 c = max(radiance, 0.0) * u_exposure;
+    vec3 c = max(radiance, 0.0) * u_sky_scale;
     float y = dot(c, vec3(0.2126, 0.7152, 0.0722));
     c *= 1.0 / (1.0 + y);  // Reinhard on the luminance: a long shoulder toward a low sun
     float top = max(c.r, max(c.g, c.b));
@@ -317,7 +318,7 @@ void main() {
 #if SKY_PHYSICAL && SKY_SCENE_LINEAR
     f_colour = vec4(max(col, 0.0), 1.0);
 #else
-    f_colour = vec4(clamp(col, 0.0, 1.0), 1.0);
+    f_colour = legacy_output(vec4(clamp(col, 0.0, 1.0), 1.0));
 #endif
 }
 #endif

@@ -120,6 +120,7 @@ void main() {
 #endif
 
 #if defined FRAGMENT_SHADER
+#include "display.glsl"
 in vec2 v_uv;
 #if ROUND_MIX
 in vec2 v_round_uv;
@@ -140,6 +141,6 @@ void main() {
     if (a < 1.0 / 512.0) {
         discard;
     }
-    f_colour = vec4(v_rgba.rgb * t.rgb * a, a);
+    f_colour = legacy_output(vec4(v_rgba.rgb * t.rgb * a, a));
 }
 #endif

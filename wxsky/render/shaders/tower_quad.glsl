@@ -19,6 +19,7 @@ void main() {
 #endif
 
 #if defined FRAGMENT_SHADER
+#include "display.glsl"
 in vec2 v_uv;
 uniform sampler2D u_first;
 uniform sampler2D u_second;
@@ -34,6 +35,6 @@ void main() {
     if (c.a < 1.0 / 512.0) {
         discard;
     }
-    f_colour = c;
+    f_colour = legacy_output(c);
 }
 #endif
