@@ -113,7 +113,7 @@ def _render_sky_linear(
     ctx = renderer.ctx
     renderer._sky.use_atmosphere(luts)
     uniforms = renderer._sky_uniforms(cam, sky, feats, sky_textures.FULL_RECT)
-    del uniforms["u_exposure"]  # the scene-linear variant has none
+    del uniforms["u_sky_scale"]  # the scene-linear variant has none
     tex = ctx.texture((cam.width_px, cam.height_px), 4, dtype="f4")
     fbo = ctx.framebuffer(color_attachments=[tex])
     try:
@@ -121,6 +121,8 @@ def _render_sky_linear(
         ctx.disable(moderngl.BLEND)
         prog, vao = renderer._sky.prepare(feats)
         for name, value in uniforms.items():
+            if name == "u_exposure" and prog.get(name, None) is None:
+                continue  # display.glsl's: compiled out where unused
             prog[name].value = value  # type: ignore[union-attr]
         vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
         data = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32)
