@@ -531,12 +531,13 @@ def ground_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
 
 
 def ground_tint(sky: SkyParams) -> tuple[float, float, float]:
-    """The colour of the light on the ground, at the luminance of white: the sun's through
-    the clear share of the sky, on a level surface, and the diffuse light of the air over it
-    (the haze's colour: the sky's horizon, greyed under a deck, as the clouds fade into it).
-    The ground's own colour (SkyParams.ground_rgb) keeps its brightness and takes this tint,
-    so that a low sun's ground is warm like everything else it lights, and an overcast's
-    ground is grey."""
+    """The colour of the light on the ground, at the luminance of white: the sun's on a level
+    surface through the clear share of the sky, and the diffuse light of the air over it. The
+    haze is aerosol, which scatters all colours nearly alike, so the colour it takes is the
+    colour of the light it is lit by, which lights the ground as well: SkyParams.haze_rgb
+    (the horizon's, greyed under a deck, what the clouds fade into). The ground's own colour
+    (SkyParams.ground_rgb) keeps its brightness and takes this tint: warm in a low sun's
+    light, grey under an overcast."""
     sun_z = max(sky.sun.direction_enu[2], 0.0)
     direct = SUN_OVER_SKY_LIGHT * sun_z * (1.0 - sky.cover)
     light = np.asarray(sky.haze_rgb, np.float64) + direct * np.asarray(sky.sun_rgb, np.float64)
