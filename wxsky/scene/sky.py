@@ -177,6 +177,7 @@ class SkyParams:
             "sunset": self.sunset,
             "cover": self.cover,
             "haze_m": self.haze_m,
+            "haze_rgb": list(self.haze_rgb),
             "stars": self.stars,
             "dome": self.dome.to_dict(),
         }
