@@ -64,9 +64,9 @@ uniform vec3 u_dome_haze_rgb;     // the air between the eye and the layer (SkyP
 uniform float u_haze_m;
 uniform float u_haze_depth_m;     // of the dome's height, how much lies in the hazy layer
 uniform float u_clear_haze_m;     // haze distance in the clear air above it
-// Ground band (every variant): the eye's height over the flat ground (0: no ground drawn),
-// the haze distance over the ground, how much of the eye's height lies in the hazy layer, the
-// clear air's haze distance.
+// Ground band (every variant): the eye's height over the ground under the observer (at least
+// 0.5 m is taken), the haze distance over the ground, how much of the eye's height lies in the
+// hazy layer, the clear air's haze distance.
 uniform vec4 u_ground_air;
 // The air at the horizon, where a layer reaches it (rgb: the dome's haze colour there; a: 1
 // when the dome's distant band is drawn, else 0 and the clear sky's horizon shows).
