@@ -83,11 +83,11 @@ DOME_DETAIL_TILE_M = 3_500.0
 # Below this height above the eye the dome would be a deck the eye is in or above: not drawn.
 DOME_MIN_CLEARANCE_M = 300.0
 EARTH_RADIUS_M = 6_371_000.0
-EARTHSHINE = 0.05
+EARTHSHINE = 0.05  # of the sunlit face's brightness, on the dark part of a crescent at night
 LUMA_WEIGHTS = (0.2126, 0.7152, 0.0722)  # Rec. 709
-# On level ground under a clear sky, the sun's irradiance over the sky's, for the sun overhead
-# and a sky as bright as its horizon: 6 to 8 on a clear day (1000 W/m² direct, 120-150 diffuse).
-SUN_OVER_SKY_LIGHT = 6.0  # of the sunlit face's brightness, on the dark part of a crescent at night
+# On level ground under a clear sky, the sun's irradiance over the sky's is about this times
+# sin(sun elevation): near 1 with the sun 5° up (40-50 W/m² each), 6 to 10 at noon.
+SUN_OVER_SKY_LIGHT = 12.0
 
 # The shipped files: wxsky/render/data/, written by tools/generate/build_sky_textures.py.
 DATA_PACKAGE = "wxsky.render"
@@ -532,15 +532,19 @@ def ground_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
 
 def ground_tint(sky: SkyParams) -> tuple[float, float, float]:
     """The colour of the light on the ground, at the luminance of white: the sun's on a level
-    surface through the clear share of the sky, and the diffuse light of the air over it. The
-    haze is aerosol, which scatters all colours nearly alike, so the colour it takes is the
-    colour of the light it is lit by, which lights the ground as well: SkyParams.haze_rgb
-    (the horizon's, greyed under a deck, what the clouds fade into). The ground's own colour
-    (SkyParams.ground_rgb) keeps its brightness and takes this tint: warm in a low sun's
-    light, grey under an overcast."""
+    surface through the clear share of the sky, and the diffuse light from above. Under open
+    sky a level surface gets the cosine-weighted mean of the sky's gradient (sky_colour: horizon
+    to zenith by sqrt(elevation)), which lies 0.8 of the way to the zenith's colour; under
+    cloud, the light of the air under it (SkyParams.haze_rgb: the horizon's, greyed under a
+    deck, what the clouds fade into). The ground's own colour (SkyParams.ground_rgb) keeps its
+    brightness and takes this tint: warm where a low sun lights it, grey under an overcast."""
     sun_z = max(sky.sun.direction_enu[2], 0.0)
     direct = SUN_OVER_SKY_LIGHT * sun_z * (1.0 - sky.cover)
-    light = np.asarray(sky.haze_rgb, np.float64) + direct * np.asarray(sky.sun_rgb, np.float64)
+    open_sky = np.asarray(sky.horizon_rgb) + 0.8 * (
+        np.asarray(sky.zenith_rgb) - np.asarray(sky.horizon_rgb)
+    )
+    diffuse = open_sky + sky.cover * (np.asarray(sky.haze_rgb) - open_sky)
+    light = diffuse + direct * np.asarray(sky.sun_rgb, np.float64)
     luma = float(light @ np.asarray(LUMA_WEIGHTS))
     if not luma > 1e-6:
         return (1.0, 1.0, 1.0)
