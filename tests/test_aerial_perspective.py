@@ -16,7 +16,9 @@ from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
-SETTINGS = SceneSettings(ring_texture_px=128)
+# Clouds fade into `SkyParams.haze_rgb`, the gradient's horizon: the physical sky (issue 41's
+# default) does not feed that colour yet, so these checks hold the gradient's sky behind them.
+SETTINGS = SceneSettings(ring_texture_px=128, sky="roden-parberry")
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 

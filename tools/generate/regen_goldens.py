@@ -42,7 +42,9 @@ WIDTH, HEIGHT = 240, 135
 FOV_DEG = 60.0
 EYE_ABOVE_GROUND_M = 2.0
 RING_PX = 128
-SETTINGS = SceneSettings(ring_texture_px=RING_PX)
+# The goldens hold Roden & Parberry's sky, as drawn before issue 41 made the physical
+# atmosphere the default; a physical set is for whoever regenerates them to decide.
+SETTINGS = SceneSettings(ring_texture_px=RING_PX, sky="roden-parberry")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -28,10 +28,14 @@ from dataclasses import dataclass
 from datetime import date, datetime
 from typing import NamedTuple
 
+from wxsky.engine.atmosphere_work import AtmosphereWork
 from wxsky.engine.near_work import NearWork
 from wxsky.engine.ring_schedule import DEFAULT_FADE_S, RingEvent, RingFrame, RingSchedule
 from wxsky.engine.ring_worker import DEFAULT_NICE, BuildJob, RingWorker, run_job
 from wxsky.engine.tower_work import TowerWork
+from wxsky.scene.atmosphere import EYE_ALT_M as ATMOSPHERE_EYE_ALT_M
+from wxsky.scene.atmosphere import VISIBILITY_M as ATMOSPHERE_VISIBILITY_M
+from wxsky.scene.atmosphere import atmosphere_key
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import layer_keys
 from wxsky.scene.gather import (
@@ -55,6 +59,7 @@ from wxsky.scene.layout import (
 from wxsky.scene.near_sets import NearInputs, install_near, stale_light, warm_near
 from wxsky.scene.sky import Bodies, SkyParams, bodies_for, sky_params
 from wxsky.scene.tower_field import LayerEpoch, TowerClock
+from wxsky.weather.atmosphere import humidity_at
 from wxsky.weather.cockpit import CockpitUpdate, clock_target
 from wxsky.weather.geo import enu_from_geodetic, geodetic_from_enu
 from wxsky.weather.precedence import DEFAULT_CIGI_HOLD_S, DEFAULT_COCKPIT_HOLD_S, SourceStack
@@ -182,6 +187,8 @@ class SkyEngine:
         self.transition_step_s = transition_step_s
         self._wall_s = 0.0
         self._live = ring_build == "async"  # a daemon's engine: inputs stamped in real time
+        # The physical sky's tables: off the frame path for a daemon, at once for a snapshot.
+        self._atmosphere = AtmosphereWork(wait=not self._live)
         self._advanced_at = time.monotonic()
         self._cockpit_date: tuple[date, float] | None = None  # (date, wall_s it arrived)
         self._since_step_s = 0.0
@@ -368,9 +375,28 @@ class SkyEngine:
         from any thread: the daemon calls it first thing at shutdown)."""
         self._schedule.cancel()
 
+    def _with_atmosphere(self, sky: SkyParams, state: WeatherState, camera: Camera) -> SkyParams:
+        """The frame's sky with the physical atmosphere's tables (`[scene] sky = "physical"`):
+        those of its sun, visibility, humidity and eye, or the last made while they are made
+        off the frame path (`AtmosphereWork`). Only the frame's sky carries them, not the
+        ring's and near sets' (a child process would be sent the tables with each)."""
+        if self.settings.sky != "physical":
+            return sky
+        obs = state.observer
+        vis_lo, vis_hi = ATMOSPHERE_VISIBILITY_M.bounds
+        key = atmosphere_key(
+            min(max(sky.sun.elevation_deg, -90.0), 90.0),
+            min(max(state.visibility_m, vis_lo), vis_hi),
+            humidity_at(state, obs.alt_m),
+            # The model's ground is the observer's: the eye's height above it.
+            min(max(camera.position_m[2] - obs.alt_m, 0.0), ATMOSPHERE_EYE_ALT_M.bounds[1]),
+        )
+        return sky.with_atmosphere(self._atmosphere.luts_for(key))
+
     def close(self, wait_s: float = 0.0) -> str | None:
         """Stop the ring builder, waiting up to wait_s for a build in flight to give up;
         idempotent. Returns what was abandoned (`RingSchedule.close`), or None."""
+        self._atmosphere.close()
         cut = self._schedule.close(wait_s)
         if self._worker is not None:
             self._worker.close(max(wait_s, 0.5))
@@ -612,7 +638,7 @@ class SkyEngine:
             drawn_drift,
             camera,
             near,
-            sky,
+            self._with_atmosphere(sky, state, camera),
             self.settings,
             locks=self._locks,
             near_radius_m=near_radius_m,
@@ -704,7 +730,7 @@ class SkyEngine:
             drift,
             camera,
             (ring,),
-            sky,
+            self._with_atmosphere(sky, state, camera),
             self.settings,
             locks=self._locks,
             split_at_m=aircraft_m,

@@ -184,8 +184,10 @@ class Renderer:
         scratch = self._target("sky_warm_up", 16, 16)
         scratch.fbo.use()
         self.ctx.disable(moderngl.BLEND)
+        physical = sky.atmosphere is not None  # the frame's sky mode: its variants only
+        self._sky.use_atmosphere(sky.atmosphere)
         for stars, moon, dome in itertools.product((False, True), repeat=3):
-            feats = sky_textures.SkyFeatures(stars=stars, moon=moon, dome=dome)
+            feats = sky_textures.SkyFeatures(stars=stars, moon=moon, dome=dome, physical=physical)
             uniforms = self._sky_uniforms(cam, sky, feats, sky_textures.FULL_RECT)
             self._sky_draw("sky warm-up", feats, uniforms)
 
@@ -412,6 +414,7 @@ class Renderer:
         the layer was drawn, a strip at a time while it drifts (`sky_layer.plan_sky`)."""
         target = self._target(name, cam.width_px, cam.height_px)
         feats = sky_textures.features(cam, sky)
+        self._sky.use_atmosphere(sky.atmosphere)  # a new physical table, when there is one
         if not self.split_sky:
             parts = [("sky", feats, sky_textures.FULL_RECT)]
         else:
@@ -481,6 +484,16 @@ class Renderer:
             "u_sun_rgb": sky.sun_rgb,
             "u_sun_cos_radius": math.cos(math.radians(SUN_RADIUS_DEG)),
         }
+        if feats.physical:
+            # The physical sky has no gradient; the dome fades into the haze's colour
+            # (u_dome_haze_rgb) and glows with the sun's; the ground band (display values
+            # only) keeps the ground's colour.
+            for gone in (
+                ("u_zenith", "u_horizon")
+                + (("u_ground",) if feats.scene_linear else ())
+                + (() if feats.dome else ("u_sun_rgb",))
+            ):
+                del camera[gone]
         return camera | sky_textures.frame_uniforms(cam, sky, feats)
 
     def _sky_draw(

@@ -55,6 +55,13 @@ from wxsky.render.sky_texture_gen import (
     SUNSET_FILE,
     SUNSET_SIZE_PX,
 )
+from wxsky.scene.atmosphere import (
+    MIE_SCALE_HEIGHT_M,
+    SUN_ANGULAR_RADIUS_RAD,
+    AtmosphereLuts,
+    display_exposure,
+    sun_irradiance,
+)
 from wxsky.scene.camera import Camera
 from wxsky.scene.sky import CLEAR_AIR_HAZE_M, DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
 
@@ -103,6 +110,8 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "SKY_STARS": str(int(feats.stars)),
         "SKY_MOON": str(int(feats.moon)),
         "SKY_DOME": str(int(feats.dome)),
+        "SKY_PHYSICAL": str(int(feats.physical)),
+        "SKY_SCENE_LINEAR": str(int(feats.scene_linear)),
     }
 
 
@@ -161,6 +170,11 @@ class SkyFeatures:
     stars: bool
     moon: bool
     dome: bool
+    # The physical atmosphere's sky-view table instead of Roden & Parberry's gradient.
+    physical: bool = False
+    # With `physical`: the radiance itself (kcd/m^2) into a float target, no exposure or tone
+    # map (tests/test_atmosphere.py reads it back; the hook for scene-linear render targets).
+    scene_linear: bool = False
 
 
 class SkyPass:
@@ -172,6 +186,7 @@ class SkyPass:
         "u_galaxy_tex": 2,
         "u_dome_tex": 3,
         "u_sunset_tex": 4,
+        "u_sky_view": 5,
     }
 
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
@@ -196,6 +211,31 @@ class SkyPass:
         # A gradient read between texel centres: its ends must not wrap into each other.
         self.sunset.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.sunset.repeat_x = self.sunset.repeat_y = False
+        # The physical sky's table (`use_atmosphere`), and the serial of the tables it holds.
+        self.sky_view: moderngl.Texture | None = None
+        self._sky_view_serial = -1
+
+    def use_atmosphere(self, luts: AtmosphereLuts | None) -> None:
+        """Upload the sky-view table of `luts` (RGB float, kcd/m^2) when it is a new one;
+        the texture keeps the last table until then."""
+        if luts is None or luts.serial == self._sky_view_serial:
+            return
+        rgb = np.nan_to_num(luts.sky_view_radiance(), nan=0.0, posinf=0.0)
+        rows, cols = rgb.shape[:2]
+        # Half floats, four channels: llvmpipe filters them faster than RGB32F, and 11 bits of
+        # mantissa are finer than any display step (the radiance spans 1e-6..1e3 kcd/m^2).
+        # Scaled by a power of two so the brightest texel is near 1024 (`sky_view_scale`): a
+        # night's 1e-7 kcd/m^2 would be lost below half floats' normal range.
+        table = np.ones((rows, cols, 4), np.float16)
+        table[..., :3] = np.minimum(rgb / sky_view_scale(luts), 60_000.0)
+        if self.sky_view is None or self.sky_view.size != (cols, rows):
+            if self.sky_view is not None:
+                self.sky_view.release()
+            self.sky_view = self._ctx.texture((cols, rows), 4, dtype="f2")
+            self.sky_view.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self.sky_view.repeat_x = self.sky_view.repeat_y = False
+        self.sky_view.write(table.tobytes())
+        self._sky_view_serial = luts.serial
 
     def prepare(self, feats: SkyFeatures) -> tuple[moderngl.Program, moderngl.VertexArray]:
         """The program and vertex array that draw `feats` (some of this frame's `features`),
@@ -210,6 +250,8 @@ class SkyPass:
         self.galaxy.use(self.UNITS["u_galaxy_tex"])
         self.dome.use(self.UNITS["u_dome_tex"])
         self.sunset.use(self.UNITS["u_sunset_tex"])
+        if feats.physical and self.sky_view is not None:
+            self.sky_view.use(self.UNITS["u_sky_view"])
         return variant
 
     def release(self) -> None:
@@ -218,6 +260,9 @@ class SkyPass:
         self._variants.clear()
         for tex in (self.stars, self.galaxy, self.dome, self.sunset):
             tex.release()
+        if self.sky_view is not None:
+            self.sky_view.release()
+            self.sky_view = None
 
 
 # -- per-frame values ------------------------------------------------------------------------
@@ -234,7 +279,9 @@ def features(cam: Camera, sky: SkyParams) -> SkyFeatures:
     cos_off_axis = float(np.dot(fwd, moon.direction_enu))
     moon_in_view = max(sky.moon_rgb) > 0.0 and cos_off_axis >= math.cos(min(reach_rad, math.pi))
     dome = dome_frame(sky, cam.position_m[2]).height_m > 0.0
-    return SkyFeatures(stars=sky.stars > 0.0, moon=moon_in_view, dome=dome)
+    return SkyFeatures(
+        stars=sky.stars > 0.0, moon=moon_in_view, dome=dome, physical=sky.atmosphere is not None
+    )
 
 
 def moon_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
@@ -346,7 +393,13 @@ def _clip_rect(x0: float, y0: float, x1: float, y1: float) -> Rect | None:
 def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str, object]:
     """The sky pass's uniforms for the night sky, moon and cloud dome, those of the features
     drawn (the camera, gradient and sun ones are set by the renderer)."""
-    out: dict[str, object] = ground_uniforms(cam, sky)
+    out: dict[str, object] = {}
+    if feats.physical and sky.atmosphere is not None:
+        out.update(physical_uniforms(sky.atmosphere))
+        out["u_overcast"] = overcast_veil(sky.cover)
+    if not (feats.physical and feats.scene_linear):
+        # The ground band, in display values (the scene-linear sky keeps its table's ground).
+        out.update(ground_uniforms(cam, sky))
     if feats.stars:
         sigma, gain = star_sigma(cam)
         out.update(
@@ -550,3 +603,80 @@ def ground_tint(sky: SkyParams) -> tuple[float, float, float]:
         return (1.0, 1.0, 1.0)
     r, g, b = (float(v) for v in light / luma)
     return (r, g, b)
+
+
+# -- the physical sky ------------------------------------------------------------------------
+
+# Limb darkening of the sun's disc, I(mu) = 1 - u (1 - mu) (u about 0.6 in the visible): the
+# disc's mean is 1 - u / 3 of its centre.
+LIMB_DARKENING = 0.6
+# The aureole: the narrow forward lobe of the aerosol's diffraction that the table's smooth
+# Cornette-Shanks lobe (and its 1 deg texels) leave out. Its share of the aerosol's light, and
+# its Henyey-Greenstein g from clean air (narrow) to haze (broadened by multiple scattering).
+AUREOLE_SHARE = 0.12
+AUREOLE_G_CLEAN = 0.985
+AUREOLE_G_HAZE = 0.93
+AUREOLE_HAZE_DEPTH = 1.0  # Mie optical depth to the sun at which g is AUREOLE_G_HAZE
+
+
+def overcast_veil(cover: float) -> tuple[float, float]:
+    """(share of grey, dimming) of the physical sky under cloud cover above the eye, as the
+    gradient mode greys and dims its own (scene.sky): the clear-sky model knows nothing of a
+    deck, and under overcast its bright clear horizon showed as a white slot below the deck.
+    A stand-in until the sky sees the decks themselves (issue 41, item 5)."""
+    t = _smoothstep(0.6, 1.0, cover)
+    # Dimmer than the gradient's 0.55: the model's clear horizon is its brightest part, and
+    # at 0.55 the slot under overcast-stratus still stood 55 % brighter than the deck.
+    return (0.8 * t, 1.0 - 0.7 * t)
+
+
+@functools.lru_cache(maxsize=4)
+def sky_view_scale(luts: AtmosphereLuts) -> float:
+    """What the sky-view texture's values are multiplied by in the shader (a power of two:
+    the texture holds radiance / this, its brightest texel near 1024)."""
+    peak = float(np.max(luts.sky_view_radiance()))
+    if not math.isfinite(peak) or peak <= 0.0:
+        return 1.0
+    return float(2.0 ** round(math.log2(peak / 1024.0)))
+
+
+def physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
+    """`_physical_uniforms`, made once per set of tables (a frame asks for them per part)."""
+    return dict(_physical_uniforms(luts))
+
+
+@functools.lru_cache(maxsize=4)
+def _physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
+    """The physical sky's uniforms: its table's unit and horizon, the exposure (the stand-in
+    for the renderer's exposure: `atmosphere.display_exposure`), the sun's disc (radiance at
+    its centre, kcd/m^2, transmitted to the eye) and the aureole (strength and g, both from
+    the aerosol's optical depth toward the sun)."""
+    # The table's own (quantised) sun, not this frame's: these change with the table only,
+    # as a jump that redraws the kept layer whole, never as a drift every sky step.
+    el = luts.sun_elevation_deg
+    eye_m = luts.eye_alt_m
+    sun_klx = sun_irradiance(luts, eye_m, el)
+    solid_angle = math.pi * SUN_ANGULAR_RADIUS_RAD**2
+    centre = sun_klx / (solid_angle * (1.0 - LIMB_DARKENING / 3.0))
+    # Mie optical depth from the eye toward the sun: vertical depth over a slant of at most
+    # 40 air masses (the horizon's).
+    vertical = (
+        luts.medium.mie_extinction_per_m
+        * MIE_SCALE_HEIGHT_M
+        * math.exp(-eye_m / MIE_SCALE_HEIGHT_M)
+    )
+    tau = vertical / max(math.sin(math.radians(max(el, 0.0))), 1.0 / 40.0)
+    haze = min(tau / AUREOLE_HAZE_DEPTH, 1.0)
+    g = AUREOLE_G_CLEAN + (AUREOLE_G_HAZE - AUREOLE_G_CLEAN) * haze
+    strength = sun_klx * (AUREOLE_SHARE * (1.0 - math.exp(-tau)))
+    return {
+        "u_sky_view": SkyPass.UNITS["u_sky_view"],
+        "u_horizon_rad": luts.horizon_rad,
+        "u_sky_view_scale": sky_view_scale(luts),
+        "u_exposure": display_exposure(luts),
+        "u_sun_radiance": tuple(float(v) for v in centre),
+        "u_limb_darkening": LIMB_DARKENING,
+        "u_aureole": (*(float(v) for v in strength), g),
+        # A new table is a jump for the kept sky layer (sky_layer): it is drawn whole again.
+        "u_atmosphere_serial": float(luts.serial % 1_000_000),
+    }

@@ -71,6 +71,8 @@ from wxsky.scene.tower_field import (
 )
 from wxsky.weather.state import WeatherState
 
+SKY_MODELS = ("physical", "roden-parberry")  # [scene] sky
+
 
 @dataclass(frozen=True)
 class SceneSettings:
@@ -78,6 +80,8 @@ class SceneSettings:
     max_range_m: float = 40000.0
     ring_texture_px: int = 256
     shading: str = DEFAULT_SHADING  # "wang" or "harris" (wxsky.scene.shading)
+    # The sky: "physical" (wxsky.scene.atmosphere's tables) or "roden-parberry" (the gradient).
+    sky: str = "physical"
     # Near clouds this far from the eye are drawn as one sprite (Wang's LOD for machines
     # short of fill rate; 0: never), cross-fading over the band beyond it (see cloud_lod).
     lod_start_m: float = 0.0

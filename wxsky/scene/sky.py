@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
+from wxsky.scene.atmosphere import AtmosphereLuts
 from wxsky.scene.ephemeris import (
     Matrix3,
     MoonPosition,
@@ -140,6 +141,19 @@ class SkyParams:
     # Top of the hazy boundary layer, MSL: haze_m holds below it, clear air above (the sky
     # pass fades the high-cloud dome only over the part of its ray below this).
     haze_top_m: float = math.inf
+    # The physical atmosphere's tables (`[scene] sky = "physical"`, made off the frame path
+    # by engine/atmosphere_work.py); None: Roden & Parberry's gradient (`zenith_rgb`, ...).
+    atmosphere: AtmosphereLuts | None = None
+
+    def with_atmosphere(self, luts: AtmosphereLuts | None) -> SkyParams:
+        """This sky drawn from `luts` (None: from its gradient); every other field is this
+        one's, the same objects (as `at_clock`)."""
+        if luts is self.atmosphere:
+            return self
+        out = object.__new__(SkyParams)
+        out.__dict__.update(self.__dict__)
+        out.__dict__["atmosphere"] = luts
+        return out
 
     def at_clock(self, sky_time_s: float) -> SkyParams:
         """This sky with its clock at sky_time_s (a later frame of the same sky step): every

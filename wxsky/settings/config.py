@@ -25,7 +25,7 @@ from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX
 from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.gather import MAX_NEAR_BLOCKS, MAX_RING_BLOCKS, largest_range, scene_blocks
-from wxsky.scene.layout import SceneSettings
+from wxsky.scene.layout import SKY_MODELS, SceneSettings
 from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
 from wxsky.schema import (
     OMIT,
@@ -216,6 +216,9 @@ class SceneSection(_Section):
         BLOCK_SIZE_M, _fixed(BLOCK_SIZE_M, "the cloud field is generated in 4 km blocks by design")
     )
     shading: str = _opt(DEFAULT_SHADING, Text(choices=SHADING_MODELS))
+    # The sky: a physical atmosphere (Rayleigh, Mie, ozone; docs/atmosphere.md) or Roden &
+    # Parberry's gradient and dome controls as before issue 41.
+    sky: str = _opt("physical", Text(choices=SKY_MODELS))
 
     def settings(self) -> SceneSettings:
         """The scene stage's view of this section."""
@@ -224,6 +227,7 @@ class SceneSection(_Section):
             max_range_m=self.max_range_m,
             ring_texture_px=self.ring_texture_px,
             shading=self.shading,
+            sky=self.sky,
             far_band_m=self.far_band_m,
             lod_start_m=self.lod_start_m,
             impostor_lod_m=self.impostor_lod_m,

@@ -2,7 +2,7 @@
 // of the sky with a flickering star texture and a galaxy band; the sun and moon discs; and
 // the thin cloud dome for high and distant cover. Full-screen triangle.
 // Needs STAR_FACE_PX, STAR_JITTER, STAR_RATE_SCALE_HZ and the switches SKY_STARS, SKY_MOON,
-// SKY_DOME (wxsky/render/sky_textures.py): llvmpipe runs both sides of every branch under a
+// SKY_DOME, SKY_PHYSICAL (wxsky/render/sky_textures.py): llvmpipe runs both sides of every branch under a
 // mask, so a feature a frame does not need is compiled out, not skipped. Where a feature does
 // show, it usually covers a small part of the picture (the moon's disc, the distant cloud
 // band above the horizon): the renderer draws the sky without it over the whole picture, then
@@ -74,6 +74,66 @@ uniform vec4 u_horizon_air;
 uniform vec3 u_ground_tint;       // the light on the ground, at the luminance of white
 
 const float PI = 3.14159265358979;
+
+#if SKY_PHYSICAL
+// The physical atmosphere (wxsky/scene/atmosphere.py): radiance in kcd/m^2 from the sky-view
+// table, the sun's disc and its aureole, then one exposure and tone map to the display.
+uniform sampler2D u_sky_view;     // rows: sky_view_v (0.5 at the horizon); cols: 0..pi from the sun
+uniform float u_sky_view_scale;   // the texture holds radiance / this (half floats)
+uniform float u_horizon_rad;      // elevation of the horizon from the eye (<= 0)
+uniform float u_exposure;         // kcd/m^2 -> display, set from Python (display_exposure)
+uniform vec3 u_sun_radiance;      // at the disc's centre, transmitted to the eye, kcd/m^2
+uniform float u_limb_darkening;
+uniform vec4 u_aureole;           // rgb: strength (kcd/m^2 per unit phase), w: HG g
+uniform float u_atmosphere_serial;  // changes with the table (the kept layer redraws)
+uniform vec2 u_overcast;          // share of grey, dimming: cover above the eye (overcast_veil)
+
+float hg_phase(float nu, float g) {
+    float k = 1.0 + g * g - 2.0 * g * nu;
+    return (1.0 - g * g) / (4.0 * PI * k * sqrt(k));
+}
+
+// Scene-linear sky radiance along `ray`: the table (square-root rows about the horizon, so
+// the horizon falls on a texel edge and stays sharp), the aureole and the limb-darkened disc.
+vec3 physical_sky(vec3 ray) {
+    float el = asin(clamp(ray.z, -1.0, 1.0));
+    float h = u_horizon_rad;
+    float v = el >= h ? 0.5 + 0.5 * sqrt(clamp((el - h) / (0.5 * PI - h), 0.0, 1.0))
+                      : 0.5 - 0.5 * sqrt(clamp((h - el) / (h + 0.5 * PI), 0.0, 1.0));
+    vec2 flat_ray = normalize(ray.xy + vec2(1e-6, 0.0));
+    vec2 flat_sun = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
+    float u = acos(clamp(dot(flat_ray, flat_sun), -1.0, 1.0)) / PI;
+    vec3 radiance = textureLod(u_sky_view, vec2(u, v), 0.0).rgb * u_sky_view_scale;
+    float nu = dot(ray, u_sun_dir);
+    float above = step(h, el);
+    radiance += u_aureole.rgb * hg_phase(nu, u_aureole.w) * above;
+    // The disc: anti-aliased edge as the gradient mode's, limb darkened.
+    float disc = smoothstep(u_sun_cos_radius - 0.00002, u_sun_cos_radius + 0.00002, nu);
+    float sin_r2 = 1.0 - u_sun_cos_radius * u_sun_cos_radius;
+    float r2 = clamp((1.0 - nu * nu) / max(sin_r2, 1e-12), 0.0, 1.0);
+    float limb = 1.0 - u_limb_darkening * (1.0 - sqrt(1.0 - r2));
+    radiance += u_sun_radiance * (limb * disc * above);
+    float grey = dot(radiance, vec3(0.2126, 0.7152, 0.0722));
+    radiance = mix(radiance, vec3(grey), u_overcast.x) * u_overcast.y;
+    return u_atmosphere_serial < 0.0 ? vec3(0.0) : radiance;
+}
+
+// The stand-in for the scene-linear exposure and tone map (issue 41's render-target work
+// replaces this function and u_exposure): exposure, a shoulder on the luminance that keeps
+// the hue (a low sun stays orange, not white), white where a channel still overflows, and
+// the display's gamma (the layers hold display values, as the gradient mode's).
+vec3 display_from_scene(vec3 radiance) {
+    vec3 c = max(radiance, 0.0) * u_exposure;
+    float y = dot(c, vec3(0.2126, 0.7152, 0.0722));
+    c *= 1.0 / (1.0 + y);  // Reinhard on the luminance: a long shoulder toward a low sun
+    float top = max(c.r, max(c.g, c.b));
+    if (top > 1.0) {
+        c = mix(c / top, vec3(1.0), clamp(top - 1.0, 0.0, 1.0));
+    }
+    // Gamma 2, a square root: pow() cost a quarter of the whole pass on llvmpipe.
+    return sqrt(clamp(c, 0.0, 1.0));
+}
+#endif
 
 #if SKY_STARS
 // Celestial direction -> (face, continuous cell coordinates, face-plane coordinates) on
@@ -200,7 +260,8 @@ vec4 cloud_dome(vec3 ray) {
              grazing * step(0.001, band));
     // The distant band fades out upwards as a whole rather than by thinning its cover, which
     // would cut a hard edge where the averaged far texture crosses the threshold.
-    a *= max(band, step(0.001, high_cover));
+    // The dome is a plane above the eye: nothing of it below the eye's level.
+    a *= max(band, step(0.001, high_cover)) * step(0.0, ray.z);
     vec3 rgb = u_dome_rgb * mix(0.8, 1.05, detail) * (1.0 - 0.3 * density * a);
     // Thin ice cloud glows around the sun.
     float toward_sun = max(dot(ray, u_sun_dir), 0.0);
@@ -259,11 +320,21 @@ void main() {
     vec2 ndc = gl_FragCoord.xy / u_target_size * 2.0 - 1.0;
     vec3 ray = normalize(u_forward + ndc.x * u_tan_half_fov.x * u_right
                          - ndc.y * u_tan_half_fov.y * u_up);
+#if SKY_PHYSICAL && SKY_SCENE_LINEAR
+    vec3 col = physical_sky(ray);  // into a float target: radiance, kcd/m^2
+#elif SKY_PHYSICAL
+    vec3 look = ray.z < 0.0 ? normalize(vec3(ray.xy + vec2(1e-6, 0.0), 0.0)) : ray;
+    vec3 col = display_from_scene(physical_sky(ray));
+    vec3 air = mix(ray.z < 0.0 ? display_from_scene(physical_sky(look)) : col,
+                   u_horizon_air.rgb, u_horizon_air.a);
+#else
     // Below the horizon the sky is what lies behind the ground's haze: its colour at the
-    // horizon, or where a layer reaches the horizon, the air under it (`ground_band`).
+    // horizon, or where a layer reaches the horizon, the air under it (`ground_band`). The
+    // physical sky's table holds its own ground, in its own aerial perspective.
     vec3 look = ray.z < 0.0 ? normalize(vec3(ray.xy + vec2(1e-6, 0.0), 0.0)) : ray;
     vec3 col = sky_colour(look, u_sun_dir, u_zenith, u_horizon, u_ground, u_sun_rgb);
     vec3 air = mix(col, u_horizon_air.rgb, u_horizon_air.a);
+#endif
 #if SKY_DOME
     vec4 dome = cloud_dome(ray);
 #else
@@ -290,11 +361,19 @@ void main() {
     }
 #endif
     col += moon * moon_cover * (1.0 - 0.85 * dome.a);
+#if !SKY_PHYSICAL
     float disc = smoothstep(u_sun_cos_radius - 0.00002, u_sun_cos_radius + 0.00002,
                             dot(ray, u_sun_dir));
     col = mix(col, vec3(1.0, 0.98, 0.9) * 1.2, disc * step(-0.01, ray.z) * length(u_sun_rgb));
+#endif
     col = mix(col, dome.rgb, dome.a);
+#if !(SKY_PHYSICAL && SKY_SCENE_LINEAR)
     col = ground_band(ray, col, air);
+#endif
+#if SKY_PHYSICAL && SKY_SCENE_LINEAR
+    f_colour = vec4(max(col, 0.0), 1.0);
+#else
     f_colour = vec4(clamp(col, 0.0, 1.0), 1.0);
+#endif
 }
 #endif
