@@ -23,6 +23,7 @@ from wxsky.errors import RenderError
 from wxsky.host.compositor import Layers, composite, layers_from_images, sample_ring, stretch
 from wxsky.render import renderer as renderer_module
 from wxsky.render import shaders as shaders_mod
+from wxsky.render import sky_textures
 from wxsky.render.profile import PassProfiler
 from wxsky.render.renderer import (
     IMPOSTOR_MIN_ROWS,
@@ -147,14 +148,23 @@ def test_zenith_colour_when_pitched_straight_up(renderer: Renderer) -> None:
     np.testing.assert_allclose(img[CR, CC, :3], _u8(sky.zenith_rgb), atol=1)
 
 
+def _lit_ground(sky: SkyParams) -> np.ndarray:
+    """The ground's own colour in the light on it (sky.glsl `ground_band`), unhazed."""
+    return _u8(tuple(np.asarray(sky.ground_rgb) * np.asarray(sky_textures.ground_tint(sky))))
+
+
+# 2 m above the ground: the ground 17° down is 7 m off, its own colour (no haze to speak of).
+GROUND_EYE_M = (0.0, 0.0, WeatherState().observer.alt_m + 2.0)
+
+
 def test_horizon_and_ground_colours_looking_level_away_from_the_sun(renderer: Renderer) -> None:
     sky = _sky()
-    cam = _camera(heading_deg=sky.sun.azimuth_deg + 180.0, pitch_deg=0.0)
+    cam = _camera(heading_deg=sky.sun.azimuth_deg + 180.0, pitch_deg=0.0, position_m=GROUND_EYE_M)
     img = _render_sky(renderer, cam, sky)
-    horizon, zenith, ground = _u8(sky.horizon_rgb), _u8(sky.zenith_rgb), _u8(sky.ground_rgb)
+    horizon, zenith, ground = _u8(sky.horizon_rgb), _u8(sky.zenith_rgb), _lit_ground(sky)
     # The centre row looks exactly level: the horizon colour, no glow facing away.
     np.testing.assert_allclose(img[CR, CC, :3], horizon, atol=1)
-    # The bottom row looks 17° down, past the 0.08 blend band: ground.
+    # The bottom row looks 17° down at the ground 7 m off: its own colour in the light on it.
     np.testing.assert_allclose(img[H - 1, CC, :3], ground, atol=1)
     # Above the horizon the colour runs monotonically from the horizon towards the zenith.
     column = img[: CR + 1, CC, :3][::-1]  # from the horizon row up to the top row
@@ -203,12 +213,18 @@ def test_sky_follows_roll(renderer: Renderer) -> None:
     # Rolled 90° right wing down, the image's up points to the world's right and its right
     # points down: the horizon runs vertically through the centre, the ground on the right.
     sky = _sky()
-    cam = _camera(heading_deg=sky.sun.azimuth_deg + 180.0, roll_deg=90.0, height_px=W, width_px=H)
+    cam = _camera(
+        heading_deg=sky.sun.azimuth_deg + 180.0,
+        roll_deg=90.0,
+        height_px=W,
+        width_px=H,
+        position_m=GROUND_EYE_M,
+    )
     img = _render_sky(renderer, cam, sky)
     mid_r, mid_c = W // 2, H // 2
     np.testing.assert_allclose(img[mid_r, mid_c, :3], _u8(sky.horizon_rgb), atol=1)
-    np.testing.assert_allclose(img[mid_r, H - 1, :3], _u8(sky.ground_rgb), atol=1)
-    assert abs(img[mid_r, 0, :3] - _u8(sky.ground_rgb)).sum() > 60
+    np.testing.assert_allclose(img[mid_r, H - 1, :3], _lit_ground(sky), atol=1)
+    assert abs(img[mid_r, 0, :3] - _lit_ground(sky)).sum() > 60
 
 
 # -- sprites ------------------------------------------------------------------------------

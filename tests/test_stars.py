@@ -392,11 +392,13 @@ def test_each_frame_compiles_in_only_the_features_it_shows() -> None:
     # Above the cirrus deck the dome is not drawn: the sprites are the clouds there.
     high = dataclasses.replace(away, position_m=(0.0, 0.0, 11_000.0))
     assert not sky_textures.features(high, sky_params(cirrus)).dome
-    # Uniforms only for what is drawn (GL would have optimised the others away).
+    # Uniforms only for what is drawn (GL would have optimised the others away): with no
+    # feature, the ground band's, which every variant draws.
     names = set(
         sky_textures.frame_uniforms(away, noon, sky_textures.SkyFeatures(False, False, False))
     )
-    assert names == set()
+    assert names == set(sky_textures.ground_uniforms(away, noon))
+    assert names == {"u_pixel_rad", "u_ground_air", "u_horizon_air", "u_ground_tint"}
 
 
 # -- split passes ---------------------------------------------------------------------------

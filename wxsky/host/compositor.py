@@ -13,8 +13,11 @@ scene-linear colour, `composite_linear`), composited alike.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -86,12 +89,26 @@ class ShadowMap:
 class Ground:
     """A host's own flat ground at up_m (MSL), Lambertian, lit by the frame's sun:
     colour = rgb (ambient + (1 - ambient) T max(0, n.s)), n = up, T the cloud shadow there:
-    what a host does with the shadow map, in its simplest form."""
+    what a host does with the shadow map, in its simplest form. Seen from `t` metres off it
+    is in aerial perspective as wxsky's own ground band and clouds are: mixed toward
+    `air_rgb` by 1 - exp(-t / haze_m) (`in_air_of` takes both from the published sky; the
+    default, an endless haze distance, leaves the ground as lit)."""
 
     up_m: float
     sun_direction_enu: tuple[float, float, float]
     rgb: tuple[float, float, float] = (0.30, 0.38, 0.20)
     ambient: float = 0.35
+    haze_m: float = math.inf
+    air_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def in_air_of(self, sky: Mapping[str, Any]) -> Ground:
+        """This ground in the air of a published sky (the `scene` message's "sky", as
+        SkyParams.to_dict writes it): the surface's haze distance (the dome's
+        "surface_haze_m", else "haze_m") and the colour the clouds fade into ("haze_rgb")."""
+        dome = sky.get("dome") or {}
+        haze_m = float(dome.get("surface_haze_m") or sky["haze_m"])
+        r, g, b = (float(v) for v in sky["haze_rgb"])
+        return dataclasses.replace(self, haze_m=haze_m, air_rgb=(r, g, b))
 
 
 def layers_from_images(
@@ -186,6 +203,9 @@ def ground_colour(ground: Ground, shadow: ShadowMap | None, camera: Camera) -> t
     light = ground.ambient + (1.0 - ground.ambient) * shade * direct
     colour = np.ones((*t.shape, 4))
     colour[..., :3] = light[..., None] * np.asarray(ground.rgb)
+    if math.isfinite(ground.haze_m):
+        haze = 1.0 - np.exp(-np.where(hit, t, 0.0) / max(ground.haze_m, 1e-3))
+        colour[..., :3] += haze[..., None] * (np.asarray(ground.air_rgb) - colour[..., :3])
     return t, colour
 
 

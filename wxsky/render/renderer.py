@@ -579,10 +579,13 @@ class Renderer:
             "u_exposure": self._exposure,
         }
         if feats.physical:
-            # The physical sky has no gradient; the dome still fades into the horizon colour
-            # and glows with the sun's.
-            for gone in ("u_zenith", "u_ground") + (
-                () if feats.dome else ("u_horizon", "u_sun_rgb")
+            # The physical sky has no gradient; the dome fades into the haze's colour
+            # (u_dome_haze_rgb) and glows with the sun's; the ground band (display values
+            # only) keeps the ground's colour.
+            for gone in (
+                ("u_zenith", "u_horizon")
+                + (("u_ground",) if feats.scene_linear else ())
+                + (() if feats.dome else ("u_sun_rgb",))
             ):
                 del camera[gone]
         return camera | sky_textures.frame_uniforms(cam, sky, feats)

@@ -91,6 +91,10 @@ DOME_DETAIL_TILE_M = 3_500.0
 DOME_MIN_CLEARANCE_M = 300.0
 EARTH_RADIUS_M = 6_371_000.0
 EARTHSHINE = 0.05  # of the sunlit face's brightness, on the dark part of a crescent at night
+LUMA_WEIGHTS = (0.2126, 0.7152, 0.0722)  # Rec. 709
+# On level ground under a clear sky, the sun's irradiance over the sky's is about this times
+# sin(sun elevation): near 1 with the sun 5° up (40-50 W/m² each), 6 to 10 at noon.
+SUN_OVER_SKY_LIGHT = 12.0
 
 # The shipped files: wxsky/render/data/, written by tools/generate/build_sky_textures.py.
 DATA_PACKAGE = "wxsky.render"
@@ -393,6 +397,9 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
     if feats.physical and sky.atmosphere is not None:
         out.update(physical_uniforms(sky.atmosphere))
         out["u_overcast"] = overcast_veil(sky.cover)
+    if not (feats.physical and feats.scene_linear):
+        # The ground band, in display values (the scene-linear sky keeps its table's ground).
+        out.update(ground_uniforms(cam, sky))
     if feats.stars:
         sigma, gain = star_sigma(cam)
         out.update(
@@ -438,6 +445,7 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
                 "u_dome_off1": frame.offsets[1],
                 "u_dome_off2": frame.offsets[2],
                 "u_dome_rgb": tuple(float(v) for v in dome_light_rgb(sky)),
+                "u_dome_haze_rgb": sky.haze_rgb,
                 "u_haze_m": sky.haze_m,
                 # The dome is high cloud: only the part of its ray in the hazy layer is hazy.
                 "u_haze_depth_m": min(
@@ -555,6 +563,46 @@ def flicker_clock_s(sky_time_s: float) -> float:
     """The shader's flicker clock: the sky time wrapped at the flicker period (see
     STAR_RATE_SCALE_HZ), which keeps every star's phase and float32 precision."""
     return sky_time_s % STAR_CLOCK_PERIOD_S
+
+
+def ground_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
+    """The ground band's uniforms (sky.glsl `ground_band`), the same in every variant of the
+    sky pass: below the horizon the variants must agree to the bit, so the air the ground
+    hazes into is the dome's haze colour wherever the dome is drawn this frame (its distant
+    band reaches the horizon, opaque), whether or not this variant draws the dome."""
+    dome = sky.dome
+    eye_agl_m = cam.position_m[2] - dome.ground_m
+    hazy_m = max(min(sky.haze_top_m - dome.ground_m, 1e6), 0.0)
+    surface_haze_m = dome.surface_haze_m if dome.surface_haze_m > 0.0 else sky.haze_m
+    layer_reaches = dome_frame(sky, cam.position_m[2]).height_m > 0.0
+    return {
+        "u_pixel_rad": pixel_rad(cam),
+        "u_ground_air": (eye_agl_m, surface_haze_m, hazy_m, CLEAR_AIR_HAZE_M),
+        "u_horizon_air": (*sky.haze_rgb, 1.0 if layer_reaches else 0.0),
+        "u_ground_tint": ground_tint(sky),
+    }
+
+
+def ground_tint(sky: SkyParams) -> tuple[float, float, float]:
+    """The colour of the light on the ground, at the luminance of white: the sun's on a level
+    surface through the clear share of the sky, and the diffuse light from above. Under open
+    sky a level surface gets the cosine-weighted mean of the sky's gradient (sky_colour: horizon
+    to zenith by sqrt(elevation)), which lies 0.8 of the way to the zenith's colour; under
+    cloud, the light of the air under it (SkyParams.haze_rgb: the horizon's, greyed under a
+    deck, what the clouds fade into). The ground's own colour (SkyParams.ground_rgb) keeps its
+    brightness and takes this tint: warm where a low sun lights it, grey under an overcast."""
+    sun_z = max(sky.sun.direction_enu[2], 0.0)
+    direct = SUN_OVER_SKY_LIGHT * sun_z * (1.0 - sky.cover)
+    open_sky = np.asarray(sky.horizon_rgb) + 0.8 * (
+        np.asarray(sky.zenith_rgb) - np.asarray(sky.horizon_rgb)
+    )
+    diffuse = open_sky + sky.cover * (np.asarray(sky.haze_rgb) - open_sky)
+    light = diffuse + direct * np.asarray(sky.sun_rgb, np.float64)
+    luma = float(light @ np.asarray(LUMA_WEIGHTS))
+    if not luma > 1e-6:
+        return (1.0, 1.0, 1.0)
+    r, g, b = (float(v) for v in light / luma)
+    return (r, g, b)
 
 
 # -- the physical sky ------------------------------------------------------------------------

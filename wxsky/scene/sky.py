@@ -90,6 +90,11 @@ class DomeControls:
     high_cover: float = 0.0  # cover of ice/high layers: the part shown overhead
     horizon_deg: float = 0.0  # the sprites' far edge seen from the ground, elevation
     drift_toward_deg: float = 0.0  # where the wind aloft carries the dome, true
+    # The ground band below the horizon (sky.glsl `ground_band`): the flat ground under the
+    # observer, MSL, and the haze distance in the air over it (the surface visibility's, also
+    # when the eye is above the hazy layer and SkyParams.haze_m is the clear air's).
+    ground_m: float = 0.0
+    surface_haze_m: float = 0.0
 
     def to_dict(self) -> dict[str, float]:
         return {
@@ -102,6 +107,8 @@ class DomeControls:
             "high_cover": self.high_cover,
             "horizon_deg": self.horizon_deg,
             "drift_toward_deg": self.drift_toward_deg,
+            "ground_m": self.ground_m,
+            "surface_haze_m": self.surface_haze_m,
         }
 
 
@@ -184,6 +191,7 @@ class SkyParams:
             "sunset": self.sunset,
             "cover": self.cover,
             "haze_m": self.haze_m,
+            "haze_rgb": list(self.haze_rgb),
             "stars": self.stars,
             "dome": self.dome.to_dict(),
         }
@@ -356,8 +364,12 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
         state.time_utc.hour * 3600.0 + state.time_utc.minute * 60.0 + state.time_utc.second
     )
     solar_time = (seconds_of_day / 86400.0 + state.observer.lon_deg / 360.0) % 1.0
+    ground_m = state.observer.alt_m
+    surface_haze_m = _haze_m(state, ground_m, _haze_top_m(state))
     if not layers:
-        return DomeControls(sunset=sunset, time=solar_time)
+        return DomeControls(
+            sunset=sunset, time=solar_time, ground_m=ground_m, surface_haze_m=surface_haze_m
+        )
     high = [lay for lay in layers if _is_high(lay)]
     high_cover = 1.0 - math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in high)
     weight = sum(lay.cover_oktas for lay in layers)
@@ -382,6 +394,8 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
         high_cover=high_cover,
         horizon_deg=math.degrees(math.atan2(max(edge_m, 0.0), DISTANT_CLOUD_M)),
         drift_toward_deg=math.degrees(math.atan2(wind_e, wind_n)) % 360.0,
+        ground_m=ground_m,
+        surface_haze_m=surface_haze_m,
     )
 
 

@@ -61,9 +61,18 @@ uniform vec2 u_dome_off0;
 uniform vec2 u_dome_off1;
 uniform vec2 u_dome_off2;
 uniform vec3 u_dome_rgb;          // cloud lit by sky and sun
+uniform vec3 u_dome_haze_rgb;     // the air between the eye and the layer (SkyParams.haze_rgb)
 uniform float u_haze_m;
 uniform float u_haze_depth_m;     // of the dome's height, how much lies in the hazy layer
 uniform float u_clear_haze_m;     // haze distance in the clear air above it
+// Ground band (every variant): the eye's height over the ground under the observer (at least
+// 0.5 m is taken), the haze distance over the ground, how much of the eye's height lies in the
+// hazy layer, the clear air's haze distance.
+uniform vec4 u_ground_air;
+// The air at the horizon, where a layer reaches it (rgb: the dome's haze colour there; a: 1
+// when the dome's distant band is drawn, else 0 and the clear sky's horizon shows).
+uniform vec4 u_horizon_air;
+uniform vec3 u_ground_tint;       // the light on the ground, at the luminance of white
 
 const float PI = 3.14159265358979;
 
@@ -220,7 +229,11 @@ vec3 moon_light(vec3 ray, out float coverage) {
 
 #if SKY_DOME
 // Roden & Parberry's cloud dome as a plane at the dome height: two shape layers blended,
-// cover as a threshold, density smoothing and darkening, and the sunset gradient.
+// cover as a threshold, density smoothing and darkening, and the sunset gradient. Along the
+// horizon it stands for the distant part of every layer, which carries on into the horizon
+// haze: seen edge-on it closes its gaps and turns opaque, and the air in front of it (a deck
+// 400 m up is 23 km away at 1° and 230 km at 0.1°) takes it over, so under a deck the
+// horizon is the deck's underside in haze, never a strip of clear sky (issue 41 item 5).
 vec4 cloud_dome(vec3 ray) {
     float z = max(ray.z, 0.002);
     vec2 plane_m = ray.xy / z * u_dome_height_m;
@@ -234,19 +247,22 @@ vec4 cloud_dome(vec3 ray) {
     // Distant parts of every layer show below the sprites' far edge; seen ever more
     // obliquely towards the horizon, their gaps close.
     float band = 1.0 - smoothstep(u_dome_band.x, u_dome_band.y, ray.z);
-    float distant = 1.0 - (1.0 - cover) * smoothstep(0.0, u_dome_band.y, ray.z);
+    float grazing = 1.0 - smoothstep(0.0, u_dome_band.y, ray.z);
+    float distant = 1.0 - (1.0 - cover) * (1.0 - grazing);
     float here = max(high_cover, distant * step(0.001, band));
     // The mean of two uniform layers is triangular: keep the share `here` of it.
     float c = 0.5 * (c0 + c1);
     float threshold = here < 0.5 ? 1.0 - sqrt(0.5 * here) : sqrt(0.5 * (1.0 - here));
     // Thin cloud is a soft-edged veil with fibres (detail cuts into it), dense cloud has
-    // firmer edges, is smooth and nearly opaque.
+    // firmer edges, is smooth and nearly opaque; seen edge-on, every layer is opaque.
     float softness = mix(0.22, 0.1, density);
     float a = smoothstep(threshold - 0.3 * softness, threshold + softness, c) * step(0.001, here);
-    a *= mix(0.25 + 0.75 * detail, 1.0, density) * mix(0.45, 0.95, density);
+    a *= mix(mix(0.25 + 0.75 * detail, 1.0, density) * mix(0.45, 0.95, density), 1.0,
+             grazing * step(0.001, band));
     // The distant band fades out upwards as a whole rather than by thinning its cover, which
     // would cut a hard edge where the averaged far texture crosses the threshold.
-    a *= max(band, step(0.001, high_cover)) * smoothstep(0.0, 0.01, ray.z);
+    // The dome is a plane above the eye: nothing of it below the eye's level.
+    a *= max(band, step(0.001, high_cover)) * step(0.0, ray.z);
     vec3 rgb = u_dome_rgb * mix(0.8, 1.05, detail) * (1.0 - 0.3 * density * a);
     // Thin ice cloud glows around the sun.
     float toward_sun = max(dot(ray, u_sun_dir), 0.0);
@@ -262,12 +278,41 @@ vec4 cloud_dome(vec3 ray) {
     vec3 sunset_rgb = textureLod(u_sunset_tex, sunset_uv, 0.0).rgb
                       * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
     rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
+    // Aerial perspective as the sprites have it (scene.layout.hazed): the layer's contrast
+    // falls by exp(-distance / haze distance) along the ray to its plane, towards the colour
+    // the sprites fade into; at the horizon the ray is endless and only the haze is left.
     float haze = 1.0 - exp(-(u_haze_depth_m / u_haze_m
-                             + (u_dome_height_m - u_haze_depth_m) / u_clear_haze_m) / z);
-    rgb = mix(rgb, u_horizon, haze * 0.85);
+                             + (u_dome_height_m - u_haze_depth_m) / u_clear_haze_m)
+                           / max(ray.z, 1e-5));
+    rgb = mix(rgb, u_dome_haze_rgb, haze);
     return vec4(rgb, a);
 }
 #endif
+
+// The ground below the horizon: a smooth Earth under the eye, in its own colour where it is
+// near and in aerial perspective towards `air` (the air at the horizon above it) with
+// distance, so the two meet where the Earth's horizon is (0.045° below level from 2 m, 3.2°
+// from 10 km), at a line as sharp as the haze allows: the ground there is 5 km off from 2 m
+// and keeps three quarters of its contrast at 60 km visibility. Between the eye's level and
+// that line the ray misses the Earth and the air shows.
+const float EARTH_RADIUS_M = 6371000.0;
+vec3 ground_band(vec3 ray, vec3 sky, vec3 air) {
+    float h = max(u_ground_air.x, 0.5);
+    // |eye + t ray| = R: with B = (R + h) sin(depression), t = c / (B + sqrt(B^2 - c)),
+    // the near root, in a form float32 keeps accurate for small h.
+    float b = (EARTH_RADIUS_M + h) * -ray.z;
+    float c = h * (2.0 * EARTH_RADIUS_M + h);
+    float disc = b * b - c;
+    float t = c / (b + sqrt(max(disc, 0.0)));
+    // Coverage of the pixel by the ground, anti-aliased across the horizon's line.
+    float horizon_z = -sqrt(c) / (EARTH_RADIUS_M + h);
+    float ground = clamp((horizon_z - ray.z) / u_pixel_rad + 0.5, 0.0, 1.0);
+    // The part of the ray in the hazy layer over the ground, the rest in clear air.
+    float hazy = clamp(u_ground_air.z / h, 0.0, 1.0);
+    float depth = t * (hazy / u_ground_air.y + (1.0 - hazy) / u_ground_air.w);
+    vec3 hazed = mix(u_ground * u_ground_tint, air, 1.0 - exp(-depth));
+    return ray.z < 0.0 ? mix(air, hazed, ground) : sky;
+}
 
 void main() {
     // From the pixel's own position, not a varying, so that every quad the pixel is drawn
@@ -279,9 +324,17 @@ void main() {
 #if SKY_PHYSICAL && SKY_SCENE_LINEAR
     vec3 col = physical_sky(ray);  // into a float target: radiance, kcd/m^2
 #elif SKY_PHYSICAL
+    vec3 look = ray.z < 0.0 ? normalize(vec3(ray.xy + vec2(1e-6, 0.0), 0.0)) : ray;
     vec3 col = display_from_scene(physical_sky(ray));
+    vec3 air = mix(ray.z < 0.0 ? display_from_scene(physical_sky(look)) : col,
+                   u_horizon_air.rgb, u_horizon_air.a);
 #else
-    vec3 col = sky_colour(ray, u_sun_dir, u_zenith, u_horizon, u_ground, u_sun_rgb);
+    // Below the horizon the sky is what lies behind the ground's haze: its colour at the
+    // horizon, or where a layer reaches the horizon, the air under it (`ground_band`). The
+    // physical sky's table holds its own ground, in its own aerial perspective.
+    vec3 look = ray.z < 0.0 ? normalize(vec3(ray.xy + vec2(1e-6, 0.0), 0.0)) : ray;
+    vec3 col = sky_colour(look, u_sun_dir, u_zenith, u_horizon, u_ground, u_sun_rgb);
+    vec3 air = mix(col, u_horizon_air.rgb, u_horizon_air.a);
 #endif
 #if SKY_DOME
     vec4 dome = cloud_dome(ray);
@@ -315,6 +368,9 @@ void main() {
     col = mix(col, vec3(1.0, 0.98, 0.9) * 1.2, disc * step(-0.01, ray.z) * length(u_sun_rgb));
 #endif
     col = mix(col, dome.rgb, dome.a);
+#if !(SKY_PHYSICAL && SKY_SCENE_LINEAR)
+    col = ground_band(ray, col, air);
+#endif
 #if SKY_PHYSICAL && SKY_SCENE_LINEAR
     f_colour = vec4(max(col, 0.0), 1.0);
 #else
