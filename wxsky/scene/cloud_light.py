@@ -2,12 +2,22 @@
 (Harris's particles, Wang's shading groups, Bouthors' slab and the tower volumes): the key
 light (the sun, or the moon at night) at the clouds, the sky above them and the ground below.
 
-`cloud_lights` is the one place these are filled. Today they come from the sky pass's colours
-(`scene.sky.SkyParams`); when the physical atmosphere supplies the sun's transmitted colour at
-each altitude and the sky's irradiance, only `cloud_lights` changes.
+`cloud_lights` is the one place these are filled. With the physical atmosphere (`[scene] sky =
+"physical"`, `SkyParams.atmosphere` set) they come from its tables at the clouds' altitude: the
+key light is the sun's light transmitted down to that altitude (`atmosphere.sun_irradiance`:
+tops reddened before bases at sunset, a deck's top still sunlit while the ground is in
+twilight), the sky above and the ground below the sky's irradiance there on a surface facing up
+and down (`atmosphere.sky_irradiance`: the ground's part is its albedo times the sun and sky on
+it). With Roden & Parberry's gradient (`sky = "roden-parberry"`) they come from its colours.
 
 Units: the cloud models' radiance units, in which a white Lambertian surface facing the key
-light is 1 (`key_rgb` of the noon sun is about 1).
+light is 1 (`key_rgb` of the noon sun is about 1). The atmosphere's klx become these units by
+ONE factor, `cloud_units_per_klx`: the sky pass's exposure (`atmosphere.display_exposure`, the
+`u_exposure` the sky shader multiplies its kcd/m^2 by) over the clouds' own exposure
+(`CLOUD_EXPOSURE`, shading_harris.EXPOSURE) and pi (a white Lambertian surface under E klx has
+a radiance of E / pi kcd/m^2). So a cloud and the sky behind it enter their tone curves on the
+same exposure: a cloud of radiance L kcd/m^2 is exposed as CLOUD_EXPOSURE * L_units =
+u_exposure * L, as the sky's pixels are.
 """
 
 from __future__ import annotations
@@ -15,7 +25,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.atmosphere import (
+    AtmosphereLuts,
+    display_exposure,
+    moon_irradiance,
+    sky_irradiance,
+    sun_irradiance,
+)
 from wxsky.scene.sky import SkyParams, smoothstep
+
+F64 = npt.NDArray[np.float64]
 
 RGB = tuple[float, float, float]
 Vec3 = tuple[float, float, float]
@@ -31,6 +53,15 @@ GROUND_ALBEDO = 0.15
 # The skylight on the ground, in the units of key_rgb, per unit of the sky's mean colour: a
 # clear noon sky gives the ground about a fifth of the sun's light.
 SKY_ON_GROUND = 0.35
+# The clouds' exposure, shading_harris.EXPOSURE (1 - exp(-EXPOSURE L)); written here as the
+# scene layer's light may not import a shading model (a test holds the two together).
+CLOUD_EXPOSURE = 3.3
+# Where a caller gives no altitude: a cloud this far above the ground (a fair-weather
+# cumulus's middle). Callers that know their layer pass its altitude.
+DEFAULT_CLOUD_AGL_M = 1_500.0
+# Of the ground's light (sky_irradiance below), the share that is the direct sun on it, which
+# a deck shades: the ground under full cover gets the sky's light only.
+SUN_SHARE_ON_GROUND = 0.8
 
 
 @dataclass(frozen=True)
@@ -44,9 +75,15 @@ class CloudLights:
     ground_rgb: RGB  # light from the ground below, onto a cloud's base (radiance units)
 
 
-def cloud_lights(sky: SkyParams, above_cloud: bool = False) -> CloudLights:
+def cloud_lights(
+    sky: SkyParams, above_cloud: bool = False, alt_m: float | None = None
+) -> CloudLights:
     """The clouds' lights for this sky; `above_cloud`: with the open sky over every layer (what
-    lights the top of a deck) instead of the sky the eye sees under the cloud."""
+    lights the top of a deck) instead of the sky the eye sees under the cloud. `alt_m` (MSL):
+    the clouds' altitude, for the physical atmosphere (None: DEFAULT_CLOUD_AGL_M above the
+    ground); the gradient sky has one light for every altitude."""
+    if sky.atmosphere is not None:
+        return _physical_lights(sky, sky.atmosphere, above_cloud, alt_m)
     sun_el = sky.sun.elevation_deg
     key_dir: Vec3
     key_rgb: RGB
@@ -80,3 +117,87 @@ def _greyer(rgb: tuple[float, ...]) -> RGB:
     grey = rgb[0] * 0.2126 + rgb[1] * 0.7152 + rgb[2] * 0.0722
     r, g, b = (grey + (c - grey) * SKY_SATURATION for c in rgb)
     return (r, g, b)
+
+
+# -- from the physical atmosphere -------------------------------------------------------------
+
+
+def cloud_units_per_klx(luts: AtmosphereLuts) -> float:
+    """The one factor from the atmosphere's irradiance (klx) to the clouds' units (see the
+    module's docstring): u_exposure / (CLOUD_EXPOSURE * pi)."""
+    return display_exposure(luts) / (CLOUD_EXPOSURE * math.pi)
+
+
+def _agl(sky: SkyParams, alt_m: float | None) -> float:
+    if alt_m is None or not math.isfinite(alt_m):
+        return DEFAULT_CLOUD_AGL_M
+    return max(alt_m - sky.ground_m, 0.0)
+
+
+def key_rgb_at(sky: SkyParams, alt_m: F64) -> F64 | None:
+    """(N, 3) the key light at each of N altitudes (MSL) in the clouds' units, for a model that
+    lights each sprite at its own height; None with the gradient sky (one light for all) or
+    at night (the moon's light, taken at one altitude, is dim and white enough)."""
+    luts = sky.atmosphere
+    if luts is None or sky.sun.elevation_deg <= MOON_TAKES_OVER_DEG:
+        return None
+    agl = np.maximum(np.asarray(alt_m, np.float64) - sky.ground_m, 0.0)
+    out: F64 = sun_irradiance(luts, agl, sky.sun.elevation_deg) * cloud_units_per_klx(luts)
+    return out
+
+
+def _physical_lights(
+    sky: SkyParams, luts: AtmosphereLuts, above_cloud: bool, alt_m: float | None
+) -> CloudLights:
+    agl = _agl(sky, alt_m)
+    per_klx = cloud_units_per_klx(luts)
+    sun_el = sky.sun.elevation_deg
+    key_dir: Vec3
+    if sun_el > MOON_TAKES_OVER_DEG:
+        key_dir = sky.sun.direction_enu
+        key = sun_irradiance(luts, agl, sun_el) * per_klx
+    else:
+        key_dir = sky.moon.direction_enu
+        key = (
+            moon_irradiance(luts, agl, sky.moon.elevation_deg, sky.moon.illuminated_fraction)
+            * per_klx
+        )
+    up, down = sky_irradiance(luts, agl, sun_el)
+    # A uniform sky of radiance L (clouds' units) gives a surface facing it an irradiance of L
+    # in the key's units: the sky's irradiance is the radiance of the sky that lights a cloud.
+    zenith = up * per_klx
+    # Toward the horizon the sky is paler and brighter than overhead; the clouds' models mix
+    # the two by the side a light comes from. The table has the irradiance from the whole
+    # hemisphere only, so the horizon is that light whitened by the light from the ground's
+    # side (the haze low in the sky is lit by the ground and the sun alike).
+    below = down * per_klx
+    horizon = 0.5 * (zenith + np.full(3, float(zenith @ _LUMA))) + 0.5 * below
+    if not above_cloud:
+        # Under cloud the eye's sky is grey and dim (the sky pass's overcast veil): the light
+        # a cloud gets from it too.
+        grey = smoothstep(0.6, 1.0, sky.cover)
+        zenith = zenith + (float(zenith @ _LUMA) - zenith) * (0.8 * grey)
+        horizon = horizon + (float(horizon @ _LUMA) - horizon) * (0.8 * grey)
+    # The ground: its part of `below` that is the direct sun is shaded by the decks.
+    ground = below * (1.0 - SUN_SHARE_ON_GROUND * sky.cover * float(sun_el > 0.0))
+    return CloudLights(
+        key_dir,
+        _rgb(key),
+        _rgb(_greyer_np(zenith)),
+        _rgb(_greyer_np(horizon)),
+        _rgb(ground),
+    )
+
+
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _greyer_np(rgb: F64) -> F64:
+    grey = float(rgb @ _LUMA)
+    out: F64 = grey + (rgb - grey) * SKY_SATURATION
+    return out
+
+
+def _rgb(v: F64) -> RGB:
+    a = np.nan_to_num(np.asarray(v, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    return (float(max(a[0], 0.0)), float(max(a[1], 0.0)), float(max(a[2], 0.0)))

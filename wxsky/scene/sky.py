@@ -9,11 +9,15 @@ stars to the celestial sphere, the clock their flicker runs on, and `DomeControl
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
-from wxsky.scene.atmosphere import AtmosphereLuts
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.atmosphere import LUMA, AtmosphereLuts, display_exposure, horizon_elevation_rad
 from wxsky.scene.ephemeris import (
     Matrix3,
     MoonPosition,
@@ -36,6 +40,7 @@ __all__ = [
 ]
 
 RGB = tuple[float, float, float]
+F64 = npt.NDArray[np.float64]
 
 SKY_EPOCH_UTC = datetime(2000, 1, 1, tzinfo=UTC)
 # Ice clouds and anything based this high belong to the dome overhead, where the sprite
@@ -137,6 +142,9 @@ class SkyParams:
     # The physical atmosphere's tables (`[scene] sky = "physical"`, made off the frame path
     # by engine/atmosphere_work.py); None: Roden & Parberry's gradient (`zenith_rgb`, ...).
     atmosphere: AtmosphereLuts | None = None
+    # The ground under the observer, MSL: the physical atmosphere's altitudes are above it
+    # (the engine builds its tables with the observer's ground as the model's).
+    ground_m: float = 0.0
 
     def with_atmosphere(self, luts: AtmosphereLuts | None) -> SkyParams:
         """This sky drawn from `luts` (None: from its gradient); every other field is this
@@ -160,10 +168,25 @@ class SkyParams:
     def haze_rgb(self) -> RGB:
         """The colour distant clouds fade into (the airlight): the horizon's, greyed as far as
         cloud covers the sky. Under a full deck the haze is lit by the grey light through it,
-        not by the dawn glow the sky's horizon keeps a touch of."""
+        not by the dawn glow the sky's horizon keeps a touch of. With the physical atmosphere:
+        the physical sky's own horizon as the sky pass shows it (`physical_haze_rgb`, averaged
+        round the horizon; `haze_toward` gives it direction by direction)."""
+        if self.atmosphere is not None:
+            return physical_haze_rgb(self.atmosphere, self.cover)
         r, g, b = self.horizon_rgb
         luma = 0.2126 * r + 0.7152 * g + 0.0722 * b
         return _mix(self.horizon_rgb, (luma, luma, luma), smoothstep(0.6, 1.0, self.cover))
+
+    def haze_toward(self, offsets_m: F64) -> F64:
+        """(3, N) the colour each of N clouds at `offsets_m` ((3, N) from the eye, ENU) fades
+        into: with the physical atmosphere the sky as the sky pass shows it right behind the
+        cloud (its direction, no lower than just over the horizon), so a distant cloud melts
+        into the sky behind it whichever way it lies from the sun; else `haze_rgb`."""
+        n = offsets_m.shape[1]
+        luts = self.atmosphere
+        if luts is None or n == 0:
+            return np.repeat(np.asarray(self.haze_rgb, np.float64)[:, None], n, axis=1)
+        return _sky_behind(luts, self.sun.direction_enu, self.cover, offsets_m)
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -346,6 +369,7 @@ def _sky_params(
         dome=dome_controls(state, cover, sunset),
         sky_time_s=clock_s,
         celestial_from_enu=celestial_from_enu(whole_second, obs.lat_deg, obs.lon_deg),
+        ground_m=obs.alt_m,
     )
 
 
@@ -431,3 +455,76 @@ def _mix(a: RGB, b: RGB, t: float) -> RGB:
 
 def _scale(a: RGB, k: float) -> RGB:
     return (a[0] * k, a[1] * k, a[2] * k)
+
+
+# -- the physical sky's haze (issue 41, item 2) -----------------------------------------------
+
+# A cloud fades toward the sky behind it, but never toward a sky lower than this over the
+# horizon: below it the sky-view table holds the ground.
+HAZE_MIN_ELEVATION_DEG = 0.5
+# `physical_haze_rgb` averages the horizon over these azimuths from the sun (0..180 degrees,
+# the table is symmetric about the sun's vertical), at HAZE_AVERAGE_ELEVATION_DEG.
+HAZE_AVERAGE_AZIMUTHS = 16
+HAZE_AVERAGE_ELEVATION_DEG = 2.0
+
+
+def overcast_veil(cover: float) -> tuple[float, float]:
+    """(share of grey, dimming) the sky pass lays over the physical sky under cover; the same
+    numbers as render.sky_textures.overcast_veil (a test holds them together: the scene may
+    not import the renderer)."""
+    t = smoothstep(0.6, 1.0, cover)
+    return (0.8 * t, 1.0 - 0.7 * t)
+
+
+def display_from_scene(radiance: F64, exposure: float) -> F64:
+    """(..., 3) the sky pass's stand-in exposure and tone map (sky.glsl `display_from_scene`)
+    in numpy: kcd/m^2 to the display values the layers hold."""
+    c = np.maximum(radiance, 0.0) * exposure
+    y = c @ LUMA
+    c = c / (1.0 + y)[..., None]
+    top = np.max(c, axis=-1, keepdims=True)
+    over = np.clip(top - 1.0, 0.0, 1.0)
+    c = np.where(top > 1.0, c / np.maximum(top, 1e-12) * (1.0 - over) + over, c)
+    out: F64 = np.sqrt(np.clip(c, 0.0, 1.0))
+    return out
+
+
+def _veiled(radiance: F64, cover: float) -> F64:
+    grey_share, dim = overcast_veil(cover)
+    grey = radiance @ LUMA
+    out: F64 = (radiance + (grey[..., None] - radiance) * grey_share) * dim
+    return out
+
+
+def _sky_behind(
+    luts: AtmosphereLuts, sun_enu: tuple[float, float, float], cover: float, offsets_m: F64
+) -> F64:
+    d = np.asarray(offsets_m, np.float64).T.copy()
+    norm = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+    d /= norm[:, None]
+    floor = math.sin(horizon_elevation_rad(luts.eye_alt_m) + math.radians(HAZE_MIN_ELEVATION_DEG))
+    low = d[:, 2] < floor
+    if low.any():
+        flat = np.maximum(np.linalg.norm(d[low, :2], axis=1), 1e-9)
+        scale = math.sqrt(1.0 - floor * floor) / flat
+        d[low, 0] *= scale
+        d[low, 1] *= scale
+        d[low, 2] = floor
+    radiance = _veiled(luts.radiance(d, np.asarray(sun_enu, np.float64)), cover)
+    out: F64 = display_from_scene(radiance, display_exposure(luts)).T
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def physical_haze_rgb(luts: AtmosphereLuts, cover: float) -> RGB:
+    """The physical sky's horizon as the sky pass shows it (display values), averaged round
+    the horizon (HAZE_AVERAGE_ELEVATION_DEG up): the one colour for what takes a single haze
+    colour (the tower quads); sprite clouds take `SkyParams.haze_toward`."""
+    az = np.radians((np.arange(HAZE_AVERAGE_AZIMUTHS) + 0.5) / HAZE_AVERAGE_AZIMUTHS * 180.0)
+    el = horizon_elevation_rad(luts.eye_alt_m) + math.radians(HAZE_AVERAGE_ELEVATION_DEG)
+    dirs = np.stack(
+        [np.sin(az) * math.cos(el), np.cos(az) * math.cos(el), np.full_like(az, math.sin(el))]
+    )
+    # The sun due north in this frame: the azimuths above are from the sun's.
+    rgb = _sky_behind(luts, (0.0, 1.0, 0.0), cover, dirs).mean(axis=1)
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
