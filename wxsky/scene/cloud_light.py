@@ -11,13 +11,16 @@ and down (`atmosphere.sky_irradiance`: the ground's part is its albedo times the
 it). With Roden & Parberry's gradient (`sky = "roden-parberry"`) they come from its colours.
 
 Units: the cloud models' radiance units, in which a white Lambertian surface facing the key
-light is 1 (`key_rgb` of the noon sun is about 1). The atmosphere's klx become these units by
-ONE factor, `cloud_units_per_klx`: the sky pass's exposure (`atmosphere.display_exposure`, the
-`u_exposure` the sky shader multiplies its kcd/m^2 by) over the clouds' own exposure
-(`CLOUD_EXPOSURE`, shading_harris.EXPOSURE) and pi (a white Lambertian surface under E klx has
-a radiance of E / pi kcd/m^2). So a cloud and the sky behind it enter their tone curves on the
-same exposure: a cloud of radiance L kcd/m^2 is exposed as CLOUD_EXPOSURE * L_units =
-u_exposure * L, as the sky's pixels are.
+light is `key_rgb` (under the gradient sky the noon sun's is about 1). The atmosphere's klx
+become these units by ONE factor, `cloud_units_per_klx`: the sky pass's exposure
+(`atmosphere.display_exposure`, the `u_exposure` the sky shader multiplies its kcd/m^2 by), over
+pi (a white Lambertian surface under E klx has a radiance of E / pi kcd/m^2), times
+`tone_match`, which puts the clouds' tone curve (shading_harris.exposed) level with the sky's
+at the sky's own mean brightness: a cloud as bright as the sky behind it shows as that sky
+does. With one tone map for every pass (issue 41, item 4, wt-linear) `tone_match` becomes
+1 / CLOUD_EXPOSURE: the same exposure for both. Under the physical sky the noon sun is about
+1.8 in these units (tone_match 0.62 = 2 / CLOUD_EXPOSURE: the clouds' curve, with no gamma,
+is that much darker in the mid-tones than the sky's).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.atmosphere import (
+    SUN_ILLUMINANCE_KLX,
     AtmosphereLuts,
     display_exposure,
     moon_irradiance,
@@ -56,6 +60,7 @@ SKY_ON_GROUND = 0.35
 # The clouds' exposure, shading_harris.EXPOSURE (1 - exp(-EXPOSURE L)); written here as the
 # scene layer's light may not import a shading model (a test holds the two together).
 CLOUD_EXPOSURE = 3.3
+CLOUD_TOE = 0.6  # and shading_harris.TOE
 # Where a caller gives no altitude: a cloud this far above the ground (a fair-weather
 # cumulus's middle). Callers that know their layer pass its altitude.
 DEFAULT_CLOUD_AGL_M = 1_500.0
@@ -124,8 +129,27 @@ def _greyer(rgb: tuple[float, ...]) -> RGB:
 
 def cloud_units_per_klx(luts: AtmosphereLuts) -> float:
     """The one factor from the atmosphere's irradiance (klx) to the clouds' units (see the
-    module's docstring): u_exposure / (CLOUD_EXPOSURE * pi)."""
-    return display_exposure(luts) / (CLOUD_EXPOSURE * math.pi)
+    module's docstring): u_exposure / pi times `tone_match(luts)`."""
+    return display_exposure(luts) * tone_match(luts) / math.pi
+
+
+def tone_match(luts: AtmosphereLuts) -> float:
+    """Clouds' units per unit of exposed radiance (radiance times u_exposure): the value at
+    which the clouds' tone curve (shading_harris.exposed: 1 - exp(-CLOUD_EXPOSURE L), then
+    its toe, no gamma) shows what the sky's (sky.glsl display_from_scene: Reinhard on the
+    luminance, then gamma 2) shows, at the sky's own mean level. The two curves differ (the
+    clouds' is far darker in the mid-tones: at the sky's level a cloud on the same exposure
+    showed at half the sky's display value), so a cloud as bright as the sky behind it now
+    shows as that sky does there; once every pass shares one tone map (issue 41, item 4),
+    this is 1 / CLOUD_EXPOSURE."""
+    rows = luts.sky_view.shape[0]
+    sky_y = float((luts.sky_view[rows // 2 :] @ _LUMA).mean() * SUN_ILLUMINANCE_KLX)
+    c = display_exposure(luts) * max(sky_y, 1e-9)
+    shown = math.sqrt(c / (1.0 + c))
+    # Invert the clouds' toe (e (e + TOE) / (1 + TOE)) and their exposure.
+    e = 0.5 * (-CLOUD_TOE + math.sqrt(CLOUD_TOE * CLOUD_TOE + 4.0 * shown * (1.0 + CLOUD_TOE)))
+    radiance = -math.log(max(1.0 - min(e, 0.999), 1e-6)) / CLOUD_EXPOSURE
+    return radiance / c
 
 
 def _agl(sky: SkyParams, alt_m: float | None) -> float:

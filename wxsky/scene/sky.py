@@ -17,7 +17,14 @@ from datetime import UTC, datetime
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.scene.atmosphere import LUMA, AtmosphereLuts, display_exposure, horizon_elevation_rad
+from wxsky.scene.atmosphere import (
+    LUMA,
+    MIE_SCALE_HEIGHT_M,
+    AtmosphereLuts,
+    display_exposure,
+    horizon_elevation_rad,
+    sun_irradiance,
+)
 from wxsky.scene.ephemeris import (
     Matrix3,
     MoonPosition,
@@ -510,9 +517,41 @@ def _sky_behind(
         d[low, 0] *= scale
         d[low, 1] *= scale
         d[low, 2] = floor
-    radiance = _veiled(luts.radiance(d, np.asarray(sun_enu, np.float64)), cover)
+    sun = np.asarray(sun_enu, np.float64)
+    radiance = luts.radiance(d, sun)
+    # The sky pass's aureole round the sun (a cloud near a low sun fades into it too).
+    strength, g = aureole(luts)
+    k = 1.0 + g * g - 2.0 * g * np.clip(d @ sun, -1.0, 1.0)
+    radiance += strength[None, :] * ((1.0 - g * g) / (4.0 * math.pi * k * np.sqrt(k)))[:, None]
+    radiance = _veiled(radiance, cover)
     out: F64 = display_from_scene(radiance, display_exposure(luts)).T
     return out
+
+
+# The sky pass's aureole (render.sky_textures: AUREOLE_*, `_physical_uniforms`; a test holds
+# them together: the scene may not import the renderer).
+AUREOLE_SHARE = 0.12
+AUREOLE_G_CLEAN = 0.985
+AUREOLE_G_HAZE = 0.93
+AUREOLE_HAZE_DEPTH = 1.0
+
+
+def aureole(luts: AtmosphereLuts) -> tuple[F64, float]:
+    """(strength kcd/m^2 per unit phase (3,), Henyey-Greenstein g) of the sky pass's aureole:
+    from the aerosol's optical depth from the eye toward the sun, as the sky pass has it."""
+    el = luts.sun_elevation_deg
+    eye_m = luts.eye_alt_m
+    sun_klx = sun_irradiance(luts, eye_m, el)
+    vertical = (
+        luts.medium.mie_extinction_per_m
+        * MIE_SCALE_HEIGHT_M
+        * math.exp(-eye_m / MIE_SCALE_HEIGHT_M)
+    )
+    tau = vertical / max(math.sin(math.radians(max(el, 0.0))), 1.0 / 40.0)
+    haze = min(tau / AUREOLE_HAZE_DEPTH, 1.0)
+    g = AUREOLE_G_CLEAN + (AUREOLE_G_HAZE - AUREOLE_G_CLEAN) * haze
+    strength: F64 = sun_klx * (AUREOLE_SHARE * (1.0 - math.exp(-tau)))
+    return strength, g
 
 
 @functools.lru_cache(maxsize=8)
