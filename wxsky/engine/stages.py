@@ -378,8 +378,9 @@ class SkyEngine:
     def _with_atmosphere(self, sky: SkyParams, state: WeatherState, camera: Camera) -> SkyParams:
         """The frame's sky with the physical atmosphere's tables (`[scene] sky = "physical"`):
         those of its sun, visibility, humidity and eye, or the last made while they are made
-        off the frame path (`AtmosphereWork`). Only the frame's sky carries them, not the
-        ring's and near sets' (a child process would be sent the tables with each)."""
+        off the frame path (`AtmosphereWork`). The frame's and the ring build's sky carry them
+        (the clouds' light and haze come from them: scene/cloud_light.py); not the near sets',
+        whose precompute needs the light's directions only."""
         if self.settings.sky != "physical":
             return sky
         obs = state.observer
@@ -613,13 +614,17 @@ class SkyEngine:
         # One ephemeris per frame (and none while the clock stands still): `sky()` reuses it.
         self._bodies = bodies = bodies_for(state, self._bodies)
         sky = sky_params(state, camera.position_m[2], bodies)
+        lit_sky = self._with_atmosphere(sky, state, camera)
         near_radius_m: float | None = None
         if self.render_mode == "direct":
             rings = RingFrame(None, 0, None, (), None, 1, 0.0, 0, ())
             near: tuple[NearRing, ...] = (NearRing(camera.position_m, drift, 1.0),)
             near_radius_m = self.settings.max_range_m
         else:
-            rings = self._schedule.step(state, drift, camera, sky, dt_wall_s)
+            # The ring's impostors are lit and hazed with the physical atmosphere's light too
+            # (its tables, some 1 MB, go with each build job: a build every few km or 1 deg
+            # of sun, never a frame's cost).
+            rings = self._schedule.step(state, drift, camera, lit_sky, dt_wall_s)
             near = rings.near_rings(camera, drift)
         self._rings = rings
         # What the frame is drawn from: this frame's weather, or while its near set is made
@@ -638,7 +643,7 @@ class SkyEngine:
             drawn_drift,
             camera,
             near,
-            self._with_atmosphere(sky, state, camera),
+            lit_sky,
             self.settings,
             locks=self._locks,
             near_radius_m=near_radius_m,

@@ -321,7 +321,7 @@ class TowerPass:
         if math.isfinite(left):
             rows = int(min(rows, max(1, left // width)))
         vx, vy, vz = (float(c) for c in quad.view_dir)
-        weights, ambient = view_weights(sky, (vx, vy, vz))
+        weights, ambient = view_weights(sky, (vx, vy, vz), spec.base_m + 0.5 * spec.height_m)
         padded = np.zeros((MAX_LIGHTS, 3), np.float32)  # lights a sky lacks add nothing
         padded[: len(weights)] = weights
         prog = self._march

@@ -2,20 +2,47 @@
 (Harris's particles, Wang's shading groups, Bouthors' slab and the tower volumes): the key
 light (the sun, or the moon at night) at the clouds, the sky above them and the ground below.
 
-`cloud_lights` is the one place these are filled. Today they come from the sky pass's colours
-(`scene.sky.SkyParams`); when the physical atmosphere supplies the sun's transmitted colour at
-each altitude and the sky's irradiance, only `cloud_lights` changes.
+`cloud_lights` is the one place these are filled. With the physical atmosphere (`[scene] sky =
+"physical"`, `SkyParams.atmosphere` set) they come from its tables at the clouds' altitude: the
+key light is the sun's light transmitted down to that altitude (`atmosphere.sun_irradiance`:
+tops reddened before bases at sunset, a deck's top still sunlit while the ground is in
+twilight), the sky above and the ground below the sky's irradiance there on a surface facing up
+and down (`atmosphere.sky_irradiance`: the ground's part is its albedo times the sun and sky on
+it). With Roden & Parberry's gradient (`sky = "roden-parberry"`) they come from its colours.
 
 Units: the cloud models' radiance units, in which a white Lambertian surface facing the key
-light is 1 (`key_rgb` of the noon sun is about 1).
+light is `key_rgb` (under the gradient sky the noon sun's is about 1). The atmosphere's klx
+become these units by ONE factor, `cloud_units_per_klx`: the sky pass's exposure
+(`atmosphere.display_exposure`, the `u_exposure` the sky shader multiplies its kcd/m^2 by), over
+pi (a white Lambertian surface under E klx has a radiance of E / pi kcd/m^2), times
+`tone_match`, which puts the clouds' tone curve (shading_harris.exposed) level with the sky's
+at the sky's own mean brightness: a cloud as bright as the sky behind it shows as that sky
+does. With one tone map for every pass (issue 41, item 4, wt-linear) `tone_match` becomes
+1 / CLOUD_EXPOSURE: the same exposure for both. Under the physical sky the noon sun is about
+1.8 in these units (tone_match 0.62 = 2 / CLOUD_EXPOSURE: the clouds' curve, with no gamma,
+is that much darker in the mid-tones than the sky's).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.atmosphere import (
+    SUN_ILLUMINANCE_KLX,
+    AtmosphereLuts,
+    display_exposure,
+    moon_irradiance,
+    sky_irradiance,
+    sun_irradiance,
+)
 from wxsky.scene.sky import SkyParams, smoothstep
+
+F64 = npt.NDArray[np.float64]
 
 RGB = tuple[float, float, float]
 Vec3 = tuple[float, float, float]
@@ -31,6 +58,16 @@ GROUND_ALBEDO = 0.15
 # The skylight on the ground, in the units of key_rgb, per unit of the sky's mean colour: a
 # clear noon sky gives the ground about a fifth of the sun's light.
 SKY_ON_GROUND = 0.35
+# The clouds' exposure, shading_harris.EXPOSURE (1 - exp(-EXPOSURE L)); written here as the
+# scene layer's light may not import a shading model (a test holds the two together).
+CLOUD_EXPOSURE = 3.3
+CLOUD_TOE = 0.6  # and shading_harris.TOE
+# Where a caller gives no altitude: a cloud this far above the ground (a fair-weather
+# cumulus's middle). Callers that know their layer pass its altitude.
+DEFAULT_CLOUD_AGL_M = 1_500.0
+# Of the ground's light (sky_irradiance below), the share that is the direct sun on it, which
+# a deck shades: the ground under full cover gets the sky's light only.
+SUN_SHARE_ON_GROUND = 0.8
 
 
 @dataclass(frozen=True)
@@ -44,9 +81,15 @@ class CloudLights:
     ground_rgb: RGB  # light from the ground below, onto a cloud's base (radiance units)
 
 
-def cloud_lights(sky: SkyParams, above_cloud: bool = False) -> CloudLights:
+def cloud_lights(
+    sky: SkyParams, above_cloud: bool = False, alt_m: float | None = None
+) -> CloudLights:
     """The clouds' lights for this sky; `above_cloud`: with the open sky over every layer (what
-    lights the top of a deck) instead of the sky the eye sees under the cloud."""
+    lights the top of a deck) instead of the sky the eye sees under the cloud. `alt_m` (MSL):
+    the clouds' altitude, for the physical atmosphere (None: DEFAULT_CLOUD_AGL_M above the
+    ground); the gradient sky has one light for every altitude."""
+    if sky.atmosphere is not None:
+        return _physical_lights(sky, sky.atmosphere, above_cloud, alt_m)
     sun_el = sky.sun.elevation_deg
     key_dir: Vec3
     key_rgb: RGB
@@ -80,3 +123,120 @@ def _greyer(rgb: tuple[float, ...]) -> RGB:
     grey = rgb[0] * 0.2126 + rgb[1] * 0.7152 + rgb[2] * 0.0722
     r, g, b = (grey + (c - grey) * SKY_SATURATION for c in rgb)
     return (r, g, b)
+
+
+# -- from the physical atmosphere -------------------------------------------------------------
+
+
+def cloud_units_per_klx(luts: AtmosphereLuts) -> float:
+    """The one factor from the atmosphere's irradiance (klx) to the clouds' units (see the
+    module's docstring): u_exposure / pi times `tone_match(luts)`."""
+    return display_exposure(luts) * tone_match(luts) / math.pi
+
+
+def tone_match(luts: AtmosphereLuts) -> float:
+    """Clouds' units per unit of exposed radiance (radiance times u_exposure): the value at
+    which the clouds' tone curve (shading_harris.exposed: 1 - exp(-CLOUD_EXPOSURE L), then
+    its toe, no gamma) shows what the sky's (sky.glsl display_from_scene: Reinhard on the
+    luminance, then gamma 2) shows, at the sky's own mean level. The two curves differ (the
+    clouds' is far darker in the mid-tones: at the sky's level a cloud on the same exposure
+    showed at half the sky's display value), so a cloud as bright as the sky behind it now
+    shows as that sky does there; once every pass shares one tone map (issue 41, item 4),
+    this is 1 / CLOUD_EXPOSURE."""
+    rows = luts.sky_view.shape[0]
+    sky_y = float((luts.sky_view[rows // 2 :] @ _LUMA).mean() * SUN_ILLUMINANCE_KLX)
+    c = display_exposure(luts) * max(sky_y, 1e-9)
+    shown = math.sqrt(c / (1.0 + c))
+    # Invert the clouds' toe (e (e + TOE) / (1 + TOE)) and their exposure.
+    e = 0.5 * (-CLOUD_TOE + math.sqrt(CLOUD_TOE * CLOUD_TOE + 4.0 * shown * (1.0 + CLOUD_TOE)))
+    radiance = -math.log(max(1.0 - min(e, 0.999), 1e-6)) / CLOUD_EXPOSURE
+    return radiance / c
+
+
+def _agl(sky: SkyParams, alt_m: float | None) -> float:
+    if alt_m is None or not math.isfinite(alt_m):
+        return DEFAULT_CLOUD_AGL_M
+    return max(alt_m - sky.ground_m, 0.0)
+
+
+def key_rgb_at(sky: SkyParams, alt_m: F64) -> F64 | None:
+    """(N, 3) the key light at each of N altitudes (MSL) in the clouds' units, for a model that
+    lights each sprite at its own height; None with the gradient sky (one light for all) or
+    at night (the moon's light, taken at one altitude, is dim and white enough)."""
+    luts = sky.atmosphere
+    if luts is None or sky.sun.elevation_deg <= MOON_TAKES_OVER_DEG:
+        return None
+    agl = np.maximum(np.asarray(alt_m, np.float64) - sky.ground_m, 0.0)
+    # A frame's sprites read a table over height, made once per table and 0.01 deg of sun:
+    # the transmittance per sprite cost a frame 0.4-1 ms on a 2-core CPU.
+    heights, table = _key_table(luts, round(sky.sun.elevation_deg * 100.0))
+    out: F64 = np.stack([np.interp(agl, heights, table[:, c]) for c in range(3)], axis=-1)
+    return out
+
+
+KEY_TABLE_STEP_M = 25.0  # the transmittance changes under 1 % over it at a 2 deg sun
+KEY_TABLE_TOP_M = 20_000.0
+
+
+@functools.lru_cache(maxsize=4)
+def _key_table(luts: AtmosphereLuts, sun_centideg: int) -> tuple[F64, F64]:
+    heights = np.arange(0.0, KEY_TABLE_TOP_M + KEY_TABLE_STEP_M, KEY_TABLE_STEP_M)
+    table = sun_irradiance(luts, heights, sun_centideg / 100.0) * cloud_units_per_klx(luts)
+    return heights, table
+
+
+def _physical_lights(
+    sky: SkyParams, luts: AtmosphereLuts, above_cloud: bool, alt_m: float | None
+) -> CloudLights:
+    agl = _agl(sky, alt_m)
+    per_klx = cloud_units_per_klx(luts)
+    sun_el = sky.sun.elevation_deg
+    key_dir: Vec3
+    if sun_el > MOON_TAKES_OVER_DEG:
+        key_dir = sky.sun.direction_enu
+        key = sun_irradiance(luts, agl, sun_el) * per_klx
+    else:
+        key_dir = sky.moon.direction_enu
+        key = (
+            moon_irradiance(luts, agl, sky.moon.elevation_deg, sky.moon.illuminated_fraction)
+            * per_klx
+        )
+    up, down = sky_irradiance(luts, agl, sun_el)
+    # A uniform sky of radiance L (clouds' units) gives a surface facing it an irradiance of L
+    # in the key's units: the sky's irradiance is the radiance of the sky that lights a cloud.
+    zenith = up * per_klx
+    # Toward the horizon the sky is paler and brighter than overhead; the clouds' models mix
+    # the two by the side a light comes from. The table has the irradiance from the whole
+    # hemisphere only, so the horizon is that light whitened by the light from the ground's
+    # side (the haze low in the sky is lit by the ground and the sun alike).
+    below = down * per_klx
+    horizon = 0.5 * (zenith + np.full(3, float(zenith @ _LUMA))) + 0.5 * below
+    if not above_cloud:
+        # Under cloud the eye's sky is grey and dim (the sky pass's overcast veil): the light
+        # a cloud gets from it too.
+        grey = smoothstep(0.6, 1.0, sky.cover)
+        zenith = zenith + (float(zenith @ _LUMA) - zenith) * (0.8 * grey)
+        horizon = horizon + (float(horizon @ _LUMA) - horizon) * (0.8 * grey)
+    # The ground: its part of `below` that is the direct sun is shaded by the decks.
+    ground = below * (1.0 - SUN_SHARE_ON_GROUND * sky.cover * float(sun_el > 0.0))
+    return CloudLights(
+        key_dir,
+        _rgb(key),
+        _rgb(_greyer_np(zenith)),
+        _rgb(_greyer_np(horizon)),
+        _rgb(ground),
+    )
+
+
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _greyer_np(rgb: F64) -> F64:
+    grey = float(rgb @ _LUMA)
+    out: F64 = grey + (rgb - grey) * SKY_SATURATION
+    return out
+
+
+def _rgb(v: F64) -> RGB:
+    a = np.nan_to_num(np.asarray(v, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    return (float(max(a[0], 0.0)), float(max(a[1], 0.0)), float(max(a[2], 0.0)))

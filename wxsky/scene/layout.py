@@ -220,7 +220,8 @@ def fade_by_range(
     max_range_m: float,
     dist_m: F64 | None = None,
 ) -> npt.NDArray[np.float32]:
-    """Aerial perspective: distant clouds take the haze's colour (`SkyParams.haze_rgb`) and
+    """Aerial perspective: distant clouds take the haze's colour (`SkyParams.haze_rgb`; with
+    the physical sky, the sky behind each, `SkyParams.haze_toward`) and
     fade out before the edge of the generated range, so the range limit never shows as a
     hard line. `dist_m`: (N,) the sprites' distances from the eye, if known."""
     return hazed(rgba[:, :3].T, rgba[:, 3], batch, eye_m, sky, max_range_m, dist_m)
@@ -240,7 +241,12 @@ def hazed(
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1) if dist_m is None else dist_m
     haze = 1.0 - np.exp(-dist / sky.haze_m)
     rgb = colours * (1.0 - haze)
-    rgb += np.asarray(sky.haze_rgb, np.float64)[:, None] * haze
+    if sky.atmosphere is None:
+        rgb += np.asarray(sky.haze_rgb, np.float64)[:, None] * haze
+    else:
+        # The physical sky: each cloud fades into the sky right behind it (a frame's sprites,
+        # one table lookup each).
+        rgb += sky.haze_toward((batch.centre_m - np.asarray(eye_m)).T) * haze
     out = with_alpha(rgb, alpha)
     if len(dist) and float(dist.max()) > 0.75 * max_range_m:  # the near layer never is
         edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wxsky.scene.cloud_light import key_rgb_at
 from wxsky.scene.shading_harris import (
     BALL_COLUMNS,
     ParticleLight,
@@ -111,12 +112,15 @@ def display_colours(
             slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2])
         )
     if slabs == 0:
-        lights = scene_lights(sky)
+        lights = scene_lights(sky, alt_m=_middle_m(batch))
+        key = key_rgb_at(sky, batch.centre_m[:, 2])
         if model == "wang":
-            return exposed_channels(wang_radiance(batch, lights, view, balls))
+            return exposed_channels(wang_radiance(batch, lights, view, balls, key))
         incident = harris_incident(batch, lights, light, scattered)
         depth = view_depth(batch, view, incident[:, -BALL_COLUMNS:])
-        return exposed_channels(harris_radiance(view, incident, lights, batch.height_frac, depth))
+        return exposed_channels(
+            harris_radiance(view, incident, lights, batch.height_frac, depth, key)
+        )
     # Columns by index (ndarray.take), not by mask: a fifth of the time.
     particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
     slab_radiance = slab_view_radiance(
@@ -131,7 +135,9 @@ def display_colours(
         mixed[:, slabs_at] = exposed_channels(slab_radiance)
         mixed[:, particle] = wang_colours(batch.take(particle), sky)[:, :3].T
         return mixed
-    lights = scene_lights(sky)
+    particle_z = batch.centre_m[:, 2].take(particle)
+    lights = scene_lights(sky, alt_m=_middle_m(batch, particle_z))
+    key = key_rgb_at(sky, particle_z)
     radiance = np.empty((3, n))
     radiance[:, slabs_at] = slab_radiance
     if model == "wang":
@@ -140,6 +146,7 @@ def display_colours(
             lights,
             view.take(particle, axis=1),
             None if balls is None else balls.take(particle, axis=0),
+            key,
         )
         return exposed_channels(radiance)
     if scattered is not None and close_directions(scattered.directions, lights.directions):
@@ -161,8 +168,16 @@ def display_colours(
         lights,
         particles.height_frac,
         view_depth(particles, particle_view, incident[:, -BALL_COLUMNS:]),
+        key,
     )
     return exposed_channels(radiance)
+
+
+def _middle_m(batch: SpriteBatch, z_m: F64 | None = None) -> float | None:
+    """The sprites' middle height (MSL): the altitude their sky and ground light is taken at
+    (the key light is taken at each sprite's own, `key_rgb_at`)."""
+    z = batch.centre_m[:, 2] if z_m is None else z_m
+    return float(np.median(z)) if len(z) else None
 
 
 def _check(model: str) -> None:

@@ -156,20 +156,30 @@ def scattered_light(batch: SpriteBatch, lights: Lights) -> Scattered:
 # The last lights made for each side (below or above the clouds), with what they were made
 # from: a frame asks three times for its sky's (the near layer's light, its particles and its
 # slabs), and the frames of one sky step share them. Lights are frozen and never written to.
-_last_lights: dict[bool, tuple[tuple[object, ...], Lights]] = {}
+_last_lights: dict[tuple[bool, int | None], tuple[tuple[object, ...], Lights]] = {}
 
 
-def scene_lights(sky: SkyParams, above_cloud: bool = False) -> Lights:
+def scene_lights(sky: SkyParams, above_cloud: bool = False, alt_m: float | None = None) -> Lights:
     """The key light, four skylights and the ambient term for this sky; `above_cloud`: the
     skylights of the open sky over every layer (what lights the top of a deck), not the sky
-    the eye sees."""
-    key = _light_inputs(sky)
-    last = _last_lights.get(above_cloud)  # one read: another thread may replace it
+    the eye sees. `alt_m`: the clouds' altitude (MSL) for the physical atmosphere's light
+    (`cloud_light.cloud_lights`; None: its default height), rounded to ALT_STEP_M."""
+    alt_q = None if alt_m is None or not math.isfinite(alt_m) else round(alt_m / ALT_STEP_M)
+    key = (*_light_inputs(sky), alt_q)
+    slot = (above_cloud, alt_q)
+    last = _last_lights.get(slot)  # one read: another thread may replace it
     if last is not None and last[0] == key:
         return last[1]
-    made = _scene_lights(sky, above_cloud)
-    _last_lights[above_cloud] = (key, made)
+    made = _scene_lights(sky, above_cloud, None if alt_q is None else alt_q * ALT_STEP_M)
+    if len(_last_lights) > 64:  # a few decks and towers a sky; never grows past a frame's few
+        _last_lights.clear()
+    _last_lights[slot] = (key, made)
     return made
+
+
+# The physical light at a cloud's altitude changes little over this (the sun's transmittance
+# over 100 m of height at a 2-degree sun: a few per cent): lights are kept per step.
+ALT_STEP_M = 100.0
 
 
 def _light_inputs(sky: SkyParams) -> tuple[object, ...]:
@@ -184,13 +194,16 @@ def _light_inputs(sky: SkyParams) -> tuple[object, ...]:
         sky.horizon_rgb,
         sky.open_zenith_rgb,
         sky.open_horizon_rgb,
+        sky.atmosphere,
+        sky.ground_m,
+        sky.cover,
     )
 
 
-def _scene_lights(sky: SkyParams, above_cloud: bool) -> Lights:
+def _scene_lights(sky: SkyParams, above_cloud: bool, alt_m: float | None) -> Lights:
     # On plain floats, as sky_params is: a frame makes these anew (the sun moves), and on
     # (3,) arrays the numpy calls cost 0.1 ms a set, twice a frame.
-    cl = cloud_lights(sky, above_cloud)
+    cl = cloud_lights(sky, above_cloud, alt_m)
     zenith, horizon = cl.sky_zenith_rgb, cl.sky_horizon_rgb
     sunward = [z + (h - z) * SKY_HORIZON_MIX for z, h in zip(zenith, horizon, strict=True)]
     away = [z + (h - z) * SKY_AWAY_MIX for z, h in zip(zenith, horizon, strict=True)]
@@ -286,6 +299,7 @@ def harris_radiance(
     lights: Lights,
     height_frac: F32 | F64 | None = None,
     eye_depth: F64 | None = None,
+    key_rgb: F64 | None = None,
 ) -> F64:
     """(3, N) radiance toward the eye, channel by channel, from the share of each light's beam
     reaching each sprite (`incident`, (N, L) for the L `lights`, `harris_incident`), along
@@ -293,7 +307,9 @@ def harris_radiance(
     droplets' phase function, and every light's multiply scattered share through the diffuse
     one; plus the ambient, and the ground's light on the lower part of a cloud (`height_frac`,
     (N,) 0 at its base, 1 at its top; None: half way). `eye_depth`: (N,) the optical depth of
-    the sprite's cloud between it and the eye (`view_depth`; None: none).
+    the sprite's cloud between it and the eye (`view_depth`; None: none). `key_rgb`: (N, 3)
+    the key light at each sprite's own altitude (`cloud_light.key_rgb_at`: the physical sun,
+    redder at a cloud's base than at its top at sunset); None: the lights' key for all.
     Exposed and given the sprites' opacity as alpha (`shading.sprite_colours`), the renderer's
     back-to-front blending is eq. 9's recurrence, with alpha as 1 - T."""
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
@@ -308,6 +324,9 @@ def harris_radiance(
         single *= np.exp(-eye_depth)
     weight[0] += single
     out: F64 = lights.rgb.T @ weight
+    if key_rgb is not None:
+        # The key's part with each sprite's own colour of it instead of the lights' one.
+        out += (key_rgb.T - lights.rgb[0][:, None]) * weight[0]
     out *= ALBEDO
     out += lights.ambient_rgb[:, None]
     below = 0.5 if height_frac is None else 1.0 - np.asarray(height_frac, np.float64)

@@ -39,6 +39,7 @@ from collections import OrderedDict
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.scene.cloud_light import key_rgb_at
 from wxsky.scene.scattering import ALBEDO, hg_phase
 from wxsky.scene.shading_harris import NIGHT_FLOOR_RGB, scene_lights
 from wxsky.scene.sky import SkyParams
@@ -267,12 +268,18 @@ def slab_view_radiance(
     the eye. The eye is above a sprite's slab above its top, below it under its base, and
     inside it on the side of the sprite it looks at. Only the arrays it reads, so a frame's
     slab sprites among others need no sub-batch of every field."""
-    # The deck is lit from the open sky above it, whatever the eye under it sees of the sky.
-    lights = scene_lights(sky, above_cloud=True)
-    key_dir, key_rgb = lights.directions[0], lights.rgb[0]
-    sky_rgb = lights.sky_rgb
     base_m = slab_m[:, 0].astype(np.float64)
     top_m = slab_m[:, 1].astype(np.float64)
+    # The deck is lit from the open sky above it, whatever the eye under it sees of the sky;
+    # with the physical atmosphere, the sun and sky at its top (a deck's top keeps the sun
+    # after the ground has lost it), each sprite's deck its own (`key_rgb_at`).
+    lights = scene_lights(
+        sky, above_cloud=True, alt_m=float(np.median(top_m)) if len(top_m) else None
+    )
+    key_dir = lights.directions[0]
+    sky_rgb = lights.sky_rgb
+    key_at_top = key_rgb_at(sky, top_m)
+    key_rgb = lights.rgb[0][:, None] if key_at_top is None else key_at_top.T
     eye_above: B
     if len(top_m) and eye_z_m >= top_m.max():  # over every deck (or under): one side for all
         eye_above = np.ones(len(top_m), np.bool_)
@@ -288,7 +295,7 @@ def slab_view_radiance(
     key, sky_share = slab_radiance(top_m - base_m, mu_l, np.abs(view[2]), key_dir @ view, reflected)
     # The sky term is the slab's own ambient: only the night floor (starlight, towns) is added.
     # (3, 1) by (N,): the same products as np.multiply.outer, at a quarter of the time.
-    out: F64 = key_rgb[:, None] * key
+    out: F64 = key_rgb * key
     out += sky_rgb[:, None] * sky_share
     out += NIGHT_FLOOR_RGB[:, None]
     return out

@@ -84,15 +84,22 @@ def _table(rows: tuple[tuple[float, ...], ...], el_deg: float) -> tuple[float, .
 WANG_CLOUD_TAU = 6.0
 
 
-def wang_radiance(batch: SpriteBatch, lights: Lights, view: F64, balls: F32 | None = None) -> F64:
+def wang_radiance(
+    batch: SpriteBatch,
+    lights: Lights,
+    view: F64,
+    balls: F32 | None = None,
+    key_rgb: F64 | None = None,
+) -> F64:
     """(3, N) radiance toward the eye along `view` ((3, N), `view_rays`) under the physical
     light (the same phase functions, ambient and ground light as Harris's particles): Wang
     has no particle pass, so the beam reaching a sprite is estimated from its shading group's
     direction from the cloud's centre (`light_dir`) against each light's: exp(-tau (1 - cos)
     / 2), tau the cloud's depth, thicker for grey types and thinner for forming clouds.
-    `balls`: the sprites' places in their whole clouds (`view_depth`)."""
+    `balls`: the sprites' places in their whole clouds (`view_depth`); `key_rgb`: (N, 3) the
+    key light at each sprite's altitude (`harris_radiance`)."""
     facing = batch.light_dir.astype(np.float64) @ lights.directions.T  # (N, L)
     tau = WANG_CLOUD_TAU * batch.opacity * (1.0 + DARK_TAU * batch.darkness)
     beam = np.exp(-(0.5 * tau)[:, None] * (1.0 - facing)).astype(np.float32)
     depth = view_depth(batch, view, balls)
-    return harris_radiance(view, beam, lights, batch.height_frac, depth)
+    return harris_radiance(view, beam, lights, batch.height_frac, depth, key_rgb)

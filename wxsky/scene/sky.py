@@ -9,11 +9,22 @@ stars to the celestial sphere, the clock their flicker runs on, and `DomeControl
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
-from wxsky.scene.atmosphere import AtmosphereLuts
+import numpy as np
+import numpy.typing as npt
+
+from wxsky.scene.atmosphere import (
+    LUMA,
+    MIE_SCALE_HEIGHT_M,
+    AtmosphereLuts,
+    display_exposure,
+    horizon_elevation_rad,
+    sun_irradiance,
+)
 from wxsky.scene.ephemeris import (
     Matrix3,
     MoonPosition,
@@ -36,6 +47,7 @@ __all__ = [
 ]
 
 RGB = tuple[float, float, float]
+F64 = npt.NDArray[np.float64]
 
 SKY_EPOCH_UTC = datetime(2000, 1, 1, tzinfo=UTC)
 # Ice clouds and anything based this high belong to the dome overhead, where the sprite
@@ -144,6 +156,9 @@ class SkyParams:
     # The physical atmosphere's tables (`[scene] sky = "physical"`, made off the frame path
     # by engine/atmosphere_work.py); None: Roden & Parberry's gradient (`zenith_rgb`, ...).
     atmosphere: AtmosphereLuts | None = None
+    # The ground under the observer, MSL: the physical atmosphere's altitudes are above it
+    # (the engine builds its tables with the observer's ground as the model's).
+    ground_m: float = 0.0
 
     def with_atmosphere(self, luts: AtmosphereLuts | None) -> SkyParams:
         """This sky drawn from `luts` (None: from its gradient); every other field is this
@@ -167,10 +182,25 @@ class SkyParams:
     def haze_rgb(self) -> RGB:
         """The colour distant clouds fade into (the airlight): the horizon's, greyed as far as
         cloud covers the sky. Under a full deck the haze is lit by the grey light through it,
-        not by the dawn glow the sky's horizon keeps a touch of."""
+        not by the dawn glow the sky's horizon keeps a touch of. With the physical atmosphere:
+        the physical sky's own horizon as the sky pass shows it (`physical_haze_rgb`, averaged
+        round the horizon; `haze_toward` gives it direction by direction)."""
+        if self.atmosphere is not None:
+            return physical_haze_rgb(self.atmosphere, self.cover)
         r, g, b = self.horizon_rgb
         luma = 0.2126 * r + 0.7152 * g + 0.0722 * b
         return _mix(self.horizon_rgb, (luma, luma, luma), smoothstep(0.6, 1.0, self.cover))
+
+    def haze_toward(self, offsets_m: F64) -> F64:
+        """(3, N) the colour each of N clouds at `offsets_m` ((3, N) from the eye, ENU) fades
+        into: with the physical atmosphere the sky as the sky pass shows it right behind the
+        cloud (its direction, no lower than just over the horizon), so a distant cloud melts
+        into the sky behind it whichever way it lies from the sun; else `haze_rgb`."""
+        n = offsets_m.shape[1]
+        luts = self.atmosphere
+        if luts is None or n == 0:
+            return np.repeat(np.asarray(self.haze_rgb, np.float64)[:, None], n, axis=1)
+        return _sky_behind(luts, self.sun.direction_enu, self.cover, offsets_m)
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -354,6 +384,7 @@ def _sky_params(
         dome=dome_controls(state, cover, sunset),
         sky_time_s=clock_s,
         celestial_from_enu=celestial_from_enu(whole_second, obs.lat_deg, obs.lon_deg),
+        ground_m=obs.alt_m,
     )
 
 
@@ -445,3 +476,108 @@ def _mix(a: RGB, b: RGB, t: float) -> RGB:
 
 def _scale(a: RGB, k: float) -> RGB:
     return (a[0] * k, a[1] * k, a[2] * k)
+
+
+# -- the physical sky's haze (issue 41, item 2) -----------------------------------------------
+
+# A cloud fades toward the sky behind it, but never toward a sky lower than this over the
+# horizon: below it the sky-view table holds the ground.
+HAZE_MIN_ELEVATION_DEG = 0.5
+# `physical_haze_rgb` averages the horizon over these azimuths from the sun (0..180 degrees,
+# the table is symmetric about the sun's vertical), at HAZE_AVERAGE_ELEVATION_DEG.
+HAZE_AVERAGE_AZIMUTHS = 16
+HAZE_AVERAGE_ELEVATION_DEG = 2.0
+
+
+def overcast_veil(cover: float) -> tuple[float, float]:
+    """(share of grey, dimming) the sky pass lays over the physical sky under cover; the same
+    numbers as render.sky_textures.overcast_veil (a test holds them together: the scene may
+    not import the renderer)."""
+    t = smoothstep(0.6, 1.0, cover)
+    return (0.8 * t, 1.0 - 0.7 * t)
+
+
+def display_from_scene(radiance: F64, exposure: float) -> F64:
+    """(..., 3) the sky pass's stand-in exposure and tone map (sky.glsl `display_from_scene`)
+    in numpy: kcd/m^2 to the display values the layers hold."""
+    c = np.maximum(radiance, 0.0) * exposure
+    y = c @ LUMA
+    c = c / (1.0 + y)[..., None]
+    top = np.max(c, axis=-1, keepdims=True)
+    over = np.clip(top - 1.0, 0.0, 1.0)
+    c = np.where(top > 1.0, c / np.maximum(top, 1e-12) * (1.0 - over) + over, c)
+    out: F64 = np.sqrt(np.clip(c, 0.0, 1.0))
+    return out
+
+
+def _veiled(radiance: F64, cover: float) -> F64:
+    grey_share, dim = overcast_veil(cover)
+    grey = radiance @ LUMA
+    out: F64 = (radiance + (grey[..., None] - radiance) * grey_share) * dim
+    return out
+
+
+def _sky_behind(
+    luts: AtmosphereLuts, sun_enu: tuple[float, float, float], cover: float, offsets_m: F64
+) -> F64:
+    d = np.asarray(offsets_m, np.float64).T.copy()
+    norm = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+    d /= norm[:, None]
+    floor = math.sin(horizon_elevation_rad(luts.eye_alt_m) + math.radians(HAZE_MIN_ELEVATION_DEG))
+    low = d[:, 2] < floor
+    if low.any():
+        flat = np.maximum(np.linalg.norm(d[low, :2], axis=1), 1e-9)
+        scale = math.sqrt(1.0 - floor * floor) / flat
+        d[low, 0] *= scale
+        d[low, 1] *= scale
+        d[low, 2] = floor
+    sun = np.asarray(sun_enu, np.float64)
+    radiance = luts.radiance(d, sun)
+    # The sky pass's aureole round the sun (a cloud near a low sun fades into it too).
+    strength, g = aureole(luts)
+    k = 1.0 + g * g - 2.0 * g * np.clip(d @ sun, -1.0, 1.0)
+    radiance += strength[None, :] * ((1.0 - g * g) / (4.0 * math.pi * k * np.sqrt(k)))[:, None]
+    radiance = _veiled(radiance, cover)
+    out: F64 = display_from_scene(radiance, display_exposure(luts)).T
+    return out
+
+
+# The sky pass's aureole (render.sky_textures: AUREOLE_*, `_physical_uniforms`; a test holds
+# them together: the scene may not import the renderer).
+AUREOLE_SHARE = 0.12
+AUREOLE_G_CLEAN = 0.985
+AUREOLE_G_HAZE = 0.93
+AUREOLE_HAZE_DEPTH = 1.0
+
+
+def aureole(luts: AtmosphereLuts) -> tuple[F64, float]:
+    """(strength kcd/m^2 per unit phase (3,), Henyey-Greenstein g) of the sky pass's aureole:
+    from the aerosol's optical depth from the eye toward the sun, as the sky pass has it."""
+    el = luts.sun_elevation_deg
+    eye_m = luts.eye_alt_m
+    sun_klx = sun_irradiance(luts, eye_m, el)
+    vertical = (
+        luts.medium.mie_extinction_per_m
+        * MIE_SCALE_HEIGHT_M
+        * math.exp(-eye_m / MIE_SCALE_HEIGHT_M)
+    )
+    tau = vertical / max(math.sin(math.radians(max(el, 0.0))), 1.0 / 40.0)
+    haze = min(tau / AUREOLE_HAZE_DEPTH, 1.0)
+    g = AUREOLE_G_CLEAN + (AUREOLE_G_HAZE - AUREOLE_G_CLEAN) * haze
+    strength: F64 = sun_klx * (AUREOLE_SHARE * (1.0 - math.exp(-tau)))
+    return strength, g
+
+
+@functools.lru_cache(maxsize=8)
+def physical_haze_rgb(luts: AtmosphereLuts, cover: float) -> RGB:
+    """The physical sky's horizon as the sky pass shows it (display values), averaged round
+    the horizon (HAZE_AVERAGE_ELEVATION_DEG up): the one colour for what takes a single haze
+    colour (the tower quads); sprite clouds take `SkyParams.haze_toward`."""
+    az = np.radians((np.arange(HAZE_AVERAGE_AZIMUTHS) + 0.5) / HAZE_AVERAGE_AZIMUTHS * 180.0)
+    el = horizon_elevation_rad(luts.eye_alt_m) + math.radians(HAZE_AVERAGE_ELEVATION_DEG)
+    dirs = np.stack(
+        [np.sin(az) * math.cos(el), np.cos(az) * math.cos(el), np.full_like(az, math.sin(el))]
+    )
+    # The sun due north in this frame: the azimuths above are from the sun's.
+    rgb = _sky_behind(luts, (0.0, 1.0, 0.0), cover, dirs).mean(axis=1)
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))

@@ -44,13 +44,14 @@ def tower_light(density: F32, sky: SkyParams, extinction: float = EXTINCTION_PER
 
 
 def view_weights(
-    sky: SkyParams, view_dir: tuple[float, float, float]
+    sky: SkyParams, view_dir: tuple[float, float, float], alt_m: float | None = None
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(L + 1, 3) what each channel of `tower_light` adds to the radiance toward an eye looking
     along `view_dir` (phase and albedo times the light's colour; the phase angle is the same in
     every cell for a distant eye), as `shading_harris.harris_radiance` weighs them, and (3,)
-    the ambient radiance (with the ground's light at a tower's middle height)."""
-    lights = scene_lights(sky)
+    the ambient radiance (with the ground's light at a tower's middle height). `alt_m`: the
+    tower's middle height (MSL), where the physical atmosphere's sun and sky are taken."""
+    lights = scene_lights(sky, alt_m=alt_m)
     view = np.asarray(view_dir, np.float64)
     view = view / np.linalg.norm(view)
     cos = lights.directions @ view
