@@ -16,9 +16,8 @@ from wxsky.scene.layout import SceneSettings
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
-# Clouds fade into `SkyParams.haze_rgb`, the gradient's horizon: the physical sky (issue 41's
-# default) does not feed that colour yet, so these checks hold the gradient's sky behind them.
-SETTINGS = SceneSettings(ring_texture_px=128, sky="roden-parberry")
+# The default sky: the physical one, where each cloud fades into the sky right behind it.
+SETTINGS = SceneSettings(ring_texture_px=128)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 

@@ -112,11 +112,6 @@ def test_backlit_cumulus_dark_core_bright_rim(renderer: Renderer) -> None:
     assert cloud["rim"] > cloud["sky"], f"the rim is not brighter than the sky beside it: {cloud}"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 41 open: the measured cloud is ~8 km off and two-thirds hazed, and the "
-    "sprites' texture multiplies the haze too (0.176 against a 0.193 sky)",
-)
 def test_front_lit_cumulus_brighter_than_sky(renderer: Renderer) -> None:
     when, az, _, _ = low_sun("fair-cumulus")
     lum, alpha, _ = shot(renderer, "fair-cumulus", when, (az + 180.0) % 360.0, 10.0)

@@ -377,3 +377,19 @@ def test_renderer_uploads_every_shipped_level(renderer: Renderer) -> None:
         assert renderer.ctx.error == "GL_NO_ERROR"
     finally:
         fresh.close()
+
+
+def test_cell_shades_are_each_slots_alpha_weighted_mean_luminance() -> None:
+    from wxsky.render.sprite_sheet import cell_shades, load_sheet
+
+    level = load_sheet()[0].astype(np.float64) / 255.0
+    shades = cell_shades()
+    assert shades.shape == (16,) and np.all((shades > 0.5) & (shades <= 1.0))
+    # Slot 5 by hand: the luminance of its texels, weighted by how much of each a sprite shows.
+    cell = level[128:256, 128:256]
+    luma = cell[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    expected = (luma * cell[..., 3]).sum() / cell[..., 3].sum()
+    assert shades[5] == pytest.approx(expected, rel=1e-5)
+    # A sheet of flat white texels has nothing to divide out.
+    white = [np.full((512, 512, 4), 255, np.uint8)]
+    assert np.allclose(cell_shades(white), 1.0)

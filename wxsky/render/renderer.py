@@ -24,7 +24,13 @@ from wxsky.render import sky_layer, sky_textures
 from wxsky.render.context import create_context, gil_free_finish
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
-from wxsky.render.sprite_sheet import CELL_PX, SUPPORT_LEVELS, load_sheet, support_polygons
+from wxsky.render.sprite_sheet import (
+    CELL_PX,
+    SUPPORT_LEVELS,
+    cell_shades,
+    load_sheet,
+    support_polygons,
+)
 from wxsky.render.towers import Drawable, TowerPass
 from wxsky.scene import exposure
 from wxsky.scene.camera import Camera
@@ -155,9 +161,11 @@ class Renderer:
         boxes = np.concatenate(
             [np.concatenate([p.min(axis=1), p.max(axis=1)], axis=1) for p in (fine, coarse)]
         )
+        shades = cell_shades(levels)
         for prog in self._sprite_progs.values():
             _write(prog, "u_polygon", np.concatenate([fine, coarse]).tobytes())
             _write(prog, "u_box", boxes.tobytes())
+            _write(prog, "u_cell_shade", shades.tobytes())
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
         self._sprite_vaos = {
             mixing: self._make_sprite_vao(prog) for mixing, prog in self._sprite_progs.items()

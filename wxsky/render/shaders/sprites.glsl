@@ -30,7 +30,11 @@ uniform mat4 u_proj;
 uniform vec4 u_polygon[POLYGONS * 8];  // fine set, then coarse
 uniform vec4 u_box[POLYGONS * 2];  // each set's bounding boxes: fine, then coarse
 uniform float u_viewport_px;  // the target's width
+// Per sheet slot, its mean shade (sprite_sheet.cell_shades): texels are divided by it, so a
+// sprite's mean colour is the one its cloud was shaded and hazed to.
+uniform float u_cell_shade[SHEET_CELLS * SHEET_CELLS];
 out vec2 v_uv;
+flat out float v_inv_shade;
 #if ROUND_MIX
 out vec2 v_round_uv;
 out float v_round_mix;
@@ -115,6 +119,12 @@ void main() {
     // Only sprites whose turn is none (0) or complete (1) come here.
     v_uv = cell_uv(round_mix > 0.5 ? float(ROUND_SLOT) : in_texture, local);
 #endif
+    int shown = round_mix > 0.5 ? ROUND_SLOT : slot;
+#if ROUND_MIX
+    v_inv_shade = 1.0 / mix(u_cell_shade[slot], u_cell_shade[ROUND_SLOT], round_mix);
+#else
+    v_inv_shade = 1.0 / u_cell_shade[shown];
+#endif
     v_rgba = vec4(in_rgba.rgb, alpha);
 }
 #endif
@@ -127,6 +137,7 @@ in vec2 v_round_uv;
 in float v_round_mix;
 #endif
 in vec4 v_rgba;
+flat in float v_inv_shade;
 uniform sampler2D u_sheet;
 out vec4 f_colour;
 void main() {
@@ -141,6 +152,6 @@ void main() {
     if (a < 1.0 / 512.0) {
         discard;
     }
-    f_colour = legacy_output(vec4(v_rgba.rgb * t.rgb * a, a));
+    f_colour = legacy_output(vec4(v_rgba.rgb * (t.rgb * v_inv_shade) * a, a));
 }
 #endif
