@@ -60,10 +60,17 @@ from wxsky.scene.atmosphere import (
     SUN_ANGULAR_RADIUS_RAD,
     AtmosphereLuts,
     display_exposure,
+    sky_irradiance,
     sun_irradiance,
 )
 from wxsky.scene.camera import Camera
-from wxsky.scene.sky import CLEAR_AIR_HAZE_M, DOME_MAX_WIND_MPS, DOME_TOP_M, SkyParams
+from wxsky.scene.sky import (
+    CLEAR_AIR_HAZE_M,
+    DOME_MAX_WIND_MPS,
+    DOME_TOP_M,
+    SkyParams,
+    display_from_scene,
+)
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
@@ -579,8 +586,38 @@ def ground_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
         "u_pixel_rad": pixel_rad(cam),
         "u_ground_air": (eye_agl_m, surface_haze_m, hazy_m, CLEAR_AIR_HAZE_M),
         "u_horizon_air": (*sky.haze_rgb, 1.0 if layer_reaches else 0.0),
-        "u_ground_tint": ground_tint(sky),
+        "u_ground_tint": ground_tint(sky) if sky.atmosphere is None else physical_ground_tint(sky),
     }
+
+
+# The diffuse share of the light a cloud deck lets through to the ground (stratus and
+# stratocumulus of optical depth 10-20 transmit 0.3-0.4 of what falls on their tops).
+DECK_TRANSMITTANCE = 0.35
+GROUND_ALBEDO_PHYSICAL = 0.12  # fields, woods and towns; the atmosphere model's ground is 0.1
+
+
+def physical_ground_tint(sky: SkyParams) -> tuple[float, float, float]:
+    """With the physical sky: the factor on the ground's colour (`SkyParams.ground_rgb`) that
+    makes it the ground's lit radiance as the sky pass shows it: an albedo of
+    GROUND_ALBEDO_PHYSICAL, in the ground's hue, lit by the atmosphere's sun on a level
+    surface and its sky from above at the ground, through the cloud cover (what a deck covers
+    gets DECK_TRANSMITTANCE of it), at the sky's exposure. The ground so darkens with the
+    light, as the sky and the clouds do, instead of keeping the gradient's brightness: under
+    a deck at a low sun it was brighter than the deck over it (issue 41)."""
+    luts = sky.atmosphere
+    assert luts is not None
+    el = sky.sun.elevation_deg
+    sun_h = sun_irradiance(luts, 0.0, el) * max(math.sin(math.radians(el)), 0.0)
+    above, _ = sky_irradiance(luts, 0.0, el)
+    open_share = 1.0 - sky.cover * (1.0 - DECK_TRANSMITTANCE)
+    light_klx = (np.asarray(sun_h) + np.asarray(above)) * open_share
+    ground = np.asarray(sky.ground_rgb, np.float64)
+    luma = float(ground @ np.asarray(LUMA_WEIGHTS))
+    albedo = GROUND_ALBEDO_PHYSICAL * ground / max(luma, 1e-6)
+    radiance = albedo * light_klx / math.pi  # klx -> kcd/m^2 off a Lambertian surface
+    shown = display_from_scene(radiance, display_exposure(luts))
+    r, g, b = (float(v) for v in shown / np.maximum(ground, 1e-6))
+    return (r, g, b)
 
 
 def ground_tint(sky: SkyParams) -> tuple[float, float, float]:
