@@ -49,7 +49,7 @@ them on a thread and the renderer keeps the last until the next is ready).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import numpy.typing as npt
@@ -102,6 +102,9 @@ MULTISCATTER_DIRECTIONS = 32
 AMBIENT_STEPS = 12
 AMBIENT_DIRECTIONS = (6, 8)  # elevations, azimuths per hemisphere
 SKY_VIEW_STEPS = 24
+# Ray samples marched at once (rays x steps): bounds a table build's temporaries to some
+# 40 MiB of float64 (twenty (rays, steps, 3) arrays).
+MARCH_SAMPLES = 100_000
 
 # Inputs and their limits (the one-line errors name them).
 VISIBILITY_M = Number(50.0, 1_000_000.0, unit="m")
@@ -249,6 +252,14 @@ def _transmittance_uv(r: F64, mu: F64) -> tuple[F64, F64]:
 
 def _optical_depth(med: Medium, r: F64, mu: F64, length: F64, steps: int) -> F64:
     """Optical depth (..., 3) along a ray from radius r, cos zenith mu, over `length`."""
+    if r.ndim and r.size * steps > MARCH_SAMPLES and r.shape[0] > 1:  # in slices, as _march
+        n = max(1, MARCH_SAMPLES // (steps * (r.size // r.shape[0])))
+        return np.concatenate(
+            [
+                _optical_depth(med, r[i : i + n], mu[i : i + n], length[i : i + n], steps)
+                for i in range(0, r.shape[0], n)
+            ]
+        )
     s = (np.arange(steps) + 0.5) / steps
     t = length[..., None] * s  # (..., S)
     ri = np.sqrt(r[..., None] ** 2 + t * t + 2.0 * r[..., None] * mu[..., None] * t)
@@ -330,6 +341,22 @@ def _march(
     multiple-scattering table's Psi where given. Samples crowd the ray's start (quadratic
     spacing), where the dense air is on a horizontal ray."""
     r, mu, mu_s, nu = np.broadcast_arrays(r, mu, mu_s, nu)
+    if r.ndim and r.size * steps > MARCH_SAMPLES and r.shape[0] > 1:
+        # In slices along the first axis: a ray's samples make some twenty (rays, steps, 3)
+        # temporaries, and the sky view's 20,736 rays at once took 233 MiB for a moment, a
+        # swing of the daemon's RSS with every rebuild (issue 40's soak).
+        per_row = r.size // r.shape[0]
+        n = max(1, MARCH_SAMPLES // (steps * per_row))
+        parts = [
+            _march(
+                med, t_table, ms_table, r[i : i + n], mu[i : i + n], mu_s[i : i + n],
+                nu[i : i + n], steps, isotropic,
+            )
+            for i in range(0, r.shape[0], n)
+        ]  # fmt: skip
+        return _March(
+            *(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(_March))
+        )
     ground = _hits_ground(r, mu)
     length = np.where(ground, _distance_to_ground(r, mu), _distance_to_top(r, mu))
     edges = (np.arange(steps + 1) / steps) ** 2
