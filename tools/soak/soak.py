@@ -1466,8 +1466,11 @@ def _chart(r: dict[str, Any], path: Path) -> None:
     if len(rows) < 2:
         return
     t = [row["t"] / 60.0 for row in rows]
+    # A sample whose frame could not be read (-1: the segment being restored) has no rate.
     fps = [0.0] + [
-        (b["frame"] - a["frame"]) / (b["t"] - a["t"]) if b["t"] > a["t"] else 0.0
+        (b["frame"] - a["frame"]) / (b["t"] - a["t"])
+        if b["t"] > a["t"] and a["frame"] >= 0 and b["frame"] >= 0
+        else float("nan")
         for a, b in itertools.pairwise(rows)
     ]
     m = r["marks"]
@@ -1480,6 +1483,15 @@ def _chart(r: dict[str, Any], path: Path) -> None:
             [float("nan") if c is None else c / 1024 for c in cache],
             color="tab:purple",
             label="block cache",
+        )
+    heap = [row.get("heap_in_use_kib") for row in rows]
+    if any(h is not None for h in heap):
+        axes[0].plot(
+            t,
+            [float("nan") if h is None else h / 1024 for h in heap],
+            color="tab:cyan",
+            linewidth=0.6,
+            label="heap in use",
         )
     axes[0].set_ylabel("MiB")
     axes[0].legend(loc="center right")
@@ -1496,6 +1508,8 @@ def _chart(r: dict[str, Any], path: Path) -> None:
         label="0.8 x baseline",
     )
     axes[2].set_ylabel("frames/s")
+    # A frame counter that jumps (a segment written again whole) would set the scale.
+    axes[2].set_ylim(0.0, 2.0 * max(r["fps"]["baseline"] or 30.0, 1.0))
     axes[2].set_xlabel("minutes since the daemon started")
     axes[2].legend(loc="lower left")
     for ax in axes:
