@@ -746,7 +746,7 @@ def test_a_one_shot_command_interrupted_by_ctrl_c_exits_130() -> None:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
-    assert proc.returncode == EXIT_INTERRUPTED == 130
+    assert proc.returncode == EXIT_INTERRUPTED == 130, err  # what it said instead, if not
     assert err.strip().splitlines() == ["wxsky: interrupted"]
 
 
