@@ -70,6 +70,7 @@ from wxsky.scene.sky import (
     DOME_TOP_M,
     SkyParams,
     display_from_scene,
+    overcast_veil,
 )
 
 U8 = npt.NDArray[np.uint8]
@@ -654,17 +655,6 @@ AUREOLE_SHARE = 0.12
 AUREOLE_G_CLEAN = 0.985
 AUREOLE_G_HAZE = 0.93
 AUREOLE_HAZE_DEPTH = 1.0  # Mie optical depth to the sun at which g is AUREOLE_G_HAZE
-
-
-def overcast_veil(cover: float) -> tuple[float, float]:
-    """(share of grey, dimming) of the physical sky under cloud cover above the eye, as the
-    gradient mode greys and dims its own (scene.sky): the clear-sky model knows nothing of a
-    deck, and under overcast its bright clear horizon showed as a white slot below the deck.
-    A stand-in until the sky sees the decks themselves (issue 41, item 5)."""
-    t = _smoothstep(0.6, 1.0, cover)
-    # Dimmer than the gradient's 0.55: the model's clear horizon is its brightest part, and
-    # at 0.55 the slot under overcast-stratus still stood 55 % brighter than the deck.
-    return (0.8 * t, 1.0 - 0.7 * t)
 
 
 @functools.lru_cache(maxsize=4)

@@ -490,9 +490,10 @@ HAZE_AVERAGE_ELEVATION_DEG = 2.0
 
 
 def overcast_veil(cover: float) -> tuple[float, float]:
-    """(share of grey, dimming) the sky pass lays over the physical sky under cover; the same
-    numbers as render.sky_textures.overcast_veil (a test holds them together: the scene may
-    not import the renderer)."""
+    """(share of grey, dimming) the sky pass lays over the physical sky under cover (the
+    uniform u_overcast): the clear-sky model knows nothing of a deck, and under overcast its
+    bright horizon showed as a white slot below the deck (issue 41). Dimmer than the
+    gradient's 0.55: at 0.55 the slot under overcast-stratus still stood 55 % brighter."""
     t = smoothstep(0.6, 1.0, cover)
     return (0.8 * t, 1.0 - 0.7 * t)
 
