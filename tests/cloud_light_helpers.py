@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.ephemeris import sun_position
+from wxsky.scene.exposure import display_inverse
 
 F64 = npt.NDArray[np.float64]
 
@@ -60,9 +61,13 @@ def srgb_to_linear(srgb8: npt.NDArray[np.uint8]) -> F64:
 
 
 def picture_luminance(rgba8: npt.NDArray[np.uint8]) -> F64:
-    """(H, W) relative linear luminance (Rec. 709 weights) of a rendered picture. Measured on
-    today's 8-bit sRGB output; switch here to scene-linear output when it exists."""
-    lin = srgb_to_linear(rgba8[..., :3])
+    """(H, W) relative scene-linear luminance (Rec. 709 weights) of a rendered picture: its
+    8-bit values through the inverse of the one tone map every pass shares under the physical
+    sky (`exposure.display_inverse`: sRGB decode, then ACES's inverse), so a ratio of two
+    regions is the ratio of their radiance, not of what the tone curve made of it. Exact up
+    to the 8-bit steps and to the layers being composited after the tone map (the sun's disc
+    and anything else past the curve's white read as that white)."""
+    lin = display_inverse(rgba8[..., :3].astype(np.float64) / 255.0, 1.0)
     out: F64 = lin @ np.array([0.2126, 0.7152, 0.0722])
     return out
 

@@ -17,7 +17,7 @@ from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
 from wxsky.render.sky_textures import overcast_veil as render_overcast_veil
 from wxsky.render.sky_textures import physical_uniforms
-from wxsky.scene import cloud_light, shading_harris
+from wxsky.scene import shading_harris
 from wxsky.scene.atmosphere import AtmosphereLuts, atmosphere_key, build_luts, display_exposure
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_light import CloudLights, cloud_lights, cloud_units_per_klx, key_rgb_at
@@ -85,40 +85,52 @@ def test_deck_top_sunlit_while_the_ground_is_in_twilight() -> None:
 
 
 def test_noon_sun_is_white_and_the_sky_above_blue() -> None:
-    """Units (one factor from klx, `cloud_units_per_klx`): the noon sun is about 1.8 in the
-    clouds' units (`tone_match`); the sky's light on a cloud is blue-grey (B/R over 1, bluer
+    """Units (one factor from klx, `cloud_units_per_klx`: the sky's exposure over pi): the
+    noon sun is about 1.4 in the clouds' units, past the tone map's mid-tones and short of
+    its white (7.2); the sky's light on a cloud is blue-grey (B/R over 1, bluer
     than the sun's), and far weaker than the sun's, as the sky's irradiance is."""
     sky = physical_sky(60.0)
     cl = lights_at(sky, 1_500.0)
-    assert 1.2 < cl.key_rgb[1] < 2.5, cl.key_rgb
+    assert 0.8 < cl.key_rgb[1] < 3.0, cl.key_rgb
     zenith_b_over_r = cl.sky_zenith_rgb[2] / cl.sky_zenith_rgb[0]
     assert zenith_b_over_r > 1.1, cl.sky_zenith_rgb
     assert zenith_b_over_r > cl.key_rgb[2] / cl.key_rgb[0] + 0.2, cl
     assert 0.05 < cl.sky_zenith_rgb[1] / cl.key_rgb[1] < 0.5, cl
     # The ground's light is its albedo's share of what falls on it: a small fraction.
     assert 0.0 < cl.ground_rgb[1] < 0.2 * cl.key_rgb[1], cl
-    # The one factor: the sky pass's exposure over the clouds' own and pi.
+    # The one factor: the sky pass's exposure over pi.
     luts = sky.atmosphere
     assert luts is not None
-    assert cloud_units_per_klx(luts) == pytest.approx(
-        display_exposure(luts) * cloud_light.tone_match(luts) / math.pi
-    )
-    assert cloud_light.CLOUD_EXPOSURE == shading_harris.EXPOSURE
-    assert cloud_light.CLOUD_TOE == shading_harris.TOE
+    assert cloud_units_per_klx(luts) == pytest.approx(display_exposure(luts) / math.pi)
 
 
 def test_a_cloud_as_bright_as_the_sky_shows_as_the_sky_does() -> None:
-    """`tone_match`: a cloud of the sky's mean radiance, through the clouds' tone curve, shows
-    the display value the sky pass gives the sky's mean radiance."""
+    """One exposure and one tone map: a cloud whose radiance is the sky's (in the clouds'
+    units, kcd/m^2 times the sky's exposure) shows, through the shading models' display
+    curve under the physical sky (`shown_channels`), the value the sky pass gives that sky;
+    a brighter cloud shows brighter and a darker one darker, for a grey and a blue sky, at
+    noon, a low sun and in twilight."""
     for el in (60.0, 5.0, -3.0):
-        luts = build_luts(atmosphere_key(el, 30_000.0, 60.0, 2.0))
+        sky = physical_sky(el)
+        luts = sky.atmosphere
+        assert luts is not None
         rows = luts.sky_view.shape[0]
         mean = (luts.sky_view[rows // 2 :].reshape(-1, 3) * 128.0).mean(axis=0)
         grey = np.full(3, float(mean @ np.array([0.2126, 0.7152, 0.0722])))
-        sky_shown = display_from_scene(grey, display_exposure(luts))
-        units = grey * display_exposure(luts) * cloud_light.tone_match(luts)
-        cloud_shown = shading_harris.exposed_channels(units[:, None])[:, 0]
-        assert np.allclose(cloud_shown, sky_shown, atol=0.01), (el, cloud_shown, sky_shown)
+        for radiance in (grey, mean):
+            sky_shown = display_from_scene(radiance, display_exposure(luts))
+            units = radiance * display_exposure(luts)
+            cloud_shown = shading_harris.shown_channels(units[:, None], sky)[:, 0]
+            assert np.allclose(cloud_shown, sky_shown, atol=1e-9), (el, cloud_shown, sky_shown)
+            brighter = shading_harris.shown_channels(2.0 * units[:, None], sky)[:, 0]
+            darker = shading_harris.shown_channels(0.5 * units[:, None], sky)[:, 0]
+            assert np.all(darker < cloud_shown) and np.all(cloud_shown < brighter), el
+    # The gradient sky keeps Harris's own curve (the goldens' look).
+    gradient = dataclasses.replace(physical_sky(60.0), atmosphere=None)
+    units = np.array([[0.5], [0.4], [0.3]])
+    assert np.array_equal(
+        shading_harris.shown_channels(units, gradient), shading_harris.exposed_channels(units)
+    )
 
 
 def test_shading_lights_follow_the_cloud_altitude() -> None:

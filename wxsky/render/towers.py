@@ -123,18 +123,12 @@ class TowerPass:
 
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self.ctx = ctx
-        self._march = shaders.program(
-            "tower_march.glsl",
-            {
-                "EXPOSURE": repr(EXPOSURE),
-                "TOE": repr(TOE),
-                "WHITEN_FROM": repr(WHITEN_FROM),
-                "WHITEN_TO": repr(WHITEN_TO),
-                "DENSITY_FLOOR": repr(OCCUPIED_FLOOR),
-            },
-        )
+        self._shaders = shaders
+        # Two marches: Harris's curve under the gradient sky, the shared tone map under the
+        # physical one (CLOUD_DISPLAY_SHARED, shading_harris.shown_channels); each made when
+        # first drawn with.
+        self._marches: dict[bool, tuple[moderngl.Program, moderngl.VertexArray]] = {}
         self._quad = shaders.program("tower_quad.glsl")
-        self._march_vao = ctx.vertex_array(self._march, [])
         self._quad_vao = ctx.vertex_array(self._quad, [])
         self._volumes: OrderedDict[tuple[object, ...], tuple[moderngl.Texture3D, ...]] = (
             OrderedDict()
@@ -222,6 +216,9 @@ class TowerPass:
         self._volumes.clear()
         self._volume_bytes = 0
         self._noise.release()
+        for _, vao in self._marches.values():
+            vao.release()
+        self._marches.clear()
 
     # -- internals ---------------------------------------------------------------------------
 
@@ -312,6 +309,24 @@ class TowerPass:
         fbo.clear(0.0, 0.0, 0.0, 0.0)
         return _Image(volume.key, volume.step, volume, eye_rel.copy(), tex, fbo)
 
+    def _march(self, physical: bool) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        made = self._marches.get(physical)
+        if made is None:
+            prog = self._shaders.program(
+                "tower_march.glsl",
+                {
+                    "EXPOSURE": repr(EXPOSURE),
+                    "TOE": repr(TOE),
+                    "WHITEN_FROM": repr(WHITEN_FROM),
+                    "WHITEN_TO": repr(WHITEN_TO),
+                    "DENSITY_FLOOR": repr(OCCUPIED_FLOOR),
+                    "CLOUD_DISPLAY_SHARED": str(int(physical)),
+                },
+            )
+            made = (prog, self.ctx.vertex_array(prog, []))
+            self._marches[physical] = made
+        return made
+
     def _march_rows(
         self, image: _Image, quad: _Quad, spec: TowerSpec, sky: SkyParams, left: float
     ) -> float:
@@ -324,7 +339,7 @@ class TowerPass:
         weights, ambient = view_weights(sky, (vx, vy, vz), spec.base_m + 0.5 * spec.height_m)
         padded = np.zeros((MAX_LIGHTS, 3), np.float32)  # lights a sky lacks add nothing
         padded[: len(weights)] = weights
-        prog = self._march
+        prog, vao = self._march(sky.atmosphere is not None)
         _set(prog, "u_light0", 0)
         _set(prog, "u_light1", 1)
         _set(prog, "u_noise", 2)
@@ -357,7 +372,7 @@ class TowerPass:
         self.ctx.disable(moderngl.BLEND)
         image.fbo.use()
         self.ctx.scissor = (0, image.rows_done, width, rows)
-        self._march_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
+        vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
         self.ctx.scissor = None
         image.rows_done += rows
         if image.complete:

@@ -24,8 +24,8 @@ Medium (Hillaire 2020's Earth, Bruneton 2017's parameters):
 
 Units: radiance in kcd/m^2 (luminance Y = 0.2126 R + 0.7152 G + 0.0722 B is cd/m^2 / 1000),
 irradiance in klx: the sun at the top of the atmosphere gives SUN_ILLUMINANCE_KLX on a surface
-facing it. Scene-linear values: the exposure (`display_exposure`, a stand-in until the
-renderer's own exposure lands) turns them into a picture.
+facing it. Scene-linear values: the exposure (`display_exposure`) and the one tone map every
+pass shares (`exposure.display`) turn them into a picture.
 
 Tables (rows first, float32, RGB):
 
@@ -765,9 +765,9 @@ def vertical_rayleigh_optical_depth() -> F64:
 
 
 def display_exposure(luts: AtmosphereLuts) -> float:
-    """A scale from kcd/m^2 to the display's 0..1 before the tone map (`u_sky_scale`): the
-    stand-in for the renderer's exposure (issue 41's scene-linear work replaces it). From the
-    mean luminance of the sky above the horizon, adapting only partly (a power of 0.5), so
+    """The automatic exposure: a scale from kcd/m^2 to exposed units, before the one tone map
+    (`exposure.display`; sky.glsl's `u_sky_scale`; the clouds' light is made in these units,
+    cloud_light), from the scene's luminance: the mean luminance of the sky above the horizon, adapting only partly (a power of 0.5), so
     that noon is bright, the low sun golden and twilight dark blue rather than lifted to
     noon's brightness; capped so the night stays night."""
     rows = luts.sky_view.shape[0]
@@ -776,6 +776,8 @@ def display_exposure(luts: AtmosphereLuts) -> float:
     return float(EXPOSURE_KEY / max(y, EXPOSURE_FLOOR_KCD) ** EXPOSURE_ADAPT)
 
 
-EXPOSURE_KEY = 0.25
+# Set for the ACES + sRGB curve (it was 0.25 for the sky's Reinhard + gamma 2): a clear
+# noon sky's mean at about 0.36 of display white, the horizon paler, the zenith deeper.
+EXPOSURE_KEY = 0.12
 EXPOSURE_ADAPT = 0.5
 EXPOSURE_FLOOR_KCD = 1e-4

@@ -13,14 +13,11 @@ it). With Roden & Parberry's gradient (`sky = "roden-parberry"`) they come from 
 Units: the cloud models' radiance units, in which a white Lambertian surface facing the key
 light is `key_rgb` (under the gradient sky the noon sun's is about 1). The atmosphere's klx
 become these units by ONE factor, `cloud_units_per_klx`: the sky pass's exposure
-(`atmosphere.display_exposure`, the `u_exposure` the sky shader multiplies its kcd/m^2 by), over
-pi (a white Lambertian surface under E klx has a radiance of E / pi kcd/m^2), times
-`tone_match`, which puts the clouds' tone curve (shading_harris.exposed) level with the sky's
-at the sky's own mean brightness: a cloud as bright as the sky behind it shows as that sky
-does. With one tone map for every pass (issue 41, item 4, wt-linear) `tone_match` becomes
-1 / CLOUD_EXPOSURE: the same exposure for both. Under the physical sky the noon sun is about
-1.8 in these units (tone_match 0.62 = 2 / CLOUD_EXPOSURE: the clouds' curve, with no gamma,
-is that much darker in the mid-tones than the sky's).
+(`atmosphere.display_exposure`, the `u_sky_scale` the sky shader multiplies its kcd/m^2 by)
+over pi (a white Lambertian surface under E klx has a radiance of E / pi kcd/m^2). The clouds'
+radiance is so already exposed as the sky's is, and goes through the same tone map
+(`shading_harris.shown_channels`, `exposure.display`): one exposure and one curve for the sky,
+the clouds and the ground, so a cloud as bright as the sky behind it shows as that sky does.
 """
 
 from __future__ import annotations
@@ -33,7 +30,6 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.atmosphere import (
-    SUN_ILLUMINANCE_KLX,
     AtmosphereLuts,
     display_exposure,
     moon_irradiance,
@@ -58,10 +54,6 @@ GROUND_ALBEDO = 0.15
 # The skylight on the ground, in the units of key_rgb, per unit of the sky's mean colour: a
 # clear noon sky gives the ground about a fifth of the sun's light.
 SKY_ON_GROUND = 0.35
-# The clouds' exposure, shading_harris.EXPOSURE (1 - exp(-EXPOSURE L)); written here as the
-# scene layer's light may not import a shading model (a test holds the two together).
-CLOUD_EXPOSURE = 3.3
-CLOUD_TOE = 0.6  # and shading_harris.TOE
 # Where a caller gives no altitude: a cloud this far above the ground (a fair-weather
 # cumulus's middle). Callers that know their layer pass its altitude.
 DEFAULT_CLOUD_AGL_M = 1_500.0
@@ -130,27 +122,8 @@ def _greyer(rgb: tuple[float, ...]) -> RGB:
 
 def cloud_units_per_klx(luts: AtmosphereLuts) -> float:
     """The one factor from the atmosphere's irradiance (klx) to the clouds' units (see the
-    module's docstring): u_exposure / pi times `tone_match(luts)`."""
-    return display_exposure(luts) * tone_match(luts) / math.pi
-
-
-def tone_match(luts: AtmosphereLuts) -> float:
-    """Clouds' units per unit of exposed radiance (radiance times u_exposure): the value at
-    which the clouds' tone curve (shading_harris.exposed: 1 - exp(-CLOUD_EXPOSURE L), then
-    its toe, no gamma) shows what the sky's (sky.glsl display_from_scene: Reinhard on the
-    luminance, then gamma 2) shows, at the sky's own mean level. The two curves differ (the
-    clouds' is far darker in the mid-tones: at the sky's level a cloud on the same exposure
-    showed at half the sky's display value), so a cloud as bright as the sky behind it now
-    shows as that sky does there; once every pass shares one tone map (issue 41, item 4),
-    this is 1 / CLOUD_EXPOSURE."""
-    rows = luts.sky_view.shape[0]
-    sky_y = float((luts.sky_view[rows // 2 :] @ _LUMA).mean() * SUN_ILLUMINANCE_KLX)
-    c = display_exposure(luts) * max(sky_y, 1e-9)
-    shown = math.sqrt(c / (1.0 + c))
-    # Invert the clouds' toe (e (e + TOE) / (1 + TOE)) and their exposure.
-    e = 0.5 * (-CLOUD_TOE + math.sqrt(CLOUD_TOE * CLOUD_TOE + 4.0 * shown * (1.0 + CLOUD_TOE)))
-    radiance = -math.log(max(1.0 - min(e, 0.999), 1e-6)) / CLOUD_EXPOSURE
-    return radiance / c
+    module's docstring): the sky's exposure over pi."""
+    return display_exposure(luts) / math.pi
 
 
 def _agl(sky: SkyParams, alt_m: float | None) -> float:

@@ -21,11 +21,11 @@ from wxsky.scene.shading_harris import (
     ParticleLight,
     Scattered,
     close_directions,
-    exposed_channels,
     harris_incident,
     harris_radiance,
     particle_light,
     scene_lights,
+    shown_channels,
     view_depth,
     view_rays,
     with_alpha,
@@ -108,18 +108,20 @@ def display_colours(
     # column is what shading the slab and particle sprites apart gives, at half the calls.
     view = view_rays(batch.centre_m, eye_m, dist_m)
     if slabs == n:
-        return exposed_channels(
-            slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2])
+        return shown_channels(
+            slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2]),
+            sky,
         )
     if slabs == 0:
         lights = scene_lights(sky, alt_m=_middle_m(batch))
         key = key_rgb_at(sky, batch.centre_m[:, 2])
         if model == "wang":
-            return exposed_channels(wang_radiance(batch, lights, view, balls, key))
+            return shown_channels(wang_radiance(batch, lights, view, balls, key), sky)
         incident = harris_incident(batch, lights, light, scattered)
         depth = view_depth(batch, view, incident[:, -BALL_COLUMNS:])
-        return exposed_channels(
-            harris_radiance(view, incident, lights, batch.height_frac, depth, key)
+        return shown_channels(
+            harris_radiance(view, incident, lights, batch.height_frac, depth, key),
+            sky,
         )
     # Columns by index (ndarray.take), not by mask: a fifth of the time.
     particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
@@ -132,7 +134,7 @@ def display_colours(
     )
     if model == "wang-artist":
         mixed = np.empty((3, n))
-        mixed[:, slabs_at] = exposed_channels(slab_radiance)
+        mixed[:, slabs_at] = shown_channels(slab_radiance, sky)
         mixed[:, particle] = wang_colours(batch.take(particle), sky)[:, :3].T
         return mixed
     particle_z = batch.centre_m[:, 2].take(particle)
@@ -148,7 +150,7 @@ def display_colours(
             None if balls is None else balls.take(particle, axis=0),
             key,
         )
-        return exposed_channels(radiance)
+        return shown_channels(radiance, sky)
     if scattered is not None and close_directions(scattered.directions, lights.directions):
         # A frame's near layer: the light is known, and only the arrays the eye-dependent
         # half reads are cut, not every field of the batch (which was a third of the stage).
@@ -170,7 +172,7 @@ def display_colours(
         view_depth(particles, particle_view, incident[:, -BALL_COLUMNS:]),
         key,
     )
-    return exposed_channels(radiance)
+    return shown_channels(radiance, sky)
 
 
 def _middle_m(batch: SpriteBatch, z_m: F64 | None = None) -> float | None:

@@ -39,6 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.cloud_light import cloud_lights
+from wxsky.scene.exposure import display
 from wxsky.scene.scattering import ALBEDO, cloud_phase, diffuse_phase, incident_light
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, SpriteBatch
@@ -416,6 +417,18 @@ def view_rays(centre_m: F64, eye_m: tuple[float, float, float], dist_m: F64 | No
     dist = np.sqrt(np.einsum("ij,ij->j", ray, ray)) if dist_m is None else dist_m
     ray *= np.divide(1.0, dist, out=np.zeros(len(dist)), where=dist > 1e-6)
     return ray
+
+
+def shown_channels(radiance: F64, sky: SkyParams) -> F64:
+    """(3, N) display colour of (3, N) cloud radiance under `sky`: with the physical
+    atmosphere, the one tone map every pass shares (`exposure.display`, the sky pass's too;
+    the clouds' light is already in exposed units, cloud_light), so a cloud as bright as the
+    sky behind it shows as that sky does; under the gradient sky, Harris's own curve
+    (`exposed_channels`), the look the goldens hold."""
+    if sky.atmosphere is not None:
+        out: F64 = display(radiance.T, 1.0).T
+        return out
+    return exposed_channels(radiance)
 
 
 def exposed(radiance: F64) -> F64:

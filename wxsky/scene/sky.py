@@ -33,6 +33,7 @@ from wxsky.scene.ephemeris import (
     sun_and_moon_smooth,
 )
 from wxsky.scene.ephemeris import sun_position as _ephemeris_sun_position
+from wxsky.scene.exposure import display
 from wxsky.weather.state import CloudLayer, CloudType, Observer, WeatherState
 
 __all__ = [
@@ -499,15 +500,11 @@ def overcast_veil(cover: float) -> tuple[float, float]:
 
 
 def display_from_scene(radiance: F64, exposure: float) -> F64:
-    """(..., 3) the sky pass's stand-in exposure and tone map (sky.glsl `display_from_scene`)
-    in numpy: kcd/m^2 to the display values the layers hold."""
-    c = np.maximum(radiance, 0.0) * exposure
-    y = c @ LUMA
-    c = c / (1.0 + y)[..., None]
-    top = np.max(c, axis=-1, keepdims=True)
-    over = np.clip(top - 1.0, 0.0, 1.0)
-    c = np.where(top > 1.0, c / np.maximum(top, 1e-12) * (1.0 - over) + over, c)
-    out: F64 = np.sqrt(np.clip(c, 0.0, 1.0))
+    """(..., 3) kcd/m^2 to the display values the layers hold, at `exposure` (kcd/m^2 to
+    exposed units): the one tone map of every pass (`exposure.display`, display.glsl's
+    `display`), which the sky pass applies at the atmosphere's exposure and the clouds' light
+    is made in the units of (cloud_light: the same exposure, no curve of their own)."""
+    out: F64 = display(radiance, exposure)
     return out
 
 

@@ -17,6 +17,7 @@ from wxsky.scene.shading_harris import (
     exposed,
     multiple_scattering,
     scene_lights,
+    shown_channels,
 )
 from wxsky.scene.sky import SkyParams
 from wxsky.towers.lighting import EXTINCTION_PER_CELL, slice_light
@@ -67,15 +68,22 @@ def view_weights(
 def tower_colours(density: F32, sky: SkyParams, view_dir: tuple[float, float, float]) -> F32:
     """(nz, ny, nx, 3) display colour 0..1 of every cell of `density` (z up, x east, y north),
     seen along `view_dir` (the direction from the eye into the volume; a distant eye)."""
-    return colours_of(tower_light(density, sky), *view_weights(sky, view_dir))
+    weights, ambient = view_weights(sky, view_dir)
+    return colours_of(tower_light(density, sky), weights, ambient, sky)
 
 
 def colours_of(
-    light: F32, weights: npt.NDArray[np.float64], ambient: npt.NDArray[np.float64]
+    light: F32,
+    weights: npt.NDArray[np.float64],
+    ambient: npt.NDArray[np.float64],
+    sky: SkyParams | None = None,
 ) -> F32:
     """(..., 3) display colour of cells with `light` (..., L) reaching them (`tower_light`)
-    for `view_weights`: the same sum and exposure the tower shader does."""
+    for `view_weights`: the same sum and exposure the tower shader does (under `sky`'s
+    display curve, `shown_channels`; None: Harris's)."""
     radiance = light @ weights + ambient
     shape = radiance.shape
-    out: F32 = exposed(radiance.reshape(-1, 3)).reshape(shape).astype(np.float32)
+    flat = radiance.reshape(-1, 3)
+    shown = exposed(flat) if sky is None else shown_channels(flat.T, sky).T
+    out: F32 = shown.reshape(shape).astype(np.float32)
     return out

@@ -119,20 +119,12 @@ vec3 physical_sky(vec3 ray) {
     return u_atmosphere_serial < 0.0 ? vec3(0.0) : radiance;
 }
 
-// The stand-in for the scene-linear exposure and tone map (issue 41's render-target work
-// replaces this function and u_sky_scale): exposure, a shoulder on the luminance that keeps
-// the hue (a low sun stays orange, not white), white where a channel still overflows, and
-// the display's gamma (the layers hold display values, as the gradient mode's).
+// Radiance (kcd/m^2) to display values at the atmosphere's exposure: display.glsl's one tone
+// map (ACES on the largest channel, then sRGB), the curve the clouds' light is shown through
+// too (scene/cloud_light.py), so a cloud as bright as the sky behind it shows as that sky.
+// The layer's own exposure (u_exposure, [render] exposure) then applies in legacy_output.
 vec3 display_from_scene(vec3 radiance) {
-    vec3 c = max(radiance, 0.0) * u_sky_scale;
-    float y = dot(c, vec3(0.2126, 0.7152, 0.0722));
-    c *= 1.0 / (1.0 + y);  // Reinhard on the luminance: a long shoulder toward a low sun
-    float top = max(c.r, max(c.g, c.b));
-    if (top > 1.0) {
-        c = mix(c / top, vec3(1.0), clamp(top - 1.0, 0.0, 1.0));
-    }
-    // Gamma 2, a square root: pow() cost a quarter of the whole pass on llvmpipe.
-    return sqrt(clamp(c, 0.0, 1.0));
+    return srgb_encode(tone_map(max(radiance, 0.0) * u_sky_scale));
 }
 #endif
 

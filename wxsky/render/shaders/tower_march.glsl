@@ -4,7 +4,7 @@
 // sky's lights is in two 3D textures (scene/tower_field.py: lights 0-3; lights 4-5 and the
 // density); the eye's phase and the lights' colours come as one weight per light
 // (tower_shading.view_weights), and the radiance is exposed as the sprite clouds' is
-// (shading_harris.exposed), so numpy's tower colours and these agree.
+// (shading_harris.shown_channels), so numpy's tower colours and these agree.
 
 #if defined VERTEX_SHADER
 out vec2 v_uv;  // -1..1 across the quad
@@ -36,6 +36,14 @@ uniform vec3 u_ambient;
 uniform float u_ext_per_m;  // extinction per metre at density 1
 out vec4 f_colour;
 
+#if CLOUD_DISPLAY_SHARED
+// Under the physical sky: the one tone map every pass shares (display.glsl, at the light's
+// own exposure: the clouds' light is in exposed units), as shading_harris.shown_channels.
+#include "display.glsl"
+vec3 exposed(vec3 r) {
+    return srgb_encode(tone_map(r));
+}
+#else
 vec3 exposed(vec3 r) {
     float peak = max(max(r.r, r.g), max(r.b, 1e-6));
     float e = 1.0 - exp(-EXPOSURE * peak);
@@ -45,6 +53,7 @@ vec3 exposed(vec3 r) {
     vec3 each = 1.0 - exp(-EXPOSURE * r);
     return mix(kept, each * (each + TOE) / (1.0 + TOE), bleach);
 }
+#endif
 
 void main() {
     vec3 dir = normalize(u_centre + v_uv.x * u_axis_u + v_uv.y * u_axis_v - u_eye);
