@@ -89,9 +89,10 @@ def low_sun(preset: str, elevation_deg: float = 5.0) -> tuple[datetime, float, f
 
 @pytest.mark.xfail(
     strict=True,
-    reason="issue 41 open: on one tone map, in radiance, the silver rim is 0.55 of a 0.92 "
-    "sky (the core is dark: 0.17): a sprite has one colour, its centre's, and a rim sprite's "
-    "thin outer texels need the unshadowed forward peak (a per-fragment term)",
+    reason="issue 41 open: on one tone map, in radiance, the silver rim is 0.60 of a 0.93 "
+    "sky (the core is dark: 0.18), with the sprites' rim colour (the forward beam the cloud "
+    "before a sprite hides); letting rims keep the beam's dimming toward the sun too lifts it "
+    "to 0.68 but outlines every sprite inside the cloud",
 )
 def test_backlit_cumulus_dark_core_bright_rim(renderer: Renderer) -> None:
     when, az, _, _ = low_sun("fair-cumulus")

@@ -69,8 +69,8 @@ ROUND_SNAP = 1e-4
 # fine set holds (trilinear filtering reads level log2(CELL_PX / pixels) and the next), with
 # half as much again to spare; smaller ones are drawn as the polygons that hold every level.
 FINE_MIN_PX = 1.5 * CELL_PX / 2.0 ** (SUPPORT_LEVELS - 1)
-# centre (3) + size + rotation + texture + rgba (4) + normal (3), float32
-_INSTANCE_FLOATS = 13
+# centre (3) + size + rotation + texture + rgba (4) + normal (3) + rim (3), float32
+_INSTANCE_FLOATS = 16
 _INSTANCE_LAYOUT = (
     ("in_centre", "3f", 0),
     ("in_size", "f", 3),
@@ -78,6 +78,7 @@ _INSTANCE_LAYOUT = (
     ("in_texture", "f", 5),
     ("in_rgba", "4f", 6),
     ("in_normal", "3f", 10),
+    ("in_rim", "3f", 13),
 )
 
 
@@ -645,9 +646,11 @@ class Renderer:
         inst[:, 3] = s.size_m
         inst[:, 4] = s.rotation_rad
         inst[:, 5] = s.texture
-        inst[:, 6:10] = draw.rgba
+        inst[:, 6:10] = draw.rgba[:, :4]
         # A zero normal is a sprite that faces the camera; others keep their own orientation.
         inst[:, 10:13] = 0.0 if draw.normals is None else draw.normals
+        # The colour of the sprite's thin outer texels (SpriteDraw.rgba); negative: none.
+        inst[:, 13:16] = draw.rgba[:, 4:7] if draw.rgba.shape[1] > 4 else -1.0
         data = inst.tobytes()
         if len(data) > self._instance_buf.size:
             self._instance_buf.orphan(len(data) * 2)

@@ -71,9 +71,11 @@ def collapse_far_clouds(
     mean_size = np.bincount(inverse, size) / np.maximum(count, 1)
     first = np.zeros(len(ids), np.intp)
     first[inverse[::-1]] = np.arange(n)[::-1]  # the cloud's first sprite, for its attributes
+    # Every colour column (the rim's too, where the draw has one: SpriteDraw.rgba), by
+    # coverage; alpha (column 3) is the cloud's densest sprite's.
     colour = np.stack(
-        [np.bincount(inverse, w * rgba[:, k]) / wsum for k in range(3)], axis=1
-    )  # (C, 3)
+        [np.bincount(inverse, w * rgba[:, k]) / wsum for k in range(rgba.shape[1])], axis=1
+    )  # (C, K)
     alpha = np.zeros(len(ids))
     np.maximum.at(alpha, inverse, rgba[:, 3].astype(np.float64))
     slab = sprites.slab[first[lod]]
@@ -93,7 +95,8 @@ def collapse_far_clouds(
         flat=np.zeros(len(lod), np.bool_),
         slab_m=sprites.slab_m[first[lod]],
     )
-    one_rgba = np.concatenate([colour[lod], (alpha[lod] * t[lod])[:, None]], axis=1)
+    one_rgba = colour[lod]
+    one_rgba[:, 3] = alpha[lod] * t[lod]
     return Collapsed(
         SpriteBatch.concat([sprites.take(keep), one]),
         np.concatenate([full_rgba[keep], one_rgba.astype(np.float32)]),

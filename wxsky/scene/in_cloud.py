@@ -152,11 +152,11 @@ def in_cloud_fog(
     cloud: InCloud,
     dist_m: npt.NDArray[np.float64] | None = None,
 ) -> tuple[F32, tuple[float, float, float, float]]:
-    """The sprites' (N, 4) straight-alpha colours fogged by the cloud the eye is in, and the
-    premultiplied veil over everything behind them (ring and sky). The fog is the colour of
-    the sprite the eye is deepest in, thickening with distance at the in-cloud visibility
-    (Koschmieder), and with depth into the cloud (VEIL_FULL_DEPTH). `dist_m`: (N,) the
-    sprites' distances from the eye, if known."""
+    """The sprites' (N, 4) (with rims (N, 7)) straight-alpha colours fogged by the cloud the
+    eye is in, and the premultiplied veil over everything behind them (ring and sky). The
+    fog is the colour of the sprite the eye is deepest in, thickening with distance at the
+    in-cloud visibility (Koschmieder), and with depth into the cloud (VEIL_FULL_DEPTH).
+    `dist_m`: (N,) the sprites' distances from the eye, if known."""
     if not cloud.inside or cloud.visibility_m is None or len(batch) == 0:
         return rgba, NO_VEIL
     depth_frac = math.log(cloud.visibility_m / VISIBILITY_EDGE_M) / math.log(
@@ -179,6 +179,8 @@ def in_cloud_fog(
     fogged = np.multiply(rgba[:, :3].T, 1.0 - f, order="C")
     fogged += fog_rgb[:, None] * f
     out[:, :3] = fogged.T
+    if rgba.shape[1] > 4:  # the sprites' rims (SpriteDraw.rgba), in the same fog
+        out[:, 4:7] = (rgba[:, 4:7].T * (1.0 - f) + fog_rgb[:, None] * f).T
     r, g, b = (float(c) * strength for c in fog_rgb)
     return out, (r, g, b, strength)
 

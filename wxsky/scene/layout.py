@@ -52,7 +52,7 @@ from wxsky.scene.shading import (
     DEFAULT_SHADING,
     ParticleLight,
     Scattered,
-    display_colours,
+    display_colours_and_rim,
     prepare_lighting,
 )
 from wxsky.scene.shading_harris import LIGHT_REUSE_DEG, batch_balls, with_alpha
@@ -106,7 +106,11 @@ class SpriteDraw:
     """Sprites ready to draw from one eye: sorted back to front, shaded."""
 
     sprites: SpriteBatch
-    rgba: npt.NDArray[np.float32]  # (N, 4) straight alpha
+    # (N, 4) straight alpha; or (N, 7): then columns 4-6 are the display colour of each
+    # sprite's thin outer texels, its rim (`shading.display_colours_and_rim`: the silver
+    # lining of a cloud before a low sun). Stages that keep, drop or merge sprites carry
+    # every column; a draw of four columns has rims of its sprites' own colour.
+    rgba: npt.NDArray[np.float32]
     # (N, 3) unit normal of a quad with its own orientation (a flat cirrus sheet, a sprite
     # whose facing locked while the camera is inside it); a zero row, or None for all, faces
     # the camera.
@@ -224,7 +228,8 @@ def fade_by_range(
     the physical sky, the sky behind each, `SkyParams.haze_toward`) and
     fade out before the edge of the generated range, so the range limit never shows as a
     hard line. `dist_m`: (N,) the sprites' distances from the eye, if known."""
-    return hazed(rgba[:, :3].T, rgba[:, 3], batch, eye_m, sky, max_range_m, dist_m)
+    rim = rgba[:, 4:7].T if rgba.shape[1] > 4 else None
+    return hazed(rgba[:, :3].T, rgba[:, 3], batch, eye_m, sky, max_range_m, dist_m, rim)
 
 
 def hazed(
@@ -235,19 +240,23 @@ def hazed(
     sky: SkyParams,
     max_range_m: float,
     dist_m: F64 | None = None,
+    rim: F64 | npt.NDArray[np.float32] | None = None,
 ) -> npt.NDArray[np.float32]:
     """`fade_by_range` of (3, N) colours (`shading.display_colours`) and (N,) alphas: (N, 4)
-    straight-alpha RGBA, rounded to float32 once."""
+    straight-alpha RGBA, rounded to float32 once; with `rim` ((3, N) the sprites' rim
+    colours, hazed alike), (N, 7) (see SpriteDraw.rgba)."""
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1) if dist_m is None else dist_m
     haze = 1.0 - np.exp(-dist / sky.haze_m)
-    rgb = colours * (1.0 - haze)
     if sky.atmosphere is None:
-        rgb += np.asarray(sky.haze_rgb, np.float64)[:, None] * haze
+        air = np.asarray(sky.haze_rgb, np.float64)[:, None] * haze
     else:
         # The physical sky: each cloud fades into the sky right behind it (a frame's sprites,
         # one table lookup each).
-        rgb += sky.haze_toward((batch.centre_m - np.asarray(eye_m)).T) * haze
+        air = sky.haze_toward((batch.centre_m - np.asarray(eye_m)).T) * haze
+    rgb = colours * (1.0 - haze) + air
     out = with_alpha(rgb, alpha)
+    if rim is not None:
+        out = np.concatenate([out, (rim * (1.0 - haze) + air).T.astype(np.float32)], axis=1)
     if len(dist) and float(dist.max()) > 0.75 * max_range_m:  # the near layer never is
         edge = np.clip((max_range_m - dist) / (0.25 * max_range_m), 0.0, 1.0)
         out[:, 3] *= (edge * edge * (3.0 - 2.0 * edge)).astype(np.float32)
@@ -283,8 +292,10 @@ def shade_for_eye(
     # from the whole batch, not from the drawn sprites, or a cloud half out of view would
     # change its shade as the view turns.
     balls = batch_balls(batch)[order] if shading == "wang" else None
-    colours = display_colours(drawn, sky, eye_m, shading, light, scattered, dist, balls)
-    rgba = hazed(colours, drawn.opacity, drawn, eye_m, sky, max_range_m, dist)
+    colours, rim = display_colours_and_rim(
+        drawn, sky, eye_m, shading, light, scattered, dist, balls
+    )
+    rgba = hazed(colours, drawn.opacity, drawn, eye_m, sky, max_range_m, dist, rim)
     if share is not None and len(share) and share.min() < 1.0:
         rgba[:, 3] *= share[order]
     return SpriteDraw(drawn, rgba)

@@ -23,6 +23,7 @@ from wxsky.scene.shading_harris import (
     close_directions,
     harris_incident,
     harris_radiance,
+    harris_radiance_and_rim,
     particle_light,
     scene_lights,
     shown_channels,
@@ -48,6 +49,7 @@ __all__ = [
     "ParticleLight",
     "Scattered",
     "display_colours",
+    "display_colours_and_rim",
     "prepare_lighting",
     "sprite_colours",
 ]
@@ -95,34 +97,72 @@ def display_colours(
     """`sprite_colours`' colours without their alpha, channel by channel: (3, N). `balls`:
     for Wang, (N, BALL_COLUMNS) each sprite's place in its whole cloud (`batch_balls` of a
     batch holding the clouds whole; None: of these sprites' clouds as they are here)."""
+    return _colours(batch, sky, eye_m, model, light, scattered, dist_m, balls, False)[0]
+
+
+def display_colours_and_rim(
+    batch: SpriteBatch,
+    sky: SkyParams,
+    eye_m: tuple[float, float, float],
+    model: str = DEFAULT_SHADING,
+    light: ParticleLight | None = None,
+    scattered: Scattered | None = None,
+    dist_m: F64 | None = None,
+    balls: F32 | None = None,
+) -> tuple[F64 | F32, F64 | None]:
+    """`display_colours`, and (3, N) the display colour of each sprite's thin outer texels
+    (`shading_harris.harris_radiance_and_rim`: the silver lining), or None where the model
+    has no rim of its own: Wang's, and Harris's under the gradient sky (whose look the golden
+    images hold). Slab sprites' rim is their colour."""
+    return _colours(batch, sky, eye_m, model, light, scattered, dist_m, balls, True)
+
+
+def _colours(
+    batch: SpriteBatch,
+    sky: SkyParams,
+    eye_m: tuple[float, float, float],
+    model: str,
+    light: ParticleLight | None,
+    scattered: Scattered | None,
+    dist_m: F64 | None,
+    balls: F32 | None,
+    want_rim: bool,
+) -> tuple[F64 | F32, F64 | None]:
     _check(model)
+    want_rim = want_rim and model == "harris" and sky.atmosphere is not None
     n = len(batch)
     if n == 0:
-        return np.zeros((3, 0))
+        return np.zeros((3, 0)), (np.zeros((3, 0)) if want_rim else None)
     slab = batch.slab
     slabs = int(np.count_nonzero(slab))
     if slabs == 0 and model == "wang-artist":
         out: F32 = wang_colours(batch, sky)[:, :3].T
-        return out
+        return out, None
     # The view rays once for all sprites, and one exposure over the sprites' radiance: each
     # column is what shading the slab and particle sprites apart gives, at half the calls.
     view = view_rays(batch.centre_m, eye_m, dist_m)
     if slabs == n:
-        return shown_channels(
+        shown = shown_channels(
             slab_view_radiance(batch.centre_m[:, 2], batch.slab_m, view, sky, eye_m[2]),
             sky,
         )
+        return shown, (shown if want_rim else None)
     if slabs == 0:
         lights = scene_lights(sky, alt_m=_middle_m(batch))
         key = key_rgb_at(sky, batch.centre_m[:, 2])
         if model == "wang":
-            return shown_channels(wang_radiance(batch, lights, view, balls, key), sky)
+            return shown_channels(wang_radiance(batch, lights, view, balls, key), sky), None
         incident = harris_incident(batch, lights, light, scattered)
         depth = view_depth(batch, view, incident[:, -BALL_COLUMNS:])
+        if want_rim:
+            body, rim = harris_radiance_and_rim(
+                view, incident, lights, batch.height_frac, depth, key
+            )
+            return shown_channels(body, sky), shown_channels(rim, sky)
         return shown_channels(
             harris_radiance(view, incident, lights, batch.height_frac, depth, key),
             sky,
-        )
+        ), None
     # Columns by index (ndarray.take), not by mask: a fifth of the time.
     particle, slabs_at = np.flatnonzero(~slab), np.flatnonzero(slab)
     slab_radiance = slab_view_radiance(
@@ -136,7 +176,7 @@ def display_colours(
         mixed = np.empty((3, n))
         mixed[:, slabs_at] = shown_channels(slab_radiance, sky)
         mixed[:, particle] = wang_colours(batch.take(particle), sky)[:, :3].T
-        return mixed
+        return mixed, None
     particle_z = batch.centre_m[:, 2].take(particle)
     lights = scene_lights(sky, alt_m=_middle_m(batch, particle_z))
     key = key_rgb_at(sky, particle_z)
@@ -150,7 +190,7 @@ def display_colours(
             None if balls is None else balls.take(particle, axis=0),
             key,
         )
-        return shown_channels(radiance, sky)
+        return shown_channels(radiance, sky), None
     if scattered is not None and close_directions(scattered.directions, lights.directions):
         # A frame's near layer: the light is known, and only the arrays the eye-dependent
         # half reads are cut, not every field of the batch (which was a third of the stage).
@@ -164,15 +204,19 @@ def display_colours(
         )
     particles = batch.take(particle)
     particle_view = view.take(particle, axis=1)
-    radiance[:, particle] = harris_radiance(
-        particle_view,
-        incident,
-        lights,
-        particles.height_frac,
-        view_depth(particles, particle_view, incident[:, -BALL_COLUMNS:]),
-        key,
+    depth = view_depth(particles, particle_view, incident[:, -BALL_COLUMNS:])
+    if not want_rim:
+        radiance[:, particle] = harris_radiance(
+            particle_view, incident, lights, particles.height_frac, depth, key
+        )
+        return shown_channels(radiance, sky), None
+    rim_radiance = radiance.copy()
+    body, rim = harris_radiance_and_rim(
+        particle_view, incident, lights, particles.height_frac, depth, key
     )
-    return shown_channels(radiance, sky)
+    radiance[:, particle] = body
+    rim_radiance[:, particle] = rim
+    return shown_channels(radiance, sky), shown_channels(rim_radiance, sky)
 
 
 def _middle_m(batch: SpriteBatch, z_m: F64 | None = None) -> float | None:

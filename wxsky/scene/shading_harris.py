@@ -313,6 +313,37 @@ def harris_radiance(
     redder at a cloud's base than at its top at sunset); None: the lights' key for all.
     Exposed and given the sprites' opacity as alpha (`shading.sprite_colours`), the renderer's
     back-to-front blending is eq. 9's recurrence, with alpha as 1 - T."""
+    return _harris(view, incident, lights, height_frac, eye_depth, key_rgb, False)[0]
+
+
+def harris_radiance_and_rim(
+    view: F64,
+    incident: F32,
+    lights: Lights,
+    height_frac: F32 | F64 | None,
+    eye_depth: F64 | None,
+    key_rgb: F64 | None,
+) -> tuple[F64, F64]:
+    """`harris_radiance`, and (3, N) the radiance of each sprite's thin outer texels (its
+    rim): the same light without the cloud between the sprite's centre and the eye on the
+    droplets' forward beam. Where a sprite's edge reaches past its cloud's silhouette nothing
+    lies between that edge and the eye, and a cloud between the eye and a low sun shows there
+    the forward peak undimmed: the silver lining. (Inside the silhouette the sprites in front
+    cover the rim.)"""
+    out, rim = _harris(view, incident, lights, height_frac, eye_depth, key_rgb, True)
+    assert rim is not None
+    return out, rim
+
+
+def _harris(
+    view: F64,
+    incident: F32,
+    lights: Lights,
+    height_frac: F32 | F64 | None,
+    eye_depth: F64 | None,
+    key_rgb: F64 | None,
+    want_rim: bool,
+) -> tuple[F64, F64 | None]:
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.
     cos = lights.directions @ view  # (L, N)
@@ -321,18 +352,29 @@ def harris_radiance(
     weight *= multiple_scattering(beam)
     weight[0] *= DIFFUSE_SHARE
     single = (1.0 - DIFFUSE_SHARE) * cloud_phase(cos[0]) * beam[0]
+    # What the cloud in front of the sprite takes off its forward beam (the rim keeps it;
+    # the beam's dimming on the way in stays: letting a rim keep that too outlined every
+    # sprite inside a backlit cloud in light).
+    hidden = None
     if eye_depth is not None:
-        single *= np.exp(-eye_depth)
+        kept = np.exp(-eye_depth)
+        if want_rim:
+            hidden = single * (1.0 - kept)
+        single *= kept
     weight[0] += single
     out: F64 = lights.rgb.T @ weight
+    key = lights.rgb[0][:, None] if key_rgb is None else key_rgb.T
     if key_rgb is not None:
         # The key's part with each sprite's own colour of it instead of the lights' one.
-        out += (key_rgb.T - lights.rgb[0][:, None]) * weight[0]
+        out += (key - lights.rgb[0][:, None]) * weight[0]
     out *= ALBEDO
     out += lights.ambient_rgb[:, None]
     below = 0.5 if height_frac is None else 1.0 - np.asarray(height_frac, np.float64)
     out += lights.ground_rgb[:, None] * (BASE_REFLECTANCE * below)
-    return out
+    if not want_rim:
+        return out, None
+    rim: F64 = out if hidden is None else out + key * (ALBEDO * hidden)
+    return out, rim
 
 
 # A cloud taken as a ball about its sprites' mean centre: of this radius over the sprites' RMS

@@ -16,6 +16,8 @@ in float in_rotation;
 in float in_texture;
 in vec4 in_rgba;
 in vec3 in_normal;        // ENU unit normal, or zero: face the camera
+in vec3 in_rim;           // display colour of the thin outer texels (SpriteDraw.rgba's
+                          // rim), or negative: none (the texel's own colour to the edge)
 uniform mat3 u_view_rot;
 uniform mat4 u_proj;
 // Per sheet slot, and last for a flat-bottomed sprite part-way to the round one, the convex
@@ -40,6 +42,7 @@ out vec2 v_round_uv;
 out float v_round_mix;
 #endif
 out vec4 v_rgba;
+flat out vec4 v_rim;  // rgb, and 1 where the sprite has a rim, else 0
 
 vec2 cell_uv(float cell, vec2 local) {
     vec2 origin = vec2(mod(cell, float(SHEET_CELLS)), floor(cell / float(SHEET_CELLS)));
@@ -126,6 +129,7 @@ void main() {
     v_inv_shade = 1.0 / u_cell_shade[shown];
 #endif
     v_rgba = vec4(in_rgba.rgb, alpha);
+    v_rim = in_rim.r < 0.0 ? vec4(0.0) : vec4(in_rim, 1.0);
 }
 #endif
 
@@ -138,6 +142,7 @@ in float v_round_mix;
 #endif
 in vec4 v_rgba;
 flat in float v_inv_shade;
+flat in vec4 v_rim;
 uniform sampler2D u_sheet;
 out vec4 f_colour;
 void main() {
@@ -152,6 +157,10 @@ void main() {
     if (a < 1.0 / 512.0) {
         discard;
     }
-    f_colour = legacy_output(vec4(v_rgba.rgb * (t.rgb * v_inv_shade) * a, a));
+    // A texel's opacity is how thick the cloud is there: the thinner, the more it shows the
+    // light its sprite's centre is shaded without (the rim: the forward peak that the cloud
+    // before the centre hides, which a silhouette's thin edge lets through).
+    vec3 body = v_rgba.rgb * (t.rgb * v_inv_shade);
+    f_colour = legacy_output(vec4(mix(body, v_rim.rgb, (1.0 - t.a) * v_rim.a) * a, a));
 }
 #endif

@@ -1,0 +1,168 @@
+"""The silver lining (issue 41, item 3): a sprite's thin outer texels show the light its centre
+is shaded without, the key light's forward beam that the cloud in front of the centre takes
+off (`shading_harris.harris_radiance_and_rim`). Under the physical sky the draw carries each
+sprite's rim colour (SpriteDraw.rgba, columns 4-6) through every stage that keeps, merges,
+drops or fogs sprites, and the sprite shader mixes it in by how thin a texel is."""
+
+from __future__ import annotations
+
+import dataclasses
+from datetime import UTC, datetime
+
+import numpy as np
+import pytest
+from sprite_helpers import sprite_batch
+
+from wxsky.render.renderer import Renderer
+from wxsky.scene.atmosphere import atmosphere_key, build_luts
+from wxsky.scene.camera import Camera
+from wxsky.scene.cloud_lod import collapse_far_clouds
+from wxsky.scene.cloud_model_files import default_models
+from wxsky.scene.clouds import SpriteBatch, block_clouds, layer_keys
+from wxsky.scene.exposure import display_inverse
+from wxsky.scene.in_cloud import InCloud, in_cloud_fog
+from wxsky.scene.layout import FrameScene, SpriteDraw, shade_for_eye
+from wxsky.scene.shading import display_colours, display_colours_and_rim
+from wxsky.scene.sky import SkyParams, SunPosition, sky_params
+from wxsky.scene.sprite_budget import cap_sprites
+from wxsky.scene.texture_slots import TEX_FOG
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+LAYER = CloudLayer(8.0, 1500.0, 3000.0, CloudType.CUMULUS)
+NOON = datetime(2026, 6, 21, 11, 30, tzinfo=UTC)
+EYE = (0.0, -6000.0, 2250.0)  # 6 km south of the cloud, level with its middle
+
+
+def _cumulus() -> SpriteBatch:
+    model = default_models().for_layer(LAYER.type, LAYER.thickness_m)
+    block = block_clouds(0, 0, layer_keys((LAYER,))[0], model, LAYER.thickness_m, 7)
+    ids, counts = np.unique(block.sprites.cloud_id, return_counts=True)
+    one = block.sprites.take(np.flatnonzero(block.sprites.cloud_id == ids[np.argmax(counts)]))
+    centre = one.centre_m.mean(axis=0)
+    return one.shifted((-centre[0], -centre[1], LAYER.base_m))
+
+
+def _sky(elevation_deg: float, azimuth_deg: float, physical: bool = True) -> SkyParams:
+    sky = dataclasses.replace(
+        sky_params(WeatherState(time_utc=NOON)), sun=SunPosition(elevation_deg, azimuth_deg)
+    )
+    if not physical:
+        return sky
+    return sky.with_atmosphere(build_luts(atmosphere_key(elevation_deg, 30_000.0, 60.0, 2.0)))
+
+
+def test_a_cloud_before_a_low_sun_has_rims_brighter_than_its_body() -> None:
+    cloud = _cumulus()
+    behind_cloud = _sky(5.0, 0.0)  # the sun due north, the eye south of the cloud
+    body, rim = display_colours_and_rim(cloud, behind_cloud, EYE, "harris")
+    assert rim is not None and rim.shape == body.shape == (3, len(cloud))
+    assert np.isfinite(rim).all() and (rim >= 0.0).all() and (rim <= 1.0).all()
+    # The rim keeps what the cloud before the centre takes: never darker, and for the
+    # sprites behind others toward the eye (most of a cloud) far brighter. In radiance: the
+    # tone map keeps hue (max-RGB), so adding orange light can lower a display's green.
+    rim_l = display_inverse(rim.T, 1.0) @ LUMA
+    body_l = display_inverse(body.T, 1.0) @ LUMA
+    # (Where the body is already past the curve's white its display says nothing more.)
+    unclipped = body.max(axis=0) < 0.999
+    assert unclipped.sum() > len(cloud) // 2
+    assert (rim_l >= body_l - 1e-6)[unclipped].all()
+    gain = rim_l / np.maximum(body_l, 1e-6)
+    assert np.median(gain) > 1.5, np.median(gain)
+    # The body is what display_colours gives.
+    assert np.array_equal(body, display_colours(cloud, behind_cloud, EYE, "harris"))
+    # With the sun behind the eye the droplets scatter less toward it: the rim is nearer
+    # the body (the forward peak is what makes a silver lining).
+    behind_eye = _sky(5.0, 180.0)
+    body_away, rim_away = display_colours_and_rim(cloud, behind_eye, EYE, "harris")
+    assert rim_away is not None
+    away_gain = (display_inverse(rim_away.T, 1.0) @ LUMA) / np.maximum(
+        display_inverse(body_away.T, 1.0) @ LUMA, 1e-6
+    )
+    # Measured: a median gain of 1.22 with the sun behind the eye, over 3 before it.
+    assert np.median(gain) > 2.0 * np.median(away_gain), (away_gain, gain)
+
+
+@pytest.mark.parametrize("model", ["wang", "wang-artist"])
+def test_models_without_a_rim_and_the_gradient_sky_give_four_columns(model: str) -> None:
+    cloud = _cumulus()
+    _, rim = display_colours_and_rim(cloud, _sky(5.0, 0.0), EYE, model)
+    assert rim is None
+    gradient = _sky(5.0, 0.0, physical=False)
+    _, rim = display_colours_and_rim(cloud, gradient, EYE, "harris")
+    assert rim is None
+    draw = shade_for_eye(cloud, EYE, gradient, 100_000.0, "harris")
+    assert draw.rgba.shape == (len(cloud), 4)
+    draw = shade_for_eye(cloud, EYE, _sky(5.0, 0.0), 100_000.0, "harris")
+    assert draw.rgba.shape == (len(cloud), 7)
+    # Hazed alike: a sprite with no forward beam hidden (none before it) has rim = body.
+    assert np.isfinite(draw.rgba).all()
+
+
+def _seven(n: int, seed: int = 3) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    rgba = rng.uniform(0.1, 0.6, (n, 7)).astype(np.float32)
+    rgba[:, 4:7] = rgba[:, :3] + 0.3  # rims brighter than bodies, told apart below
+    return rgba
+
+
+def test_rims_survive_the_stages_that_merge_drop_and_fog_sprites() -> None:
+    cloud = _cumulus()
+    n = len(cloud)
+    rgba = _seven(n)
+    far = cloud.shifted((0.0, 40_000.0, 0.0))
+    # One sprite for a far cloud: its rim is the coverage-weighted mean of its sprites'.
+    collapsed = collapse_far_clouds(far, rgba, (0.0, 0.0, 0.0), 10_000.0, 1_000.0)
+    assert collapsed.lod_clouds == 1 and collapsed.rgba.shape[1] == 7
+    one = collapsed.rgba[-1]
+    assert (one[4:7] > one[:3]).all()
+    assert one[4:7] == pytest.approx(one[:3] + 0.3, abs=1e-4)
+    # A budget keeps rows whole.
+    capped = cap_sprites(cloud, rgba, EYE, n // 2)
+    assert capped.rgba.shape[1] == 7
+    assert np.allclose(capped.rgba[:, 4:7] - capped.rgba[:, :3], 0.3, atol=1e-6)
+    # In cloud, the rims fog as the bodies do, toward the same fog colour.
+    inside = InCloud(inside=True, visibility_m=40.0)  # the core of a cloud
+    eye = tuple(float(v) for v in cloud.centre_m.mean(axis=0))
+    fogged, veil = in_cloud_fog(cloud, rgba, eye, inside)  # type: ignore[arg-type]
+    assert veil[3] > 0.0
+    assert fogged.shape == rgba.shape
+    diff_before = rgba[:, 4:7] - rgba[:, :3]
+    diff_after = fogged[:, 4:7] - fogged[:, :3]
+    assert (np.abs(diff_after) <= np.abs(diff_before) + 1e-6).all()
+    assert np.abs(diff_after).sum() < np.abs(diff_before).sum()
+
+
+@pytest.mark.gl
+def test_the_shader_shows_the_rim_in_thin_texels_and_the_body_in_thick_ones(
+    renderer: Renderer,
+) -> None:
+    sky = sky_params(WeatherState(time_utc=NOON))
+    cam = Camera(position_m=(0.0, 0.0, 1000.0), fov_deg=60.0, width_px=161, height_px=91)
+    batch = sprite_batch([(0, 2000, 1000)], [900], texture=TEX_FOG[0])
+    body = np.float32([[0.2, 0.2, 0.2, 1.0]])
+
+    def near(rgba: np.ndarray) -> np.ndarray:
+        renderer.render_frame(FrameScene(cam, sky, SpriteDraw(batch, rgba)))
+        return renderer.read("near").astype(np.float64)
+
+    plain = near(body)
+    same = near(np.concatenate([body, body[:, :3]], axis=1))
+    bright = near(np.concatenate([body, np.float32([[1.0, 1.0, 1.0]])], axis=1))
+    alpha = plain[..., 3] / 255.0
+    # The fog texture is soft: its densest texels give about 0.85.
+    assert (alpha > 0.8).any() and ((alpha > 0.02) & (alpha < 0.3)).any()
+    # Alpha is the sprite's whatever its rim.
+    assert np.array_equal(plain[..., 3], bright[..., 3])
+    thin = (alpha > 0.02) & (alpha < 0.3)
+    thick = alpha > 0.8
+
+    # Premultiplied: straight colour = rgb / alpha.
+    def straight(img: np.ndarray, where: np.ndarray) -> float:
+        return float((img[..., :3].mean(axis=2)[where] / img[..., 3][where]).mean())
+
+    assert straight(bright, thin) > straight(plain, thin) + 0.3
+    assert straight(bright, thick) < straight(plain, thick) + 0.15
+    # A rim of the body's own colour keeps the thin texels near that colour (the texture's
+    # shade is left out there), and no rim at all draws exactly what it always did.
+    assert abs(straight(same, thin) - straight(plain, thin)) < 0.15
