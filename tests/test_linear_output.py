@@ -72,16 +72,36 @@ def test_legacy_colours_come_back_unchanged_at_the_legacy_exposure() -> None:
 
 def test_tone_map_keeps_a_bright_sky_blue_blue_and_rolls_highlights_off() -> None:
     blue = np.array([0.25, 0.45, 0.9])
-    for scale in (1.0, 4.0, 16.0):
+    for scale in (1.0, 4.0, 8.0):
         out = ex.tone_map(blue * scale)
         # Max-RGB keeps the ratios: no drift to cyan (green catching up with blue).
         assert out[1] / out[2] == pytest.approx(blue[1] / blue[2], rel=1e-9)
         assert out[0] / out[2] == pytest.approx(blue[0] / blue[2], rel=1e-9)
+    # Past the curve's white (8 x 0.9 is just under it) a colour burns toward white, not
+    # toward cyan: both ratios rise, blue stays the largest, and far past it (the sun's
+    # disc) it is nearly white.
+    ratios = []
+    for scale in (8.0, 16.0, 32.0, 1000.0):
+        out = ex.tone_map(blue * scale)
+        assert out[2] == pytest.approx(1.0 if scale > 8.0 else out[2]) and out.argmax() == 2
+        ratios.append((out[0] / out[2], out[1] / out[2]))
+    assert all(a[0] < b[0] and a[1] < b[1] for a, b in itertools.pairwise(ratios))
+    assert ratios[-1][0] > 0.9 and ratios[-1][1] > 0.9
     x = np.array([0.5, 1.0, 2.0, 4.0, 7.0])
     y = ex.tone_curve(x)
     assert np.all(np.diff(y) > 0.0) and y[-1] < 1.0  # still rising at 7x: a shoulder, no clip
     assert ex.tone_curve(np.array([ex.TM_WHITE]))[0] == pytest.approx(1.0)
     assert np.allclose(ex.tone_curve(ex.tone_curve_inverse(y)), y)
+
+
+def test_display_glsl_holds_exposure_py_s_constants() -> None:
+    """The shader's tone map is exposure.py's: the same numbers, written twice."""
+    import re
+
+    text = (Path(ex.__file__).parents[1] / "render" / "shaders" / "display.glsl").read_text()
+    found = dict(re.findall(r"const float (\w+) = ([0-9.eE+-]+);", text))
+    for name in ("TM_A", "TM_B", "TM_C", "TM_D", "TM_E", "TM_WHITE", "BURN_FULL", "BURN_MAX"):
+        assert float(found[name]) == pytest.approx(getattr(ex, name), rel=1e-12), name
 
 
 # -- float layers and the files ----------------------------------------------------------------

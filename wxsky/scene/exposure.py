@@ -62,6 +62,10 @@ MIN_LUMINANCE = 1e-6
 # frames: False while they draw the artist colours of before issue 41 (from_legacy), whose
 # look "auto" keeps; the physical atmosphere (issue 41 item 1) turns it on.
 SCENE_REFERRED = False
+# Past the curve's white, colours burn toward white: fully (BURN_MAX of the way) at BURN_FULL
+# times the white. The sun's disc is thousands of times it; a silver lining a few times.
+BURN_FULL = 4.0
+BURN_MAX = 0.9
 # Rec. 709 luminance weights (the layers' primaries are sRGB's).
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -133,12 +137,26 @@ def tone_curve_inverse(y: F64) -> F64:
     return x
 
 
+def burn(m: F64) -> F64:
+    """How far a colour whose largest exposed channel is `m` is burnt toward white: 0 up to
+    the curve's white (TM_WHITE), rising smoothly to BURN_MAX at BURN_FULL times it. Only
+    what the curve has already clipped burns (the sun's disc, a blazing silver lining): the
+    colours below it keep their hue exactly, and `tone_map_inverse` stays exact for them."""
+    t = np.clip((np.asarray(m, np.float64) / TM_WHITE - 1.0) / (BURN_FULL - 1.0), 0.0, 1.0)
+    out: F64 = BURN_MAX * t * t * (3.0 - 2.0 * t)
+    return out
+
+
 def tone_map(rgb: F64) -> F64:
-    """Max-RGB: the curve on the largest channel, the colour scaled by the same factor."""
+    """Max-RGB: the curve on the largest channel, the colour scaled by the same factor; past
+    the curve's white the colour burns toward white (`burn`), as film and an eye see the
+    low sun's disc: white-hot, not an orange dot."""
     rgb = np.maximum(np.asarray(rgb, np.float64), 0.0)
     m = rgb.max(axis=-1, keepdims=True)
     safe = np.where(m > 0.0, m, 1.0)
-    out: F64 = np.where(m > 0.0, rgb * (tone_curve(safe) / safe), 0.0)
+    y = tone_curve(safe)
+    hue: F64 = np.where(m > 0.0, rgb * (y / safe), 0.0)
+    out: F64 = hue + (y - hue) * burn(m)
     return out
 
 
@@ -146,6 +164,8 @@ def tone_map_inverse(rgb: F64) -> F64:
     rgb = np.clip(np.asarray(rgb, np.float64), 0.0, 1.0)
     n = rgb.max(axis=-1, keepdims=True)
     safe = np.where(n > 0.0, n, 1.0)
+    # Below the curve's white nothing burnt (exact); a clipped value reads as the smallest
+    # colour giving it, at TM_WHITE, which does not burn either.
     out: F64 = np.where(n > 0.0, rgb * (tone_curve_inverse(safe) / safe), 0.0)
     return out
 

@@ -41,10 +41,21 @@ float tone_curve_inverse(float y) {
     return (-b - sqrt(max(b * b - 4.0 * a * c, 0.0))) / (2.0 * a);
 }
 
+// Past the curve's white a colour burns toward white (exposure.py `burn`).
+const float TM_WHITE = 7.241657386773973;  // exposure.TM_WHITE: where the curve reaches 1
+const float BURN_FULL = 4.0;
+const float BURN_MAX = 0.9;
+
 vec3 tone_map(vec3 c) {
     c = max(c, vec3(0.0));
     float m = max(max(c.r, c.g), c.b);
-    return m > 0.0 ? c * (tone_curve(m) / m) : vec3(0.0);
+    if (m <= 0.0) {
+        return vec3(0.0);
+    }
+    float y = tone_curve(m);
+    vec3 hue = c * (y / m);
+    float t = clamp((m / TM_WHITE - 1.0) / (BURN_FULL - 1.0), 0.0, 1.0);
+    return mix(hue, vec3(y), BURN_MAX * t * t * (3.0 - 2.0 * t));
 }
 
 vec3 tone_map_inverse(vec3 c) {
