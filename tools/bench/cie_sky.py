@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import math
 import os
 import subprocess
@@ -271,8 +272,6 @@ def _fmt(rgb: np.ndarray) -> str:
 
 
 def terms() -> None:
-    import dataclasses
-
     from wxsky.scene.sky import aureole
 
     sun_deg = 60.0
@@ -305,14 +304,11 @@ def terms() -> None:
     finally:
         atm.OZONE_ABSORPTION_PER_M = saved
     print(f"  without ozone                          {_fmt(no_ozone * sun_rgb)}")
-    saved_mie = atm.MIE_SPECTRAL
-    try:
-        atm.MIE_SPECTRAL = np.ones(3)
-        t_grey = atm.transmittance_table(med)
-        grey = _march(med, t_grey, atm.multiscatter_table(med, t_grey), sun_deg, zen)[0]
-        grey_whole = _march(med, t_grey, atm.multiscatter_table(med, t_grey), sun_deg, zen, 1.0)
-    finally:
-        atm.MIE_SPECTRAL = saved_mie
+    grey_med = dataclasses.replace(med, mie_angstrom=0.0)
+    t_grey = atm.transmittance_table(grey_med)
+    ms_grey = atm.multiscatter_table(grey_med, t_grey)
+    grey = _march(grey_med, t_grey, ms_grey, sun_deg, zen)[0]
+    grey_whole = _march(grey_med, t_grey, ms_grey, sun_deg, zen, 1.0)
     print(f"  a grey aerosol (Angstrom 0)            {_fmt(grey * sun_rgb)}")
     print(f"  grey and the whole lobe (before's)     {_fmt(grey_whole[0] * sun_rgb)}")
     strength, g = aureole(luts)
@@ -332,14 +328,14 @@ def terms() -> None:
 @contextlib.contextmanager
 def _coefficients(nm: np.ndarray, angstrom: float) -> Iterator[None]:
     """The model's three channels set to the wavelengths nm (three), for a build."""
-    saved = (atm.RAYLEIGH_SCATTERING_PER_M, atm.OZONE_ABSORPTION_PER_M, atm.MIE_SPECTRAL)
+    saved = (atm.RAYLEIGH_SCATTERING_PER_M, atm.OZONE_ABSORPTION_PER_M, atm.CHANNEL_NM)
     try:
         atm.RAYLEIGH_SCATTERING_PER_M = RAYLEIGH_AT_1UM_PER_M * (nm / 1000.0) ** -4
         atm.OZONE_ABSORPTION_PER_M = OZONE_PEAK_PER_M3 * _bin(OZONE_M2, nm)
-        atm.MIE_SPECTRAL = (nm / 550.0) ** -angstrom
+        atm.CHANNEL_NM = nm
         yield
     finally:
-        atm.RAYLEIGH_SCATTERING_PER_M, atm.OZONE_ABSORPTION_PER_M, atm.MIE_SPECTRAL = saved
+        atm.RAYLEIGH_SCATTERING_PER_M, atm.OZONE_ABSORPTION_PER_M, atm.CHANNEL_NM = saved
 
 
 SPECTRAL_DIRECTIONS = [(90.0, 0.0), (10.0, 180.0), (40.0, 180.0)]  # zenith; away 10, 40 up
@@ -348,6 +344,7 @@ SPECTRAL_DIRECTIONS = [(90.0, 0.0), (10.0, 180.0), (40.0, 180.0)]  # zenith; awa
 def spectral_sky(angstrom: float) -> np.ndarray:
     """(moments, SPECTRAL_DIRECTIONS, 3) linear sRGB per unit sun of the spectral model."""
     med = atm.medium(COLOUR_VISIBILITY_M, COLOUR_HUMIDITY_PCT)  # 550 nm's aerosol
+    med = dataclasses.replace(med, mie_angstrom=angstrom)
     out = np.zeros((len(COLOUR_MOMENTS), len(SPECTRAL_DIRECTIONS), len(SPECTRAL_NM)))
     for i in range(0, len(SPECTRAL_NM), 3):
         nm = SPECTRAL_NM[i : i + 3]
@@ -411,12 +408,16 @@ def ozone_channels() -> None:
         print(f"  through {m:4.0f} columns: " + ", ".join(f"{v * 1e6:.3f}" for v in eff))
 
 
+def med_angstrom() -> float:
+    return atm.medium(COLOUR_VISIBILITY_M, COLOUR_HUMIDITY_PCT).mie_angstrom
+
+
 def fit_ozone() -> None:
     """The three channels' ozone absorption (R, G; B's is negligible) that makes their
     twilight zenith (sun -4 and -10 deg) the colour the spectral model gives it: a grid over
     multiples of the single wavelengths' values, the error that of ln(R/B) and ln(G/B)."""
     twilight = [k for k, (_, s) in enumerate(COLOUR_MOMENTS) if s < 0.0]
-    ref = spectral_sky(atm.MIE_ANGSTROM)[twilight, 0]
+    ref = spectral_sky(med_angstrom())[twilight, 0]
     want = np.log(ref[:, :2] / ref[:, 2:])
     med = atm.medium(COLOUR_VISIBILITY_M, COLOUR_HUMIDITY_PCT)
     base = OZONE_PEAK_PER_M3 * _bin(OZONE_M2, atm.CHANNEL_NM)
@@ -514,7 +515,7 @@ def main() -> int:
     if args.terms:
         terms()
     if args.spectral:
-        spectral((0.0, atm.MIE_ANGSTROM))
+        spectral((0.0, atm.medium(COLOUR_VISIBILITY_M, COLOUR_HUMIDITY_PCT).mie_angstrom))
     if args.ozone:
         ozone_channels()
     if args.fit_ozone:
