@@ -233,7 +233,7 @@ def colour_table(label: str) -> None:
         shown = display(z, atm.display_exposure(luts))
         low, high = _away_bands(luts, sun)
         print(
-            f"{name:7s} {sun_deg:4.0f}  ({z[0]:.3g}, {z[1]:.3g}, {z[2]:.3g})".ljust(44)
+            f"{name:7s} {sun_deg:4.0f}  ({z[0]:.3g}, {z[1]:.3g}, {z[2]:.3g})".ljust(45)
             + f"{z[2] / z[0]:5.2f}  ({shown[0]:.2f}, {shown[1]:.2f}, {shown[2]:.2f})"
             + f"   {low:5.2f} | {high:5.2f}"
         )
@@ -371,7 +371,7 @@ def spectral(angstroms: tuple[float, ...]) -> None:
     print("same model at 42 wavelengths through the CIE observer (linear sRGB, sun-white):")
     rows = {"three channels": three_channel_sky()}
     for a in angstroms:
-        rows[f"spectral, Angstrom {a:g}"] = spectral_sky(a)
+        rows[f"spectral, Angstrom {a:.2f}"] = spectral_sky(a)
     print("".ljust(26) + "".join(f"{name:>20s}" for name, _ in COLOUR_MOMENTS))
     for label, rgb in rows.items():
         cells = [

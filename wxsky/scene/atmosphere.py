@@ -808,9 +808,10 @@ def vertical_rayleigh_optical_depth() -> F64:
 def display_exposure(luts: AtmosphereLuts) -> float:
     """The automatic exposure: a scale from kcd/m^2 to exposed units, before the one tone map
     (`exposure.display`; sky.glsl's `u_sky_scale`; the clouds' light is made in these units,
-    cloud_light), from the scene's luminance: the mean luminance of the sky above the horizon, adapting only partly (a power of 0.5), so
-    that noon is bright, the low sun golden and twilight dark blue rather than lifted to
-    noon's brightness; capped so the night stays night."""
+    cloud_light), from the scene's luminance: the mean luminance of the sky above the
+    horizon, adapting only partly (a power of 0.5), so that noon is bright, the low sun golden
+    and twilight dark blue rather than lifted to noon's brightness; capped so the night stays
+    night."""
     rows = luts.sky_view.shape[0]
     upper = luts.sky_view[rows // 2 :]
     y = float((upper @ LUMA).mean() * (_sun_rgb() @ LUMA))
