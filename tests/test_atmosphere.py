@@ -219,6 +219,49 @@ def test_zenith_is_daylight_blue_with_the_sun_5_deg_up(
     assert zenith[2] > zenith[0]
 
 
+# A clear noon sky overhead is blue, not whitish: B/R of its linear radiance (sRGB primaries) of
+# 1.8 or more at 30 km (an aerosol optical depth of 0.23: the same air marched at 42
+# wavelengths through the CIE observer gives 1.80, `tools/bench/cie_sky.py --spectral`) and 2.4
+# at 60 km. Before the aerosol's Angstrom law it was 1.30 at 30 km, a whitish blue.
+NOON_ZENITH_MIN_B_OVER_R = {30_000.0: 1.8, 60_000.0: 2.4}
+
+
+@pytest.mark.parametrize("vis_m", [30_000.0, 60_000.0])
+def test_noon_zenith_is_deep_blue_and_only_the_sun_and_horizon_whiten(
+    luts_by_case: dict[tuple[float, float], atm.AtmosphereLuts], vis_m: float
+) -> None:
+    """Sun 60 deg up: the zenith's B/R is high, and higher still 64 deg from the sun (30 deg
+    up, 90 deg round from it); the sky 10 deg from the sun and 2 deg above the horizon facing
+    away are whiter than the zenith."""
+    luts = _luts(luts_by_case, 60.0, vis_m)
+    sun = _sun_dir(60.0)
+
+    def b_over_r(rgb: F64) -> float:
+        return float(rgb[2] / rgb[0])
+
+    zenith = b_over_r(luts.radiance(np.array([0.0, 0.0, 1.0]), sun))
+    assert zenith >= NOON_ZENITH_MIN_B_OVER_R[vis_m], f"zenith B/R {zenith:.2f}"
+    side = b_over_r(luts.radiance(_sun_dir(30.0, 90.0), sun))
+    assert side > zenith
+    near_sun = b_over_r(luts.radiance(_sun_dir(50.0, 0.0), sun))
+    horizon = b_over_r(luts.radiance(_sun_dir(2.0, 180.0), sun))
+    assert near_sun < zenith and horizon < zenith
+
+
+@pytest.mark.parametrize("sun_deg", [20.0, 5.0, -4.0, -6.0, -10.0])
+def test_zenith_is_blue_not_mauve_from_afternoon_to_nautical_twilight(
+    luts_by_case: dict[tuple[float, float], atm.AtmosphereLuts], sun_deg: float
+) -> None:
+    """The zenith is blue (B > G > R, B/R over 2) with the sun 20 and 5 deg up and through
+    civil twilight into nautical (-4, -6, -10): the ozone's Chappuis band, absorbing the
+    orange and yellow, keeps it so. Mauve (R at or above G under a larger B) was what three
+    single wavelengths made of it, the red one (680 nm) beyond most of the band."""
+    luts = _luts(luts_by_case, sun_deg, 30_000.0)
+    r, g, b = luts.radiance(np.array([0.0, 0.0, 1.0]), _sun_dir(sun_deg))
+    assert b > g > r, (r, g, b)
+    assert b / r > 2.0, (r, g, b)
+
+
 # -- (c) no NaN or inf -----------------------------------------------------------------------
 
 

@@ -56,7 +56,6 @@ from wxsky.render.sky_texture_gen import (
     SUNSET_SIZE_PX,
 )
 from wxsky.scene.atmosphere import (
-    MIE_SCALE_HEIGHT_M,
     SUN_ANGULAR_RADIUS_RAD,
     AtmosphereLuts,
     display_exposure,
@@ -69,6 +68,7 @@ from wxsky.scene.sky import (
     DOME_MAX_WIND_MPS,
     DOME_TOP_M,
     SkyParams,
+    aureole,
     display_from_scene,
     overcast_veil,
 )
@@ -648,13 +648,6 @@ def ground_tint(sky: SkyParams) -> tuple[float, float, float]:
 # Limb darkening of the sun's disc, I(mu) = 1 - u (1 - mu) (u about 0.6 in the visible): the
 # disc's mean is 1 - u / 3 of its centre.
 LIMB_DARKENING = 0.6
-# The aureole: the narrow forward lobe of the aerosol's diffraction that the table's smooth
-# Cornette-Shanks lobe (and its 1 deg texels) leave out. Its share of the aerosol's light, and
-# its Henyey-Greenstein g from clean air (narrow) to haze (broadened by multiple scattering).
-AUREOLE_SHARE = 0.12
-AUREOLE_G_CLEAN = 0.985
-AUREOLE_G_HAZE = 0.93
-AUREOLE_HAZE_DEPTH = 1.0  # Mie optical depth to the sun at which g is AUREOLE_G_HAZE
 
 
 @functools.lru_cache(maxsize=4)
@@ -676,8 +669,8 @@ def physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
 def _physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
     """The physical sky's uniforms: its table's unit and horizon, the exposure (the stand-in
     for the renderer's exposure: `atmosphere.display_exposure`), the sun's disc (radiance at
-    its centre, kcd/m^2, transmitted to the eye) and the aureole (strength and g, both from
-    the aerosol's optical depth toward the sun)."""
+    its centre, kcd/m^2, transmitted to the eye) and the aureole (scene.sky's `aureole`:
+    strength and g, both from the aerosol's optical depth toward the sun)."""
     # The table's own (quantised) sun, not this frame's: these change with the table only,
     # as a jump that redraws the kept layer whole, never as a drift every sky step.
     el = luts.sun_elevation_deg
@@ -685,17 +678,7 @@ def _physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
     sun_klx = sun_irradiance(luts, eye_m, el)
     solid_angle = math.pi * SUN_ANGULAR_RADIUS_RAD**2
     centre = sun_klx / (solid_angle * (1.0 - LIMB_DARKENING / 3.0))
-    # Mie optical depth from the eye toward the sun: vertical depth over a slant of at most
-    # 40 air masses (the horizon's).
-    vertical = (
-        luts.medium.mie_extinction_per_m
-        * MIE_SCALE_HEIGHT_M
-        * math.exp(-eye_m / MIE_SCALE_HEIGHT_M)
-    )
-    tau = vertical / max(math.sin(math.radians(max(el, 0.0))), 1.0 / 40.0)
-    haze = min(tau / AUREOLE_HAZE_DEPTH, 1.0)
-    g = AUREOLE_G_CLEAN + (AUREOLE_G_HAZE - AUREOLE_G_CLEAN) * haze
-    strength = sun_klx * (AUREOLE_SHARE * (1.0 - math.exp(-tau)))
+    strength, g = aureole(luts)
     return {
         "u_sky_view": SkyPass.UNITS["u_sky_view"],
         "u_horizon_rad": luts.horizon_rad,

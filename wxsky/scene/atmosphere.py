@@ -15,11 +15,13 @@ Medium (Hillaire 2020's Earth, Bruneton 2017's parameters):
   beta = 3.912 / visibility_m, less Rayleigh's share at 550 nm (the air alone gives a
   visibility near 290 km), never below a clean-air floor; exponential with a 1.2 km scale
   height (not Hillaire's 1.2 km: see MIE_SCALE_HEIGHT_M); single-scattering albedo 0.9;
-  phase Cornette-Shanks with g = 0.76.
+  phase Cornette-Shanks with g = 0.76; extinction as lambda^-1.3 (Angstrom) across the
+  channels, the visibility's at 550 nm (`Medium.mie_spectral`).
 - Humidity grows the aerosol (hygroscopic growth, Hanel): the extinction is multiplied by
   ((1 - RH_ref) / (1 - RH))^0.25 with RH_ref = 50 % and RH capped at 95 % (so 1.0 at and
   below 50 %, 1.3 at 85 %, 1.78 at 95 %), and its phase grows a little more forward
-  (g from 0.76 to 0.80 at 95 %). Reported visibility is the optical state near the ground,
+  (g from 0.76 to 0.80 at 95 %) and greyer (Angstrom from 1.3 to 0.3 with the growth).
+  Reported visibility is the optical state near the ground,
   so the growth is kept small: it stands for the damp haze aloft the visibility misses.
 
 Units: radiance in kcd/m^2 (luminance Y = 0.2126 R + 0.7152 G + 0.0722 B is cd/m^2 / 1000),
@@ -63,14 +65,37 @@ EARTH_RADIUS_M = 6_360_000.0
 TOP_RADIUS_M = 6_460_000.0
 RAYLEIGH_SCATTERING_PER_M = np.array([5.802e-6, 13.558e-6, 33.1e-6])
 RAYLEIGH_SCALE_HEIGHT_M = 8_000.0
-OZONE_ABSORPTION_PER_M = np.array([0.650e-6, 1.881e-6, 0.085e-6])
+# Ozone absorption per channel at the tent's peak (300 Dobson units), not at single wavelengths:
+# each channel's transmittance through ozone for a Rayleigh sky's light through the CIE 1931
+# observer (`tools/bench/cie_sky.py --ozone`, the same within 2 % for 1 to 40 ozone columns).
+# The Chappuis band peaks at 600 nm, inside the red channel: at 680 nm alone (Bruneton's 0.650)
+# red lost a third of what it does and green the most, and the twilight zenith turned mauve.
+OZONE_ABSORPTION_PER_M = np.array([2.893e-6, 1.841e-6, 0.096e-6])
 OZONE_CENTRE_M = 25_000.0
 OZONE_HALF_WIDTH_M = 15_000.0
 # 2 km, within the observed 1-2 km: with Hillaire's 1.2 km the clean 60 km sky at a 60 deg
 # sun had too dark a zenith against CIE type 12 (p90 error 0.66; docs/atmosphere.md).
 MIE_SCALE_HEIGHT_M = 2_000.0
 MIE_ALBEDO = 0.9  # single-scattering albedo of the aerosol
+# The channels' wavelengths (R, G, B), nm: Rayleigh's coefficients above are at these.
+CHANNEL_NM = np.array([680.0, 550.0, 440.0])
+# The aerosol's extinction falls with wavelength as lambda^-alpha (Angstrom): 1.3 for
+# continental aerosol (Angstrom's own value, Preetham et al. 1999's turbidity model; AERONET
+# sites over land 1.0-1.6), the visibility setting it at 550 nm. Taken as grey (alpha 0), a
+# 30 km sky's aerosol, twice the air's optical depth at 550 nm, lit the noon zenith as
+# brightly in red as in blue: B/R 1.3, a whitish blue (docs/atmosphere.md, "Colour").
+# Humidity swells the particles and flattens the law (hygroscopic growth): with the growth
+# of the extinction, toward MIE_ANGSTROM_WET at HUMIDITY_CAP_PCT, the near-grey of a mist's
+# droplets (fog is grey; 1.23 at 60 %, 0.85 at 85 %).
+MIE_ANGSTROM = 1.3
+MIE_ANGSTROM_WET = 0.3
 MIE_G = 0.76
+# The share of the aerosol's phase function in its narrow forward (diffraction) peak, a few
+# degrees wide, which the sky view's smooth lobe and 1 deg texels cannot hold: the sky pass
+# draws it as the aureole (scene.sky AUREOLE_SHARE is this) and the sky view keeps the rest,
+# so the aerosol's light is counted once. It was counted 1.12 times: the aureole on top of the
+# whole lobe, which alone lit the noon zenith, 30 deg from the sun, with too much white.
+MIE_PEAK_SHARE = 0.12
 MIE_G_WET = 0.80  # at HUMIDITY_CAP_PCT
 # Clean continental air aloft never quite lacks aerosol: Hillaire's Mie extinction (4.4e-6 /m)
 # as the floor, a visibility of some 200 km with the air's share.
@@ -129,12 +154,19 @@ class Medium:
 
     visibility_m: float
     humidity_pct: float
-    mie_extinction_per_m: float  # at the ground
+    mie_extinction_per_m: float  # at the ground, at 550 nm
     mie_g: float
+    mie_angstrom: float = MIE_ANGSTROM
 
     @property
     def mie_scattering_per_m(self) -> float:
         return self.mie_extinction_per_m * MIE_ALBEDO
+
+    @property
+    def mie_spectral(self) -> F64:
+        """The aerosol's extinction in each channel relative to 550 nm's (Angstrom's law)."""
+        out: F64 = (CHANNEL_NM / 550.0) ** -self.mie_angstrom
+        return out
 
 
 def medium(visibility_m: float, humidity_pct: float) -> Medium:
@@ -148,11 +180,15 @@ def medium(visibility_m: float, humidity_pct: float) -> Medium:
         HANEL_EXPONENT
     )
     wet = max(0.0, rh_capped - HUMIDITY_REF_PCT) / (HUMIDITY_CAP_PCT - HUMIDITY_REF_PCT)
+    # The Angstrom law flattens as the particles swell: with the growth, not the humidity.
+    cap_growth = ((100.0 - HUMIDITY_REF_PCT) / (100.0 - HUMIDITY_CAP_PCT)) ** HANEL_EXPONENT
+    swollen = (growth - 1.0) / (cap_growth - 1.0)
     return Medium(
         vis,
         rh,
         max(beta, MIE_MIN_EXTINCTION_PER_M) * growth,
         MIE_G + (MIE_G_WET - MIE_G) * wet,
+        MIE_ANGSTROM + (MIE_ANGSTROM_WET - MIE_ANGSTROM) * swollen,
     )
 
 
@@ -179,7 +215,7 @@ def _extinction(med: Medium, alt_m: F64) -> tuple[F64, F64, F64]:
     """(extinction, Rayleigh scattering, Mie scattering) per metre, (..., 3) each."""
     rayleigh, mie, ozone = _densities(alt_m)
     r_sca = rayleigh[..., None] * RAYLEIGH_SCATTERING_PER_M
-    m_ext = (mie * med.mie_extinction_per_m)[..., None] * np.ones(3)
+    m_ext = (mie * med.mie_extinction_per_m)[..., None] * med.mie_spectral
     ext = r_sca + m_ext + ozone[..., None] * OZONE_ABSORPTION_PER_M
     return ext, r_sca, m_ext * MIE_ALBEDO
 
@@ -335,11 +371,13 @@ def _march(
     nu: F64,
     steps: int,
     isotropic: bool = False,
+    mie_share: float = 1.0,
 ) -> _March:
     """In-scattered light along rays (all arrays broadcast alike): single scattering by the
-    phase functions (isotropic: 1 / 4 pi, for the multiple-scattering table), plus the
-    multiple-scattering table's Psi where given. Samples crowd the ray's start (quadratic
-    spacing), where the dense air is on a horizontal ray."""
+    phase functions (isotropic: 1 / 4 pi, for the multiple-scattering table; the aerosol's
+    by mie_share of its lobe, the sky view leaving its narrow peak to the sky pass's aureole),
+    plus the multiple-scattering table's Psi where given. Samples crowd the ray's start
+    (quadratic spacing), where the dense air is on a horizontal ray."""
     r, mu, mu_s, nu = np.broadcast_arrays(r, mu, mu_s, nu)
     if r.ndim and r.size * steps > MARCH_SAMPLES and r.shape[0] > 1:
         # In slices along the first axis: a ray's samples make some twenty (rays, steps, 3)
@@ -350,7 +388,7 @@ def _march(
         parts = [
             _march(
                 med, t_table, ms_table, r[i : i + n], mu[i : i + n], mu_s[i : i + n],
-                nu[i : i + n], steps, isotropic,
+                nu[i : i + n], steps, isotropic, mie_share,
             )
             for i in range(0, r.shape[0], n)
         ]  # fmt: skip
@@ -376,7 +414,8 @@ def _march(
     if isotropic:
         single = (r_sca + m_sca) * (1.0 / (4.0 * math.pi))
     else:
-        single = r_sca * rayleigh_phase(nn)[..., None] + m_sca * mie_phase(nn, med.mie_g)[..., None]
+        mie = mie_phase(nn, med.mie_g) * mie_share
+        single = r_sca * rayleigh_phase(nn)[..., None] + m_sca * mie[..., None]
     source = single * sun_t
     if ms_table is not None:
         source = source + (r_sca + m_sca) * _multiscatter_at(ms_table, ri, mu_si)
@@ -555,7 +594,9 @@ def sky_view_table(
     mu = np.sin(el) * np.ones_like(az)
     mu_s = np.array(math.sin(sun_el))
     nu = np.cos(el) * np.cos(az) * math.cos(sun_el) + np.sin(el) * math.sin(sun_el)
-    m = _march(med, t_table, ms_table, r, mu, mu_s, nu, SKY_VIEW_STEPS)
+    m = _march(
+        med, t_table, ms_table, r, mu, mu_s, nu, SKY_VIEW_STEPS, mie_share=1.0 - MIE_PEAK_SHARE
+    )
     sun_on = (
         _sun_transmittance(t_table, m.end_r, m.end_mu_s) * np.maximum(m.end_mu_s, 0.0)[..., None]
     )

@@ -19,6 +19,7 @@ import numpy.typing as npt
 
 from wxsky.scene.atmosphere import (
     LUMA,
+    MIE_PEAK_SHARE,
     MIE_SCALE_HEIGHT_M,
     AtmosphereLuts,
     display_exposure,
@@ -540,17 +541,21 @@ def _sky_behind(
     return out
 
 
-# The sky pass's aureole (render.sky_textures: AUREOLE_*, `_physical_uniforms`; a test holds
-# them together: the scene may not import the renderer).
-AUREOLE_SHARE = 0.12
+# The sky pass's aureole (render.sky_textures `_physical_uniforms` takes it from here): the
+# narrow forward lobe of the aerosol's diffraction that the table's smooth Cornette-Shanks lobe
+# (and its 1 deg texels) leave out. Its share of the aerosol's light (the table keeps the
+# rest: atmosphere.MIE_PEAK_SHARE), and its Henyey-Greenstein g from clean air (narrow) to
+# haze (broadened by multiple scattering).
+AUREOLE_SHARE = MIE_PEAK_SHARE
 AUREOLE_G_CLEAN = 0.985
 AUREOLE_G_HAZE = 0.93
-AUREOLE_HAZE_DEPTH = 1.0
+AUREOLE_HAZE_DEPTH = 1.0  # Mie optical depth to the sun at which g is AUREOLE_G_HAZE
 
 
 def aureole(luts: AtmosphereLuts) -> tuple[F64, float]:
     """(strength kcd/m^2 per unit phase (3,), Henyey-Greenstein g) of the sky pass's aureole:
-    from the aerosol's optical depth from the eye toward the sun, as the sky pass has it."""
+    from the aerosol's optical depth from the eye toward the sun (per channel: the aerosol's
+    Angstrom law, `Medium.mie_spectral`; g from 550 nm's), as the sky pass has it."""
     el = luts.sun_elevation_deg
     eye_m = luts.eye_alt_m
     sun_klx = sun_irradiance(luts, eye_m, el)
@@ -562,7 +567,7 @@ def aureole(luts: AtmosphereLuts) -> tuple[F64, float]:
     tau = vertical / max(math.sin(math.radians(max(el, 0.0))), 1.0 / 40.0)
     haze = min(tau / AUREOLE_HAZE_DEPTH, 1.0)
     g = AUREOLE_G_CLEAN + (AUREOLE_G_HAZE - AUREOLE_G_CLEAN) * haze
-    strength: F64 = sun_klx * (AUREOLE_SHARE * (1.0 - math.exp(-tau)))
+    strength: F64 = sun_klx * (AUREOLE_SHARE * (1.0 - np.exp(-tau * luts.medium.mie_spectral)))
     return strength, g
 
 
