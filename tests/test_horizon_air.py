@@ -108,10 +108,11 @@ def test_the_suns_disc_never_shows_in_the_air(renderer: Renderer) -> None:
     20 km one so low a sun is too dim to see), the air round it (which the band and the
     ground fade into) holds the aureole, not the disc: the pixels on the sun are no brighter
     than those a degree to either side, from the horizon to the haze floor (over it the sky's
-    own aureole and the disc's edge show through the band's thinner top). Guards `air_behind`'s turn off the disc: the air's ray
-    under the sun lies at the haze floor, 0.16° from its centre, and without the turn a
-    stripe the disc's width, 2.8 times brighter than the band beside it, stood from the
-    horizon to the floor (measured). Old code: the air was one colour all round, no stripe."""
+    own aureole and the disc's edge show through the band's thinner top). Guards
+    `air_behind`'s turn off the disc: the air's ray under the sun lies at the haze floor,
+    0.16° from its centre, and without the turn a stripe the disc's width, 2.8 times brighter
+    than the band beside it, stood from the horizon to the floor (measured). Old code: the air
+    was one colour all round, no stripe."""
     with _facing_the_sun(renderer, 0.3, 10.0, 60_000.0) as (shot, sky, camera):
         linear = srgb_to_linear(_sky_layer(shot))
         el = pixel_elevation_deg(camera)
