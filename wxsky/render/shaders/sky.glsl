@@ -356,7 +356,13 @@ void main() {
     // the eye's level, the clear sky there, straight across.
     float air_floor_rad = u_horizon_air.a > 0.0
                           ? u_horizon_rad + radians(HAZE_MIN_ELEVATION_DEG) : 0.0;
-    vec3 air = air_behind(ray, air_floor_rad);
+    // Over the floor and off the sun's disc that is the sky here: a second look-up only where
+    // it is not (llvmpipe skips a branch no pixel of a block takes).
+    vec3 air = col;
+    if (ray.z < sin(air_floor_rad)
+        || dot(ray, u_sun_dir) > 2.0 * u_sun_cos_radius * u_sun_cos_radius - 1.0) {
+        air = air_behind(ray, air_floor_rad);
+    }
 #else
     // Below the horizon the sky is what lies behind the ground's haze: its colour at the
     // horizon, or where a layer reaches the horizon, the air under it (`ground_band`). The
