@@ -453,7 +453,6 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
                 "u_dome_off1": frame.offsets[1],
                 "u_dome_off2": frame.offsets[2],
                 "u_dome_rgb": tuple(float(v) for v in dome_light_rgb(sky)),
-                "u_dome_haze_rgb": sky.haze_rgb,
                 "u_haze_m": sky.haze_m,
                 # The dome is high cloud: only the part of its ray in the hazy layer is hazy.
                 "u_haze_depth_m": min(
@@ -462,6 +461,11 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
                 "u_clear_haze_m": CLEAR_AIR_HAZE_M,
             }
         )
+        if not feats.physical or feats.scene_linear:
+            # The physical sky's dome fades into the air behind it, direction by direction
+            # (sky.glsl `air_behind`), as the sprites do (SkyParams.haze_toward); the
+            # gradient's into the one haze colour.
+            out["u_dome_haze_rgb"] = sky.haze_rgb
     return out
 
 
@@ -576,8 +580,10 @@ def flicker_clock_s(sky_time_s: float) -> float:
 def ground_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
     """The ground band's uniforms (sky.glsl `ground_band`), the same in every variant of the
     sky pass: below the horizon the variants must agree to the bit, so the air the ground
-    hazes into is the dome's haze colour wherever the dome is drawn this frame (its distant
-    band reaches the horizon, opaque), whether or not this variant draws the dome."""
+    hazes into is the dome's haze wherever the dome is drawn this frame (its distant band
+    reaches the horizon, opaque), whether or not this variant draws the dome: in the gradient
+    mode the one haze colour (u_horizon_air.rgb), with the physical sky the air behind, in
+    each direction (sky.glsl `air_behind`; u_horizon_air.a says a layer reaches)."""
     dome = sky.dome
     eye_agl_m = cam.position_m[2] - dome.ground_m
     hazy_m = max(min(sky.haze_top_m - dome.ground_m, 1e6), 0.0)

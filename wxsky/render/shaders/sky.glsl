@@ -226,7 +226,7 @@ vec3 moon_light(vec3 ray, out float coverage) {
 // haze: seen edge-on it closes its gaps and turns opaque, and the air in front of it (a deck
 // 400 m up is 23 km away at 1° and 230 km at 0.1°) takes it over, so under a deck the
 // horizon is the deck's underside in haze, never a strip of clear sky (issue 41 item 5).
-vec4 cloud_dome(vec3 ray) {
+vec4 cloud_dome(vec3 ray, vec3 air) {
     float z = max(ray.z, 0.002);
     vec2 plane_m = ray.xy / z * u_dome_height_m;
     // Sampled in uniform control flow so the mip level comes from true derivatives; at the
@@ -271,13 +271,47 @@ vec4 cloud_dome(vec3 ray) {
                       * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
     rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
     // Aerial perspective as the sprites have it (scene.layout.hazed): the layer's contrast
-    // falls by exp(-distance / haze distance) along the ray to its plane, towards the colour
-    // the sprites fade into; at the horizon the ray is endless and only the haze is left.
+    // falls by exp(-distance / haze distance) along the ray to its plane, towards `air`, the
+    // colour the sprites fade into in this direction; at the horizon the ray is endless and
+    // only the haze is left.
     float haze = 1.0 - exp(-(u_haze_depth_m / u_haze_m
                              + (u_dome_height_m - u_haze_depth_m) / u_clear_haze_m)
                            / max(ray.z, 1e-5));
-    rgb = mix(rgb, u_dome_haze_rgb, haze);
+    rgb = mix(rgb, air, haze);
     return vec4(rgb, a);
+}
+#endif
+
+#if SKY_PHYSICAL && !SKY_SCENE_LINEAR
+// The air is the sky no lower than this over the horizon (below it the sky-view table
+// holds the ground): scene.sky.HAZE_MIN_ELEVATION_DEG, held equal by tests/test_horizon_air.py.
+const float HAZE_MIN_ELEVATION_DEG = 0.5;
+
+// The air in front of whatever lies at the horizon in this direction, as the sky pass shows
+// it: the physical sky right behind, with its aureole and overcast veil, no lower than
+// `floor_rad` over the eye's level (below it, that sky straight across at `floor_rad`). The
+// colour the sprites fade into (`SkyParams.haze_toward`, floor HAZE_MIN_ELEVATION_DEG over
+// the horizon), so the deck's distant band and the ground's haze are the same air as the
+// sprites' in every direction (issue 41 item 5): toward a low sun the bright, orange
+// forward-scattering haze, away from it the bluer, dimmer one; averaged round the horizon it
+// was one colour all round, bluer than the deck toward the sun and darker. Haze holds no
+// sun's disc (a layer hides it): the ray is turned aside in azimuth, at its elevation, to
+// two of the disc's radii from the sun (its anti-aliased edge is gone by 1.06).
+vec3 air_behind(vec3 ray, float floor_rad) {
+    float z = max(ray.z, sin(floor_rad));
+    float cos_e = sqrt(max(1.0 - z * z, 0.0));
+    vec2 f = normalize(ray.xy + vec2(1e-6, 0.0));
+    vec2 fs = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
+    float cos_es = length(u_sun_dir.xy);
+    // dot(ray, sun) = cos_e cos_es dot(f, fs) + z sun.z: at most cos(clearance) when
+    // dot(f, fs) <= q.
+    float clear_cos = 2.0 * u_sun_cos_radius * u_sun_cos_radius - 1.0;  // cos 2r
+    float q = clamp((clear_cos - z * u_sun_dir.z) / max(cos_e * cos_es, 1e-6), -1.0, 1.0);
+    float along = dot(f, fs);
+    vec2 side = f - fs * along;
+    side = dot(side, side) > 1e-12 ? normalize(side) : vec2(-fs.y, fs.x);
+    f = along > q ? fs * q + side * sqrt(1.0 - q * q) : f;
+    return display_from_scene(physical_sky(vec3(f * cos_e, z)));
 }
 #endif
 
@@ -316,10 +350,19 @@ void main() {
 #if SKY_PHYSICAL && SKY_SCENE_LINEAR
     vec3 col = physical_sky(ray);  // into a float target: radiance, kcd/m^2
 #elif SKY_PHYSICAL
-    vec3 look = ray.z < 0.0 ? normalize(vec3(ray.xy + vec2(1e-6, 0.0), 0.0)) : ray;
     vec3 col = display_from_scene(physical_sky(ray));
-    vec3 air = mix(ray.z < 0.0 ? display_from_scene(physical_sky(look)) : col,
-                   u_horizon_air.rgb, u_horizon_air.a);
+    // What the ground hazes into and the dome's band fades into: where a layer reaches the
+    // horizon (u_horizon_air.a), the air the sprites fade into in this direction; else, below
+    // the eye's level, the clear sky there, straight across.
+    float air_floor_rad = u_horizon_air.a > 0.0
+                          ? u_horizon_rad + radians(HAZE_MIN_ELEVATION_DEG) : 0.0;
+    // Over the floor and off the sun's disc that is the sky here: a second look-up only where
+    // it is not (llvmpipe skips a branch no pixel of a block takes).
+    vec3 air = col;
+    if (ray.z < sin(air_floor_rad)
+        || dot(ray, u_sun_dir) > 2.0 * u_sun_cos_radius * u_sun_cos_radius - 1.0) {
+        air = air_behind(ray, air_floor_rad);
+    }
 #else
     // Below the horizon the sky is what lies behind the ground's haze: its colour at the
     // horizon, or where a layer reaches the horizon, the air under it (`ground_band`). The
@@ -328,8 +371,10 @@ void main() {
     vec3 col = sky_colour(look, u_sun_dir, u_zenith, u_horizon, u_ground, u_sun_rgb);
     vec3 air = mix(col, u_horizon_air.rgb, u_horizon_air.a);
 #endif
-#if SKY_DOME
-    vec4 dome = cloud_dome(ray);
+#if SKY_DOME && SKY_PHYSICAL && !SKY_SCENE_LINEAR
+    vec4 dome = cloud_dome(ray, air);
+#elif SKY_DOME
+    vec4 dome = cloud_dome(ray, u_dome_haze_rgb);
 #else
     vec4 dome = vec4(0.0);
 #endif
