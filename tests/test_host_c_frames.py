@@ -278,6 +278,8 @@ def test_open_reports_the_header_and_layer_table_python_wrote(
                 "max_width": spec.max_width,
                 "max_height": spec.max_height,
                 "capacity": spec.capacity,
+                "format": 0,  # RGBA8: a version 1 segment has no other
+                "bytes_per_pixel": 4,
                 "index": k,
             }
             for k, spec in enumerate(LAYERS)
