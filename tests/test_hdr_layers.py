@@ -423,12 +423,10 @@ LINEAR_TOLERANCE = 1e-5
 
 
 @pytest.fixture(scope="module")
-def linear_frame() -> Iterator[tuple[Any, Any, dict[str, npt.NDArray[np.float16]]]]:
-    """A linear renderer's frame of scattered cumulus (ring and all), the plan, and each
-    picture layer as `Renderer.read_linear` gives it (as half floats: exactly what it holds)."""
-    from gl_probe import skip_without_gl
-
-    skip_without_gl()
+def linear_frame(gl_renderer: Any) -> Iterator[tuple[Any, Any, dict[str, npt.NDArray[np.float16]]]]:
+    """A linear renderer's frame of scattered cumulus (ring and all), on the session's GL
+    context, the plan, and each picture layer as `Renderer.read_linear` gives it (as half
+    floats: exactly what it holds)."""
     from wxsky.app.frame_publish import draw_ring
     from wxsky.engine.stages import SkyEngine
     from wxsky.render.renderer import Renderer
@@ -447,7 +445,7 @@ def linear_frame() -> Iterator[tuple[Any, Any, dict[str, npt.NDArray[np.float16]
     settings = SceneSettings(ring_texture_px=RING_PX, shadow_map_px=SHADOW_PX)
     with (
         SkyEngine(state, camera, settings, clock_rate=0.0, ring_build="immediate") as engine,
-        Renderer(RING_PX, output="linear") as renderer,
+        Renderer(RING_PX, ctx=gl_renderer.ctx, output="linear") as renderer,
     ):
         plan = engine.advance(0.0)
         draw_ring(renderer, plan)
@@ -603,6 +601,7 @@ def test_the_c_compositor_composites_rgba16f_in_linear_and_tone_maps_once(
     assert np.fromfile(runs[2.0][0], np.uint8).mean() > np.fromfile(runs[0.0][0], np.uint8).mean()
 
 
+@pytest.mark.gl
 def test_the_c_compositor_refuses_linear_out_for_rgba8_layers(
     names: Callable[[], str],
     host_kit: Path,  # noqa: F811
@@ -650,6 +649,8 @@ def daemons(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Any, Any
         yield pair
 
 
+@pytest.mark.gl
+@pytest.mark.xdist_group("hdr_daemons")
 def test_a_daemon_negotiates_its_layer_format_and_keeps_publishing_after_bad_input(
     daemons: tuple[Any, Any],
 ) -> None:
@@ -707,6 +708,8 @@ def test_a_daemon_negotiates_its_layer_format_and_keeps_publishing_after_bad_inp
         assert reader.read(timeout_s=HANG_S).layers["sky"].dtype == np.uint8
 
 
+@pytest.mark.gl
+@pytest.mark.xdist_group("hdr_daemons")
 def test_the_kits_snapshot_tool_writes_the_linear_picture_and_tone_maps_it_once(
     daemons: tuple[Any, Any],
     host_kit: Path,  # noqa: F811
@@ -760,6 +763,8 @@ def test_the_kits_snapshot_tool_writes_the_linear_picture_and_tone_maps_it_once(
     )
 
 
+@pytest.mark.gl
+@pytest.mark.xdist_group("hdr_daemons")
 def test_the_reference_host_writes_the_linear_picture_and_tone_maps_it_once(
     daemons: tuple[Any, Any], tmp_path: Path
 ) -> None:
