@@ -211,6 +211,7 @@ def test_client_limit_floods_bad_params_and_accept_failures_leave_the_daemon_usa
             "status": {},
             "scene": {},
             "export_textures": {},
+            "output_format": {},
             "set_camera": {},
             "set_aircraft": {"position_m": None},
             "set_time": {"rate": 1.0},
@@ -228,6 +229,7 @@ def test_client_limit_floods_bad_params_and_accept_failures_leave_the_daemon_usa
             "set_time": {"time_utc": "2026-06-21T13:00:00" + "0" * 100 + "Z"},
             "apply_preset": {"name": "a" * 65},
             "apply_metar": {"report": "LSZH " * 1000},
+            "output_format": {"layer_format": "rgba16f" * 1000},
         }
         for command, params in too_big.items():
             with pytest.raises(RemoteError, match=rf"^{command}: ") as rejected:

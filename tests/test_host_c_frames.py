@@ -278,6 +278,8 @@ def test_open_reports_the_header_and_layer_table_python_wrote(
                 "max_width": spec.max_width,
                 "max_height": spec.max_height,
                 "capacity": spec.capacity,
+                "format": 0,  # RGBA8: a version 1 segment has no other
+                "bytes_per_pixel": 4,
                 "index": k,
             }
             for k, spec in enumerate(LAYERS)
@@ -407,9 +409,11 @@ def bad_segments(data: bytes, w: dict[str, int]) -> dict[str, tuple[bytes, dict[
             patched(data, (4, "raw", bytes(4))),
             fails("WXSKY_STARTING", "no magic yet"),
         ),
-        "version_2": (
-            patched(data, (shm.HDR_VERSION, "<I", 2)),
-            fails("WXSKY_EVERSION", "has layout version 2 (offset 8); this kit reads version 1"),
+        "version_3": (
+            patched(data, (shm.HDR_VERSION, "<I", 3)),
+            fails(
+                "WXSKY_EVERSION", "has layout version 3 (offset 8); this kit reads versions 1 to 2"
+            ),
         ),
         "slot_count_3": (
             patched(data, (shm.HDR_SLOT_COUNT, "<I", 3)),

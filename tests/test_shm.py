@@ -229,9 +229,9 @@ def test_wrong_version_is_refused(name: str) -> None:
     with FrameWriter.create(name, LAYERS):
         fd = shm._shm_open(name, os.O_RDWR)
         with mmap.mmap(fd, 4096) as mm:
-            struct.pack_into("<I", mm, shm.HDR_VERSION, 2)
+            struct.pack_into("<I", mm, shm.HDR_VERSION, 3)
         os.close(fd)
-        with pytest.raises(WxskyError, match="version 2; this wxsky understands version 1"):
+        with pytest.raises(WxskyError, match="version 3; this wxsky understands versions 1 and 2"):
             FrameReader.open(name)
 
 

@@ -2,6 +2,12 @@
 
     python plugins/reference-host/reference_host.py --out sky.png [--control ADDR]
         [--frames N] [--heading-deg D --pitch-deg D --fov-deg D --size WxH]
+        [--exposure EV] [--linear-out FILE.pfm|FILE.npy]
+
+A daemon with `[output] layer_format = "rgba16f"` publishes scene-linear half-float layers:
+this host composites them in linear, writes that composite with --linear-out, and exposes
+(--exposure, EV; 0 the legacy look) and tone-maps it once for the PNG. With 8-bit layers the
+PNG is their composite as published (--exposure does not apply; --linear-out is an error).
 
 It reads only what a simulator reads (the msgpack stream and the shared-memory segment), so
 it doubles as the worked example for a host written in another language: see
@@ -14,11 +20,15 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from wxsky.app.snapshot import LINEAR_SUFFIXES, write_linear
 from wxsky.cli.common import parse_size
 from wxsky.errors import WxskyError
 from wxsky.host.reference import ReferenceHost
 from wxsky.output.transport import default_address, parse_address
 from wxsky.png import write_png
+from wxsky.scene.exposure import scale_of_ev
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -30,8 +40,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pitch-deg", type=float)
     p.add_argument("--fov-deg", type=float)
     p.add_argument("--size", help="WIDTHxHEIGHT")
+    p.add_argument("--exposure", type=float, default=0.0, help="EV for rgba16f layers")
+    p.add_argument("--linear-out", type=Path, help="scene-linear composite (.pfm or .npy)")
     args = p.parse_args(argv)
     try:
+        exposure = scale_of_ev(args.exposure)  # ValueError outside -20..20 EV
+        if args.linear_out is not None and args.linear_out.suffix.lower() not in LINEAR_SUFFIXES:
+            raise ValueError(f"--linear-out {args.linear_out}: give a name ending in .pfm or .npy")
         address = parse_address(args.control) if args.control else default_address()
         with ReferenceHost.connect(address) as host:
             camera = {
@@ -54,8 +69,15 @@ def main(argv: list[str] | None = None) -> int:
                 frame = host.wait_frame(after)
                 after = frame.meta.frame_number
                 out = args.out if args.frames == 1 else args.out.with_stem(f"{args.out.stem}_{n}")
-                write_png(out, frame.composite())
+                # First, so 8-bit layers refuse --linear-out before anything is written.
+                linear = None if args.linear_out is None else frame.composite_linear()
+                write_png(out, frame.composite(exposure=exposure))
                 print(f"frame {frame.meta.frame_number} -> {out}")
+                if linear is not None:
+                    lin = args.linear_out
+                    lin = lin if args.frames == 1 else lin.with_stem(f"{lin.stem}_{n}")
+                    write_linear(lin, linear.astype(np.float32))
+                    print(f"frame {frame.meta.frame_number} -> {lin} (scene-linear)")
     except (WxskyError, ValueError) as exc:
         print(f"reference-host: error: {exc}", file=sys.stderr)
         return 2

@@ -24,11 +24,12 @@ from wxsky.schema import (
     Invalid,
     Nullable,
     Number,
+    Problem,
     Table,
     Text,
     Tuple,
 )
-from wxsky.settings.config import CLOCK_RATE, PRESET_NAME
+from wxsky.settings.config import CLOCK_RATE, LAYER_FORMAT, PRESET_NAME
 from wxsky.weather.metar_clouds import FIELD_ELEVATION_M
 from wxsky.weather.state import (
     ALT_M,
@@ -60,6 +61,24 @@ ERROR_MAX_CHARS = 1000  # a command's error, one line: a long value in it is cli
 _EN_M = Number(-1e6, 1e6, unit="m")
 _POSITION = Tuple((_EN_M, _EN_M, Number(-1000.0, 100_000.0, unit="m")), "[east_m, north_m, alt_m]")
 SET_AIRCRAFT = Table({"position_m": Field(Nullable(_POSITION), REQUIRED)})
+
+
+def _asked_format(value: Any) -> str:
+    """The config's kind, with a long string refused by its length: the error quotes the
+    value, and a host's 30 KB string is no format."""
+    if isinstance(value, str) and len(value) > 16:
+        raise ValueError(
+            f"must be {LAYER_FORMAT.describe()}, got a string of {len(value)} characters"
+        )
+    problems: list[Problem] = []
+    checked = LAYER_FORMAT.check(value, (), problems)
+    if problems:
+        raise ValueError(problems[0].message)
+    return str(checked)
+
+
+# `output_format`: the layer format a host asks for (omitted: it only asks what is written).
+OUTPUT_FORMAT = Table({"layer_format": Field(Custom(_asked_format, LAYER_FORMAT.describe()))})
 # Commands that take no params still refuse any they are given (§5: unknown params are errors).
 NO_PARAMS = Table({})
 
@@ -183,6 +202,29 @@ def set_aircraft(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
     position = v["position_m"]
     engine.set_aircraft(position)
     return {"position_m": None if position is None else list(position)}
+
+
+def output_format(params: dict[str, Any], written: str, segment_version: int) -> dict[str, Any]:
+    """`output_format` (docs/protocol.md §5, §1.2): a host asks for a layer format; the answer
+    says the one the daemon writes (`written`, its [output] layer_format, fixed for the
+    segment's life) and whether that is what was asked for. A format outside the choices is
+    an error naming it and them."""
+    v = checked_params("output_format", OUTPUT_FORMAT, params)
+    wanted = v.get("layer_format", written)
+    granted = wanted == written
+    reason = None
+    if not granted:
+        reason = (
+            f"this daemon writes {written} layers ([output] layer_format, fixed for the "
+            f'segment\'s life): start it with layer_format = "{wanted}" for {wanted} layers; '
+            f"read the {written} layers meanwhile"
+        )
+    return {
+        "layer_format": written,
+        "granted": granted,
+        "reason": reason,
+        "segment_version": segment_version,
+    }
 
 
 def set_time(engine: SkyEngine, params: dict[str, Any]) -> None:

@@ -33,6 +33,7 @@ from wxsky.app.control import (
     camera_to_dict,
     dispatch_table,
     no_params,
+    output_format,
     release,
     set_aircraft,
     set_time,
@@ -49,7 +50,7 @@ from wxsky.errors import ConfigError, RenderError, WxskyError
 from wxsky.inputs.stats import InputStats
 from wxsky.logs import RateLimitedLog, clip
 from wxsky.output.frame_meta import FrameMeta
-from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec
+from wxsky.output.shm import FrameReader, FrameWriter, LayerSpec, segment_version
 from wxsky.output.transport import Address, ControlServer, WithFds, default_address
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
@@ -90,7 +91,7 @@ def layer_specs(config: DaemonConfig) -> list[LayerSpec]:
     out = config.output
     scene = config.scene
     return frame_layer_specs(
-        out.max_width, out.max_height, scene.ring_texture_px, scene.shadow_map_px
+        out.max_width, out.max_height, scene.ring_texture_px, scene.shadow_map_px, out.layer_format
     )
 
 
@@ -204,6 +205,9 @@ class Daemon:
             "release": lambda p: release(self.engine, p),
             "apply_metar": lambda p: apply_metar(self.engine, p),
             "export_textures": self._export_textures,
+            "output_format": lambda p: output_format(
+                p, config.output.layer_format, self._segment_version()
+            ),
         }
         self._dispatch = dispatch_table(self._commands)
 
@@ -391,8 +395,13 @@ class Daemon:
         )
 
         setting = self.config.render.exposure
+        # [output] layer_format "rgba16f": every pass draws scene-linear half floats, which
+        # go into the segment as they are (hosts with HDR pipelines expose and tone-map).
+        linear = self.config.output.layer_format == "rgba16f"
         self._renderer = Renderer(
-            self.config.scene.ring_texture_px, variable_exposure=needs_variable(setting)
+            self.config.scene.ring_texture_px,
+            variable_exposure=needs_variable(setting),
+            output="linear" if linear else "display",
         )
         # [render] exposure: a number of EV fixes it; "auto" holds the legacy exposure while
         # the passes' colours are display-referred (scene/exposure.py).
@@ -529,11 +538,22 @@ class Daemon:
 
             r = self._renderer
             assert r is not None
-            layers = [(s.name, s.max_width, s.max_height) for s in layer_specs(self.config)]
-            self._slot_textures = SlotTextures(r.ctx, layers, 2, DmaBufExporter.create())
+            specs = layer_specs(self.config)
+            layers = [(s.name, s.max_width, s.max_height) for s in specs]
+            self._slot_textures = SlotTextures(
+                r.ctx,
+                layers,
+                2,
+                DmaBufExporter.create(),
+                formats={s.name: s.format for s in specs},
+            )
             log.info("zero-copy textures: exported %d layers x 2 slots", len(layers))
         textures, fds = self._slot_textures.descriptors()
         return textures, fds
+
+    def _segment_version(self) -> int:
+        """The layout version of the daemon's segment (1 for RGBA8 layers, 2 with RGBA16F)."""
+        return segment_version(layer_specs(self.config))
 
     def _publish_target(self) -> None:
         if self.engine.target_version != self._target_version:
@@ -589,6 +609,8 @@ class Daemon:
             "sky": self.engine.sky().to_dict(),
             "block_size_m": BLOCK_SIZE_M,
             "layers": [s.name for s in layer_specs(self.config)],
+            # The picture layers' format (docs/protocol.md §1.2; `output_format`).
+            "layer_format": self.config.output.layer_format,
         }
 
     def _broadcast_frame(self, plan: FramePlan, meta: FrameMeta, published_s: float) -> None:

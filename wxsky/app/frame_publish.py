@@ -18,7 +18,7 @@ import numpy as np
 
 from wxsky.engine.stages import FramePlan
 from wxsky.output.frame_meta import FrameMeta, ShadowPlacement
-from wxsky.output.shm import LayerSpec
+from wxsky.output.shm import RGBA8, LayerSpec
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX
 from wxsky.scene.layout import RingScene
 from wxsky.scene.ring import RING_SIZE, ring_target_name
@@ -74,19 +74,26 @@ class LayerSink(Protocol):
 
 
 def frame_layer_specs(
-    width: int, height: int, ring_px: int, shadow_px: int = SHADOW_MAP_PX
+    width: int,
+    height: int,
+    ring_px: int,
+    shadow_px: int = SHADOW_MAP_PX,
+    layer_format: str = RGBA8,
 ) -> list[LayerSpec]:
     """The segment's layers: sky and near at most width x height, the current ring's 8
     images, the incoming ring's 8 while it fades in (absent otherwise), and the cloud-shadow
-    map of the ring on show (`shadow_px` square; none with 0)."""
+    map of the ring on show (`shadow_px` square; none with 0). The pictures are in
+    `layer_format` (the renderer's: "rgba8" display values or "rgba16f" scene-linear); the
+    shadow map, a map of transmittance rather than a picture, is RGBA8 in either."""
     shadow = [LayerSpec("shadow", shadow_px, shadow_px)] if shadow_px > 0 else []
+    fmt = layer_format
     return [
-        LayerSpec("sky", width, height),
-        LayerSpec("near", width, height),
+        LayerSpec("sky", width, height, fmt),
+        LayerSpec("near", width, height, fmt),
         # The near sprites in front of the host's aircraft, while it is set (absent otherwise).
-        LayerSpec("near_front", width, height),
-        *(LayerSpec(f"ring_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
-        *(LayerSpec(f"ring_in_{i}", ring_px, ring_px) for i in range(RING_SIZE)),
+        LayerSpec("near_front", width, height, fmt),
+        *(LayerSpec(f"ring_{i}", ring_px, ring_px, fmt) for i in range(RING_SIZE)),
+        *(LayerSpec(f"ring_in_{i}", ring_px, ring_px, fmt) for i in range(RING_SIZE)),
         *shadow,
     ]
 

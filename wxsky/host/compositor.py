@@ -26,8 +26,9 @@ from wxsky.scene.camera import FAR_M, Camera
 
 U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
-# A layer: RGBA8 display values or float scene-linear colour.
-Image = npt.NDArray[np.uint8] | npt.NDArray[np.float32]
+# A layer: RGBA8 display values or float scene-linear colour (float16: RGBA16F segment
+# layers as read, float32: a linear renderer's read_linear).
+Image = npt.NDArray[np.uint8] | npt.NDArray[np.float32] | npt.NDArray[np.float16]
 
 
 def unit(image: Image) -> F64:

@@ -13,10 +13,18 @@ import numpy.typing as npt
 
 from wxsky.errors import WxskyError
 from wxsky.host.client import ControlClient
-from wxsky.host.compositor import Ground, Layers, composite, layers_from_images
+from wxsky.host.compositor import (
+    F64,
+    Ground,
+    Layers,
+    composite,
+    composite_linear,
+    layers_from_images,
+)
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import Frame, FrameReader
 from wxsky.output.transport import Address
+from wxsky.scene.exposure import LEGACY_EXPOSURE, display
 
 TOPICS = ("frame", "scene", "weather")
 
@@ -26,8 +34,36 @@ class HostFrame:
     meta: FrameMeta
     layers: Layers
 
-    def composite(self, ground: Ground | None = None) -> npt.NDArray[np.uint8]:
-        return composite(self.layers, self.meta.camera, ground)
+    @property
+    def linear(self) -> bool:
+        """Whether the picture layers are scene-linear half floats (RGBA16F: a daemon with
+        [output] layer_format = "rgba16f") rather than display values."""
+        return self.layers.sky.dtype != np.uint8
+
+    def composite(
+        self, ground: Ground | None = None, exposure: float = LEGACY_EXPOSURE
+    ) -> npt.NDArray[np.uint8]:
+        """The opaque RGBA8 picture. RGBA16F layers are composited in linear, then exposed
+        (`exposure`, a scale on scene-linear colour) and tone-mapped once, as an HDR host does
+        (docs/linear-output.md); RGBA8 layers are composited as they are (`exposure` unused:
+        the daemon exposed them)."""
+        if not self.linear:
+            return composite(self.layers, self.meta.camera, ground)
+        rgb = display(self.composite_linear(ground), exposure)
+        h, w = rgb.shape[:2]
+        out = np.full((h, w, 4), 255, np.uint8)
+        out[..., :3] = np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+        return out
+
+    def composite_linear(self, ground: Ground | None = None) -> F64:
+        """(H, W, 3) the scene-linear composite of RGBA16F layers, before exposure and tone
+        map (what `wxsky snapshot --linear-out` writes)."""
+        if not self.linear:
+            raise WxskyError(
+                "composite_linear: this frame's layers are rgba8 display values; ask the "
+                'daemon for rgba16f ([output] layer_format = "rgba16f")'
+            )
+        return composite_linear(self.layers, self.meta.camera, ground)
 
     def shadow_at(self, points_m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """(...) the cloud shadow T at world points (..., 3): 1 where the frame has no map."""

@@ -21,11 +21,14 @@ Layout (all integers little-endian, every field naturally aligned; offsets in by
        44    4 u32     state            0 initialising, 1 live, 2 closed by the writer
        48    8 u64     latest_frame     frame number of the latest published frame
        56    8 u64     publish_count    frames published so far (0: none yet)
-       64 32*L         layer descriptors, 32 bytes each:
+       64 D*L          layer descriptors, D bytes each (D = 32 in version 1, 40 in 2):
                          +0  char[16] name        ASCII, NUL padded (no NUL when 16 long)
                          +16 u32      max_width   pixels
                          +20 u32      max_height  pixels
-                         +24 u64      capacity    max_width * max_height * 4 bytes
+                         +24 u64      capacity    max_width * max_height * B bytes
+                         +32 u32      format      version 2 only: 0 RGBA8 (B = 4),
+                                                  1 RGBA16F (B = 8)
+                         +36 u32      reserved    version 2 only: 0
 
     Slot i, at segment offset header_size + i * slot_size
       off size type   field
@@ -38,8 +41,16 @@ Layout (all integers little-endian, every field naturally aligned; offsets in by
                          +4  u32 height   used height
                          +8  u64 offset   offset of the pixels from the *segment* start
       meta_offset      metadata region, meta_capacity bytes, the first meta_length used
-      layer offsets    pixels: RGBA8, premultiplied alpha, rows top to bottom, tightly packed
-                       (stride = width * 4), each region 64-byte aligned
+      layer offsets    pixels: RGBA8 or RGBA16F (the layer's format), premultiplied alpha,
+                       rows top to bottom, tightly packed (stride = width * B), each region
+                       64-byte aligned
+
+Versions. A segment whose layers are all RGBA8 is written as version 1, byte for byte the
+layout of before HDR layers (so every reader of before still reads the default). A segment
+with any RGBA16F layer (`[output] layer_format = "rgba16f"`) is version 2: its descriptors
+carry the format, and a reader of version 1 refuses it for its version rather than reading
+half floats as bytes. RGBA16F pixels are IEEE 754 binary16, little-endian, scene-linear
+colour before exposure and tone map (docs/linear-output.md).
 
 Writer, per frame: make the inactive slot's seq odd (before the first pixel is written), fill
 pixels, layer table, frame number and metadata, make seq even, then store active_slot,
@@ -128,9 +139,19 @@ _posixshmem = importlib.import_module("_posixshmem")
 logger = logging.getLogger(__name__)
 
 MAGIC = b"WXSKYSHM"
-VERSION = 1
+# The newest layout this module writes and reads; version 1 (RGBA8 layers only, no format
+# field) is still written for such a segment and read.
+VERSION = 2
+VERSION_RGBA8 = 1
+VERSIONS = (VERSION_RGBA8, VERSION)
 SLOT_COUNT = 2
-BYTES_PER_PIXEL = 4
+BYTES_PER_PIXEL = 4  # an RGBA8 layer's
+
+# Layer formats: name -> (descriptor code, bytes per pixel). RGBA16F: 4 half floats.
+RGBA8 = "rgba8"
+RGBA16F = "rgba16f"
+LAYER_FORMATS: dict[str, tuple[int, int]] = {RGBA8: (0, 4), RGBA16F: (1, 8)}
+_FORMAT_NAMES = {code: name for name, (code, _) in LAYER_FORMATS.items()}
 
 STATE_INITIALISING = 0
 STATE_LIVE = 1
@@ -153,12 +174,15 @@ HDR_LAYERS = 64  # first layer descriptor
 HDR_FIXED_SIZE = 64
 
 # Layer descriptor, offsets from its start.
-LAYER_DESC_SIZE = 32
+LAYER_DESC_SIZE = 32  # version 1
+LAYER_DESC_SIZE_V2 = 40  # version 2: the format and a reserved u32 follow
 LD_NAME = 0  # char[16]
 LAYER_NAME_SIZE = 16
 LD_MAX_WIDTH = 16  # u32
 LD_MAX_HEIGHT = 20  # u32
 LD_CAPACITY = 24  # u64
+LD_FORMAT = 32  # u32, version 2
+LD_RESERVED = 36  # u32, version 2: 0
 
 # Slot header, offsets from the slot start.
 SLOT_SEQ = 0  # u64
@@ -257,24 +281,45 @@ def _unlink_own(name: str, fd: int) -> bool:
 
 @dataclass(frozen=True)
 class LayerSpec:
-    """A layer's fixed capacity; a frame may use any width/height up to it."""
+    """A layer's fixed capacity and pixel format; a frame may use any width/height up to it."""
 
     name: str
     max_width: int
     max_height: int
+    format: str = RGBA8  # a key of LAYER_FORMATS
+
+    @property
+    def bytes_per_pixel(self) -> int:
+        return LAYER_FORMATS[self.format][1]
 
     @property
     def capacity(self) -> int:
-        return self.max_width * self.max_height * BYTES_PER_PIXEL
+        return self.max_width * self.max_height * self.bytes_per_pixel
+
+
+# A layer's pixels as a reader copies them: (height, width, 4) uint8 for RGBA8, float16 for
+# RGBA16F (the half floats as they are in the segment).
+LayerPixels = npt.NDArray[np.uint8] | npt.NDArray[np.float16]
 
 
 @dataclass(frozen=True, eq=False)
 class Frame:
-    """One published frame, copied out of the segment (arrays are (height, width, 4) uint8)."""
+    """One published frame, copied out of the segment: arrays (height, width, 4), uint8 for
+    RGBA8 layers and float16 for RGBA16F ones."""
 
     frame_number: int
-    layers: dict[str, npt.NDArray[np.uint8]]
+    layers: dict[str, LayerPixels]
     meta: bytes
+
+
+def segment_version(layers: Sequence[LayerSpec]) -> int:
+    """The layout version a segment of these layers is written in: 1 while every layer is
+    RGBA8 (the layout of before, which older readers read), 2 otherwise."""
+    return VERSION_RGBA8 if all(spec.format == RGBA8 for spec in layers) else VERSION
+
+
+def _desc_size(version: int) -> int:
+    return LAYER_DESC_SIZE if version == VERSION_RGBA8 else LAYER_DESC_SIZE_V2
 
 
 @dataclass(frozen=True)
@@ -285,17 +330,23 @@ class _Layout:
     slot_size: int
     meta_offset: int  # from the slot start
     pixel_offsets: tuple[int, ...]  # from the slot start
+    version: int = VERSION_RGBA8
 
     @property
     def total_size(self) -> int:
         return self.header_size + SLOT_COUNT * self.slot_size
+
+    @property
+    def desc_size(self) -> int:
+        return _desc_size(self.version)
 
     def slot_base(self, slot: int) -> int:
         return self.header_size + slot * self.slot_size
 
     @classmethod
     def compute(cls, layers: tuple[LayerSpec, ...], meta_capacity: int) -> _Layout:
-        header_size = _align(HDR_LAYERS + LAYER_DESC_SIZE * len(layers), SLOT_ALIGN)
+        version = segment_version(layers)
+        header_size = _align(HDR_LAYERS + _desc_size(version) * len(layers), SLOT_ALIGN)
         meta_offset = _align(SLOT_LAYERS + LAYER_ENTRY_SIZE * len(layers), REGION_ALIGN)
         end = meta_offset + meta_capacity
         offsets = []
@@ -310,6 +361,7 @@ class _Layout:
             slot_size=_align(end, SLOT_ALIGN),
             meta_offset=meta_offset,
             pixel_offsets=tuple(offsets),
+            version=version,
         )
 
 
@@ -326,6 +378,11 @@ def _check_specs(layers: Sequence[LayerSpec]) -> tuple[LayerSpec, ...]:
         if spec.name in seen:
             raise ValueError(f"duplicate layer name {spec.name!r}")
         seen.add(spec.name)
+        if spec.format not in LAYER_FORMATS:
+            raise ValueError(
+                f"layer {spec.name!r}: format {spec.format!r} is not one of "
+                f"{', '.join(LAYER_FORMATS)}"
+            )
         if not (1 <= spec.max_width <= 65535 and 1 <= spec.max_height <= 65535):
             raise ValueError(
                 f"layer {spec.name!r}: max size {spec.max_width}x{spec.max_height} is outside "
@@ -465,6 +522,7 @@ class FrameWriter:
         self._u32 = self._view.cast("I")
         self._u64 = self._view.cast("Q")
         self._index = {spec.name: i for i, spec in enumerate(layout.layers)}
+        self._bpp = tuple(spec.bytes_per_pixel for spec in layout.layers)
         self._target = 1  # slot being filled; slot 0 is "active" but empty until publish 1
         self._writing = False
         # Width and height of each layer published in the slot being filled, flat (0: absent),
@@ -553,6 +611,11 @@ class FrameWriter:
     @property
     def segment_size(self) -> int:
         return self._layout.total_size
+
+    @property
+    def version(self) -> int:
+        """The layout version the segment's header carries (1: RGBA8 layers only)."""
+        return self._layout.version
 
     @property
     def target_slot(self) -> int:
@@ -648,7 +711,7 @@ class FrameWriter:
 
     def _init_header(self) -> None:
         lay = self._layout
-        self._put32(HDR_VERSION, VERSION)
+        self._put32(HDR_VERSION, lay.version)
         self._put32(HDR_HEADER_SIZE, lay.header_size)
         self._put32(HDR_SLOT_COUNT, SLOT_COUNT)
         self._put32(HDR_LAYER_COUNT, len(lay.layers))
@@ -657,7 +720,7 @@ class FrameWriter:
         self._put32(HDR_WRITER_PID, os.getpid() & U32_MAX)
         self._put32(HDR_ACTIVE_SLOT, 1 - self._target)
         for i, spec in enumerate(lay.layers):
-            desc = HDR_LAYERS + i * LAYER_DESC_SIZE
+            desc = HDR_LAYERS + i * lay.desc_size
             self._view[desc + LD_NAME : desc + LD_NAME + LAYER_NAME_SIZE] = spec.name.encode(
                 "ascii"
             ).ljust(LAYER_NAME_SIZE, b"\0")
@@ -665,6 +728,9 @@ class FrameWriter:
             self._put32(desc + LD_MAX_WIDTH, spec.max_width)
             self._put32(desc + LD_MAX_HEIGHT, spec.max_height)
             self._put64(desc + LD_CAPACITY, spec.capacity)
+            if lay.version != VERSION_RGBA8:
+                self._put32(desc + LD_FORMAT, LAYER_FORMATS[spec.format][0])
+                self._put32(desc + LD_RESERVED, 0)
         for slot in range(SLOT_COUNT):
             base = lay.slot_base(slot)
             self._put32(base + SLOT_META_OFFSET, lay.meta_offset)
@@ -694,8 +760,9 @@ class FrameWriter:
         content: Hashable | None = None,
         rows: Sequence[tuple[int, int]] | None = None,
     ) -> memoryview:
-        """The writable pixels of `layer` in the slot being filled: width*height*4 contiguous
-        bytes (RGBA8, premultiplied, rows top to bottom). Valid until the next `publish`; a layer
+        """The writable pixels of `layer` in the slot being filled: width*height*B contiguous
+        bytes (the layer's format, B bytes a pixel: RGBA8 4, RGBA16F 8; premultiplied, rows
+        top to bottom). Valid until the next `publish`; a layer
         not asked for before `publish` is published as absent (0x0). `content`: a name for
         what the caller writes there, by which a later frame filling this slot again may keep
         the pixels instead of writing them (`keep_layer`). `rows`: the (first, stop) row ranges
@@ -709,7 +776,7 @@ class FrameWriter:
         else:
             self._filling[index] = (content, width, height)
         start = self._layout.slot_base(self._target) + self._layout.pixel_offsets[index]
-        row_bytes = width * BYTES_PER_PIXEL
+        row_bytes = width * self._bpp[index]
         if rows is None:
             self._dirty.append((start, height * row_bytes))
         else:
@@ -871,12 +938,13 @@ def _parse_header(name: str, fd: int, size: int) -> _Layout:
     version, header_size, slot_count, layer_count, slot_size, meta_capacity = struct.unpack_from(
         "<IIIIQI", fixed, HDR_VERSION
     )
-    if version != VERSION:
+    if version not in VERSIONS:
         raise RuntimeFailure(
             f"shared-memory segment {name!r} uses frame protocol version {version}; "
-            f"this wxsky understands version {VERSION}: run a daemon and a host of the same "
-            "wxsky version"
+            f"this wxsky understands versions {' and '.join(map(str, VERSIONS))}: run a "
+            "daemon and a host of the same wxsky version"
         )
+    desc_size = _desc_size(version)
 
     def bad(why: str) -> WxskyError:
         return WxskyError(f"shared-memory segment {name!r} has a corrupt header: {why}")
@@ -885,7 +953,7 @@ def _parse_header(name: str, fd: int, size: int) -> _Layout:
         raise bad(f"slot_count {slot_count}, expected {SLOT_COUNT}")
     if not 1 <= layer_count <= MAX_LAYERS:
         raise bad(f"layer_count {layer_count}")
-    if header_size < HDR_LAYERS + layer_count * LAYER_DESC_SIZE or header_size % 8:
+    if header_size < HDR_LAYERS + layer_count * desc_size or header_size % 8:
         raise bad(f"header_size {header_size}")
     if slot_size % 8 or header_size + SLOT_COUNT * slot_size > size:
         raise bad(f"slot_size {slot_size} does not fit the {size}-byte segment")
@@ -895,10 +963,18 @@ def _parse_header(name: str, fd: int, size: int) -> _Layout:
         raise RuntimeFailure(f"shared-memory segment {name!r} was truncated while opening it")
     specs = []
     for i in range(layer_count):
-        desc = HDR_LAYERS + i * LAYER_DESC_SIZE
+        desc = HDR_LAYERS + i * desc_size
         raw = head[desc + LD_NAME : desc + LD_NAME + LAYER_NAME_SIZE].rstrip(b"\0")
         max_width, max_height, capacity = struct.unpack_from("<IIQ", head, desc + LD_MAX_WIDTH)
-        spec = LayerSpec(raw.decode("ascii", "replace"), max_width, max_height)
+        layer_name = raw.decode("ascii", "replace")
+        layer_format = RGBA8
+        if version != VERSION_RGBA8:
+            (code,) = struct.unpack_from("<I", head, desc + LD_FORMAT)
+            if code not in _FORMAT_NAMES:
+                known = ", ".join(f"{c} {n.upper()}" for c, n in sorted(_FORMAT_NAMES.items()))
+                raise bad(f"layer {layer_name!r} format {code} (this wxsky knows {known})")
+            layer_format = _FORMAT_NAMES[code]
+        spec = LayerSpec(layer_name, max_width, max_height, layer_format)
         if capacity != spec.capacity or capacity > slot_size:
             raise bad(f"layer {spec.name!r} capacity {capacity}")
         specs.append(spec)
@@ -912,6 +988,7 @@ def _parse_header(name: str, fd: int, size: int) -> _Layout:
         slot_size=slot_size,
         meta_offset=meta_offset,
         pixel_offsets=(),  # read per frame from the slot's layer table
+        version=version,
     )
 
 
@@ -970,6 +1047,12 @@ class FrameReader:
     @property
     def layers(self) -> tuple[LayerSpec, ...]:
         return self._layout.layers
+
+    @property
+    def version(self) -> int:
+        """The segment's layout version (1: RGBA8 layers only; 2: the descriptors carry each
+        layer's format)."""
+        return self._layout.version
 
     def _fixed(self) -> bytes | None:
         return _pread_exact(self._fd, HDR_FIXED_SIZE, 0)
@@ -1066,7 +1149,7 @@ class FrameReader:
         regions = []
         for index, spec in enumerate(lay.layers):
             width, height, offset = table[3 * index : 3 * index + 3]
-            length = width * height * BYTES_PER_PIXEL
+            length = width * height * spec.bytes_per_pixel
             if (
                 width > spec.max_width
                 or height > spec.max_height
@@ -1075,8 +1158,8 @@ class FrameReader:
             ):
                 problem = f"layer {spec.name!r} entry {width}x{height}@{offset}"
                 break
-            regions.append((spec.name, width, height, offset, length))
-        layers: dict[str, npt.NDArray[np.uint8]] = {}
+            regions.append((spec, width, height, offset, length))
+        layers: dict[str, LayerPixels] = {}
         meta = b""
         if problem is None:
             got = _pread_exact(fd, meta_length, base + lay.meta_offset)
@@ -1084,12 +1167,13 @@ class FrameReader:
                 self._short += 1
                 return None
             meta = got
-            for layer, width, height, offset, length in regions:
-                pixels = np.empty((height, width, BYTES_PER_PIXEL), np.uint8)
+            for spec, width, height, offset, length in regions:
+                dtype = np.float16 if spec.format == RGBA16F else np.uint8
+                pixels = np.empty((height, width, 4), dtype)
                 if length and os.preadv(fd, [pixels.data], offset) != length:
                     self._short += 1
                     return None
-                layers[layer] = pixels
+                layers[spec.name] = pixels
         after = self._fixed()
         again = _pread_exact(fd, 8, base + SLOT_SEQ)
         if (

@@ -419,18 +419,32 @@ class Renderer:
     def layer_size(self, name: str) -> tuple[int, int]:
         return self._targets[name].size
 
+    @property
+    def layer_format(self) -> str:
+        """The segment format (`output/shm.py` LAYER_FORMATS) of this renderer's layers:
+        "rgba8" for a display renderer, "rgba16f" (half floats) for a linear one."""
+        return "rgba16f" if self.output == "linear" else "rgba8"
+
     def read_into(self, name: str, buffer: memoryview, rows: tuple[int, int] | None = None) -> None:
-        """Copy a layer's pixels, top row first, into a writable buffer of w*h*4 bytes;
-        `rows` (first, stop): only those rows, into their place in the buffer."""
+        """Copy a layer's pixels, top row first, into a writable buffer of w*h*B bytes (B = 4
+        for a display renderer's RGBA8, 8 for a linear one's RGBA16F half floats, as they are
+        held: `read_linear` widened to float32 is exactly them); `rows` (first, stop): only
+        those rows, into their place in the buffer."""
         self._finish()  # wait for the drawing GIL-free, so the read itself only copies
         fbo = self._targets[name].fbo
+        if self.output == "linear":
+            dtype, pixel_bytes = "f2", 8
+        else:
+            dtype, pixel_bytes = "f1", 4
         if rows is None:
-            fbo.read_into(buffer, components=4, alignment=1)
+            fbo.read_into(buffer, components=4, alignment=1, dtype=dtype)
             return
         width = self.layer_size(name)[0]
         first, stop = rows
-        part = buffer[first * width * 4 : stop * width * 4]
-        fbo.read_into(part, viewport=(0, first, width, stop - first), components=4, alignment=1)
+        part = buffer[first * width * pixel_bytes : stop * width * pixel_bytes]
+        fbo.read_into(
+            part, viewport=(0, first, width, stop - first), components=4, alignment=1, dtype=dtype
+        )
 
     def target_framebuffer(self, name: str) -> moderngl.Framebuffer:
         """The framebuffer of a drawn layer, exactly its size (for the zero-copy slot copies,

@@ -25,7 +25,7 @@ import ctypes
 import glob
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -49,6 +49,14 @@ EGL_DEVICE_EXT = 0x322C
 EGL_DRM_DEVICE_FILE_EXT = 0x3233
 EGL_DRM_RENDER_NODE_FILE_EXT = 0x3377
 DRM_FORMAT_MOD_INVALID = 0x00FFFFFFFFFFFFFF
+# The fourccs the slot textures export as (the driver names its own; these are what the
+# segment's formats are, for checking it): DRM_FORMAT_ABGR8888 'AB24' for RGBA8 (bytes R, G,
+# B, A), DRM_FORMAT_ABGR16161616F 'AB4H' for RGBA16F (half floats R, G, B, A).
+DRM_FORMAT_ABGR8888 = 0x34324241
+DRM_FORMAT_ABGR16161616F = 0x48344241
+LAYER_FOURCC = {"rgba8": DRM_FORMAT_ABGR8888, "rgba16f": DRM_FORMAT_ABGR16161616F}
+# The texture dtype of each segment format (moderngl's names).
+_TEXTURE_DTYPE = {"rgba8": "f1", "rgba16f": "f2"}
 MAX_PLANES = 4
 
 _EGL_ERRORS = {
@@ -411,7 +419,9 @@ class _SlotLayer:
 class SlotTextures:
     """One texture per (segment slot, layer), at the layer's capacity, on the render thread's
     context; exported as dma-bufs when an exporter is given (a GPU), plain textures otherwise
-    (what the copies can be tested with on llvmpipe).
+    (what the copies can be tested with on llvmpipe). `formats`: each layer's segment format
+    (rgba8 when not named): RGBA16F layers get half-float textures, which a driver exports
+    as 'AB4H' (DRM_FORMAT_ABGR16161616F) where it can.
 
     Per frame, for the slot the segment writer is filling: `copy` each layer it publishes
     (a GPU blit from the renderer's target, row 0 the image's top as in the segment), then
@@ -424,17 +434,19 @@ class SlotTextures:
         layers: Sequence[tuple[str, int, int]],
         slot_count: int = 2,
         exporter: DmaBufExporter | None = None,
+        formats: Mapping[str, str] | None = None,
     ) -> None:
         self._ctx = ctx
         self._exporter = exporter
         self.slot_count = slot_count
         self._layers: dict[tuple[int, str], _SlotLayer] = {}
         self._capacity = {name: (w, h) for name, w, h in layers}
+        self._format = {name: (formats or {}).get(name, "rgba8") for name, _, _ in layers}
         self._written: dict[tuple[int, str], int] = {}  # version of what `write` last put there
         try:
             for slot in range(slot_count):
                 for name, width, height in layers:
-                    tex = ctx.texture((width, height), 4)
+                    tex = ctx.texture((width, height), 4, dtype=_TEXTURE_DTYPE[self._format[name]])
                     # One level and no mipmap filtering: a complete texture, as
                     # EGL_KHR_gl_texture_2D_image wants for level 0.
                     tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -492,9 +504,13 @@ class SlotTextures:
         self._written[(slot, layer)] = version
 
     def read(self, slot: int, layer: str, width: int, height: int) -> bytes:
-        """The slot texture's top-left width x height, rows as in the segment (for tests)."""
+        """The slot texture's top-left width x height, rows as in the segment (for tests):
+        bytes for RGBA8, half floats for RGBA16F, as the segment holds them."""
         fbo = self._layers[(slot, layer)].fbo
-        data: bytes = fbo.read(viewport=(0, 0, width, height), components=4, alignment=1)
+        dtype = _TEXTURE_DTYPE[self._format[layer]]
+        data: bytes = fbo.read(
+            viewport=(0, 0, width, height), components=4, alignment=1, dtype=dtype
+        )
         return data
 
     def close(self) -> None:

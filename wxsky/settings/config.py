@@ -255,6 +255,11 @@ class ClockSection(_Section):
     rate: float = _opt(1.0, CLOCK_RATE)  # simulation seconds per wall second
 
 
+# The segment's picture layers (wxsky/output/shm.py LAYER_FORMATS): the config's
+# [output] layer_format and the control channel's `output_format` check by this one kind.
+LAYER_FORMAT = Text(choices=("rgba8", "rgba16f"))
+
+
 @dataclass(frozen=True)
 class OutputSection(_Section):
     SECTION: ClassVar[str] = "output"
@@ -269,6 +274,10 @@ class OutputSection(_Section):
     )
     max_width: int = _opt(1920, VIEWPORT_PX)
     max_height: int = _opt(1080, VIEWPORT_PX)
+    # The segment's picture layers: "rgba8" display values (exposed, tone-mapped, sRGB) or
+    # "rgba16f" scene-linear half floats for hosts with HDR pipelines (docs/linear-output.md;
+    # the segment is then protocol version 2, which older readers refuse).
+    layer_format: str = _opt("rgba8", LAYER_FORMAT)
     # Control clients served at once (output/transport.py DEFAULT_MAX_CLIENTS); one more is
     # served and the longest-idle one closed to make room. Each holds a file descriptor.
     max_clients: int = _opt(64, _int(1, 1000))

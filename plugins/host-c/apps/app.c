@@ -60,10 +60,57 @@ int app_gl_read(const app_gl *g, uint8_t *rgba, char *err) {
     return 0;
 }
 
+int app_gl_open_linear(app_gl *g, char *err) {
+    glGenTextures(1, &g->linear_tex);
+    glBindTexture(GL_TEXTURE_2D, g->linear_tex);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    /* 32-bit floats: the composite of half-float layers loses nothing to the blending */
+    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA32F, (GLsizei)g->width, (GLsizei)g->height, 0, GL_RGBA,
+                 GL_FLOAT, NULL);
+    glGenFramebuffers(1, &g->linear_fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, g->linear_fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, g->linear_tex, 0);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g->depth);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+        snprintf(err, APP_ERR, "a %ux%u RGBA32F framebuffer is incomplete", g->width, g->height);
+        return -1;
+    }
+    glViewport(0, 0, (GLsizei)g->width, (GLsizei)g->height);
+    return 0;
+}
+
+int app_gl_read_linear(const app_gl *g, float *rgba, char *err) {
+    GLenum code;
+    glBindFramebuffer(GL_FRAMEBUFFER, g->linear_fbo);
+    glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    glReadPixels(0, 0, (GLsizei)g->width, (GLsizei)g->height, GL_RGBA, GL_FLOAT, rgba);
+    if ((code = glGetError()) != GL_NO_ERROR) {
+        snprintf(err, APP_ERR, "reading the linear picture back: GL error 0x%x", (unsigned)code);
+        return -1;
+    }
+    return 0;
+}
+
+int app_gl_tone_map(const app_gl *g, wxsky_gl_compositor *gl, float exposure, char *err) {
+    int st;
+    glBindFramebuffer(GL_FRAMEBUFFER, g->fbo);
+    glViewport(0, 0, (GLsizei)g->width, (GLsizei)g->height);
+    if ((st = wxsky_gl_tone_map(gl, g->linear_tex, exposure)) != WXSKY_OK) {
+        snprintf(err, APP_ERR, "tone map: %s: %s", wxsky_status_name(st), wxsky_gl_error(gl));
+        return -1;
+    }
+    return 0;
+}
+
 void app_gl_close(app_gl *g) {
     egl_state *e = g->egl_;
     if (!e)
         return;
+    if (g->linear_fbo)
+        glDeleteFramebuffers(1, &g->linear_fbo);
+    if (g->linear_tex)
+        glDeleteTextures(1, &g->linear_tex);
     if (g->fbo)
         glDeleteFramebuffers(1, &g->fbo);
     if (g->color)

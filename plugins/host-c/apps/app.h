@@ -20,6 +20,9 @@ typedef struct app_gl {
     void *egl_; /* private */
     GLuint fbo, color, depth;
     uint32_t width, height;
+    /* app_gl_open_linear's float framebuffer (RGBA32F texture, the same depth buffer): where
+     * HDR layers are composited in linear; 0 until then */
+    GLuint linear_fbo, linear_tex;
 } app_gl;
 
 /* 0 on success; -1 with err when GL or the framebuffer could not be made (exit code 2 for the
@@ -29,6 +32,15 @@ int app_gl_open(app_gl *g, uint32_t width, uint32_t height, char *err);
  * drawn with wxsky_gl_camera_matrices(..., flip_y 1, ...). 0 or -1 with err. */
 int app_gl_read(const app_gl *g, uint8_t *rgba, char *err);
 void app_gl_close(app_gl *g);
+/* For RGBA16F layers: adds a float framebuffer of the same size (an RGBA32F texture and the
+ * depth buffer) and binds it, so a composite that follows is scene-linear and unclipped.
+ * 0 or -1 with err. */
+int app_gl_open_linear(app_gl *g, char *err);
+/* Reads the float framebuffer into rgba (width * height * 4 floats), rows as app_gl_read. */
+int app_gl_read_linear(const app_gl *g, float *rgba, char *err);
+/* Binds the RGBA8 framebuffer and draws the float one's composite into it through the
+ * daemon's exposure and tone map (wxsky_gl_tone_map): app_gl_read then reads display values. */
+int app_gl_tone_map(const app_gl *g, wxsky_gl_compositor *gl, float exposure, char *err);
 
 /* Buffers for every layer of an open segment at its capacity, and its metadata. */
 int app_copy_alloc(const wxsky_segment *seg, wxsky_frame_copy *copy);

@@ -84,3 +84,44 @@ done:
         snprintf(err, err_size, "%s: %s", path ? path : "(null)", why);
     return ok ? 0 : -1;
 }
+
+static void le32f(uint8_t *p, float v) {
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    p[0] = (uint8_t)bits;
+    p[1] = (uint8_t)(bits >> 8);
+    p[2] = (uint8_t)(bits >> 16);
+    p[3] = (uint8_t)(bits >> 24);
+}
+
+int pfm_write_rgb(const char *path, const float *rgba, uint32_t width, uint32_t height,
+                  char *err, size_t err_size) {
+    FILE *f = fopen(path, "wb");
+    uint8_t *row = malloc((size_t)width * 12 + 1);
+    int good;
+    if (!f || !row) {
+        if (err_size)
+            snprintf(err, err_size, "cannot write %s: %s", path, f ? "out of memory" : strerror(errno));
+        if (f)
+            fclose(f);
+        free(row);
+        return -1;
+    }
+    good = fprintf(f, "PF\n%u %u\n-1.0\n", (unsigned)width, (unsigned)height) > 0;
+    for (uint32_t y = height; good && y-- > 0;) { /* the format's rows go bottom first */
+        const float *src = rgba + (size_t)y * width * 4;
+        for (uint32_t x = 0; x < width; ++x)
+            for (int c = 0; c < 3; ++c)
+                le32f(row + (size_t)x * 12 + (size_t)c * 4, src[(size_t)x * 4 + (size_t)c]);
+        good = fwrite(row, 12, width, f) == width;
+    }
+    free(row);
+    if (fclose(f) != 0)
+        good = 0;
+    if (!good) {
+        if (err_size)
+            snprintf(err, err_size, "cannot write %s: %s", path, strerror(errno));
+        return -1;
+    }
+    return 0;
+}

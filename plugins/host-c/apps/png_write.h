@@ -12,4 +12,10 @@
 int png_write_rgba(const char *path, const uint8_t *rgba, uint32_t width, uint32_t height,
                    char *err, size_t err_size);
 
+/* Writes the RGB of width x height float RGBA pixels (rows top first) as a colour Portable
+ * Float Map: "PF", the size, scale -1.0 (little-endian), float32 RGB rows bottom first, as
+ * `wxsky snapshot --linear-out` writes them. 0, or -1 with a one-line reason in err. */
+int pfm_write_rgb(const char *path, const float *rgba, uint32_t width, uint32_t height,
+                  char *err, size_t err_size);
+
 #endif

@@ -2,7 +2,7 @@
  *
  *   wxsky-host-snapshot [--control ADDR] [--shm NAME] [--time ISO8601] [--lat DEG --lon DEG]
  *       [--alt-m M] [--heading-deg D] [--pitch-deg D] [--fov-deg D] [--size WxH]
- *       --out FILE.png [--timeout-s S]
+ *       --out FILE.png [--timeout-s S] [--exposure EV] [--linear-out FILE.pfm]
  *
  * Connects to the daemon at ADDR (protocol §2.1; default: the default address there), sets its clock (set_time) and camera
  * (set_camera) to what is given (anything not given stays as the daemon has it), waits for a
@@ -10,6 +10,13 @@
  * EGL context with the GL compositor and writes the PNG. --shm defaults to the segment the
  * daemon names in `scene`. For the same preset, time and camera the picture is the one
  * `wxsky snapshot` makes (tests/test_host_c_snapshot.py holds them together).
+ *
+ * A daemon with [output] layer_format = "rgba16f" publishes scene-linear RGBA16F layers: they
+ * are composited in linear into a float framebuffer, which --linear-out writes as a PFM (the
+ * scene-linear picture, as `wxsky snapshot --linear-out` does), and shown once through the
+ * daemon's exposure and tone map at --exposure EV (-20..20, default 0: the daemon's EV 0) for
+ * the PNG (wxsky_gl_tone_map). With RGBA8 layers --exposure does not apply and --linear-out
+ * is an error (the layers are display values already).
  *
  * Prints "wrote FILE (WxH), frame N" on success; otherwise one line "wxsky-host-snapshot:
  * error: ..." and exits 1 (2: no headless GL context could be made; 64: bad arguments). */
@@ -24,8 +31,8 @@
 #define PROG "wxsky-host-snapshot"
 
 typedef struct args {
-    const char *control, *shm, *time_utc, *out;
-    double lat, lon, alt_m, heading_deg, pitch_deg, fov_deg, timeout_s;
+    const char *control, *shm, *time_utc, *out, *linear_out;
+    double lat, lon, alt_m, heading_deg, pitch_deg, fov_deg, timeout_s, exposure_ev;
     int has_lat, has_lon, has_alt, has_heading, has_pitch, has_fov;
     uint32_t width, height;
 } args;
@@ -33,7 +40,7 @@ typedef struct args {
 #define USAGE                                                                              \
     "usage: " PROG " [--control ADDR] [--shm NAME] [--time ISO8601] [--lat DEG --lon DEG] "  \
     "[--alt-m M] [--heading-deg D] [--pitch-deg D] [--fov-deg D] [--size WxH] "           \
-    "--out FILE.png [--timeout-s S]"
+    "--out FILE.png [--timeout-s S] [--exposure EV] [--linear-out FILE.pfm]"
 
 static int usage(const char *why) {
     fprintf(stderr, "%s: error: %s\n%s\n", PROG, why, USAGE);
@@ -56,6 +63,12 @@ static int parse(int argc, char **argv, args *a) {
             a->time_utc = v;
         else if (!strcmp(f, "--out"))
             a->out = v;
+        else if (!strcmp(f, "--linear-out"))
+            a->linear_out = v;
+        else if (!strcmp(f, "--exposure")) {
+            if (!app_parse_number(PROG, f, v, -20, 20, &a->exposure_ev))
+                return 0;
+        }
         else if (!strcmp(f, "--lat")) {
             if (!app_parse_number(PROG, f, v, -90, 90, &a->lat))
                 return 0;
@@ -163,6 +176,8 @@ int main(int argc, char **argv) {
     args a;
     char err[APP_ERR] = "";
     uint8_t params[512], *pixels = NULL;
+    float *linear = NULL;
+    int hdr;
     wxsky_mp_writer w;
     wxsky_message res;
     wxsky_client *client = NULL;
@@ -245,7 +260,29 @@ int main(int argc, char **argv) {
                  wxsky_gl_error(gl));
         goto done;
     }
+    /* RGBA16F layers: composite in linear into a float framebuffer, tone-map once below */
+    hdr = wxsky_gl_layer_format(gl) == WXSKY_FORMAT_RGBA16F;
+    if (a.linear_out && !hdr) {
+        snprintf(err, sizeof err,
+                 "--linear-out: the daemon publishes rgba8 layers (display values); start it "
+                 "with [output] layer_format = \"rgba16f\" for scene-linear ones");
+        goto done;
+    }
+    if (hdr && app_gl_open_linear(&g, err) != 0)
+        goto done;
     if (app_composite(gl, &copy, &rec, err) != WXSKY_OK)
+        goto done;
+    if (hdr && a.linear_out) {
+        linear = malloc((size_t)rec.width_px * rec.height_px * 4 * sizeof *linear);
+        if (!linear) {
+            snprintf(err, sizeof err, "out of memory for the linear picture");
+            goto done;
+        }
+        if (app_gl_read_linear(&g, linear, err) != 0 ||
+            pfm_write_rgb(a.linear_out, linear, rec.width_px, rec.height_px, err, sizeof err) != 0)
+            goto done;
+    }
+    if (hdr && app_gl_tone_map(&g, gl, (float)pow(2.0, a.exposure_ev), err) != 0)
         goto done;
     pixels = malloc((size_t)rec.width_px * rec.height_px * 4);
     if (!pixels) {
@@ -257,6 +294,8 @@ int main(int argc, char **argv) {
         goto done;
     printf("wrote %s (%ux%u), frame %llu\n", a.out, rec.width_px, rec.height_px,
            (unsigned long long)rec.frame_number);
+    if (linear)
+        printf("wrote %s (scene-linear)\n", a.linear_out);
     code = 0;
 done:
     if (code != 0)
@@ -270,6 +309,7 @@ done:
     }
     wxsky_gl_free(gl);
     free(pixels);
+    free(linear);
     app_copy_free(&copy);
     wxsky_segment_free(seg);
     wxsky_client_free(client);

@@ -1,8 +1,8 @@
 /*
  * wxsky_host.h - the wxsky host kit: read wxsky's frames and talk to its daemon from C or C++.
  *
- * Written from docs/protocol.md (protocol version 1, frame segment version 1, frame record
- * version 3, and version 2 read too). C99, no global state: every object carries its own last error message. Objects
+ * Written from docs/protocol.md (protocol version 1, frame segment versions 1 and 2, frame
+ * record version 3, and version 2 read too). C99, no global state: every object carries its own last error message. Objects
  * are allocated once (`*_new`); nothing in the per-frame path allocates. Every function that
  * can fail returns a `wxsky_status` (0 or a positive "not now" code on success, negative on
  * error) and leaves a one-line message in its object (`wxsky_segment_error`,
@@ -23,10 +23,13 @@ extern "C" {
 
 /* The kit's own API version: MAJOR changes break source compatibility. */
 #define WXSKY_HOST_VERSION_MAJOR 0
-#define WXSKY_HOST_VERSION_MINOR 2 /* 2: frame record v3 (the cloud-shadow fields) */
+/* 2: frame record v3 (the cloud-shadow fields); 3: segment v2, RGBA16F layers (the layer
+ * info's format and bytes_per_pixel, wxsky_half_to_float, wxsky_display) */
+#define WXSKY_HOST_VERSION_MINOR 3
 /* The protocol versions this kit speaks (docs/protocol.md). */
 #define WXSKY_PROTOCOL_VERSION 1
-#define WXSKY_SEGMENT_VERSION 1
+#define WXSKY_SEGMENT_VERSION 2     /* the newest segment layout this kit reads */
+#define WXSKY_SEGMENT_VERSION_MIN 1 /* version 1: RGBA8 layers only, no format field */
 #define WXSKY_RECORD_VERSION 3 /* the newest; wxsky_record_decode reads 2 as well */
 
 #define WXSKY_MAX_LAYERS 64      /* protocol §1.2: layer_count is 1..64 */
@@ -61,11 +64,23 @@ const char *wxsky_status_name(int status);
 
 typedef struct wxsky_segment wxsky_segment;
 
+/* A layer's pixel format (protocol §1.2; a version 1 segment's layers are all RGBA8). */
+typedef enum wxsky_layer_format {
+    /* 4 bytes a pixel: display values (exposed, tone-mapped, sRGB-encoded by the daemon) */
+    WXSKY_FORMAT_RGBA8 = 0,
+    /* 8 bytes a pixel: 4 IEEE 754 half floats, little-endian, scene-linear colour before
+     * exposure and tone map (the daemon's [output] layer_format = "rgba16f"): composite in
+     * linear, then expose and tone-map once (wxsky_display) */
+    WXSKY_FORMAT_RGBA16F = 1
+} wxsky_layer_format;
+
 typedef struct wxsky_layer_info {
     char name[WXSKY_LAYER_NAME_MAX + 1]; /* NUL-terminated */
     uint32_t max_width;
     uint32_t max_height;
-    uint64_t capacity; /* bytes: max_width * max_height * 4 */
+    uint64_t capacity;        /* bytes: max_width * max_height * bytes_per_pixel */
+    uint32_t format;          /* a wxsky_layer_format */
+    uint32_t bytes_per_pixel; /* 4 (RGBA8) or 8 (RGBA16F) */
 } wxsky_layer_info;
 
 /* The segment's header (§1.2): the fixed fields as validated at open, and the live ones as
@@ -98,8 +113,10 @@ const char *wxsky_segment_error(const wxsky_segment *seg);
  * first closes it. Returns WXSKY_OK; WXSKY_STARTING while its writer is still creating it
  * (size 0, magic not yet written, or state 0: retry in a few milliseconds); WXSKY_ENOENT when
  * no object has that name; WXSKY_ECLOSED when its writer has already closed it (state 2);
- * WXSKY_EVERSION for a segment version other than 1; WXSKY_EFORMAT for anything else not in
- * the protocol's format (the message names the field, the layer or slot, and the offsets);
+ * WXSKY_EVERSION for a segment version other than 1 and 2 (WXSKY_SEGMENT_VERSION_MIN to
+ * WXSKY_SEGMENT_VERSION); WXSKY_EFORMAT for anything else not in the protocol's format, a
+ * layer format other than RGBA8 and RGBA16F among them (the message names the field, the
+ * layer or slot, and the offsets);
  * WXSKY_EINVAL for a name outside §1.1's syntax; WXSKY_ESYS when shm_open, fstat or mmap
  * failed. On any result but WXSKY_OK the handle is left closed. */
 int wxsky_segment_open(wxsky_segment *seg, const char *name);
@@ -139,8 +156,9 @@ uint32_t wxsky_segment_meta_capacity(const wxsky_segment *seg);
  * data (never index with them). The pointers stay valid (mapped) until the segment is closed
  * or reopened, whatever the writer does. */
 typedef struct wxsky_layer_view {
-    const uint8_t *pixels; /* RGBA8 premultiplied, top row first, stride width * 4; NULL when
-                              width * height is 0 */
+    const uint8_t *pixels; /* premultiplied, in the layer's format (wxsky_layer_info), top
+                              row first, stride width * bytes_per_pixel; NULL when width *
+                              height is 0 */
     uint32_t width;        /* 0: the layer is absent from this frame */
     uint32_t height;
 } wxsky_layer_view;
@@ -231,6 +249,24 @@ typedef struct wxsky_record {
  * an error. */
 int wxsky_record_decode(const uint8_t *meta, size_t length, wxsky_record *out, char *error,
                         size_t error_size);
+
+/* ---------------------------------------------------------------------------------------
+ * HDR layers (RGBA16F, docs/linear-output.md): a host composites them in linear and shows the
+ * result through one exposure and one tone map, the daemon's own (wxsky/scene/exposure.py
+ * `display`), so its picture is the 8-bit layers' look without their per-fragment tone map.
+ * ------------------------------------------------------------------------------------- */
+
+/* An IEEE 754 binary16 value (as an RGBA16F layer holds it) as a float: exact, subnormals,
+ * infinities and NaN included. */
+float wxsky_half_to_float(uint16_t half);
+
+/* The daemon's display transform of straight (not premultiplied) scene-linear colour:
+ * srgb_encode(tone_map(rgb * exposure)), where tone_map is Narkowicz's ACES fit
+ * x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), clamped to 0..1, applied to the largest
+ * channel with the colour scaled by the same factor, and srgb_encode the sRGB transfer
+ * function. `exposure`: the scale on scene-linear colour (2^EV; 1 is the daemon's EV 0).
+ * Negative and NaN channels count as 0. out_rgb: display values 0..1. */
+void wxsky_display(const float linear_rgb[3], float exposure, float out_rgb[3]);
 
 /* ---------------------------------------------------------------------------------------
  * MessagePack, the subset the control channel uses (§2.2): a validator, a bounded reader over

@@ -59,7 +59,9 @@ extern "C" {
 
 /* The GL compositor's API version: MAJOR changes break source compatibility. */
 #define WXSKY_HOST_GL_VERSION_MAJOR 0
-#define WXSKY_HOST_GL_VERSION_MINOR 2 /* 2: the cloud-shadow map (wxsky_gl_shadow*) */
+/* 2: the cloud-shadow map (wxsky_gl_shadow*); 3: HDR layers (RGBA16F textures,
+ * wxsky_gl_layer_format, wxsky_gl_tone_map, WXSKY_GL_DISPLAY_GLSL) */
+#define WXSKY_HOST_GL_VERSION_MINOR 3
 
 /* Runtime version of the GL library, (MAJOR << 16) | MINOR, to compare with the header's. */
 uint32_t wxsky_gl_version(void);
@@ -236,6 +238,45 @@ int wxsky_gl_shadow(const wxsky_gl_compositor *comp, wxsky_gl_shadow_params *out
  * WXSKY_OK; WXSKY_EINVAL (not initialised, no frame uploaded, program 0, a unit outside
  * GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS); WXSKY_ESYS (a GL error: e.g. not a program). */
 int wxsky_gl_shadow_bind(wxsky_gl_compositor *comp, unsigned int program, int unit);
+
+/* HDR layers (protocol §1.2: a segment whose picture layers are RGBA16F, the daemon's
+ * [output] layer_format = "rgba16f"; docs/linear-output.md). wxsky_gl_init makes the
+ * textures GL_RGBA16F and the uploads take GL_HALF_FLOAT; the draws are the same, so they
+ * composite scene-linear colour with the same blending. Draw them into a float colour
+ * buffer (GL_RGBA16F or GL_RGBA32F: an 8-bit one would clip at 1), then show that composite
+ * once through the daemon's exposure and tone map: wxsky_gl_tone_map, or the host's own
+ * post-processing with WXSKY_GL_DISPLAY_GLSL in it (it may apply its own tone map instead:
+ * the layers are before any). The exact answer to the approximation the 8-bit layers make
+ * (each fragment tone-mapped, then blended: docs/linear-output.md). */
+
+/* WXSKY_FORMAT_RGBA8 or WXSKY_FORMAT_RGBA16F: the picture layers' format (the segment's
+ * sky, near, near_front and ring layers share one; wxsky_gl_init refuses a segment where
+ * they do not, and a shadow map other than RGBA8); -1 when not initialised. */
+int wxsky_gl_layer_format(const wxsky_gl_compositor *comp);
+
+/* Draws `linear_texture` (the host's GL_TEXTURE_2D holding the linear composite, one texel a
+ * pixel of the current viewport, texel (0, 0) at the viewport's corner) into the current
+ * framebuffer through wxsky_display (WXSKY_GL_DISPLAY_GLSL) at `exposure` (the scale on
+ * scene-linear colour: 2^EV, 1 is the daemon's EV 0), opaque, without blending or depth.
+ * Leaves GL_BLEND and GL_DEPTH_TEST disabled, the depth mask GL_FALSE, the compositor's
+ * program and vertex array bound and the texture on unit 0. WXSKY_OK; WXSKY_EINVAL (not
+ * initialised, texture 0, exposure not positive and finite); WXSKY_ESYS (a GL error). */
+int wxsky_gl_tone_map(wxsky_gl_compositor *comp, unsigned int linear_texture, float exposure);
+
+/* GLSL (3.30 core or ES 3.00; paste after the #version and precision lines): vec3
+ * wxsky_display(vec3 linear, float exposure), the daemon's display transform
+ * (wxsky/scene/exposure.py `display`, the host kit's wxsky_display): Narkowicz's ACES fit on
+ * the largest channel, the colour scaled alike, then the sRGB encoding. */
+#define WXSKY_GL_DISPLAY_GLSL                                                                  \
+    "vec3 wxsky_display(vec3 linear, float exposure) {\n"                                     \
+    "    vec3 c = max(linear * exposure, vec3(0.0));\n"                                       \
+    "    float m = max(c.r, max(c.g, c.b));\n"                                                \
+    "    if (!(m > 0.0)) return vec3(0.0);\n"                                                 \
+    "    float y = clamp(m * (2.51 * m + 0.03) / (m * (2.43 * m + 0.59) + 0.14), 0.0, 1.0);\n" \
+    "    vec3 t = clamp(c * (y / m), 0.0, 1.0);\n"                                            \
+    "    return mix(12.92 * t, 1.055 * pow(t, vec3(1.0 / 2.4)) - 0.055, "                     \
+    "step(vec3(0.0031308), t));\n"                                                           \
+    "}\n"
 
 /* The view and projection matrices (column-major) of a record's camera, exactly as
  * wxsky/scene/camera.py makes them: near WXSKY_GL_NEAR_M, far WXSKY_GL_FAR_M, horizontal

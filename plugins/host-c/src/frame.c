@@ -91,7 +91,8 @@ static int take(wxsky_segment *seg, wxsky_frame_view *v) {
             valid = 0;
             continue;
         }
-        uint64_t length = (uint64_t)w * h * 4; /* <= capacity, which was checked not to wrap */
+        /* <= capacity, which was checked not to wrap; bytes_per_pixel is 4 or 8 */
+        uint64_t length = (uint64_t)w * h * info->bytes_per_pixel;
         if (length == 0) {
             continue; /* absent: its offset is not used */
         }
@@ -214,7 +215,8 @@ int wxsky_frame_read(wxsky_segment *seg, wxsky_frame_copy *out, int timeout_ms) 
             for (uint32_t k = 0; k < v.layer_count; k++) {
                 if (out->pixels[k] != NULL && v.layers[k].pixels != NULL) {
                     memcpy(out->pixels[k], v.layers[k].pixels,
-                           (size_t)v.layers[k].width * v.layers[k].height * 4);
+                           (size_t)v.layers[k].width * v.layers[k].height *
+                               seg->layers[k].bytes_per_pixel);
                 }
             }
             if (!torn(seg, v.slot_, v.seq_)) {

@@ -95,9 +95,15 @@ int wxsky_segment_check_region(const wxsky_segment *seg, uint32_t slot, uint64_t
     return WXSKY_OK;
 }
 
+/* Bytes of a layer descriptor in the segment's layout version (checked to be 1 or 2). */
+static size_t desc_size(const wxsky_segment *seg) {
+    return seg->version == 1 ? LAYER_DESC_SIZE : LAYER_DESC_SIZE_V2;
+}
+
 static int check_layers(wxsky_segment *seg, const uint8_t *p) {
+    const size_t dsize = desc_size(seg);
     for (uint32_t k = 0; k < seg->layer_count; k++) {
-        const uint8_t *d = p + HDR_LAYERS + (size_t)LAYER_DESC_SIZE * k;
+        const uint8_t *d = p + HDR_LAYERS + dsize * k;
         wxsky_layer_info *info = &seg->layers[k];
         size_t len = 0;
         while (len < WXSKY_LAYER_NAME_MAX && d[len] != 0) {
@@ -110,14 +116,13 @@ static int check_layers(wxsky_segment *seg, const uint8_t *p) {
                 return FAIL(WXSKY_EFORMAT,
                             "segment '%s': layer %u name has byte 0x%02x at position %zu "
                             "(descriptor at offset %zu): names are ASCII 0x21-0x7E, NUL-padded",
-                            seg->name, (unsigned)k, c, i,
-                            (size_t)HDR_LAYERS + (size_t)LAYER_DESC_SIZE * k);
+                            seg->name, (unsigned)k, c, i, (size_t)HDR_LAYERS + dsize * k);
             }
         }
         if (len == 0) {
             return FAIL(WXSKY_EFORMAT,
                         "segment '%s': layer %u has an empty name (descriptor at offset %zu)",
-                        seg->name, (unsigned)k, (size_t)HDR_LAYERS + (size_t)LAYER_DESC_SIZE * k);
+                        seg->name, (unsigned)k, (size_t)HDR_LAYERS + dsize * k);
         }
         memcpy(info->name, d, len);
         info->name[len] = '\0';
@@ -130,13 +135,28 @@ static int check_layers(wxsky_segment *seg, const uint8_t *p) {
         info->max_width = wxsky_get32(d + 16);
         info->max_height = wxsky_get32(d + 20);
         info->capacity = wxsky_get64(d + 24);
+        /* Version 1 has no format field: every layer is RGBA8. */
+        info->format = seg->version == 1 ? WXSKY_FORMAT_RGBA8 : wxsky_get32(d + LD_FORMAT);
+        if (info->format == WXSKY_FORMAT_RGBA8) {
+            info->bytes_per_pixel = 4;
+        } else if (info->format == WXSKY_FORMAT_RGBA16F) {
+            info->bytes_per_pixel = 8;
+        } else {
+            return FAIL(WXSKY_EFORMAT,
+                        "segment '%s': layer %u '%s' has format %u (descriptor offset %zu); "
+                        "this kit reads 0 RGBA8 and 1 RGBA16F",
+                        seg->name, (unsigned)k, info->name, (unsigned)info->format,
+                        (size_t)HDR_LAYERS + dsize * k + LD_FORMAT);
+        }
         uint64_t pixels = (uint64_t)info->max_width * info->max_height; /* < 2^64 */
-        if (pixels > UINT64_MAX / 4 || info->capacity != pixels * 4) {
+        if (pixels > UINT64_MAX / info->bytes_per_pixel ||
+            info->capacity != pixels * info->bytes_per_pixel) {
             return FAIL(WXSKY_EFORMAT,
                         "segment '%s': layer %u '%s' capacity %llu is not max_width %u * "
-                        "max_height %u * 4",
+                        "max_height %u * %u",
                         seg->name, (unsigned)k, info->name, (unsigned long long)info->capacity,
-                        (unsigned)info->max_width, (unsigned)info->max_height);
+                        (unsigned)info->max_width, (unsigned)info->max_height,
+                        (unsigned)info->bytes_per_pixel);
         }
     }
     return WXSKY_OK;
@@ -192,10 +212,12 @@ static int validate(wxsky_segment *seg, const uint8_t *p) {
                     magic[6], magic[7]);
     }
     seg->version = wxsky_get32(p + HDR_VERSION);
-    if (seg->version != WXSKY_SEGMENT_VERSION) {
+    if (seg->version < WXSKY_SEGMENT_VERSION_MIN || seg->version > WXSKY_SEGMENT_VERSION) {
         return FAIL(WXSKY_EVERSION,
-                    "segment '%s' has layout version %u (offset 8); this kit reads version %d",
-                    seg->name, (unsigned)seg->version, WXSKY_SEGMENT_VERSION);
+                    "segment '%s' has layout version %u (offset 8); this kit reads versions "
+                    "%d to %d",
+                    seg->name, (unsigned)seg->version, WXSKY_SEGMENT_VERSION_MIN,
+                    WXSKY_SEGMENT_VERSION);
     }
     uint32_t slot_count = wxsky_get32(p + HDR_SLOT_COUNT);
     if (slot_count != 2) {
@@ -225,7 +247,7 @@ static int validate(wxsky_segment *seg, const uint8_t *p) {
         return FAIL(WXSKY_EFORMAT, "segment '%s': layer_count %u (offset 20), expected 1-%d",
                     seg->name, (unsigned)n, WXSKY_MAX_LAYERS);
     }
-    uint64_t descriptors_end = HDR_LAYERS + (uint64_t)LAYER_DESC_SIZE * seg->layer_count;
+    uint64_t descriptors_end = HDR_LAYERS + (uint64_t)desc_size(seg) * seg->layer_count;
     if (seg->header_size < descriptors_end) {
         return FAIL(WXSKY_EFORMAT,
                     "segment '%s': header_size %u leaves no room for %u layer descriptors "

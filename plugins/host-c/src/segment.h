@@ -24,7 +24,9 @@
 #define HDR_PUBLISH_COUNT 56
 #define HDR_LAYERS 64
 #define HDR_FIXED_SIZE 64
-#define LAYER_DESC_SIZE 32
+#define LAYER_DESC_SIZE 32    /* segment version 1 */
+#define LAYER_DESC_SIZE_V2 40 /* version 2: + u32 format, u32 reserved */
+#define LD_FORMAT 32
 /* Slot header, offsets from the slot start. */
 #define SLOT_SEQ 0
 #define SLOT_FRAME 8

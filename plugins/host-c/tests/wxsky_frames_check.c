@@ -15,6 +15,12 @@
  *   wxsky_frames_check repl NAME
  *       one command a line on stdin (open, close, check, header, latest, read [TIMEOUT_MS],
  *       read_small LAYER, read_nobuf, begin, end, quit), one JSON line each on stdout
+ *   wxsky_frames_check display EXPOSURE
+ *       for each line "R G B" (straight scene-linear colour) on stdin, wxsky_display's
+ *       display values "R G B" on stdout (%.9g): the HDR layers' tone map, for the tests to
+ *       hold against wxsky/scene/exposure.py
+ *   wxsky_frames_check half
+ *       for each line of a binary16 value in hex on stdin, wxsky_half_to_float's value (%.17g)
  *   wxsky_frames_check fuzz SRC DST [--seed S] [--iterations N]
  *       copies segment SRC, and N times writes a randomly mutated copy (header, slot headers,
  *       layer tables and record bytes, or a truncation) to segment DST and opens and reads it
@@ -23,8 +29,8 @@
  * The consistency verdict: the record must decode and carry the slot's frame number; with
  * --pattern, every layer must also hold the test pattern of that frame number (the writer in
  * the tests draws it): width max_width - f % 7, height max_height - f % 5, and pixel i (as a
- * little-endian u32) f * 2654435761 + k * 40503 + i modulo 2^32 in layer k. A torn frame that
- * was not detected would mix two frames and fail it.
+ * little-endian u32; u32 word i for an RGBA16F layer) f * 2654435761 + k * 40503 + i modulo
+ * 2^32 in layer k. A torn frame that was not detected would mix two frames and fail it.
  *
  * Failure: exit status 1 and one line on stderr, "wxsky_frames_check: STATUS_NAME: message";
  * 2 for a usage error. */
@@ -82,7 +88,9 @@ static void usage(void) {
             "       wxsky_frames_check read|view NAME [--frames N] [--timeout-ms T] [--pattern]\n"
             "       wxsky_frames_check probe NAME...\n"
             "       wxsky_frames_check repl NAME\n"
-            "       wxsky_frames_check fuzz SRC DST [--seed S] [--iterations N]\n");
+            "       wxsky_frames_check fuzz SRC DST [--seed S] [--iterations N]\n"
+            "       wxsky_frames_check display EXPOSURE < lines of R G B\n"
+            "       wxsky_frames_check half < lines of hex binary16\n");
     exit(2);
 }
 
@@ -162,9 +170,11 @@ static void print_header(const wxsky_segment *seg) {
         printf(k > 0 ? ",{" : "{");
         js_key("name");
         js_str(info.name);
-        printf(",\"max_width\":%u,\"max_height\":%u,\"capacity\":%llu,\"index\":%d}",
+        printf(",\"max_width\":%u,\"max_height\":%u,\"capacity\":%llu,\"format\":%u,"
+               "\"bytes_per_pixel\":%u,\"index\":%d}",
                (unsigned)info.max_width, (unsigned)info.max_height,
-               (unsigned long long)info.capacity, wxsky_segment_find_layer(seg, info.name));
+               (unsigned long long)info.capacity, (unsigned)info.format,
+               (unsigned)info.bytes_per_pixel, wxsky_segment_find_layer(seg, info.name));
     }
     printf("]}");
 }
@@ -251,7 +261,9 @@ static void analyse(const wxsky_segment *seg, uint64_t frame_number, const uint8
                  (unsigned long long)r->record.frame_number, (unsigned long long)frame_number);
     }
     for (uint32_t k = 0; k < r->layer_count; k++) {
-        size_t n = (size_t)width[k] * height[k] * 4;
+        wxsky_layer_info li;
+        wxsky_segment_layer(seg, k, &li);
+        size_t n = (size_t)width[k] * height[k] * li.bytes_per_pixel;
         r->width[k] = width[k];
         r->height[k] = height[k];
         r->fnv[k] = fnv1a64(pixels[k], pixels[k] == NULL ? 0 : n);
@@ -950,11 +962,44 @@ static int cmd_fuzz(const char *src, const char *dst, uint64_t seed, long iterat
     return 0;
 }
 
+/* ---- HDR helpers ---------------------------------------------------------------------- */
+
+static int cmd_display(const char *exposure_text) {
+    char *end = NULL;
+    float exposure = strtof(exposure_text, &end);
+    if (end == exposure_text || *end != '\0') {
+        usage();
+    }
+    float in[3], out[3];
+    while (scanf("%f %f %f", &in[0], &in[1], &in[2]) == 3) {
+        wxsky_display(in, exposure, out);
+        printf("%.9g %.9g %.9g\n", (double)out[0], (double)out[1], (double)out[2]);
+    }
+    return 0;
+}
+
+static int cmd_half(void) {
+    unsigned value;
+    while (scanf("%x", &value) == 1) {
+        if (value > 0xffffu) {
+            die(WXSKY_EINVAL, "half: 0x%x is not a 16-bit value", value);
+        }
+        printf("%.17g\n", (double)wxsky_half_to_float((uint16_t)value));
+    }
+    return 0;
+}
+
 int main(int argc, char **argv) {
+    if (argc == 2 && strcmp(argv[1], "half") == 0) {
+        return cmd_half();
+    }
     if (argc < 3) {
         usage();
     }
     const char *cmd = argv[1];
+    if (strcmp(cmd, "display") == 0 && argc == 3) {
+        return cmd_display(argv[2]);
+    }
     if (strcmp(cmd, "open") == 0 && argc == 3) {
         return cmd_open(argv[2]);
     }

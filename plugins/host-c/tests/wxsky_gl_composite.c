@@ -3,7 +3,7 @@
  * reference compositor returns), for tests/test_host_c_gl.py.
  *
  *   wxsky_gl_composite SEGMENT OUT.rgba [--window] [--twice] [--view] [--pbo]
- *                      [--terrain-m D] [--scale S]
+ *                      [--terrain-m D] [--scale S] [--linear-out OUT.f32] [--exposure EV]
  *
  * --window: draw with the unflipped (window) projection, then flip the rows read back, to
  * test that orientation too. --twice: upload the frame a second time (the ring layers are then
@@ -14,10 +14,15 @@
  * stand in for a host's opaque terrain: the left half of the picture cleared to green (0, 128,
  * 0) at the depth of a plane D metres ahead (depth written), so the sky is hidden there and
  * ring clouds beyond D too, while those nearer than D are blended over it.
+ * HDR layers (RGBA16F, wxsky_gl_layer_format): the composite goes into an RGBA32F texture,
+ * which --linear-out writes as raw float32 RGBA, top row first (the Python reference's
+ * composite_linear); OUT.rgba is then that composite through wxsky_gl_tone_map at --exposure
+ * EV (default 0), drawn into the RGBA8 framebuffer. --linear-out with RGBA8 layers fails.
  * Built twice: wxsky_gl_composite (OpenGL 3.3 core, libwxsky_host_gl) and, where pkg-config
  * finds glesv2, wxsky_gles_composite (-DWXSKY_GL_ES: OpenGL ES 3.0, libwxsky_host_gles).
  * Prints one line "ok WIDTHxHEIGHT frame N renderer R"; on failure one line and exit 1 (exit
  * 2 when no headless EGL/GL 3.3 context could be made, so the test can skip). */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -28,7 +33,11 @@
 
 int main(int argc, char **argv) {
     char why[APP_ERR];
-    const char *name, *out_path;
+    const char *name, *out_path, *linear_path = NULL;
+    double exposure_ev = 0.0;
+    int hdr = 0;
+    GLuint lin_fbo = 0, lin_tex = 0;
+    float *linear = NULL;
     int window = 0, twice = 0, use_view = 0, pbo = 0, st, code = 1;
     double terrain_m = 0.0;
     int scale = 1;
@@ -59,6 +68,10 @@ int main(int argc, char **argv) {
             use_view = 1;
         else if (!strcmp(argv[i], "--pbo"))
             pbo = 1;
+        else if (!strcmp(argv[i], "--linear-out") && i + 1 < argc)
+            linear_path = argv[++i];
+        else if (!strcmp(argv[i], "--exposure") && i + 1 < argc)
+            exposure_ev = atof(argv[++i]);
         else if (!strcmp(argv[i], "--terrain-m") && i + 1 < argc)
             terrain_m = atof(argv[++i]);
         else if (!strcmp(argv[i], "--scale") && i + 1 < argc && atoi(argv[i + 1]) >= 1 &&
@@ -145,6 +158,30 @@ int main(int argc, char **argv) {
         printf("error init %s: %s\n", wxsky_status_name(st), wxsky_gl_error(gl));
         goto done;
     }
+    hdr = wxsky_gl_layer_format(gl) == WXSKY_FORMAT_RGBA16F;
+    if (linear_path && !hdr) {
+        printf("error linear: the segment's layers are RGBA8\n");
+        goto done;
+    }
+    if (hdr) {
+        /* the linear composite: an RGBA32F texture with the same depth buffer, cleared alike */
+        glGenTextures(1, &lin_tex);
+        glBindTexture(GL_TEXTURE_2D, lin_tex);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA32F, (GLsizei)w, (GLsizei)h, 0, GL_RGBA, GL_FLOAT,
+                     NULL);
+        glGenFramebuffers(1, &lin_fbo);
+        glBindFramebuffer(GL_FRAMEBUFFER, lin_fbo);
+        glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, lin_tex, 0);
+        glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, rb[1]);
+        if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+            printf("error fbo: incomplete RGBA32F framebuffer\n");
+            goto done;
+        }
+        glClearColor(0.0f, 0.0f, 0.0f, 1.0f);
+        glClear(GL_COLOR_BUFFER_BIT);
+    }
     for (int n = 0; n < 1 + twice; ++n) {
         if (use_view) {
             /* the record was decoded from the copy above: the writer here publishes once, so
@@ -179,6 +216,33 @@ int main(int argc, char **argv) {
         printf("error draw %s: %s\n", wxsky_status_name(st), wxsky_gl_error(gl));
         goto done;
     }
+    if (hdr) {
+        linear = malloc((size_t)w * h * 4 * sizeof *linear);
+        if (!linear)
+            goto done;
+        glPixelStorei(GL_PACK_ALIGNMENT, 4);
+        glReadPixels(0, 0, (GLsizei)w, (GLsizei)h, GL_RGBA, GL_FLOAT, linear);
+        if (glGetError() != GL_NO_ERROR) {
+            printf("error readback: GL error reading the linear composite\n");
+            goto done;
+        }
+        if (linear_path) {
+            f = fopen(linear_path, "wb");
+            if (!f || fwrite(linear, sizeof *linear, (size_t)w * h * 4, f) != (size_t)w * h * 4) {
+                printf("error write: %s\n", linear_path);
+                if (f)
+                    fclose(f);
+                goto done;
+            }
+            fclose(f);
+        }
+        /* once through the daemon's exposure and tone map, into the RGBA8 framebuffer */
+        glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+        if ((st = wxsky_gl_tone_map(gl, lin_tex, (float)pow(2.0, exposure_ev))) != WXSKY_OK) {
+            printf("error tone map %s: %s\n", wxsky_status_name(st), wxsky_gl_error(gl));
+            goto done;
+        }
+    }
     pixels = malloc((size_t)w * h * 4);
     row = malloc((size_t)w * 4);
     if (!pixels || !row)
@@ -212,12 +276,17 @@ done:
         gl = NULL;
         if (fbo)
             glDeleteFramebuffers(1, &fbo);
+        if (lin_fbo)
+            glDeleteFramebuffers(1, &lin_fbo);
+        if (lin_tex)
+            glDeleteTextures(1, &lin_tex);
         if (rb[0])
             glDeleteRenderbuffers(2, rb);
         close_context(&e);
     }
     wxsky_gl_free(gl);
     free(pixels);
+    free(linear);
     free(row);
     for (int i = 0; i < WXSKY_MAX_LAYERS; ++i)
         free(copy.pixels[i]);

@@ -15,7 +15,12 @@
  *
  * The cloud-shadow map (`shadow`, protocol §3.3) is not drawn: it gets a texture of its own,
  * uploaded when the record's shadow_version changes, for the host's terrain shader
- * (wxsky_gl_shadow, wxsky_gl_shadow_bind, WXSKY_GL_SHADOW_GLSL). */
+ * (wxsky_gl_shadow, wxsky_gl_shadow_bind, WXSKY_GL_SHADOW_GLSL).
+ *
+ * HDR layers (a segment whose picture layers are RGBA16F, protocol §1.2): the textures are
+ * GL_RGBA16F, uploaded as GL_HALF_FLOAT, and the same draws composite scene-linear colour
+ * into the host's (float) framebuffer; wxsky_gl_tone_map then shows that composite through
+ * the daemon's exposure and tone map once (WXSKY_GL_DISPLAY_GLSL). */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -49,6 +54,13 @@ struct wxsky_gl_compositor {
     uint64_t ring_version;
     int flip; /* from the last background draw: layers' top row at framebuffer row 0 */
 
+    /* the picture layers' format (all alike): WXSKY_FORMAT_RGBA8 or WXSKY_FORMAT_RGBA16F, and
+     * its texture format, upload type and bytes a pixel */
+    uint32_t format;
+    GLint tex_internal;
+    GLenum tex_type;
+    uint32_t bpp;
+
     /* segment layer indices (-1: absent) and capacities */
     int fs_index[FS_COUNT];
     uint32_t fs_cap_w[FS_COUNT], fs_cap_h[FS_COUNT];
@@ -74,6 +86,8 @@ struct wxsky_gl_compositor {
     GLuint ring_tex;
     GLuint vao;
     GLuint fs_prog, ring_prog;
+    GLuint tm_prog; /* wxsky_gl_tone_map's, made at its first call */
+    GLint u_tm_tex, u_tm_exposure, u_tm_viewport;
     /* full-screen program uniforms */
     GLint u_fs_tex, u_fs_size, u_fs_cap, u_fs_viewport, u_fs_flip;
     /* ring program uniforms */
@@ -225,6 +239,18 @@ static const char FS_RING[] =
     "    colour = c;\n"
     "}\n";
 
+/* wxsky_gl_tone_map: the host's linear composite through the daemon's display transform. */
+static const char FS_TONE_MAP[] =
+    WXSKY_GL_DISPLAY_GLSL
+    "uniform sampler2D tex;\n"
+    "uniform float exposure;\n"
+    "uniform vec4 viewport;\n"
+    "out vec4 colour;\n"
+    "void main() {\n"
+    "    ivec2 px = ivec2(gl_FragCoord.xy - viewport.xy);\n"
+    "    colour = vec4(wxsky_display(texelFetch(tex, px, 0).rgb, exposure), 1.0);\n"
+    "}\n";
+
 static GLuint compile(wxsky_gl_compositor *c, GLenum type, const char *body, const char *what) {
     const char *src[2] = {WXSKY_GLSL_HEADER, body};
     GLuint s = glCreateShader(type);
@@ -312,7 +338,8 @@ static void make_pbos(wxsky_gl_compositor *c) {
             continue;
         glGenBuffers(1, &c->fs_pbo[i]);
         glBindBuffer(GL_PIXEL_UNPACK_BUFFER, c->fs_pbo[i]);
-        glBufferData(GL_PIXEL_UNPACK_BUFFER, (GLsizeiptr)c->fs_cap_w[i] * c->fs_cap_h[i] * 4, NULL,
+        glBufferData(GL_PIXEL_UNPACK_BUFFER,
+                     (GLsizeiptr)c->fs_cap_w[i] * c->fs_cap_h[i] * (GLsizeiptr)c->bpp, NULL,
                      GL_STREAM_DRAW);
     }
     glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
@@ -324,6 +351,9 @@ static void release(wxsky_gl_compositor *c) {
         glDeleteProgram(c->fs_prog);
     if (c->ring_prog)
         glDeleteProgram(c->ring_prog);
+    if (c->tm_prog)
+        glDeleteProgram(c->tm_prog);
+    c->tm_prog = 0;
     if (c->vao)
         glDeleteVertexArrays(1, &c->vao);
     for (int i = 0; i < FS_COUNT; ++i)
@@ -386,10 +416,21 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
             info.max_height > (uint32_t)max_size)
             return fail(c, WXSKY_EFORMAT, "layer '%s' capacity %ux%u outside 1..%d (GL_MAX_TEXTURE_SIZE)",
                         FS_NAMES[i], info.max_width, info.max_height, (int)max_size);
+        if (i == FS_SKY) {
+            c->format = info.format;
+        } else if (info.format != c->format) {
+            reset_indices(c);
+            return fail(c, WXSKY_EFORMAT, "layer '%s' has format %u, the sky's is %u: the picture "
+                        "layers must share one", FS_NAMES[i], info.format, c->format);
+        }
         c->fs_index[i] = k;
         c->fs_cap_w[i] = info.max_width;
         c->fs_cap_h[i] = info.max_height;
     }
+    /* RGBA16F: scene-linear half floats, composited in linear (wxsky_gl_tone_map after) */
+    c->tex_internal = c->format == WXSKY_FORMAT_RGBA16F ? GL_RGBA16F : GL_RGBA8;
+    c->tex_type = c->format == WXSKY_FORMAT_RGBA16F ? GL_HALF_FLOAT : GL_UNSIGNED_BYTE;
+    c->bpp = c->format == WXSKY_FORMAT_RGBA16F ? 8u : 4u;
     for (int i = 0; i < RING_LAYERS; ++i) {
         char name[WXSKY_LAYER_NAME_MAX + 1];
         int k;
@@ -402,6 +443,11 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
             return fail(c, WXSKY_EFORMAT, "the segment has no layer '%s'", name);
         }
         wxsky_segment_layer(seg, (uint32_t)k, &info);
+        if (info.format != c->format) {
+            reset_indices(c);
+            return fail(c, WXSKY_EFORMAT, "layer '%s' has format %u, the sky's is %u: the picture "
+                        "layers must share one", name, info.format, c->format);
+        }
         if (i == 0) {
             c->ring_cap_w = info.max_width;
             c->ring_cap_h = info.max_height;
@@ -425,6 +471,12 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
         int k = wxsky_segment_find_layer(seg, "shadow");
         if (k >= 0) {
             wxsky_segment_layer(seg, (uint32_t)k, &info);
+            if (info.format != WXSKY_FORMAT_RGBA8) {
+                reset_indices(c);
+                return fail(c, WXSKY_EFORMAT,
+                            "layer 'shadow' has format %u: the shadow map is RGBA8 (a map of "
+                            "transmittance, protocol section 1.5)", info.format);
+            }
             if (info.max_width == 0 || info.max_height == 0 ||
                 info.max_width > (uint32_t)max_size || info.max_height > (uint32_t)max_size) {
                 reset_indices(c);
@@ -468,16 +520,16 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
         glGenTextures(1, &c->fs_tex[i]);
         glBindTexture(GL_TEXTURE_2D, c->fs_tex[i]);
         tex_params(GL_TEXTURE_2D, GL_LINEAR);
-        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, (GLsizei)c->fs_cap_w[i], (GLsizei)c->fs_cap_h[i],
-                     0, GL_RGBA, GL_UNSIGNED_BYTE, NULL);
+        glTexImage2D(GL_TEXTURE_2D, 0, c->tex_internal, (GLsizei)c->fs_cap_w[i],
+                     (GLsizei)c->fs_cap_h[i], 0, GL_RGBA, c->tex_type, NULL);
     }
     if (c->pbo)
         make_pbos(c);
     glGenTextures(1, &c->ring_tex);
     glBindTexture(GL_TEXTURE_2D_ARRAY, c->ring_tex);
     tex_params(GL_TEXTURE_2D_ARRAY, GL_NEAREST);
-    glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RGBA8, (GLsizei)c->ring_cap_w, (GLsizei)c->ring_cap_h,
-                 RING_LAYERS, 0, GL_RGBA, GL_UNSIGNED_BYTE, NULL);
+    glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, c->tex_internal, (GLsizei)c->ring_cap_w,
+                 (GLsizei)c->ring_cap_h, RING_LAYERS, 0, GL_RGBA, c->tex_type, NULL);
     if (c->shadow_index >= 0) {
         /* LINEAR + CLAMP_TO_EDGE: the bilinear sampling protocol §3.3 asks for */
         glGenTextures(1, &c->shadow_tex);
@@ -574,8 +626,8 @@ static int upload(wxsky_gl_compositor *c, const uint8_t *const *pixels, const ui
         if (c->pbo && c->fs_pbo[i]) {
             /* orphan the buffer's last storage (the GPU may still read it), copy, and let the
              * driver take the texture update from the buffer asynchronously */
-            GLsizeiptr full = (GLsizeiptr)c->fs_cap_w[i] * c->fs_cap_h[i] * 4;
-            size_t bytes = (size_t)width[k] * height[k] * 4;
+            GLsizeiptr full = (GLsizeiptr)c->fs_cap_w[i] * c->fs_cap_h[i] * (GLsizeiptr)c->bpp;
+            size_t bytes = (size_t)width[k] * height[k] * c->bpp;
             void *dst;
             glBindBuffer(GL_PIXEL_UNPACK_BUFFER, c->fs_pbo[i]);
             glBufferData(GL_PIXEL_UNPACK_BUFFER, full, NULL, GL_STREAM_DRAW);
@@ -590,11 +642,11 @@ static int upload(wxsky_gl_compositor *c, const uint8_t *const *pixels, const ui
             memcpy(dst, pixels[k], bytes);
             glUnmapBuffer(GL_PIXEL_UNPACK_BUFFER);
             glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, (GLsizei)width[k], (GLsizei)height[k],
-                            GL_RGBA, GL_UNSIGNED_BYTE, (const void *)0);
+                            GL_RGBA, c->tex_type, (const void *)0);
             glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
         } else {
             glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, (GLsizei)width[k], (GLsizei)height[k],
-                            GL_RGBA, GL_UNSIGNED_BYTE, pixels[k]);
+                            GL_RGBA, c->tex_type, pixels[k]);
         }
     }
     rings = !c->rings_valid || rec->ring_version != c->ring_version;
@@ -615,7 +667,7 @@ static int upload(wxsky_gl_compositor *c, const uint8_t *const *pixels, const ui
                 }
                 if (w && h)
                     glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, (GLsizei)w, (GLsizei)h, 1,
-                                    GL_RGBA, GL_UNSIGNED_BYTE, pixels[k]);
+                                    GL_RGBA, c->tex_type, pixels[k]);
             }
             c->ring_size[2 * i] = (int32_t)(w && h ? w : 0);
             c->ring_size[2 * i + 1] = (int32_t)(w && h ? h : 0);
@@ -986,6 +1038,49 @@ int wxsky_gl_draw_near(wxsky_gl_compositor *c) {
 
 int wxsky_gl_draw_near_front(wxsky_gl_compositor *c) {
     return draw_layer(c, FS_FRONT, "wxsky_gl_draw_near_front");
+}
+
+int wxsky_gl_layer_format(const wxsky_gl_compositor *c) {
+    return c && c->ready ? (int)c->format : -1;
+}
+
+int wxsky_gl_tone_map(wxsky_gl_compositor *c, unsigned int linear_texture, float exposure) {
+    GLint viewport[4];
+    int st;
+    if (!c)
+        return WXSKY_EINVAL;
+    if (!c->ready)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_tone_map: the compositor is not initialised");
+    if (!linear_texture)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_tone_map: no texture");
+    if (!isfinite(exposure) || exposure <= 0.0f)
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_tone_map: exposure %g is not a positive number",
+                    (double)exposure);
+    if (!c->tm_prog) {
+        c->tm_prog = link_program(c, FS_TONE_MAP, "tone map");
+        if (!c->tm_prog)
+            return WXSKY_ESYS; /* message set by link_program */
+        c->u_tm_tex = glGetUniformLocation(c->tm_prog, "tex");
+        c->u_tm_exposure = glGetUniformLocation(c->tm_prog, "exposure");
+        c->u_tm_viewport = glGetUniformLocation(c->tm_prog, "viewport");
+    }
+    glGetIntegerv(GL_VIEWPORT, viewport);
+    glDisable(GL_BLEND);
+    glDisable(GL_DEPTH_TEST);
+    glDepthMask(GL_FALSE);
+    glDisable(GL_CULL_FACE);
+    glUseProgram(c->tm_prog);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, (GLuint)linear_texture);
+    glUniform1i(c->u_tm_tex, 0);
+    glUniform1f(c->u_tm_exposure, exposure);
+    glUniform4f(c->u_tm_viewport, (GLfloat)viewport[0], (GLfloat)viewport[1],
+                (GLfloat)viewport[2], (GLfloat)viewport[3]);
+    glBindVertexArray(c->vao);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    if ((st = gl_check(c, "wxsky_gl_tone_map")) != WXSKY_OK)
+        return st;
+    return ok(c);
 }
 
 /* ---- zero-copy textures (protocol §6) -------------------------------------------------- */
