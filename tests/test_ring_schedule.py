@@ -486,3 +486,28 @@ def test_before_the_first_ring_the_near_layer_is_the_one_the_ring_being_built_co
         assert blank.near_rings(cam(10.0), DRIFT) == (NearRing(cam(10.0).position_m, DRIFT, 1.0),)
     finally:
         nothing.close()
+
+
+def test_a_ring_lit_by_other_atmosphere_tables_is_built_again_once_the_right_ones_come() -> None:
+    """The daemon makes the physical sky's tables off the frame path; a ring built meanwhile
+    (after a time set, a new preset) is lit by the last tables made. It is built again when
+    the frame's tables differ in visibility, humidity or a sun beyond RING_SUN_DEG, never
+    for the eye's height alone, and never under the gradient sky."""
+    from wxsky.engine.ring_schedule import RING_SUN_DEG, _lit_otherwise
+    from wxsky.scene.atmosphere import atmosphere_key, build_luts
+
+    noon = build_luts(atmosphere_key(60.0, 30_000.0, 60.0, 2.0))
+
+    def lit(el: float, vis: float = 30_000.0, rh: float = 60.0, eye: float = 2.0) -> SkyParams:
+        # The same arrays under another key: only the key is read here.
+        return SKY.with_atmosphere(dataclasses.replace(noon, key=atmosphere_key(el, vis, rh, eye)))
+
+    built = noon.key
+    assert not _lit_otherwise(built, lit(60.0), RING_SUN_DEG)
+    assert not _lit_otherwise(built, lit(60.0, eye=3_000.0), RING_SUN_DEG)
+    assert not _lit_otherwise(built, lit(60.5), RING_SUN_DEG)  # the "sun" reason's business
+    assert _lit_otherwise(built, lit(4.0), RING_SUN_DEG)  # the tables of noon at dusk
+    assert _lit_otherwise(built, lit(60.0, vis=8_000.0), RING_SUN_DEG)
+    assert _lit_otherwise(built, lit(60.0, rh=95.0), RING_SUN_DEG)
+    assert not _lit_otherwise(None, lit(4.0), RING_SUN_DEG)  # built under the gradient sky
+    assert not _lit_otherwise(built, SKY, RING_SUN_DEG)  # a gradient frame

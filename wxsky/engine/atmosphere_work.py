@@ -31,6 +31,11 @@ class AtmosphereWork:
         self._pending: tuple[AtmosphereKey, Future[AtmosphereLuts]] | None = None
         self.builds = 0  # tables made (status, tests)
 
+    @property
+    def pending(self) -> bool:
+        """Tables for a newer key are being made: frames meanwhile show the last made."""
+        return self._pending is not None
+
     def luts_for(self, key: AtmosphereKey) -> AtmosphereLuts:
         """The tables for `key` when made, else the last made (a rebuild is started)."""
         with self._lock:

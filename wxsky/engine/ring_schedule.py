@@ -44,6 +44,7 @@ from concurrent.futures import CancelledError, Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from wxsky.scene.atmosphere import AtmosphereKey
 from wxsky.scene.camera import Camera
 from wxsky.scene.gather import BuildCancelled, Drift, NearRing
 from wxsky.scene.layout import RingScene
@@ -171,6 +172,23 @@ class RingFrame:
         return (cur, new)
 
 
+def _lit_otherwise(built: AtmosphereKey | None, sky: SkyParams, sun_deg: float) -> bool:
+    """Whether the ring was lit by other atmosphere tables than this frame's, by more than
+    the allowances: another visibility or humidity, or a sun more than `sun_deg` from its
+    own. The daemon makes the tables off the frame path and a ring built meanwhile (after a
+    time set, a new preset) is lit by the last tables made: it is built again, once, when
+    the right ones come. The eye's height, also in the key, changes the air between the eye
+    and the impostors, which the frames draw: no rebuild for it."""
+    now = None if sky.atmosphere is None else sky.atmosphere.key
+    if built is None or now is None or built == now:
+        return False
+    sun_apart_deg = abs(built.sun_elevation_deg - now.sun_elevation_deg)
+    return (built.visibility_q, built.humidity_q) != (
+        now.visibility_q,
+        now.humidity_q,
+    ) or sun_apart_deg > sun_deg
+
+
 @dataclass(frozen=True)
 class _Built:
     """What a ring was built from, to judge later whether it is stale."""
@@ -179,6 +197,8 @@ class _Built:
     drift: Drift
     centre_m: tuple[float, float, float]
     sun_dir: tuple[float, float, float]
+    # The physical atmosphere's tables the ring was lit with (None: the gradient sky).
+    atmosphere: AtmosphereKey | None = None
 
 
 class RingSchedule:
@@ -434,7 +454,13 @@ class RingSchedule:
     def _note_newest(
         self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
     ) -> None:
-        self._newest = _Built(state, drift, camera.position_m, sky.sun.direction_enu)
+        self._newest = _Built(
+            state,
+            drift,
+            camera.position_m,
+            sky.sun.direction_enu,
+            None if sky.atmosphere is None else sky.atmosphere.key,
+        )
 
     def _reason(
         self, state: WeatherState, drift: Drift, camera: Camera, sky: SkyParams
@@ -460,6 +486,8 @@ class RingSchedule:
         cos_sun = sum(a * b for a, b in zip(sky.sun.direction_enu, built.sun_dir, strict=True))
         if math.degrees(math.acos(max(-1.0, min(1.0, cos_sun)))) > p.sun_deg:
             return "sun"
+        if _lit_otherwise(built.atmosphere, sky, p.sun_deg):
+            return "sky"
         limit = p.drift_frac * self.radius_m
         if len(built.drift) != len(drift) or any(
             math.hypot(a[0] - b[0], a[1] - b[1]) > limit

@@ -337,8 +337,11 @@ class SkyEngine:
 
     @property
     def ring_busy(self) -> bool:
-        """A ring rebuild is under way (building, rendering or fading in)."""
-        return self._schedule.busy
+        """A ring rebuild is under way (building, rendering or fading in), or the physical
+        atmosphere's tables for the sky asked for are being made (the ring is built again
+        with them when they come: `ring_schedule._lit_otherwise`). A host waiting for a
+        settled picture (a still, a test) so gets the sky it asked for."""
+        return self._schedule.busy or self._atmosphere.pending
 
     @property
     def work_gate(self) -> threading.Event | None:
