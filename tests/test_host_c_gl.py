@@ -345,9 +345,13 @@ def test_a_rendered_frame_composites_as_the_python_reference_host_does(
         f"value, per channel (levels) {np.round(per_channel, 4).tolist()}, max "
         f"{int(np.abs(got.astype(int) - ref.astype(int)).max())}"
     )
-    # the ring shows: the picture is not just sky and near
+    # the ring shows: the picture is not just sky and near (its far clouds, in the haze of
+    # the physical sky's aerial perspective, differ from the sky by a few levels where they
+    # are, so: in how many pixels, not by how much over the whole picture)
     sky_near = python_composite_without_ring(images)
-    assert mean_abs_diff(ref, sky_near) > 1.0
+    ring_px = np.abs(ref.astype(int) - sky_near.astype(int))[..., :3].max(axis=2) > 2
+    print(f"ring shows in {ring_px.mean():.3f} of the picture")
+    assert ring_px.mean() > 0.05
     assert np.all(per_channel <= 1.0), per_channel
 
 
