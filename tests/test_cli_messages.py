@@ -744,15 +744,20 @@ def _signal_state(status_path: str) -> dict[str, bool]:
     }
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="since 2026-12-05's merges it exits 1 instead of 130 in every full run (three of "
-    "three), never alone or with its own file: to find first (the message now says why)",
+# A terminal starts a foreground command with SIGINT at its default. In a full run this test's
+# worker process ignores SIGINT (set by something in the session, not found yet: no test
+# changes it, see _signal_state), and an ignored signal stays ignored across exec, so the
+# command is started through a step that puts SIGINT back to its default, as a shell does.
+AS_A_TERMINAL_STARTS_IT = (
+    "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+    "os.execv(sys.argv[1], sys.argv[1:])"
 )
+
+
 def test_a_one_shot_command_interrupted_by_ctrl_c_exits_130() -> None:
     with held_feed() as feed:
         proc = subprocess.Popen(
-            [*WXSKY, "metar", "fetch", feed.url],
+            [sys.executable, "-c", AS_A_TERMINAL_STARTS_IT, *WXSKY, "metar", "fetch", feed.url],
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
