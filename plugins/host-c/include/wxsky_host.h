@@ -263,8 +263,9 @@ float wxsky_half_to_float(uint16_t half);
 /* The daemon's display transform of straight (not premultiplied) scene-linear colour:
  * srgb_encode(tone_map(rgb * exposure)), where tone_map is Narkowicz's ACES fit
  * x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), clamped to 0..1, applied to the largest
- * channel with the colour scaled by the same factor, and srgb_encode the sRGB transfer
- * function. `exposure`: the scale on scene-linear colour (2^EV; 1 is the daemon's EV 0).
+ * channel with the colour scaled by the same factor and, past the curve's white (7.24), burnt
+ * toward white (0.9 of the way at 4 times it: exposure.py `burn`), and srgb_encode the sRGB
+ * transfer function. `exposure`: the scale on scene-linear colour (2^EV; 1 is the daemon's EV 0).
  * Negative and NaN channels count as 0. out_rgb: display values 0..1. */
 void wxsky_display(const float linear_rgb[3], float exposure, float out_rgb[3]);
 

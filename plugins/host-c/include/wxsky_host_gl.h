@@ -266,14 +266,16 @@ int wxsky_gl_tone_map(wxsky_gl_compositor *comp, unsigned int linear_texture, fl
 /* GLSL (3.30 core or ES 3.00; paste after the #version and precision lines): vec3
  * wxsky_display(vec3 linear, float exposure), the daemon's display transform
  * (wxsky/scene/exposure.py `display`, the host kit's wxsky_display): Narkowicz's ACES fit on
- * the largest channel, the colour scaled alike, then the sRGB encoding. */
+ * the largest channel, the colour scaled alike, burnt toward white past the curve's white
+ * (exposure.py `burn`), then the sRGB encoding. */
 #define WXSKY_GL_DISPLAY_GLSL                                                                  \
     "vec3 wxsky_display(vec3 linear, float exposure) {\n"                                     \
     "    vec3 c = max(linear * exposure, vec3(0.0));\n"                                       \
     "    float m = max(c.r, max(c.g, c.b));\n"                                                \
     "    if (!(m > 0.0)) return vec3(0.0);\n"                                                 \
     "    float y = clamp(m * (2.51 * m + 0.03) / (m * (2.43 * m + 0.59) + 0.14), 0.0, 1.0);\n" \
-    "    vec3 t = clamp(c * (y / m), 0.0, 1.0);\n"                                            \
+    "    float b = clamp((m / 7.241657386773973 - 1.0) / 3.0, 0.0, 1.0);\n"                   \
+    "    vec3 t = clamp(mix(c * (y / m), vec3(y), 0.9 * b * b * (3.0 - 2.0 * b)), 0.0, 1.0);\n" \
     "    return mix(12.92 * t, 1.055 * pow(t, vec3(1.0 / 2.4)) - 0.055, "                     \
     "step(vec3(0.0031308), t));\n"                                                           \
     "}\n"

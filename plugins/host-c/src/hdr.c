@@ -33,6 +33,17 @@ float wxsky_half_to_float(uint16_t half) {
 #define TM_C 2.43
 #define TM_D 0.59
 #define TM_E 0.14
+/* Past the curve's white (TM_WHITE) a colour burns toward white: BURN_MAX of the way at
+ * BURN_FULL times the white (exposure.py burn). */
+#define TM_WHITE 7.241657386773973
+#define BURN_FULL 4.0
+#define BURN_MAX 0.9
+
+static double burn(double m) {
+    double t = (m / TM_WHITE - 1.0) / (BURN_FULL - 1.0);
+    t = t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+    return BURN_MAX * t * t * (3.0 - 2.0 * t);
+}
 
 static double tone_curve(double x) {
     double y = x * (TM_A * x + TM_B) / (x * (TM_C * x + TM_D) + TM_E);
@@ -54,12 +65,16 @@ void wxsky_display(const float linear_rgb[3], float exposure, float out_rgb[3]) 
     }
     /* Max-RGB: the curve on the largest channel, every channel scaled by the same factor
      * (exposure.py tone_map); an infinite channel saturates to 1 with the others at 0. */
-    double scale = 0.0;
+    double scale = 0.0, y = 0.0;
     if (m > 0.0 && isfinite(m)) {
-        scale = tone_curve(m) / m;
+        y = tone_curve(m);
+        scale = y / m;
     }
+    double w = isfinite(m) ? burn(m) : BURN_MAX; /* the sun's disc burns white */
+    if (!isfinite(m))
+        y = 1.0;
     for (int i = 0; i < 3; i++) {
         double v = isfinite(m) ? c[i] * scale : (isinf(c[i]) ? 1.0 : 0.0);
-        out_rgb[i] = (float)srgb_encode(v);
+        out_rgb[i] = (float)srgb_encode(v + (y - v) * w);
     }
 }
