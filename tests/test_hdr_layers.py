@@ -19,6 +19,7 @@ import struct
 import subprocess
 import sys
 import uuid
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
@@ -448,6 +449,12 @@ def linear_frame(gl_renderer: Any) -> Iterator[tuple[Any, Any, dict[str, npt.NDA
         Renderer(RING_PX, ctx=gl_renderer.ctx, output="linear") as renderer,
     ):
         plan = engine.advance(0.0)
+        # The session's context is shared by every GL test of this worker: an error an earlier
+        # test left pending there (GL keeps the first until it is read) must not be blamed on
+        # this draw, which reads it in its own check. Twice in full runs, never alone.
+        left = gl_renderer.ctx.error
+        if left != "GL_NO_ERROR":
+            warnings.warn(f"a GL error was pending on the session's context: {left}", stacklevel=1)
         draw_ring(renderer, plan)
         renderer.render_frame(plan.frame)
         targets = {"sky": "sky", "near": "near"}
