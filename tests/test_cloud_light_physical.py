@@ -21,12 +21,12 @@ from wxsky.scene import shading_harris
 from wxsky.scene.atmosphere import AtmosphereLuts, atmosphere_key, build_luts, display_exposure
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_light import CloudLights, cloud_lights, cloud_units_per_klx, key_rgb_at
+from wxsky.scene.exposure import display
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.sky import (
     SkyParams,
     SunPosition,
     aureole,
-    display_from_scene,
     overcast_veil,
     sky_params,
 )
@@ -118,7 +118,7 @@ def test_a_cloud_as_bright_as_the_sky_shows_as_the_sky_does() -> None:
         mean = (luts.sky_view[rows // 2 :].reshape(-1, 3) * 128.0).mean(axis=0)
         grey = np.full(3, float(mean @ np.array([0.2126, 0.7152, 0.0722])))
         for radiance in (grey, mean):
-            sky_shown = display_from_scene(radiance, display_exposure(luts))
+            sky_shown = display(radiance, display_exposure(luts))
             units = radiance * display_exposure(luts)
             cloud_shown = shading_harris.shown_channels(units[:, None], sky)[:, 0]
             assert np.allclose(cloud_shown, sky_shown, atol=1e-9), (el, cloud_shown, sky_shown)
@@ -162,7 +162,7 @@ def _display_sky(luts: AtmosphereLuts, sky: SkyParams, direction: F64) -> F64:
     radiance = radiance + strength * (1.0 - g * g) / (4.0 * math.pi * k * math.sqrt(k))
     grey = radiance @ np.array([0.2126, 0.7152, 0.0722])
     veiled = (radiance + (grey[..., None] - radiance) * grey_share) * dim
-    return display_from_scene(veiled, display_exposure(luts))
+    return display(veiled, display_exposure(luts))
 
 
 def test_distant_clouds_fade_into_the_physical_sky_behind_them() -> None:

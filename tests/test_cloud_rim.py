@@ -13,12 +13,11 @@ import numpy as np
 import pytest
 from sprite_helpers import sprite_batch
 
+from tests.test_shading import _cumulus
 from wxsky.render.renderer import Renderer
 from wxsky.scene.atmosphere import atmosphere_key, build_luts
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_lod import collapse_far_clouds
-from wxsky.scene.cloud_model_files import default_models
-from wxsky.scene.clouds import SpriteBatch, block_clouds, layer_keys
 from wxsky.scene.exposure import display_inverse
 from wxsky.scene.in_cloud import InCloud, in_cloud_fog
 from wxsky.scene.layout import FrameScene, SpriteDraw, shade_for_eye
@@ -26,21 +25,11 @@ from wxsky.scene.shading import display_colours, display_colours_and_rim
 from wxsky.scene.sky import SkyParams, SunPosition, sky_params
 from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.scene.texture_slots import TEX_FOG
-from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+from wxsky.weather.state import WeatherState
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
-LAYER = CloudLayer(8.0, 1500.0, 3000.0, CloudType.CUMULUS)
 NOON = datetime(2026, 6, 21, 11, 30, tzinfo=UTC)
 EYE = (0.0, -6000.0, 2250.0)  # 6 km south of the cloud, level with its middle
-
-
-def _cumulus() -> SpriteBatch:
-    model = default_models().for_layer(LAYER.type, LAYER.thickness_m)
-    block = block_clouds(0, 0, layer_keys((LAYER,))[0], model, LAYER.thickness_m, 7)
-    ids, counts = np.unique(block.sprites.cloud_id, return_counts=True)
-    one = block.sprites.take(np.flatnonzero(block.sprites.cloud_id == ids[np.argmax(counts)]))
-    centre = one.centre_m.mean(axis=0)
-    return one.shifted((-centre[0], -centre[1], LAYER.base_m))
 
 
 def _sky(elevation_deg: float, azimuth_deg: float, physical: bool = True) -> SkyParams:

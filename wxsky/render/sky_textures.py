@@ -63,13 +63,13 @@ from wxsky.scene.atmosphere import (
     sun_irradiance,
 )
 from wxsky.scene.camera import Camera
+from wxsky.scene.exposure import display
 from wxsky.scene.sky import (
     CLEAR_AIR_HAZE_M,
     DOME_MAX_WIND_MPS,
     DOME_TOP_M,
     SkyParams,
     aureole,
-    display_from_scene,
     overcast_veil,
 )
 
@@ -622,7 +622,7 @@ def physical_ground_tint(sky: SkyParams) -> tuple[float, float, float]:
     luma = float(ground @ np.asarray(LUMA_WEIGHTS))
     albedo = GROUND_ALBEDO_PHYSICAL * ground / max(luma, 1e-6)
     radiance = albedo * light_klx / math.pi  # klx -> kcd/m^2 off a Lambertian surface
-    shown = display_from_scene(radiance, display_exposure(luts))
+    shown = display(radiance, display_exposure(luts))
     r, g, b = (float(v) for v in shown / np.maximum(ground, 1e-6))
     return (r, g, b)
 

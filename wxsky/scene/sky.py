@@ -500,15 +500,6 @@ def overcast_veil(cover: float) -> tuple[float, float]:
     return (0.8 * t, 1.0 - 0.7 * t)
 
 
-def display_from_scene(radiance: F64, exposure: float) -> F64:
-    """(..., 3) kcd/m^2 to the display values the layers hold, at `exposure` (kcd/m^2 to
-    exposed units): the one tone map of every pass (`exposure.display`, display.glsl's
-    `display`), which the sky pass applies at the atmosphere's exposure and the clouds' light
-    is made in the units of (cloud_light: the same exposure, no curve of their own)."""
-    out: F64 = display(radiance, exposure)
-    return out
-
-
 def _veiled(radiance: F64, cover: float) -> F64:
     grey_share, dim = overcast_veil(cover)
     grey = radiance @ LUMA
@@ -537,7 +528,8 @@ def _sky_behind(
     k = 1.0 + g * g - 2.0 * g * np.clip(d @ sun, -1.0, 1.0)
     radiance += strength[None, :] * ((1.0 - g * g) / (4.0 * math.pi * k * np.sqrt(k)))[:, None]
     radiance = _veiled(radiance, cover)
-    out: F64 = display_from_scene(radiance, display_exposure(luts)).T
+    # The one tone map every pass shares (exposure.display; sky.glsl's display_from_scene).
+    out: F64 = display(radiance, display_exposure(luts)).T
     return out
 
 
