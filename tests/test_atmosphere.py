@@ -20,6 +20,7 @@ from wxsky.engine.atmosphere_work import AtmosphereWork
 from wxsky.engine.stages import SkyEngine
 from wxsky.errors import ConfigError
 from wxsky.render import sky_textures
+from wxsky.render.context import release_framebuffer
 from wxsky.scene import atmosphere as atm
 from wxsky.scene import cie_sky
 from wxsky.scene.camera import Camera
@@ -127,10 +128,7 @@ def _render_sky_linear(
         vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
         data = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32)
     finally:
-        # moderngl re-binds the current framebuffer when it makes the next one: bind object 0
-        # before releasing this (as Renderer._unbind).
-        renderer._unbind()
-        fbo.release()
+        release_framebuffer(fbo)
         tex.release()
     img = data.reshape(cam.height_px, cam.width_px, 4)[..., :3].astype(np.float64)
     # GL's rows run bottom up; the shader's NDC y runs down the picture from row 0 (sky.glsl),

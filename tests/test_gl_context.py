@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from typing import Any
 
 import pytest
 
@@ -71,3 +72,24 @@ def test_one_core_or_a_count_that_is_no_number_leaves_llvmpipe_its_own(
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2})
     monkeypatch.delenv("LP_NUM_THREADS")
     assert context.cpu_raster_threads() == 6
+
+
+@pytest.mark.gl
+def test_releasing_the_bound_framebuffer_leaves_the_next_one_clean(gl_renderer: Any) -> None:
+    """moderngl binds its last-used framebuffer again after making a new one: released while
+    bound, that name is gone and GL reports INVALID_OPERATION at the next framebuffer made
+    on the context (once, in a linear renderer's ring draw on the tests' shared context).
+    `release_framebuffer` binds the default one first."""
+    ctx = gl_renderer.ctx
+    assert ctx.error == "GL_NO_ERROR"
+    made = []
+    for _ in range(2):
+        tex = ctx.texture((8, 8), 4)
+        fbo = ctx.framebuffer(color_attachments=[tex])
+        fbo.use()
+        fbo.clear(0.5, 0.5, 0.5, 1.0)
+        context.release_framebuffer(fbo)
+        made.append(tex)
+        assert ctx.error == "GL_NO_ERROR"
+    for tex in made:
+        tex.release()

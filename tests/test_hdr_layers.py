@@ -19,7 +19,6 @@ import struct
 import subprocess
 import sys
 import uuid
-import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
@@ -31,7 +30,7 @@ import pytest
 from daemon_harness import HANG_S, running_daemons
 from host_kit import gl_program, host_kit, host_kit_sanitized, sanitizer_env  # noqa: F401
 
-from wxsky.errors import RenderError, RuntimeFailure, WxskyError
+from wxsky.errors import RuntimeFailure, WxskyError
 from wxsky.output import shm
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.output.shm import RGBA8, RGBA16F, FrameReader, FrameWriter, LayerSpec
@@ -449,19 +448,7 @@ def linear_frame(gl_renderer: Any) -> Iterator[tuple[Any, Any, dict[str, npt.NDA
         Renderer(RING_PX, ctx=gl_renderer.ctx, output="linear") as renderer,
     ):
         plan = engine.advance(0.0)
-        # The session's context is shared by every GL test of this worker: an error an earlier
-        # test left pending there (GL keeps the first until it is read) must not be blamed on
-        # this draw, which reads it in its own check. Twice in full runs, never alone.
-        left = gl_renderer.ctx.error
-        if left != "GL_NO_ERROR":
-            warnings.warn(f"a GL error was pending on the session's context: {left}", stacklevel=1)
-        try:
-            draw_ring(renderer, plan)
-        except RenderError as exc:
-            # Known, open (issue 41 note, 2026-12-05): in some full-run orders a linear
-            # renderer's ring draw on the session's shared context fails with
-            # GL_INVALID_OPERATION (no error pending before it); alone it never does.
-            pytest.skip(f"linear ring draw on the shared context failed: {exc}")
+        draw_ring(renderer, plan)
         renderer.render_frame(plan.frame)
         targets = {"sky": "sky", "near": "near"}
         for i in range(RING_SIZE):

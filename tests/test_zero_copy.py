@@ -96,6 +96,7 @@ def test_slot_textures_hold_each_slots_layers_top_row_first(renderer: Any) -> No
     """The per-frame GPU copies (what a host imports on a GPU), on llvmpipe's real GL: each
     layer lands in the corner of its slot's capacity-sized texture, rows as in the segment,
     and the other slot keeps what it had."""
+    from wxsky.render.context import release_framebuffer
     from wxsky.render.texture_export import SlotTextures
 
     ctx = renderer.ctx
@@ -116,7 +117,7 @@ def test_slot_textures_hold_each_slots_layers_top_row_first(renderer: Any) -> No
             slots.descriptors()
     finally:
         slots.close()
-        fbo.release()
+        release_framebuffer(fbo)
         src.release()
 
 

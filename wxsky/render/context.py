@@ -85,3 +85,12 @@ def gil_free_finish(ctx: moderngl.Context) -> Callable[[], None]:
         return finish
     log.info("no libOpenGL for a GIL-free glFinish; other threads wait while GL works")
     return ctx.finish
+
+
+def release_framebuffer(fbo: moderngl.Framebuffer) -> None:
+    """Release `fbo` with the default framebuffer bound first. moderngl re-binds the last
+    framebuffer it bound after creating any new one: were that one released, GL reports
+    INVALID_OPERATION at the next framebuffer made on the context, far from the cause (on a
+    shared context, in whichever renderer comes next)."""
+    fbo.ctx.detect_framebuffer(0).use()
+    fbo.release()

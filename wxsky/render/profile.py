@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 import moderngl
 import numpy as np
 
+from wxsky.render.context import release_framebuffer
+
 # Which limit bounds which pass: sprites sample the mip-mapped sheet (trilinear; small ones,
 # the far band and impostors, bilinearly from one level) and blend;
 # the sky computes its colour and writes without blending (its texture reads are few and
@@ -164,7 +166,7 @@ def measure_fill_limits(
             vao.release()
             prog.release()
     finally:
-        fbo.release()
+        release_framebuffer(fbo)
         colour.release()
         tex.release()
     return limits

@@ -21,7 +21,7 @@ import numpy.typing as npt
 
 from wxsky.errors import RenderError
 from wxsky.render import sky_layer, sky_textures
-from wxsky.render.context import create_context, gil_free_finish
+from wxsky.render.context import create_context, gil_free_finish, release_framebuffer
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import (
@@ -94,7 +94,7 @@ class _Target:
         return (int(w), int(h))
 
     def release(self) -> None:
-        self.fbo.release()
+        release_framebuffer(self.fbo)
         self.texture.release()
 
 

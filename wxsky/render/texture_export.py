@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import moderngl
 
 from wxsky.errors import RenderError
+from wxsky.render.context import release_framebuffer
 
 if TYPE_CHECKING:
     from wxsky.render.renderer import Renderer
@@ -517,7 +518,7 @@ class SlotTextures:
         if self._exporter is not None:
             self._exporter.close()
         for entry in self._layers.values():
-            entry.fbo.release()
+            release_framebuffer(entry.fbo)
             entry.texture.release()
         self._layers.clear()
 

@@ -23,6 +23,7 @@ import moderngl
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.render.context import release_framebuffer
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.scene.camera import Camera
 from wxsky.scene.shading_harris import EXPOSURE, TOE, WHITEN_FROM, WHITEN_TO
@@ -89,7 +90,7 @@ class _Image:
         return bool(self.rows_done >= int(self.texture.size[1]))
 
     def release(self) -> None:
-        self.fbo.release()
+        release_framebuffer(self.fbo)
         self.texture.release()
 
 
