@@ -117,6 +117,7 @@ from tools.soak.cockpit_faults import (
     valid_wind,
     wind_sentence,
 )
+from tools.soak.rss_parts import PARTS, rss_parts
 from tools.soak.soak_control import ControlFaults
 from tools.soak.soak_feed import FeedWrite, FeedWriter
 from tools.soak.soak_links import MulticastCan, PtyDevice
@@ -146,6 +147,7 @@ REOPEN_TIMEOUT_S = 15.0
 START_TIMEOUT_S = 90.0
 STOP_TIMEOUT_S = 15.0
 SETTLE_S = 4.0
+PARTS_EVERY_S = 5.0  # reading smaps walks every mapping: a few ms
 FAULTS = ("feed", "links", "cockpit", "presets", "kills", "control", "attacks")
 DEFAULT_FAULTS = FAULTS[:-1]  # the attacks need a CIGI port, a pose port and a channel: opt in
 
@@ -291,6 +293,13 @@ class Sample:
     # Python's live blocks. Flat while RSS climbs: the allocator keeping freed pages.
     heap_in_use_kib: int | None = None
     python_blocks: int | None = None
+    heap_free_kib: int | None = None  # free inside glibc's arenas, resident or not
+    # RSS by kind of mapping (rss_parts.PARTS), every PARTS_EVERY_S: where a climb is.
+    main_heap_kib: int | None = None
+    arenas_kib: int | None = None
+    jit_kib: int | None = None
+    anon_kib: int | None = None
+    files_kib: int | None = None
 
 
 @dataclass
@@ -655,7 +664,7 @@ name = "{SERIAL_NAME}"
         pid = self.proc.pid
         reader: FrameReader | None = None
         client: ControlClient | None = None
-        next_t = time.monotonic()
+        next_t = next_parts = time.monotonic()
         while not self.quit.is_set():
             next_t += 1.0
             try:
@@ -675,7 +684,12 @@ name = "{SERIAL_NAME}"
                     frame = reader.frame_number
                 except WxskyError:
                     reader, frame = None, -1
-            fps = clients = cache_kib = heap_kib = blocks = None
+            fps = clients = cache_kib = heap_kib = blocks = free_kib = None
+            parts: dict[str, int | None] = dict.fromkeys(PARTS)
+            if time.monotonic() >= next_parts:
+                next_parts = time.monotonic() + PARTS_EVERY_S
+                with contextlib.suppress(OSError, ValueError):
+                    parts.update(rss_parts(pid))
             try:
                 client = client or self._client()
                 status = client.call("status", timeout_s=2.0)
@@ -684,6 +698,7 @@ name = "{SERIAL_NAME}"
                 memory = status.get("memory") or {}
                 heap_kib = (memory.get("heap") or {}).get("in_use_kib")
                 blocks = memory.get("python_blocks")
+                free_kib = (memory.get("heap") or {}).get("free_kib")
             except (WxskyError, OSError):
                 if client is not None:
                     client.close()
@@ -702,6 +717,8 @@ name = "{SERIAL_NAME}"
                     cache_kib,
                     heap_kib,
                     blocks,
+                    free_kib,
+                    *(parts[name] for name in PARTS),
                 )
             )
             time.sleep(max(0.0, next_t - time.monotonic()))
@@ -1013,6 +1030,11 @@ name = "{SERIAL_NAME}"
                 "heap_in_use_end": _median_of(end_samples, "heap_in_use_kib"),
                 "python_blocks_warm": _median_of(warm, "python_blocks"),
                 "python_blocks_end": _median_of(end_samples, "python_blocks"),
+                "heap_free_warm": _median_of(warm, "heap_free_kib"),
+                "heap_free_end": _median_of(end_samples, "heap_free_kib"),
+                # RSS by kind of mapping (tools/soak/rss_parts.py), after warm-up and at the end
+                "parts_warm": {k: _median_of(warm, f"{k}_kib") for k in PARTS},
+                "parts_end": {k: _median_of(end_samples, f"{k}_kib") for k in PARTS},
             },
             "fds": {
                 "start": quiet_start.fds,
@@ -1405,6 +1427,14 @@ def _print_summary(r: dict[str, Any]) -> bool:
             f"end {_fmt_kib(rss['heap_in_use_end'])}; python blocks "
             f"{_fmt(rss['python_blocks_warm'])} -> {_fmt(rss['python_blocks_end'])}"
         )
+    if rss.get("parts_end"):
+        print(
+            "  rss by mapping (warm-up -> end): "
+            + ", ".join(
+                f"{k} {_fmt_kib(rss['parts_warm'][k])} -> {_fmt_kib(rss['parts_end'][k])}"
+                for k in PARTS
+            )
+        )
     rb = r.get("ring_rebuilds")
     if rb:
         print(
@@ -1493,6 +1523,12 @@ def _chart(r: dict[str, Any], path: Path) -> None:
             linewidth=0.6,
             label="heap in use",
         )
+    colours = ("tab:olive", "tab:brown", "tab:red", "tab:pink", "tab:gray")
+    for name, colour in zip(PARTS, colours, strict=True):
+        xs = [x for x, row in zip(t, rows, strict=True) if row.get(f"{name}_kib") is not None]
+        ys = [row[f"{name}_kib"] / 1024 for row in rows if row.get(f"{name}_kib") is not None]
+        if xs:
+            axes[0].plot(xs, ys, color=colour, linewidth=0.6, linestyle="--", label=name)
     axes[0].set_ylabel("MiB")
     axes[0].legend(loc="center right")
     axes[1].plot(t, [row["fds"] for row in rows], label="open fds", color="tab:orange")

@@ -9,6 +9,15 @@ alive stayed level. `status` tells the two apart (`python_blocks` and the heap's
 `in_use_kib` against `rss_kib`), and `trim` (glibc's `malloc_trim(0)`, which also returns
 free pages in the middle of a heap) runs once a minute on a worker thread, never on the
 frame path. Elsewhere than glibc both are absent and say so.
+
+Trimming was not enough. A 16-minute attack soak with RSS read by kind of mapping
+(`tools/soak/rss_parts.py`) placed the rest of the climb: once the block cache was full the
+main heap stayed level (86-88 MiB) and the other arenas went 90 -> 159 MiB, the heap's free
+bytes 68 -> 119 MiB: freed memory spread over more and more per-thread arenas (glibc makes
+up to 8 per core as threads contend: Zenoh's, llvmpipe's, the workers'), each holding
+pages that a few live chunks pin. `limit_arenas` caps them at ARENAS before the daemon's
+threads start, so freed memory is used again wherever it was freed; a user's own
+MALLOC_ARENA_MAX (or glibc tunable) wins.
 """
 
 from __future__ import annotations
@@ -25,6 +34,10 @@ from typing import Any
 log = logging.getLogger(__name__)
 
 TRIM_EVERY_S = 60.0
+# The daemon's threads that allocate much at once hold the GIL while they do (numpy), so
+# more arenas buy little: two keep a thread outside Python (Zenoh, llvmpipe) off its lock.
+ARENAS = 2
+_M_ARENA_MAX = -8  # mallopt's parameter number (malloc.h)
 _PAGE_KIB = os.sysconf("SC_PAGE_SIZE") // 1024 if hasattr(os, "sysconf") else 4
 
 
@@ -56,9 +69,23 @@ def _libc() -> Any | None:
         libc.malloc_trim.argtypes = [ctypes.c_size_t]
         libc.malloc_trim.restype = ctypes.c_int
         libc.mallinfo2.restype = _Mallinfo2
+        libc.mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+        libc.mallopt.restype = ctypes.c_int
     except (OSError, AttributeError):  # not glibc, or one older than 2.33
         return None
     return libc
+
+
+def limit_arenas(arenas: int = ARENAS) -> int | None:
+    """Cap glibc's malloc arenas at `arenas` for this process; call it before the threads
+    start (arenas made before stay). Returns the cap now in force, None where it is not
+    glibc or the user set their own (MALLOC_ARENA_MAX, GLIBC_TUNABLES' arena_max)."""
+    if "MALLOC_ARENA_MAX" in os.environ or "arena_max" in os.environ.get("GLIBC_TUNABLES", ""):
+        return None
+    libc = _libc()
+    if libc is None or libc.mallopt(_M_ARENA_MAX, arenas) != 1:
+        return None
+    return arenas
 
 
 def rss_kib() -> int | None:

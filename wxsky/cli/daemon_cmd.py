@@ -384,6 +384,10 @@ def _shared_config(config: Any, args: argparse.Namespace) -> Any:
 def _cmd_run(args: argparse.Namespace) -> int:
     import asyncio
 
+    from wxsky.app.memory import limit_arenas
+
+    limit_arenas()  # first: before any thread that allocates starts (app/memory.py)
+
     from wxsky.app.daemon import Daemon, initial_patches
     from wxsky.app.part_factory import PartOptions, parts_from_config
     from wxsky.output.transport import parse_address
