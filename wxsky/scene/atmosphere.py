@@ -50,6 +50,7 @@ them on a thread and the renderer keeps the last until the next is ready).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 
@@ -805,6 +806,7 @@ def vertical_rayleigh_optical_depth() -> F64:
     return out
 
 
+@functools.lru_cache(maxsize=8)  # a frame asks for it several times; a table is immutable
 def display_exposure(luts: AtmosphereLuts) -> float:
     """The automatic exposure: a scale from kcd/m^2 to exposed units, before the one tone map
     (`exposure.display`; sky.glsl's `u_sky_scale`; the clouds' light is made in these units,

@@ -544,6 +544,7 @@ AUREOLE_G_HAZE = 0.93
 AUREOLE_HAZE_DEPTH = 1.0  # Mie optical depth to the sun at which g is AUREOLE_G_HAZE
 
 
+@functools.lru_cache(maxsize=8)  # once per table, not per frame (its strength is read-only)
 def aureole(luts: AtmosphereLuts) -> tuple[F64, float]:
     """(strength kcd/m^2 per unit phase (3,), Henyey-Greenstein g) of the sky pass's aureole:
     from the aerosol's optical depth from the eye toward the sun (per channel: the aerosol's
@@ -560,6 +561,7 @@ def aureole(luts: AtmosphereLuts) -> tuple[F64, float]:
     haze = min(tau / AUREOLE_HAZE_DEPTH, 1.0)
     g = AUREOLE_G_CLEAN + (AUREOLE_G_HAZE - AUREOLE_G_CLEAN) * haze
     strength: F64 = sun_klx * (AUREOLE_SHARE * (1.0 - np.exp(-tau * luts.medium.mie_spectral)))
+    strength.flags.writeable = False
     return strength, g
 
 
