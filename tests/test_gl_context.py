@@ -14,26 +14,42 @@ from wxsky.render import context
 
 # A fresh process (llvmpipe reads its thread count once, when the driver starts): make the
 # context, then name the renderer and count the driver's raster threads, which it names
-# llvmpipe-0, llvmpipe-1, ...
+# llvmpipe-0, llvmpipe-1, ... Each thread names itself once it first runs: on a busy machine
+# some had not yet (the count came out short once), so the probe waits, until the count
+# reaches the one expected (argv) or a time that only a hang exceeds.
 _PROBE = """
-import json, os
+import json, os, sys, time
 from wxsky.render.context import create_context
 ctx = create_context()
-names = [open(f"/proc/self/task/{t}/comm").read().strip() for t in os.listdir("/proc/self/task")]
+def count():
+    names = []
+    for t in os.listdir("/proc/self/task"):
+        try:
+            names.append(open(f"/proc/self/task/{t}/comm").read().strip())
+        except OSError:
+            pass
+    return sum(n.startswith("llvmpipe-") for n in names)
+deadline = time.monotonic() + 30.0
+while count() < int(sys.argv[1]) and time.monotonic() < deadline:
+    time.sleep(0.05)
 print(json.dumps({
     "renderer": ctx.info["GL_RENDERER"],
-    "threads": sum(n.startswith("llvmpipe-") for n in names),
+    "threads": count(),
     "env": os.environ.get("LP_NUM_THREADS"),
 }))
 """
 
 
-def _probe(lp_num_threads: str | None) -> dict[str, object]:
+def _probe(lp_num_threads: str | None, expected: int) -> dict[str, object]:
     env = {k: v for k, v in os.environ.items() if k != "LP_NUM_THREADS"}
     if lp_num_threads is not None:
         env["LP_NUM_THREADS"] = lp_num_threads
     out = subprocess.run(
-        [sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=60
+        [sys.executable, "-c", _PROBE, str(expected)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert out.returncode == 0, out.stderr
     result: dict[str, object] = json.loads(out.stdout.strip().splitlines()[-1])
@@ -47,14 +63,14 @@ def test_llvmpipe_draws_with_twice_as_many_threads_as_cores() -> None:
     cores = len(os.sched_getaffinity(0))
     if cores < 2:
         pytest.skip("one core: llvmpipe keeps its own count")
-    result = _probe(None)
+    result = _probe(None, 2 * cores)
     assert result["env"] == str(2 * cores)
     assert result["threads"] == 2 * cores
 
 
 @pytest.mark.gl
 def test_a_users_thread_count_wins() -> None:
-    result = _probe("3")
+    result = _probe("3", 3)
     assert result["env"] == "3"
     assert result["threads"] == 3
 
