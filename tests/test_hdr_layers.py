@@ -443,6 +443,12 @@ def linear_frame(gl_renderer: Any) -> Iterator[tuple[Any, Any, dict[str, npt.NDA
         (0.0, 0.0, 600.0), heading_deg=225.0, pitch_deg=4.0, fov_deg=70.0, width_px=W, height_px=H
     )
     settings = SceneSettings(ring_texture_px=RING_PX, shadow_map_px=SHADOW_PX)
+    # An earlier test on this worker may have left a context of its own current on this
+    # thread (a renderer it made and released): GL calls through the session's moderngl
+    # context then went to that one, where the session's framebuffers do not exist, and the
+    # ring draw failed with GL_INVALID_OPERATION in some full-run orders. The `renderer`
+    # fixture does the same for each test.
+    gl_renderer.ctx.__enter__()
     with (
         SkyEngine(state, camera, settings, clock_rate=0.0, ring_build="immediate") as engine,
         Renderer(RING_PX, ctx=gl_renderer.ctx, output="linear") as renderer,
