@@ -56,10 +56,32 @@ def gl_renderer() -> Iterator[Renderer]:
     # since the session's was made: the renderer's objects must go into the session's.
     ctx.__enter__()
     renderer = Renderer(ring_texture_px=GL_RING_PX, ctx=ctx)
+    _SESSION_GL["renderer"] = renderer
     try:
         yield renderer
     finally:
+        _SESSION_GL.clear()
         renderer.close()
+
+
+_SESSION_GL: dict[str, Renderer] = {}
+
+
+@pytest.fixture(autouse=True)
+def _no_released_framebuffer_left_bound() -> Iterator[None]:
+    """After each test, the session context's bound framebuffer is one that exists: moderngl
+    binds it again whenever a framebuffer is made, and a released one would make the next
+    test that makes one fail with GL_INVALID_OPERATION, far from the cause (render.context
+    `release_framebuffer` is the way to release one)."""
+    yield
+    renderer = _SESSION_GL.get("renderer")
+    if renderer is None:
+        return
+    import moderngl
+
+    bound = renderer.ctx.fbo
+    if isinstance(bound, moderngl.Framebuffer) and isinstance(bound.mglo, moderngl.InvalidObject):
+        pytest.fail("this test left a released framebuffer bound on the session's GL context")
 
 
 @pytest.fixture
