@@ -498,7 +498,6 @@ class Renderer:
         if self._closed:
             return
         self._closed = True
-        self._unbind()
         for target in self._targets.values():
             target.release()
         self._targets.clear()
@@ -731,7 +730,6 @@ class Renderer:
         if target is not None and target.size == (width, height):
             return target
         if target is not None:
-            self._unbind()
             target.release()
         # Float layers hold scene-linear colour, beyond 1 (half floats: to 65504).
         tex = self.ctx.texture((width, height), 4, dtype="f2" if self.output == "linear" else "f1")
@@ -743,11 +741,6 @@ class Renderer:
         if self._profiler is None:
             return contextlib.nullcontext()
         return self._profiler.measure(name, kind)
-
-    def _unbind(self) -> None:
-        # moderngl re-binds the current framebuffer after creating a new one: if that is one we
-        # just released, GL reports INVALID_OPERATION. Bind object 0 before releasing any.
-        self.ctx.detect_framebuffer(0).use()
 
     def _check(self, what: str) -> None:
         err = self.ctx.error
