@@ -23,8 +23,10 @@ from wxsky.render import sky_textures
 from wxsky.render.context import release_framebuffer
 from wxsky.scene import atmosphere as atm
 from wxsky.scene import cie_sky
+from wxsky.scene import sky as scene_sky
 from wxsky.scene.camera import Camera
 from wxsky.scene.ephemeris import SunPosition
+from wxsky.scene.exposure import display
 from wxsky.scene.layout import SceneSettings
 from wxsky.scene.sky import sky_params
 from wxsky.settings.config import load_config
@@ -430,10 +432,15 @@ def test_physical_sky_layer_is_blue_at_noon_and_differs_from_the_gradient(
 
 
 def test_overcast_veil_greys_and_dims_only_under_cover() -> None:
-    assert sky_textures.overcast_veil(0.0) == (0.0, 1.0)
-    assert sky_textures.overcast_veil(0.5) == (0.0, 1.0)
-    share, dim = sky_textures.overcast_veil(1.0)
+    assert scene_sky.overcast_veil(0.0) == (0.0, 1.0)
+    assert scene_sky.overcast_veil(0.5) == (0.0, 1.0)
+    share, dim = scene_sky.overcast_veil(1.0)
     assert share > 0.5 and dim < 0.5
+    # The sky pass's steps of it stay within half a step of it.
+    for cover in np.linspace(0.0, 1.0, 41):
+        stepped = scene_sky.display_veil(float(cover))
+        exact = scene_sky.overcast_veil(float(cover))
+        assert max(abs(a - b) for a, b in zip(stepped, exact, strict=True)) <= 0.5 / 512
 
 
 @pytest.mark.gl
@@ -494,3 +501,34 @@ def test_a_build_marches_in_slices_to_the_same_tables(monkeypatch: pytest.Monkey
     monkeypatch.setattr(atm, "MARCH_SAMPLES", 10**9)
     whole = atm.sky_view_table(med, atm.transmittance_table(med), ms, 0.0, 5.0)
     assert np.array_equal(sliced, whole)
+
+
+@pytest.mark.parametrize(("sun_deg", "visibility_m"), [(60.0, 40_000.0), (5.0, 10_000.0)])
+def test_baked_display_table_is_within_a_level_of_the_exact_sky(
+    sun_deg: float, visibility_m: float
+) -> None:
+    """The sky pass shows the baked table (`display_sky_view`, filtered) beyond the sun's own
+    part: there it is within about a display level of the exact sky (the table's radiance
+    filtered, the aureole at the pixel, the tone map); nearer the sun the table's 1-2 deg
+    texels facet the aureole, which is why the sun's part is drawn per pixel."""
+    luts = atm.build_luts(atm.atmosphere_key(sun_deg, visibility_m, 50.0, 2.0))
+    horizon = luts.horizon_rad
+    sun_el = math.radians(luts.sun_elevation_deg)
+    sun = np.array([0.0, math.cos(sun_el), math.sin(sun_el)])
+    strength, g = scene_sky.aureole(luts)
+    exposure = atm.display_exposure(luts)
+    table = scene_sky.display_sky_view(luts, 0.0)
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(4000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    el = np.arcsin(d[:, 2])
+    keep = (el > horizon + 0.01) & (d @ sun < math.cos(math.radians(scene_sky.SUN_EXACT_BLEND_DEG)))
+    d, el = d[keep], el[keep]
+    u = np.arccos(np.clip(d[:, 1] / np.hypot(d[:, 0], d[:, 1]), -1.0, 1.0)) / math.pi
+    v = atm.sky_view_v(el, horizon)
+    k = 1.0 + g * g - 2.0 * g * (d @ sun)
+    aureole = strength * ((1.0 - g * g) / (4.0 * math.pi * k * np.sqrt(k)))[:, None]
+    radiance = atm.sample_table(luts.sky_view_radiance(), u, v) + aureole
+    exact = display(radiance, exposure)
+    baked = atm.sample_table(table, u, v)
+    assert np.abs(baked - exact).max() < 1.5 / 255.0

@@ -15,7 +15,7 @@ from tests.test_cloud_backlit import low_sun
 from wxsky.app.snapshot import take_snapshot
 from wxsky.host.compositor import composite, layers_from_images
 from wxsky.render.renderer import Renderer
-from wxsky.render.sky_textures import overcast_veil as render_overcast_veil
+from wxsky.render.sky_textures import display_veil as render_veil
 from wxsky.render.sky_textures import physical_uniforms
 from wxsky.scene import shading_harris
 from wxsky.scene.atmosphere import AtmosphereLuts, atmosphere_key, build_luts, display_exposure
@@ -27,6 +27,7 @@ from wxsky.scene.sky import (
     SkyParams,
     SunPosition,
     aureole,
+    display_veil,
     overcast_veil,
     sky_params,
 )
@@ -153,6 +154,7 @@ def test_gradient_sky_keeps_its_lights() -> None:
 
 
 def _display_sky(luts: AtmosphereLuts, sky: SkyParams, direction: F64) -> F64:
+    """The exact sky: the table's radiance, the aureole, the veil, the tone map."""
     grey_share, dim = overcast_veil(sky.cover)
     sun = np.asarray(sky.sun.direction_enu)
     radiance = luts.radiance(direction, sun)
@@ -176,8 +178,10 @@ def test_distant_clouds_fade_into_the_physical_sky_behind_them() -> None:
     flat = np.array([sun[0], sun[1], 0.0]) / np.linalg.norm(sun[:2])
     offsets = np.stack([flat * 30_000.0 + [0, 0, 1_500.0], -flat * 30_000.0 + [0, 0, 1_500.0]]).T
     toward, away = sky.haze_toward(offsets).T
+    # The sky pass's baked table (display values per texel, filtered) is within a display
+    # level or two of the exact sky beyond the sun's own part (scene.sky.SUN_EXACT_DEG).
     for got, offset in zip((toward, away), offsets.T, strict=True):
-        assert np.allclose(got, _display_sky(luts, sky, offset), atol=1e-6)
+        assert np.allclose(got, _display_sky(luts, sky, offset), atol=2.0 / 255.0)
     assert red_over_blue(toward) > red_over_blue(away) + 0.1, (toward, away)
     gradient = dataclasses.replace(sky, atmosphere=None)
     assert not np.allclose(sky.haze_rgb, gradient.haze_rgb, atol=0.05)
@@ -187,7 +191,7 @@ def test_distant_clouds_fade_into_the_physical_sky_behind_them() -> None:
 
 def test_overcast_veil_and_aureole_are_the_sky_pass_own() -> None:
     for cover in (0.0, 0.5, 0.7, 0.9, 1.0):
-        assert overcast_veil(cover) == render_overcast_veil(cover)
+        assert display_veil(cover) == render_veil(cover)
     for el in (60.0, 5.0):
         luts = build_luts(atmosphere_key(el, 30_000.0, 60.0, 2.0))
         strength, g = aureole(luts)

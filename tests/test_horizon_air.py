@@ -9,10 +9,9 @@ deck did not reach (tests/test_horizon_deck.py measures that strip)."""
 from __future__ import annotations
 
 import dataclasses
-import re
+import math
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,11 +26,12 @@ from sky_measure import (
     srgb_to_linear,
 )
 
-import wxsky.render
 from wxsky.app.snapshot import Snapshot, picture
 from wxsky.engine.stages import SkyEngine
+from wxsky.render import sky_textures
 from wxsky.render.renderer import Renderer
 from wxsky.scene import sky as scene_sky
+from wxsky.scene.atmosphere import sky_view_v
 from wxsky.scene.camera import Camera
 from wxsky.scene.sky import SkyParams
 from wxsky.settings.config import DaemonConfig
@@ -66,12 +66,26 @@ def _sky_layer(shot: Snapshot) -> np.ndarray:
     return np.asarray(shot.layers["sky"][..., :3], np.float64) / 255.0
 
 
-def test_the_shader_keeps_the_sprites_haze_floor() -> None:
-    """sky.glsl's air takes the sky no lower over the horizon than the sprites' haze does."""
-    text = (Path(wxsky.render.__file__).parent / "shaders" / "sky.glsl").read_text()
-    found = re.search(r"const float HAZE_MIN_ELEVATION_DEG = ([0-9.]+);", text)
-    assert found is not None
-    assert float(found.group(1)) == scene_sky.HAZE_MIN_ELEVATION_DEG
+@pytest.mark.parametrize(("preset", "reaches"), [(PRESET, True), ("clear", False)])
+def test_the_sky_pass_takes_the_sprites_haze_floor(preset: str, reaches: bool) -> None:
+    """sky.glsl's air takes the sky no lower over the horizon than the sprites' haze does
+    (HAZE_MIN_ELEVATION_DEG) where a layer reaches the horizon, else the eye's level; its
+    table row is the table's own for that elevation."""
+    sun = preset_sun(preset, 5.0)
+    state = preset_state(preset, sun.time_utc)
+    camera = eye_camera(state, sun.azimuth_deg, 0.0, (320, 180), 60.0, EYE_AGL_M)
+    engine = SkyEngine(state, camera, DaemonConfig().scene.settings(), clock_rate=0.0)
+    try:
+        plan = engine.advance(0.0)
+    finally:
+        engine.close()
+    sky = plan.frame.sky
+    assert sky.atmosphere is not None
+    floor_z, floor_v = sky_textures.display_uniforms(plan.frame.camera, sky)["u_air_floor"]
+    horizon = sky.atmosphere.horizon_rad
+    expected = horizon + math.radians(scene_sky.HAZE_MIN_ELEVATION_DEG) if reaches else 0.0
+    assert math.asin(floor_z) == pytest.approx(expected, abs=1e-9)
+    assert floor_v == pytest.approx(float(sky_view_v(np.array(expected), horizon)), abs=1e-9)
 
 
 @pytest.mark.gl

@@ -216,7 +216,7 @@ def test_dusk_dome_is_tinted_from_the_sunset_texture_on_unit_4(renderer: Rendere
     and the dusk clouds turn from red-orange to blue, while a picture without the dome stays
     the same."""
     assert SkyPass.UNITS["u_sunset_tex"] == 4
-    assert sorted(SkyPass.UNITS.values()) == [1, 2, 3, 4, 5]  # unit 0 is the sprite sheet's
+    assert sorted(SkyPass.UNITS.values()) == [1, 2, 3, 4, 5, 6]  # unit 0 is the sprite sheet's
     state = dataclasses.replace(WeatherState().apply(load_preset("high-cirrus")), time_utc=DUSK)
     assert sky_params(state).dome.sunset > 0.9
     cam = Camera(

@@ -19,6 +19,7 @@ from wxsky.app.snapshot import take_snapshot
 from wxsky.render import sky_layer, sky_texture_gen, sky_textures
 from wxsky.render.renderer import Renderer
 from wxsky.scene import ephemeris
+from wxsky.scene.atmosphere import atmosphere_key, build_luts
 from wxsky.scene.camera import Camera
 from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.layout import FrameScene, SceneSettings, SpriteDraw
@@ -419,6 +420,9 @@ def one_pass_renderer(renderer: Renderer) -> Iterator[Renderer]:
         ("fair-cumulus", datetime(2026, 6, 21, 13, 0, tzinfo=UTC), "rolled"),  # distant band
         ("high-cirrus", datetime(2026, 5, 20, 10, 0, tzinfo=UTC), "moon-centre"),  # high cover
         ("high-cirrus", datetime(2026, 5, 20, 10, 0, tzinfo=UTC), "down"),
+        # The sun's part (the physical sky per pixel round the sun, the baked table beyond).
+        ("clear", datetime(2026, 6, 21, 9, 0, tzinfo=UTC), "sun-centre"),
+        ("fair-cumulus", datetime(2026, 6, 21, 19, 30, tzinfo=UTC), "sun-centre"),  # low sun
     ],
 )
 def test_sky_drawn_in_parts_equals_one_pass(
@@ -440,6 +444,8 @@ def test_sky_drawn_in_parts_equals_one_pass(
         cam = _camera(state, moon.azimuth_deg - turn_deg, moon.elevation_deg, fov_deg=20.0)
     elif where == "moon-centre":
         cam = _camera(state, moon.azimuth_deg, moon.elevation_deg, fov_deg=30.0)
+    elif where == "sun-centre":
+        cam = _camera(state, sky.sun.azimuth_deg + 3.0, max(sky.sun.elevation_deg, 2.0))
     elif where == "rolled":
         cam = dataclasses.replace(_camera(state, 120.0, 2.0), roll_deg=25.0)
     else:
@@ -447,6 +453,11 @@ def test_sky_drawn_in_parts_equals_one_pass(
     feats = sky_textures.features(cam, sky)
     assert feats.moon or not where.startswith("moon")
     assert feats.dome == (preset != "clear")
+    if where.startswith("sun"):  # the snapshot's sky is the physical one: its sun part
+        luts = build_luts(atmosphere_key(sky.sun.elevation_deg, state.visibility_m, 60.0, 2.0))
+        physical = dataclasses.replace(sky, atmosphere=luts)
+        assert sky_textures.features(cam, physical).sun
+        assert sky_textures.sun_rect_ndc(cam, physical) not in (None, sky_textures.FULL_RECT)
     split = take_snapshot(state, cam, SETTINGS, renderer).layers["sky"].astype(int)
     whole = take_snapshot(state, cam, SETTINGS, one_pass_renderer).layers["sky"].astype(int)
     assert np.abs(split - whole).max() == 0

@@ -231,9 +231,13 @@ class Renderer:
         scratch.fbo.use()
         self.ctx.disable(moderngl.BLEND)
         physical = sky.atmosphere is not None  # the frame's sky mode: its variants only
-        self._sky.use_atmosphere(sky.atmosphere)
-        for stars, moon, dome in itertools.product((False, True), repeat=3):
-            feats = sky_textures.SkyFeatures(stars=stars, moon=moon, dome=dome, physical=physical)
+        self._sky.use_atmosphere(sky.atmosphere, sky.cover)
+        for stars, moon, dome, sun in itertools.product((False, True), repeat=4):
+            if sun and not physical:
+                continue
+            feats = sky_textures.SkyFeatures(
+                stars=stars, moon=moon, dome=dome, physical=physical, sun=sun
+            )
             uniforms = self._sky_uniforms(cam, sky, feats, sky_textures.FULL_RECT)
             self._sky_draw("sky warm-up", feats, uniforms)
 
@@ -529,21 +533,32 @@ class Renderer:
         the layer was drawn, a strip at a time while it drifts (`sky_layer.plan_sky`)."""
         target = self._target(name, cam.width_px, cam.height_px)
         feats = sky_textures.features(cam, sky)
-        self._sky.use_atmosphere(sky.atmosphere)  # a new physical table, when there is one
+        # A new physical table or overcast veil, when there is one.
+        self._sky.use_atmosphere(sky.atmosphere, sky.cover)
         if not self.split_sky:
             parts = [("sky", feats, sky_textures.FULL_RECT)]
         else:
             parts = [
-                ("sky", dataclasses.replace(feats, moon=False, dome=False), sky_textures.FULL_RECT)
+                (
+                    "sky",
+                    dataclasses.replace(feats, moon=False, dome=False, sun=False),
+                    sky_textures.FULL_RECT,
+                )
             ]
             if feats.dome:
                 rect = sky_textures.dome_rect_ndc(cam, sky)
                 if rect is not None:
-                    parts.append(("sky dome", dataclasses.replace(feats, moon=False), rect))
+                    parts.append(
+                        ("sky dome", dataclasses.replace(feats, moon=False, sun=False), rect)
+                    )
             if feats.moon:
                 rect = sky_textures.moon_rect_ndc(cam, sky)
                 if rect is not None:
-                    parts.append(("sky moon", feats, rect))
+                    parts.append(("sky moon", dataclasses.replace(feats, sun=False), rect))
+            if feats.sun:
+                rect = sky_textures.sun_rect_ndc(cam, sky)
+                if rect is not None:
+                    parts.append(("sky sun", feats, rect))
         tolerances: dict[str, float] = {}
         if feats.dome:
             tol = sky_layer.dome_offset_tolerance(
@@ -608,6 +623,13 @@ class Renderer:
                 ("u_zenith", "u_horizon")
                 + (("u_ground",) if feats.scene_linear else ())
                 + (() if feats.dome else ("u_sun_rgb",))
+                # The display variants' disc is the sun part's (the baked table has none).
+                + (() if feats.scene_linear or feats.sun else ("u_sun_cos_radius",))
+                + (
+                    ()
+                    if feats.scene_linear or feats.sun or feats.dome or feats.moon
+                    else ("u_sun_dir",)
+                )
             ):
                 del camera[gone]
         return camera | sky_textures.frame_uniforms(cam, sky, feats)

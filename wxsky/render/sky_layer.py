@@ -27,7 +27,8 @@ the dome's band would be drawn only to be drawn over (before, a plain-sky strip 
 the sun's motion redrew the dome in it as well, and a frame's dome cost 20 to 110 rows).
 
 Tolerances are in the uniforms' own units: `SKY_REUSE_TOLERANCE` for directions (radians),
-colours and the like; for the dome's texture offsets, what moves the nearest dome the eye can
+colours and the like, and that share of a number's size past 1 (radiances in kcd/m^2, heights in
+metres); for the dome's texture offsets, what moves the nearest dome the eye can
 see by `DOME_REUSE_PX` of a pixel (`dome_offset_tolerance`).
 """
 
@@ -75,6 +76,10 @@ _NO_RATE = -1.0  # no frame since the layer was drawn whole
 # Uniforms a change of which always redraws the whole layer (the stars twinkle every frame).
 _ALWAYS = frozenset({"u_star_clock_s"})
 _NOT_COMPARED = frozenset({"u_rect"})  # where a part is drawn, compared as the layout
+# The physical sky's sun azimuth (a unit vector in the level plane) moves faster than the sun's
+# direction (by 1 / cos elevation): at SKY_REUSE_TOLERANCE it redrew two strips a frame where the
+# gradient's sun redrew one. Twice that is still a ninth of a pixel at 60 deg across 1280.
+_TOLERANCES = {"u_flat_sun": 2.0 * SKY_REUSE_TOLERANCE}
 # Texture offsets repeat: 0.9999 and 0.0001 are a step of 0.0002.
 _PERIODS = {"u_dome_off0": 1.0, "u_dome_off1": 1.0, "u_dome_off2": 1.0}
 
@@ -137,7 +142,7 @@ class SkyPart:
         tolerances: Mapping[str, float] | None = None,
     ) -> SkyPart:
         """`tolerances`: by uniform name, where not SKY_REUSE_TOLERANCE."""
-        tolerances = tolerances or {}
+        tolerances = {**_TOLERANCES, **(tolerances or {})}
         values: list[float] = []
         tolerance: list[float] = []
         period: list[float] = []
@@ -146,8 +151,15 @@ class SkyPart:
                 continue
             numbers = np.asarray(value, np.float64).ravel().tolist()
             values.extend(numbers)
-            tol = 0.0 if name in _ALWAYS else tolerances.get(name, SKY_REUSE_TOLERANCE)
-            tolerance.extend([tol] * len(numbers))
+            if name in _ALWAYS:
+                tolerance.extend([0.0] * len(numbers))
+            elif name in tolerances:
+                tolerance.extend([tolerances[name]] * len(numbers))
+            else:
+                # Relative past 1: the physical sky's radiances are kcd/m^2 (the sun's disc
+                # about 1e6), and an absolute 5e-5 of them redrew the whole sky whenever the
+                # sun moved at all (clear: a full sky every frame or two, not a strip).
+                tolerance.extend(SKY_REUSE_TOLERANCE * max(1.0, abs(n)) for n in numbers)
             period.extend([_PERIODS.get(name, 0.0)] * len(numbers))
         drawn = {k: v for k, v in uniforms.items() if k not in _NOT_COMPARED}
         return SkyPart(

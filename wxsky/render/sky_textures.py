@@ -60,6 +60,7 @@ from wxsky.scene.atmosphere import (
     AtmosphereLuts,
     display_exposure,
     sky_irradiance,
+    sky_view_v,
     sun_irradiance,
 )
 from wxsky.scene.camera import Camera
@@ -68,9 +69,13 @@ from wxsky.scene.sky import (
     CLEAR_AIR_HAZE_M,
     DOME_MAX_WIND_MPS,
     DOME_TOP_M,
+    HAZE_MIN_ELEVATION_DEG,
+    SUN_EXACT_BLEND_DEG,
+    SUN_EXACT_DEG,
     SkyParams,
     aureole,
-    overcast_veil,
+    display_sky_view,
+    display_veil,
 )
 
 U8 = npt.NDArray[np.uint8]
@@ -120,6 +125,7 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "SKY_DOME": str(int(feats.dome)),
         "SKY_PHYSICAL": str(int(feats.physical)),
         "SKY_SCENE_LINEAR": str(int(feats.scene_linear)),
+        "SKY_SUN": str(int(feats.sun)),
     }
 
 
@@ -183,6 +189,9 @@ class SkyFeatures:
     # With `physical`: the radiance itself (kcd/m^2) into a float target, no exposure or tone
     # map (tests/test_atmosphere.py reads it back; the hook for scene-linear render targets).
     scene_linear: bool = False
+    # With `physical`, in display values: the sky near the sun per pixel (its disc and the
+    # aureole's core), which the other variants take from the baked table.
+    sun: bool = False
 
 
 class SkyPass:
@@ -195,6 +204,7 @@ class SkyPass:
         "u_dome_tex": 3,
         "u_sunset_tex": 4,
         "u_sky_view": 5,
+        "u_sky_display": 6,
     }
 
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
@@ -222,28 +232,47 @@ class SkyPass:
         # The physical sky's table (`use_atmosphere`), and the serial of the tables it holds.
         self.sky_view: moderngl.Texture | None = None
         self._sky_view_serial = -1
+        # ... and what the display variants show of it (scene.sky.display_sky_view), with the
+        # table's serial and the overcast veil it was baked with.
+        self.sky_display: moderngl.Texture | None = None
+        self._sky_display_key: tuple[int, tuple[float, float]] = (-1, (0.0, 0.0))
 
-    def use_atmosphere(self, luts: AtmosphereLuts | None) -> None:
-        """Upload the sky-view table of `luts` (RGB float, kcd/m^2) when it is a new one;
-        the texture keeps the last table until then."""
-        if luts is None or luts.serial == self._sky_view_serial:
+    def use_atmosphere(self, luts: AtmosphereLuts | None, cover: float = 0.0) -> None:
+        """Upload the sky-view table of `luts` (RGB float, kcd/m^2) when it is a new one, and
+        its display values under `cover` (`display_sky_view`) when either changed; the
+        textures keep the last tables until then."""
+        if luts is None:
+            return
+        key = (luts.serial, display_veil(cover))
+        if key != self._sky_display_key:
+            self.sky_display = self._upload(self.sky_display, display_sky_view(luts, cover), 1.0)
+            self._sky_display_key = key
+        if luts.serial == self._sky_view_serial:
             return
         rgb = np.nan_to_num(luts.sky_view_radiance(), nan=0.0, posinf=0.0)
-        rows, cols = rgb.shape[:2]
         # Half floats, four channels: llvmpipe filters them faster than RGB32F, and 11 bits of
         # mantissa are finer than any display step (the radiance spans 1e-6..1e3 kcd/m^2).
         # Scaled by a power of two so the brightest texel is near 1024 (`sky_view_scale`): a
         # night's 1e-7 kcd/m^2 would be lost below half floats' normal range.
-        table = np.ones((rows, cols, 4), np.float16)
-        table[..., :3] = np.minimum(rgb / sky_view_scale(luts), 60_000.0)
-        if self.sky_view is None or self.sky_view.size != (cols, rows):
-            if self.sky_view is not None:
-                self.sky_view.release()
-            self.sky_view = self._ctx.texture((cols, rows), 4, dtype="f2")
-            self.sky_view.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            self.sky_view.repeat_x = self.sky_view.repeat_y = False
-        self.sky_view.write(table.tobytes())
+        self.sky_view = self._upload(self.sky_view, rgb, sky_view_scale(luts))
         self._sky_view_serial = luts.serial
+
+    def _upload(
+        self, texture: moderngl.Texture | None, rgb: npt.NDArray[np.floating], scale: float
+    ) -> moderngl.Texture:
+        """`rgb` / `scale` into `texture` (made anew when missing or another size): half floats,
+        four channels, filtered, clamped at the edges."""
+        rows, cols = rgb.shape[:2]
+        table = np.ones((rows, cols, 4), np.float16)
+        table[..., :3] = np.minimum(rgb / scale, 60_000.0)
+        if texture is None or texture.size != (cols, rows):
+            if texture is not None:
+                texture.release()
+            texture = self._ctx.texture((cols, rows), 4, dtype="f2")
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            texture.repeat_x = texture.repeat_y = False
+        texture.write(table.tobytes())
+        return texture
 
     def prepare(self, feats: SkyFeatures) -> tuple[moderngl.Program, moderngl.VertexArray]:
         """The program and vertex array that draw `feats` (some of this frame's `features`),
@@ -260,6 +289,8 @@ class SkyPass:
         self.sunset.use(self.UNITS["u_sunset_tex"])
         if feats.physical and self.sky_view is not None:
             self.sky_view.use(self.UNITS["u_sky_view"])
+        if feats.physical and self.sky_display is not None:
+            self.sky_display.use(self.UNITS["u_sky_display"])
         return variant
 
     def release(self) -> None:
@@ -268,9 +299,10 @@ class SkyPass:
         self._variants.clear()
         for tex in (self.stars, self.galaxy, self.dome, self.sunset):
             tex.release()
-        if self.sky_view is not None:
-            self.sky_view.release()
-            self.sky_view = None
+        for table in (self.sky_view, self.sky_display):
+            if table is not None:
+                table.release()
+        self.sky_view = self.sky_display = None
 
 
 # -- per-frame values ------------------------------------------------------------------------
@@ -288,8 +320,36 @@ def features(cam: Camera, sky: SkyParams) -> SkyFeatures:
     moon_in_view = max(sky.moon_rgb) > 0.0 and cos_off_axis >= math.cos(min(reach_rad, math.pi))
     dome = dome_frame(sky, cam.position_m[2]).height_m > 0.0
     return SkyFeatures(
-        stars=sky.stars > 0.0, moon=moon_in_view, dome=dome, physical=sky.atmosphere is not None
+        stars=sky.stars > 0.0,
+        moon=moon_in_view,
+        dome=dome,
+        physical=sky.atmosphere is not None,
+        sun=sky.atmosphere is not None and _sun_near_view(cam, sky, half_diagonal_rad),
     )
+
+
+def _sun_near_view(cam: Camera, sky: SkyParams, half_diagonal_rad: float) -> bool:
+    """Whether the physical sky's sun part (SUN_EXACT_DEG round the sun, above the horizon)
+    can show in the picture."""
+    luts = sky.atmosphere
+    assert luts is not None
+    exact_rad = math.radians(SUN_EXACT_DEG)
+    if math.radians(sky.sun.elevation_deg) < luts.horizon_rad - exact_rad:
+        return False
+    cos_off_axis = float(np.dot(cam.basis()[2], sky.sun.direction_enu))
+    return cos_off_axis >= math.cos(min(half_diagonal_rad + exact_rad, math.pi))
+
+
+# The sun part's rectangle (`sun_rect_ndc`) on a grid of this many pixels: it moves a cell (and
+# the kept sky is drawn whole) about once a minute and a half at 60 deg across 1280 pixels.
+SUN_RECT_GRID_PX = 16
+
+
+def sun_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
+    """The rectangle (as `moon_rect_ndc`) holding every pixel within SUN_EXACT_DEG of the
+    sun, where the sun part draws the sky per pixel."""
+    reach_rad = math.radians(SUN_EXACT_DEG) + 3.0 * pixel_rad(cam)
+    return _disc_rect_ndc(cam, sky.sun.direction_enu, reach_rad, SUN_RECT_GRID_PX)
 
 
 def moon_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
@@ -297,10 +357,18 @@ def moon_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
     holds every pixel the moon's disc touches, with its anti-aliased edge; the whole picture
     when the disc is too near the side of the eye to project safely; None when it is out of
     the picture."""
-    right, up, fwd = cam.basis()
-    moon = np.asarray(sky.moon.direction_enu, np.float64)
     # Out to where the shader's coverage is zero: the disc plus half a pixel, and a margin.
     reach_rad = math.radians(sky.moon.angular_radius_deg) + 3.0 * pixel_rad(cam)
+    return _disc_rect_ndc(cam, sky.moon.direction_enu, reach_rad, MOON_RECT_GRID_PX)
+
+
+def _disc_rect_ndc(
+    cam: Camera, direction_enu: tuple[float, float, float], reach_rad: float, grid_px: int
+) -> Rect | None:
+    """The rectangle (on a grid of `grid_px` pixels) holding the circle of `reach_rad` round
+    `direction_enu`; the whole picture when it comes near the side of the eye."""
+    right, up, fwd = cam.basis()
+    moon = np.asarray(direction_enu, np.float64)
     side = np.cross(moon, fwd)
     if float(np.dot(side, side)) < 1e-12:
         side = right
@@ -318,10 +386,10 @@ def moon_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
     x = (rim @ right) / depth / cam.tan_half_fov_x
     y = -(rim @ up) / depth / cam.tan_half_fov_y
     pad_x, pad_y = 2.0 / cam.width_px, 2.0 / cam.height_px
-    # Out to a grid of MOON_RECT_GRID_PX pixels, so that the rectangle stays put while the
-    # moon crosses a cell (a minute and more) and a kept sky layer needs only the moon again.
-    step_x = 2.0 * MOON_RECT_GRID_PX / cam.width_px
-    step_y = 2.0 * MOON_RECT_GRID_PX / cam.height_px
+    # Out to a grid of pixels, so that the rectangle stays put while the disc crosses a cell
+    # (a minute and more) and a kept sky layer needs only the disc's part again.
+    step_x = 2.0 * grid_px / cam.width_px
+    step_y = 2.0 * grid_px / cam.height_px
     return _clip_rect(
         math.floor((float(x.min()) - pad_x) / step_x) * step_x,
         math.floor((float(y.min()) - pad_y) / step_y) * step_y,
@@ -404,10 +472,18 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
     out: dict[str, object] = {}
     if feats.physical and sky.atmosphere is not None:
         out.update(physical_uniforms(sky.atmosphere))
-        out["u_overcast"] = overcast_veil(sky.cover)
+        out["u_overcast"] = display_veil(sky.cover)
+        if not feats.scene_linear:
+            out.update(display_uniforms(cam, sky))
+            if not feats.sun:
+                # Baked into the display table: only the sun part looks at the radiance.
+                for name in _EXACT_ONLY:
+                    del out[name]
     if not (feats.physical and feats.scene_linear):
         # The ground band, in display values (the scene-linear sky keeps its table's ground).
         out.update(ground_uniforms(cam, sky))
+        if feats.physical:
+            del out["u_horizon_air"]  # the physical sky's air is its table's (u_air_floor)
     if feats.stars:
         sigma, gain = star_sigma(cam)
         out.update(
@@ -575,6 +651,43 @@ def flicker_clock_s(sky_time_s: float) -> float:
     """The shader's flicker clock: the sky time wrapped at the flicker period (see
     STAR_RATE_SCALE_HZ), which keeps every star's phase and float32 precision."""
     return sky_time_s % STAR_CLOCK_PERIOD_S
+
+
+# The physical uniforms only the exact sky (scene-linear, or the sun part) reads.
+_EXACT_ONLY = (
+    "u_sky_view",
+    "u_sky_view_scale",
+    "u_sky_scale",
+    "u_sun_radiance",
+    "u_limb_darkening",
+    "u_aureole",
+    "u_sun_exact",
+)
+
+
+def display_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
+    """The physical sky's display variants' own uniforms: the baked table's unit, the sun's
+    azimuth, the floor of the air the ground and the dome's band fade into (sin elevation,
+    and its table row; `ground_uniforms`' u_horizon_air.a says whether a layer reaches the
+    horizon), and the sun part's blend into the table."""
+    luts = sky.atmosphere
+    assert luts is not None
+    sun = sky.sun.direction_enu
+    flat = math.hypot(sun[0] + 1e-6, sun[1])
+    layer_reaches = dome_frame(sky, cam.position_m[2]).height_m > 0.0
+    floor_rad = luts.horizon_rad + math.radians(HAZE_MIN_ELEVATION_DEG) if layer_reaches else 0.0
+    return {
+        "u_sky_display": SkyPass.UNITS["u_sky_display"],
+        "u_flat_sun": ((sun[0] + 1e-6) / flat, sun[1] / flat),
+        "u_air_floor": (
+            math.sin(floor_rad),
+            float(sky_view_v(np.array(floor_rad), luts.horizon_rad)),
+        ),
+        "u_sun_exact": (
+            math.cos(math.radians(SUN_EXACT_BLEND_DEG)),
+            math.cos(math.radians(SUN_EXACT_DEG)),
+        ),
+    }
 
 
 def ground_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:

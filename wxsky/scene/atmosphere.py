@@ -333,6 +333,13 @@ def _bilinear(table: F64, u: F64, v: F64) -> F64:
     return out
 
 
+def sample_table(table: F64 | F32, u: F64, v: F64) -> F64:
+    """`table` (rows, cols, C) at u (cols) and v (rows) in 0..1 as the GPU samples a texture of
+    it (LINEAR, CLAMP_TO_EDGE)."""
+    as_f64: F64 = np.asarray(table, np.float64)  # no copy when it is float64 already
+    return _bilinear(as_f64, u, v)
+
+
 def _transmittance_to_top(table: F64, r: F64, mu: F64) -> F64:
     u, v = _transmittance_uv(r, mu)
     return _bilinear(table, u, v)

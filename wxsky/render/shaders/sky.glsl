@@ -94,13 +94,19 @@ float hg_phase(float nu, float g) {
     return (1.0 - g * g) / (4.0 * PI * k * sqrt(k));
 }
 
-// Scene-linear sky radiance along `ray`: the table (square-root rows about the horizon, so
-// the horizon falls on a texel edge and stays sharp), the aureole and the limb-darkened disc.
+// The sky-view table's row for an elevation (atmosphere.sky_view_v): square-root rows about
+// the horizon, so the horizon falls on a texel edge and stays sharp.
+float sky_view_row(float el) {
+    float h = u_horizon_rad;
+    return el >= h ? 0.5 + 0.5 * sqrt(clamp((el - h) / (0.5 * PI - h), 0.0, 1.0))
+                   : 0.5 - 0.5 * sqrt(clamp((h - el) / (h + 0.5 * PI), 0.0, 1.0));
+}
+
+// Scene-linear sky radiance along `ray`: the table, the aureole and the limb-darkened disc.
 vec3 physical_sky(vec3 ray) {
     float el = asin(clamp(ray.z, -1.0, 1.0));
     float h = u_horizon_rad;
-    float v = el >= h ? 0.5 + 0.5 * sqrt(clamp((el - h) / (0.5 * PI - h), 0.0, 1.0))
-                      : 0.5 - 0.5 * sqrt(clamp((h - el) / (h + 0.5 * PI), 0.0, 1.0));
+    float v = sky_view_row(el);
     vec2 flat_ray = normalize(ray.xy + vec2(1e-6, 0.0));
     vec2 flat_sun = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
     float u = acos(clamp(dot(flat_ray, flat_sun), -1.0, 1.0)) / PI;
@@ -125,6 +131,44 @@ vec3 physical_sky(vec3 ray) {
 // The layer's own exposure (u_exposure, [render] exposure) then applies in legacy_output.
 vec3 display_from_scene(vec3 radiance) {
     return srgb_encode(tone_map(max(radiance, 0.0) * u_sky_scale));
+}
+#endif
+
+#if SKY_PHYSICAL && !SKY_SCENE_LINEAR
+// What the display variants show, baked per texel of the sky-view table (scene.sky
+// display_sky_view: the table, the aureole at the table's sun, the overcast veil, the exposure
+// and the tone map): one look-up a pixel instead of the tone map's powers and the aureole's
+// phase in every pixel, which cost the physical sky 3.3 times the gradient's time on llvmpipe.
+// Near the sun (SKY_SUN, the sun part's rectangle) the exact sky blends in.
+uniform sampler2D u_sky_display;
+uniform vec2 u_flat_sun;          // the sun's azimuth (east, north), unit
+// The air the ground and the dome's band fade into: the sky no lower than this (sin
+// elevation, and its table row): scene.sky.HAZE_MIN_ELEVATION_DEG over the horizon where a
+// layer reaches it (u_horizon_air.a), else the eye's level (below it, that sky straight
+// across), so the ground's haze and the dome's are the sprites' air (SkyParams.haze_toward).
+uniform vec2 u_air_floor;
+uniform vec2 u_sun_exact;         // cos of the angles from the sun where the table takes over
+
+// The baked sky along `ray`, below the air's floor the air straight across (`air`: what the
+// ground and the dome fade into; the table holds no disc, so the haze holds none).
+vec3 baked_sky(vec3 ray, out vec3 air) {
+    float v = ray.z < u_air_floor.x ? u_air_floor.y : sky_view_row(asin(clamp(ray.z, -1.0, 1.0)));
+    vec2 flat_ray = normalize(ray.xy + vec2(1e-6, 0.0));
+    float u = acos(clamp(dot(flat_ray, u_flat_sun), -1.0, 1.0)) / PI;
+    vec3 col = textureLod(u_sky_display, vec2(u, v), 0.0).rgb;
+    // A new table or veil (a new bake) is a jump for the kept layer: both are compared.
+    col = u_atmosphere_serial < 0.0 || u_overcast.y < 0.0 ? vec3(0.0) : col;
+    air = col;
+#if SKY_SUN
+    // Round the sun, the exact sky (its disc and the aureole's core, which the table's
+    // texels would facet), blended into the table's so the part's edge cannot show.
+    float nu = dot(ray, u_sun_dir);
+    if (nu > u_sun_exact.y && ray.z >= u_air_floor.x) {
+        vec3 exact = display_from_scene(physical_sky(ray));
+        col = mix(col, exact, smoothstep(u_sun_exact.y, u_sun_exact.x, nu));
+    }
+#endif
+    return col;
 }
 #endif
 
@@ -282,39 +326,6 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
 }
 #endif
 
-#if SKY_PHYSICAL && !SKY_SCENE_LINEAR
-// The air is the sky no lower than this over the horizon (below it the sky-view table
-// holds the ground): scene.sky.HAZE_MIN_ELEVATION_DEG, held equal by tests/test_horizon_air.py.
-const float HAZE_MIN_ELEVATION_DEG = 0.5;
-
-// The air in front of whatever lies at the horizon in this direction, as the sky pass shows
-// it: the physical sky right behind, with its aureole and overcast veil, no lower than
-// `floor_rad` over the eye's level (below it, that sky straight across at `floor_rad`). The
-// colour the sprites fade into (`SkyParams.haze_toward`, floor HAZE_MIN_ELEVATION_DEG over
-// the horizon), so the deck's distant band and the ground's haze are the same air as the
-// sprites' in every direction (issue 41 item 5): toward a low sun the bright, orange
-// forward-scattering haze, away from it the bluer, dimmer one; averaged round the horizon it
-// was one colour all round, bluer than the deck toward the sun and darker. Haze holds no
-// sun's disc (a layer hides it): the ray is turned aside in azimuth, at its elevation, to
-// two of the disc's radii from the sun (its anti-aliased edge is gone by 1.06).
-vec3 air_behind(vec3 ray, float floor_rad) {
-    float z = max(ray.z, sin(floor_rad));
-    float cos_e = sqrt(max(1.0 - z * z, 0.0));
-    vec2 f = normalize(ray.xy + vec2(1e-6, 0.0));
-    vec2 fs = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
-    float cos_es = length(u_sun_dir.xy);
-    // dot(ray, sun) = cos_e cos_es dot(f, fs) + z sun.z: at most cos(clearance) when
-    // dot(f, fs) <= q.
-    float clear_cos = 2.0 * u_sun_cos_radius * u_sun_cos_radius - 1.0;  // cos 2r
-    float q = clamp((clear_cos - z * u_sun_dir.z) / max(cos_e * cos_es, 1e-6), -1.0, 1.0);
-    float along = dot(f, fs);
-    vec2 side = f - fs * along;
-    side = dot(side, side) > 1e-12 ? normalize(side) : vec2(-fs.y, fs.x);
-    f = along > q ? fs * q + side * sqrt(1.0 - q * q) : f;
-    return display_from_scene(physical_sky(vec3(f * cos_e, z)));
-}
-#endif
-
 // The ground below the horizon: a smooth Earth under the eye, in its own colour where it is
 // near and in aerial perspective towards `air` (the air at the horizon above it) with
 // distance, so the two meet where the Earth's horizon is (0.045° below level from 2 m, 3.2°
@@ -350,19 +361,8 @@ void main() {
 #if SKY_PHYSICAL && SKY_SCENE_LINEAR
     vec3 col = physical_sky(ray);  // into a float target: radiance, kcd/m^2
 #elif SKY_PHYSICAL
-    vec3 col = display_from_scene(physical_sky(ray));
-    // What the ground hazes into and the dome's band fades into: where a layer reaches the
-    // horizon (u_horizon_air.a), the air the sprites fade into in this direction; else, below
-    // the eye's level, the clear sky there, straight across.
-    float air_floor_rad = u_horizon_air.a > 0.0
-                          ? u_horizon_rad + radians(HAZE_MIN_ELEVATION_DEG) : 0.0;
-    // Over the floor and off the sun's disc that is the sky here: a second look-up only where
-    // it is not (llvmpipe skips a branch no pixel of a block takes).
-    vec3 air = col;
-    if (ray.z < sin(air_floor_rad)
-        || dot(ray, u_sun_dir) > 2.0 * u_sun_cos_radius * u_sun_cos_radius - 1.0) {
-        air = air_behind(ray, air_floor_rad);
-    }
+    vec3 air;
+    vec3 col = baked_sky(ray, air);
 #else
     // Below the horizon the sky is what lies behind the ground's haze: its colour at the
     // horizon, or where a layer reaches the horizon, the air under it (`ground_band`). The
