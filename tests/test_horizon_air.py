@@ -81,7 +81,9 @@ def test_the_sky_pass_takes_the_sprites_haze_floor(preset: str, reaches: bool) -
         engine.close()
     sky = plan.frame.sky
     assert sky.atmosphere is not None
-    floor_z, floor_v = sky_textures.display_uniforms(plan.frame.camera, sky)["u_air_floor"]
+    floor_z, floor_v, deck = sky_textures.display_uniforms(plan.frame.camera, sky)["u_air_floor"]
+    # Under the broken deck (three quarters) the dome fades into the floor's row throughout.
+    assert deck == (1.0 if reaches else 0.0)
     horizon = sky.atmosphere.horizon_rad
     expected = horizon + math.radians(scene_sky.HAZE_MIN_ELEVATION_DEG) if reaches else 0.0
     assert math.asin(floor_z) == pytest.approx(expected, abs=1e-9)
@@ -138,3 +140,40 @@ def test_the_suns_disc_never_shows_in_the_air(renderer: Renderer) -> None:
         on = relative_luminance(linear[rows & (np.abs(off) < 0.25)]).max()
         beside = relative_luminance(linear[rows & (np.abs(np.abs(off) - 1.2) < 0.2)]).mean()
         assert on < 1.2 * beside, (on, beside)
+
+
+@pytest.mark.parametrize(
+    ("preset", "share"),
+    [("fair-cumulus", 0.0), ("scattered-cumulus", 0.0), (PRESET, 1.0), ("overcast-stratus", 1.0)],
+)
+def test_under_a_deck_the_air_is_one_slab_at_every_elevation(preset: str, share: float) -> None:
+    """Under broken cloud and more the sprites fade into the air just over the horizon in
+    their azimuth whatever their elevation (the haze under a deck is lit alike all through);
+    under scattered cloud into the sky right behind each, which rises through the sun's glow;
+    from above the layer, never the slab."""
+    sun = preset_sun(preset, 5.0)
+    state = preset_state(preset, sun.time_utc)
+    camera = eye_camera(state, sun.azimuth_deg, 0.0, (320, 180), 60.0, EYE_AGL_M)
+    engine = SkyEngine(state, camera, DaemonConfig().scene.settings(), clock_rate=0.0)
+    try:
+        sky = engine.advance(0.0).frame.sky
+    finally:
+        engine.close()
+    eye_m = camera.position_m[2]
+    assert scene_sky.deck_share(sky, eye_m) == share
+    assert scene_sky.deck_share(sky, eye_m + 20_000.0) == 0.0  # over the layer
+    az = math.radians(sun.azimuth_deg)
+    offsets = (
+        np.array(
+            [
+                [math.sin(az) * math.cos(e), math.cos(az) * math.cos(e), math.sin(e)]
+                for e in (math.radians(2.0), math.radians(8.0))
+            ]
+        ).T
+        * 20_000.0
+    )
+    low, high = sky.haze_toward(offsets, eye_m).T
+    if share == 1.0:
+        assert np.allclose(low, high, atol=1e-9)
+    else:
+        assert not np.allclose(low, high, atol=2.0 / 255.0)

@@ -74,8 +74,10 @@ from wxsky.scene.sky import (
     SUN_EXACT_DEG,
     SkyParams,
     aureole,
+    deck_share,
     display_sky_view,
     display_veil,
+    layer_reaches_horizon,
 )
 
 U8 = npt.NDArray[np.uint8]
@@ -101,7 +103,6 @@ STAR_FLOOR_AT_DAY = 0.4
 DOME_TILE_M = 14_000.0
 DOME_DETAIL_TILE_M = 3_500.0
 # Below this height above the eye the dome would be a deck the eye is in or above: not drawn.
-DOME_MIN_CLEARANCE_M = 300.0
 EARTH_RADIUS_M = 6_371_000.0
 EARTHSHINE = 0.05  # of the sunlit face's brightness, on the dark part of a crescent at night
 LUMA_WEIGHTS = (0.2126, 0.7152, 0.0722)  # Rec. 709
@@ -577,7 +578,7 @@ def dome_frame(sky: SkyParams, eye_alt_m: float) -> DomeFrame:
 def _dome_frame(sky: SkyParams, eye_alt_m: float) -> DomeFrame:
     dome = sky.dome
     clearance_m = dome.height * DOME_TOP_M - eye_alt_m
-    visible = dome.cover > 0.0 and clearance_m >= DOME_MIN_CLEARANCE_M
+    visible = layer_reaches_horizon(sky, eye_alt_m)
     if not visible:
         none = (1.0, 0.0, 0.0, 1.0)
         return DomeFrame(0.0, (none, none, none), ((0.0, 0.0),) * 3)
@@ -674,7 +675,7 @@ def display_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
     assert luts is not None
     sun = sky.sun.direction_enu
     flat = math.hypot(sun[0] + 1e-6, sun[1])
-    layer_reaches = dome_frame(sky, cam.position_m[2]).height_m > 0.0
+    layer_reaches = layer_reaches_horizon(sky, cam.position_m[2])
     floor_rad = luts.horizon_rad + math.radians(HAZE_MIN_ELEVATION_DEG) if layer_reaches else 0.0
     return {
         "u_sky_display": SkyPass.UNITS["u_sky_display"],
@@ -682,6 +683,7 @@ def display_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
         "u_air_floor": (
             math.sin(floor_rad),
             float(sky_view_v(np.array(floor_rad), luts.horizon_rad)),
+            deck_share(sky, cam.position_m[2]),
         ),
         "u_sun_exact": (
             math.cos(math.radians(SUN_EXACT_BLEND_DEG)),

@@ -252,7 +252,7 @@ def hazed(
     else:
         # The physical sky: each cloud fades into the sky right behind it (a frame's sprites,
         # one table lookup each).
-        air = sky.haze_toward((batch.centre_m - np.asarray(eye_m)).T) * haze
+        air = sky.haze_toward((batch.centre_m - np.asarray(eye_m)).T, eye_m[2]) * haze
     rgb = colours * (1.0 - haze) + air
     out = with_alpha(rgb, alpha)
     if rim is not None:

@@ -196,16 +196,19 @@ class SkyParams:
         luma = 0.2126 * r + 0.7152 * g + 0.0722 * b
         return _mix(self.horizon_rgb, (luma, luma, luma), smoothstep(0.6, 1.0, self.cover))
 
-    def haze_toward(self, offsets_m: F64) -> F64:
+    def haze_toward(self, offsets_m: F64, eye_alt_m: float | None = None) -> F64:
         """(3, N) the colour each of N clouds at `offsets_m` ((3, N) from the eye, ENU) fades
         into: with the physical atmosphere the sky as the sky pass shows it right behind the
         cloud (its direction, no lower than just over the horizon), so a distant cloud melts
-        into the sky behind it whichever way it lies from the sun; else `haze_rgb`."""
+        into the sky behind it whichever way it lies from the sun; under a deck (`deck_share`
+        from `eye_alt_m`), toward the air just over the horizon in the cloud's azimuth, at
+        every elevation; else `haze_rgb`."""
         n = offsets_m.shape[1]
         luts = self.atmosphere
         if luts is None or n == 0:
             return np.repeat(np.asarray(self.haze_rgb, np.float64)[:, None], n, axis=1)
-        return _sky_behind(luts, self.sun.direction_enu, self.cover, offsets_m)
+        deck = 0.0 if eye_alt_m is None else deck_share(self, eye_alt_m)
+        return _sky_behind(luts, self.sun.direction_enu, self.cover, offsets_m, deck)
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -503,6 +506,28 @@ def overcast_veil(cover: float) -> tuple[float, float]:
     return (0.8 * t, 1.0 - 0.7 * t)
 
 
+# A layer whose top is less than this above the eye is not drawn as the sky pass's dome (the
+# eye is in it or over it): render.sky_textures `dome_frame`.
+DOME_MIN_CLEARANCE_M = 300.0
+
+
+def layer_reaches_horizon(sky: SkyParams, eye_alt_m: float) -> bool:
+    """Whether a layer over the eye carries on into the horizon (the sky pass draws its
+    distant band): some cover, its top at least DOME_MIN_CLEARANCE_M over the eye."""
+    dome = sky.dome
+    return dome.cover > 0.0 and dome.height * DOME_TOP_M - eye_alt_m >= DOME_MIN_CLEARANCE_M
+
+
+def deck_share(sky: SkyParams, eye_alt_m: float) -> float:
+    """How far the air under the cover is a slab of haze under a deck (`_sky_behind`): none
+    under scattered cloud (half the sky or less: the clear sky shows between the clouds and
+    the air before a cloud is the sky's), all under broken cloud and more (three quarters),
+    when the layer reaches the horizon."""
+    if not layer_reaches_horizon(sky, eye_alt_m):
+        return 0.0
+    return smoothstep(0.5, 0.75, sky.cover)
+
+
 # The veil's steps (`display_veil`): a step moves a display value by half a level at most, and
 # the sky pass's baked table (`display_sky_view`) is made again only when the veil steps.
 VEIL_STEPS = 512
@@ -515,29 +540,46 @@ def display_veil(cover: float) -> tuple[float, float]:
 
 
 def _sky_behind(
-    luts: AtmosphereLuts, sun_enu: tuple[float, float, float], cover: float, offsets_m: F64
+    luts: AtmosphereLuts,
+    sun_enu: tuple[float, float, float],
+    cover: float,
+    offsets_m: F64,
+    deck: float = 0.0,
 ) -> F64:
     """The sky pass's air (sky.glsl `baked_sky`) toward each offset: its baked display table
     (`display_sky_view`), no lower than HAZE_MIN_ELEVATION_DEG over the horizon (below it,
-    that row straight across). The same table the shader reads, so a cloud fades into the very
-    colour the sky shows behind it, and one look-up a cloud instead of the radiance, the
-    aureole and the tone map (a quarter of the frame's CPU time with 250 sprites)."""
+    that row straight across; under a `deck` (`deck_share`), toward that row at every
+    elevation). The same table the
+    shader reads, so a cloud fades into the very colour the sky shows behind it, and one
+    look-up a cloud instead of the radiance, the aureole and the tone map (a quarter of the
+    frame's CPU time with 250 sprites).
+
+    Under a layer that reaches the horizon the air between the eye and the layer is a slab of
+    haze lit by the layer's light alike at every elevation under it: a cloud of the deck 5 deg
+    up (14 km off under a 1.2 km base, nine tenths haze at 20 km visibility) fades into the
+    same air as the deck at the horizon. The clear sky's own rise through the sun's glow (more
+    orange 5 deg up toward a low sun than just over the horizon) is the air above the haze,
+    which the deck hides; taking it had the deck 5 deg up oranger than the horizon under it
+    (B/R 0.32 against 0.41 with the sun 5 deg up), a bluish strip under the deck."""
     d = np.asarray(offsets_m, np.float64).T
     horizon = luts.horizon_rad
     floor_rad = horizon + math.radians(HAZE_MIN_ELEVATION_DEG)
     norm = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
     z = d[:, 2] / norm
+    v_floor = float(sky_view_v(np.array(floor_rad), horizon))
     v = np.where(
-        z < math.sin(floor_rad),
-        float(sky_view_v(np.array(floor_rad), horizon)),
-        sky_view_v(np.arcsin(np.clip(z, -1.0, 1.0)), horizon),
+        z < math.sin(floor_rad), v_floor, sky_view_v(np.arcsin(np.clip(z, -1.0, 1.0)), horizon)
     )
     flat = d[:, :2] / norm[:, None] + np.array([1e-6, 0.0])
     flat_norm = np.maximum(np.linalg.norm(flat, axis=1), 1e-12)
     sun_flat = np.array([sun_enu[0] + 1e-6, sun_enu[1]])
     sun_flat /= max(float(np.linalg.norm(sun_flat)), 1e-12)
     u = np.arccos(np.clip((flat @ sun_flat) / flat_norm, -1.0, 1.0)) / math.pi
-    out: F64 = sample_table(display_sky_view(luts, cover), u, v).T
+    table = display_sky_view(luts, cover)
+    out: F64 = sample_table(table, u, v).T
+    if deck > 0.0:
+        slab = sample_table(table, u, np.full_like(v, v_floor)).T
+        out += (slab - out) * deck
     return out
 
 

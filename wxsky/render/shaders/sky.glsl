@@ -144,9 +144,11 @@ uniform sampler2D u_sky_display;
 uniform vec2 u_flat_sun;          // the sun's azimuth (east, north), unit
 // The air the ground and the dome's band fade into: the sky no lower than this (sin
 // elevation, and its table row): scene.sky.HAZE_MIN_ELEVATION_DEG over the horizon where a
-// layer reaches it (u_horizon_air.a), else the eye's level (below it, that sky straight
-// across), so the ground's haze and the dome's are the sprites' air (SkyParams.haze_toward).
-uniform vec2 u_air_floor;
+// layer reaches it, else the eye's level (below it, that sky straight across); under a deck
+// (z: scene.sky.deck_share) the dome fades toward that row at every elevation, the slab of
+// haze under the deck (scene.sky `_sky_behind`): the ground's haze and the dome's are the
+// sprites' air.
+uniform vec3 u_air_floor;
 uniform vec2 u_sun_exact;         // cos of the angles from the sun where the table takes over
 
 // The baked sky along `ray`, below the air's floor the air straight across (`air`: what the
@@ -159,6 +161,12 @@ vec3 baked_sky(vec3 ray, out vec3 air) {
     // A new table or veil (a new bake) is a jump for the kept layer: both are compared.
     col = u_atmosphere_serial < 0.0 || u_overcast.y < 0.0 ? vec3(0.0) : col;
     air = col;
+#if SKY_DOME
+    // Only the dome reads the air over the floor (the ground band reads it below the eye's
+    // level, where it is this row already).
+    vec3 slab = textureLod(u_sky_display, vec2(u, u_air_floor.y), 0.0).rgb;
+    air = mix(air, slab, u_air_floor.z);
+#endif
 #if SKY_SUN
     // Round the sun, the exact sky (its disc and the aureole's core, which the table's
     // texels would facet), blended into the table's so the part's edge cannot show.
