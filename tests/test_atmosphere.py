@@ -532,3 +532,15 @@ def test_baked_display_table_is_within_a_level_of_the_exact_sky(
     exact = display(radiance, exposure)
     baked = atm.sample_table(table, u, v)
     assert np.abs(baked - exact).max() < 1.5 / 255.0
+
+
+def test_the_exposure_adapts_to_an_overcast_as_to_the_evening() -> None:
+    """Under cover the scene is darker by the overcast veil's dimming, and the automatic
+    exposure rises by its square root (the same partial adaptation as to a lower sun): an
+    overcast dawn is a grey dawn, not night. Scattered cloud (no veil) leaves it alone."""
+    luts = atm.build_luts(atm.atmosphere_key(5.0, 30_000.0, 50.0, 2.0))
+    clear = scene_sky.scene_exposure(luts, 0.0)
+    assert scene_sky.scene_exposure(luts, 0.5) == clear
+    dim = scene_sky.display_veil(1.0)[1]
+    assert scene_sky.scene_exposure(luts, 1.0) == pytest.approx(clear / dim**0.5)
+    assert clear == atm.display_exposure(luts)

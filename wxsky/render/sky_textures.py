@@ -58,7 +58,6 @@ from wxsky.render.sky_texture_gen import (
 from wxsky.scene.atmosphere import (
     SUN_ANGULAR_RADIUS_RAD,
     AtmosphereLuts,
-    display_exposure,
     sky_irradiance,
     sky_view_v,
     sun_irradiance,
@@ -78,6 +77,7 @@ from wxsky.scene.sky import (
     display_sky_view,
     display_veil,
     layer_reaches_horizon,
+    scene_exposure,
 )
 
 U8 = npt.NDArray[np.uint8]
@@ -474,6 +474,8 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
     if feats.physical and sky.atmosphere is not None:
         out.update(physical_uniforms(sky.atmosphere))
         out["u_overcast"] = display_veil(sky.cover)
+        # The scene's exposure: the sky's, adapted to the cover's dimming.
+        out["u_sky_scale"] = scene_exposure(sky.atmosphere, sky.cover)
         if not feats.scene_linear:
             out.update(display_uniforms(cam, sky))
             if not feats.sun:
@@ -747,7 +749,7 @@ def _physical_ground_tint(
     luma = float(ground @ np.asarray(LUMA_WEIGHTS))
     albedo = GROUND_ALBEDO_PHYSICAL * ground / max(luma, 1e-6)
     radiance = albedo * light_klx / math.pi  # klx -> kcd/m^2 off a Lambertian surface
-    shown = display(radiance, display_exposure(luts))
+    shown = display(radiance, scene_exposure(luts, cover))
     r, g, b = (float(v) for v in shown / np.maximum(ground, 1e-6))
     return (r, g, b)
 
@@ -814,7 +816,6 @@ def _physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
         "u_sky_view": SkyPass.UNITS["u_sky_view"],
         "u_horizon_rad": luts.horizon_rad,
         "u_sky_view_scale": sky_view_scale(luts),
-        "u_sky_scale": display_exposure(luts),
         "u_sun_radiance": tuple(float(v) for v in centre),
         "u_limb_darkening": LIMB_DARKENING,
         "u_aureole": (*(float(v) for v in strength), g),

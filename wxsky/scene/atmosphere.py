@@ -814,17 +814,24 @@ def vertical_rayleigh_optical_depth() -> F64:
 
 
 @functools.lru_cache(maxsize=8)  # a frame asks for it several times; a table is immutable
-def display_exposure(luts: AtmosphereLuts) -> float:
+def display_exposure(luts: AtmosphereLuts, dim: float = 1.0) -> float:
     """The automatic exposure: a scale from kcd/m^2 to exposed units, before the one tone map
     (`exposure.display`; sky.glsl's `u_sky_scale`; the clouds' light is made in these units,
     cloud_light), from the scene's luminance: the mean luminance of the sky above the
     horizon, adapting only partly (a power of 0.5), so that noon is bright, the low sun golden
     and twilight dark blue rather than lifted to noon's brightness; capped so the night stays
-    night."""
+    night. `dim`: the share of that light the cover over the eye leaves (scene.sky's overcast
+    veil, `scene_exposure`): an overcast scene is darker, and the eye adapts to it as to the
+    sun's going down (the same power), so an overcast dawn is grey, not night."""
+    y = _sky_mean_kcd(luts) * min(max(dim, 0.0), 1.0)
+    return float(EXPOSURE_KEY / max(y, EXPOSURE_FLOOR_KCD) ** EXPOSURE_ADAPT)
+
+
+@functools.lru_cache(maxsize=8)
+def _sky_mean_kcd(luts: AtmosphereLuts) -> float:
     rows = luts.sky_view.shape[0]
     upper = luts.sky_view[rows // 2 :]
-    y = float((upper @ LUMA).mean() * (_sun_rgb() @ LUMA))
-    return float(EXPOSURE_KEY / max(y, EXPOSURE_FLOOR_KCD) ** EXPOSURE_ADAPT)
+    return float((upper @ LUMA).mean() * (_sun_rgb() @ LUMA))
 
 
 # Set for the ACES + sRGB curve (it was 0.25 for the sky's Reinhard + gamma 2): a clear

@@ -528,6 +528,13 @@ def deck_share(sky: SkyParams, eye_alt_m: float) -> float:
     return smoothstep(0.5, 0.75, sky.cover)
 
 
+def scene_exposure(luts: AtmosphereLuts, cover: float) -> float:
+    """The automatic exposure of a scene under `cover` (`display_exposure` of the sky the
+    overcast veil has dimmed): the one every part of the picture is shown at, the sky's,
+    the clouds' and the ground's."""
+    return display_exposure(luts, display_veil(cover)[1])
+
+
 # The veil's steps (`display_veil`): a step moves a display value by half a level at most, and
 # the sky pass's baked table (`display_sky_view`) is made again only when the veil steps.
 VEIL_STEPS = 512
@@ -620,7 +627,7 @@ def _display_sky_view(luts: AtmosphereLuts, veil: tuple[float, float]) -> F64:
     grey = radiance @ LUMA
     radiance = (radiance + (grey[..., None] - radiance) * share) * dim
     # Float64: the sprites' haze samples it every frame (`_sky_behind`), without a copy.
-    out: F64 = display(np.maximum(radiance, 0.0), display_exposure(luts))
+    out: F64 = display(np.maximum(radiance, 0.0), display_exposure(luts, dim))
     out.flags.writeable = False
     return out
 
