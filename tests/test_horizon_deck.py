@@ -42,9 +42,10 @@ MOST_BRIGHTER = 1.15
 # Facing away it is x1.05-1.06 (1.051 at 320 x 180 before the exposure adapted to the
 # cover's dimming, 1.064 at 640 x 360 after, ad2ae6f), and still fails: the deck 5 deg up
 # is nine tenths that same air (14 km off at 20 km visibility) and a tenth the clouds'
-# faces, lit warm by the low sun behind the eye (B/R about 0.5), while the band is the air (B/R 0.995, the overcast veil's grey) over the near ground in the
-# deck's bluish shade light. Passing with a margin wants the air under the deck lit by the
-# deck's own light rather than greyed (an aerial-perspective table), not a tuned floor.
+# faces, lit warm by the low sun behind the eye (B/R about 0.5), while the band is the air
+# (B/R 0.995, the overcast veil's grey) over the near ground in the deck's bluish shade
+# light. Passing with a margin wants the air under the deck lit by the deck's own light
+# rather than greyed (an aerial-perspective table), not a tuned floor.
 FAILING = {("broken-stratocumulus", "sun+5", "away")}
 CASES = [
     pytest.param(
