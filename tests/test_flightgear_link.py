@@ -241,6 +241,14 @@ def test_a_daemon_follows_flightgears_pose_and_writes_it_the_weather(
                 return abs(cam["position_m"][1] - 1112.0) < 20.0
 
             _until(moved)
+
+            def pose_input() -> dict[str, Any]:
+                inputs = {i["name"]: i for i in status()["inputs"]}
+                return inputs["flightgear:pose"]
+
+            # The bad line sent after the good one may still be on its way when the camera
+            # has moved (a busy CI machine): wait for it to be counted, not for a time.
+            _until(lambda: pose_input()["errors"] >= 1)
         s = status()
         cam = s["camera"]
         assert cam["heading_deg"] == pytest.approx(0.0, abs=1e-6)
