@@ -542,7 +542,7 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
         )
         if not feats.physical or feats.scene_linear:
             # The physical sky's dome fades into the air behind it, direction by direction
-            # (sky.glsl `air_behind`), as the sprites do (SkyParams.haze_toward); the
+            # (sky.glsl `baked_sky`), as the sprites do (SkyParams.haze_toward); the
             # gradient's into the one haze colour.
             out["u_dome_haze_rgb"] = sky.haze_rgb
     return out
@@ -671,8 +671,8 @@ _EXACT_ONLY = (
 def display_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
     """The physical sky's display variants' own uniforms: the baked table's unit, the sun's
     azimuth, the floor of the air the ground and the dome's band fade into (sin elevation,
-    and its table row; `ground_uniforms`' u_horizon_air.a says whether a layer reaches the
-    horizon), and the sun part's blend into the table."""
+    its table row, and how far the air under the cover is one slab: `deck_share`), and the
+    sun part's blend into the table."""
     luts = sky.atmosphere
     assert luts is not None
     sun = sky.sun.direction_enu
@@ -699,13 +699,13 @@ def ground_uniforms(cam: Camera, sky: SkyParams) -> dict[str, object]:
     sky pass: below the horizon the variants must agree to the bit, so the air the ground
     hazes into is the dome's haze wherever the dome is drawn this frame (its distant band
     reaches the horizon, opaque), whether or not this variant draws the dome: in the gradient
-    mode the one haze colour (u_horizon_air.rgb), with the physical sky the air behind, in
-    each direction (sky.glsl `air_behind`; u_horizon_air.a says a layer reaches)."""
+    mode the one haze colour (u_horizon_air.rgb; .a says a layer reaches); the physical sky
+    drops u_horizon_air and takes its air from its baked table (`display_uniforms`)."""
     dome = sky.dome
     eye_agl_m = cam.position_m[2] - dome.ground_m
     hazy_m = max(min(sky.haze_top_m - dome.ground_m, 1e6), 0.0)
     surface_haze_m = dome.surface_haze_m if dome.surface_haze_m > 0.0 else sky.haze_m
-    layer_reaches = dome_frame(sky, cam.position_m[2]).height_m > 0.0
+    layer_reaches = layer_reaches_horizon(sky, cam.position_m[2])
     return {
         "u_pixel_rad": pixel_rad(cam),
         "u_ground_air": (eye_agl_m, surface_haze_m, hazy_m, CLEAR_AIR_HAZE_M),

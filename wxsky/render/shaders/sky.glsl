@@ -69,8 +69,9 @@ uniform float u_clear_haze_m;     // haze distance in the clear air above it
 // 0.5 m is taken), the haze distance over the ground, how much of the eye's height lies in the
 // hazy layer, the clear air's haze distance.
 uniform vec4 u_ground_air;
-// The air at the horizon, where a layer reaches it (rgb: the dome's haze colour there; a: 1
-// when the dome's distant band is drawn, else 0 and the clear sky's horizon shows).
+// The gradient sky's air at the horizon, where a layer reaches it (rgb: the dome's haze colour
+// there; a: 1 when the dome's distant band is drawn, else 0 and the clear sky's horizon
+// shows). The physical sky's is its baked table's (u_air_floor).
 uniform vec4 u_horizon_air;
 uniform vec3 u_ground_tint;       // the light on the ground, at the luminance of white
 
