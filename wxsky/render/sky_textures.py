@@ -800,10 +800,10 @@ def physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
 
 @functools.lru_cache(maxsize=4)
 def _physical_uniforms(luts: AtmosphereLuts) -> dict[str, object]:
-    """The physical sky's uniforms: its table's unit and horizon, the exposure (the stand-in
-    for the renderer's exposure: `atmosphere.display_exposure`), the sun's disc (radiance at
-    its centre, kcd/m^2, transmitted to the eye) and the aureole (scene.sky's `aureole`:
-    strength and g, both from the aerosol's optical depth toward the sun)."""
+    """The physical sky's uniforms that come with a set of tables: its unit and horizon, the
+    sun's disc (radiance at its centre, kcd/m^2, transmitted to the eye) and the aureole
+    (scene.sky's `aureole`: strength and g, both from the aerosol's optical depth toward the
+    sun). The exposure (u_sky_scale) depends on the cover too: `frame_uniforms` sets it."""
     # The table's own (quantised) sun, not this frame's: these change with the table only,
     # as a jump that redraws the kept layer whole, never as a drift every sky step.
     el = luts.sun_elevation_deg

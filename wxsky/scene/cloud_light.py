@@ -31,12 +31,11 @@ import numpy.typing as npt
 
 from wxsky.scene.atmosphere import (
     AtmosphereLuts,
-    display_exposure,
     moon_irradiance,
     sky_irradiance,
     sun_irradiance,
 )
-from wxsky.scene.sky import SkyParams, display_veil, smoothstep
+from wxsky.scene.sky import SkyParams, scene_exposure, smoothstep
 
 F64 = npt.NDArray[np.float64]
 
@@ -120,16 +119,11 @@ def _greyer(rgb: tuple[float, ...]) -> RGB:
 # -- from the physical atmosphere -------------------------------------------------------------
 
 
-def cloud_units_per_klx(luts: AtmosphereLuts, dim: float = 1.0) -> float:
+def cloud_units_per_klx(luts: AtmosphereLuts, cover: float = 0.0) -> float:
     """The one factor from the atmosphere's irradiance (klx) to the clouds' units (see the
-    module's docstring): the sky's exposure over pi (`dim`: the overcast veil's dimming, the
-    exposure's adaptation to it: scene.sky `scene_exposure`)."""
-    return display_exposure(luts, dim) / math.pi
-
-
-def _dim(sky: SkyParams) -> float:
-    """The overcast veil's dimming of this sky (what its exposure adapts to)."""
-    return display_veil(sky.cover)[1]
+    module's docstring): the scene's exposure under `cover` (scene.sky `scene_exposure`, the
+    sky's) over pi."""
+    return scene_exposure(luts, cover) / math.pi
 
 
 def _agl(sky: SkyParams, alt_m: float | None) -> float:
@@ -148,7 +142,8 @@ def key_rgb_at(sky: SkyParams, alt_m: F64) -> F64 | None:
     agl = np.maximum(np.asarray(alt_m, np.float64) - sky.ground_m, 0.0)
     # A frame's sprites read a table over height, made once per table and 0.01 deg of sun:
     # the transmittance per sprite cost a frame 0.4-1 ms on a 2-core CPU.
-    heights, table = _key_table(luts, round(sky.sun.elevation_deg * 100.0), _dim(sky))
+    per_klx = cloud_units_per_klx(luts, sky.cover)  # on the veil's steps: a few values
+    heights, table = _key_table(luts, round(sky.sun.elevation_deg * 100.0), per_klx)
     out: F64 = np.stack([np.interp(agl, heights, table[:, c]) for c in range(3)], axis=-1)
     return out
 
@@ -158,9 +153,9 @@ KEY_TABLE_TOP_M = 20_000.0
 
 
 @functools.lru_cache(maxsize=4)
-def _key_table(luts: AtmosphereLuts, sun_centideg: int, dim: float) -> tuple[F64, F64]:
+def _key_table(luts: AtmosphereLuts, sun_centideg: int, per_klx: float) -> tuple[F64, F64]:
     heights = np.arange(0.0, KEY_TABLE_TOP_M + KEY_TABLE_STEP_M, KEY_TABLE_STEP_M)
-    table = sun_irradiance(luts, heights, sun_centideg / 100.0) * cloud_units_per_klx(luts, dim)
+    table = sun_irradiance(luts, heights, sun_centideg / 100.0) * per_klx
     return heights, table
 
 
@@ -168,7 +163,7 @@ def _physical_lights(
     sky: SkyParams, luts: AtmosphereLuts, above_cloud: bool, alt_m: float | None
 ) -> CloudLights:
     agl = _agl(sky, alt_m)
-    per_klx = cloud_units_per_klx(luts, _dim(sky))
+    per_klx = cloud_units_per_klx(luts, sky.cover)
     sun_el = sky.sun.elevation_deg
     key_dir: Vec3
     if sun_el > MOON_TAKES_OVER_DEG:

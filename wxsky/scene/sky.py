@@ -574,18 +574,20 @@ def _sky_behind(
     norm = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
     z = d[:, 2] / norm
     v_floor = float(sky_view_v(np.array(floor_rad), horizon))
-    v = np.where(
-        z < math.sin(floor_rad), v_floor, sky_view_v(np.arcsin(np.clip(z, -1.0, 1.0)), horizon)
-    )
     flat = d[:, :2] / norm[:, None] + np.array([1e-6, 0.0])
     flat_norm = np.maximum(np.linalg.norm(flat, axis=1), 1e-12)
     sun_flat = np.array([sun_enu[0] + 1e-6, sun_enu[1]])
     sun_flat /= max(float(np.linalg.norm(sun_flat)), 1e-12)
     u = np.arccos(np.clip((flat @ sun_flat) / flat_norm, -1.0, 1.0)) / math.pi
     table = display_sky_view(luts, cover)
+    slab: F64 | None = sample_table(table, u, np.full_like(z, v_floor)).T if deck > 0.0 else None
+    if slab is not None and deck >= 1.0:
+        return slab  # under a full deck the sky behind is not looked up at all
+    v = np.where(
+        z < math.sin(floor_rad), v_floor, sky_view_v(np.arcsin(np.clip(z, -1.0, 1.0)), horizon)
+    )
     out: F64 = sample_table(table, u, v).T
-    if deck > 0.0:
-        slab = sample_table(table, u, np.full_like(v, v_floor)).T
+    if slab is not None:
         out += (slab - out) * deck
     return out
 
