@@ -834,8 +834,9 @@ def _sky_mean_kcd(luts: AtmosphereLuts) -> float:
     return float((upper @ LUMA).mean() * (_sun_rgb() @ LUMA))
 
 
-# Set for the ACES + sRGB curve (it was 0.25 for the sky's Reinhard + gamma 2): a clear
-# noon sky's mean at about 0.36 of display white, the horizon paler, the zenith deeper.
-EXPOSURE_KEY = 0.12
+# Set for the tone curve + sRGB (it was 0.25 for the sky's Reinhard + gamma 2, 0.12 for the
+# ACES fit's own toe): a clear noon sky's mean at about 0.36 of display white, the horizon
+# paler, the zenith deeper.
+EXPOSURE_KEY = 0.10
 EXPOSURE_ADAPT = 0.5
 EXPOSURE_FLOOR_KCD = 1e-4

@@ -29,8 +29,13 @@ from wxsky.schema import Custom, Number
 
 F64 = npt.NDArray[np.float64]
 
-# Narkowicz's fit of the ACES RRT+ODT: x (A x + B) / (x (C x + D) + E), clamped to 0..1.
-TM_A, TM_B, TM_C, TM_D, TM_E = 2.51, 0.03, 2.43, 0.59, 0.14
+# Narkowicz's form of the ACES RRT+ODT fit, x (A x + B) / (x (C x + D) + E) clamped to 0..1,
+# with a toe of slope 1 (B = E) instead of the fit's 0.21 (B 0.03): the fit's toe showed a
+# level field under a 5 deg sun, a tenth of the sky's luminance, at a fortieth of its display
+# light, black, where a camera or an eye shows it dark but with its colour. D (0.59 in the
+# fit) is raised so the curve reaches white at the same 7.24 and the mid-tones stay (an
+# exposed 0.12 shows at sRGB 0.50 as before, the shoulder within 0.03).
+TM_A, TM_B, TM_C, TM_D, TM_E = 2.51, 0.14, 2.43, 0.70, 0.14
 # The exposed value at which the curve reaches 1 (its clip): the larger root of
 # (A - C) x^2 + (B - D) x - E = 0.
 TM_WHITE = (-(TM_B - TM_D) + math.sqrt((TM_B - TM_D) ** 2 + 4 * (TM_A - TM_C) * TM_E)) / (

@@ -24,8 +24,9 @@ extern "C" {
 /* The kit's own API version: MAJOR changes break source compatibility. */
 #define WXSKY_HOST_VERSION_MAJOR 0
 /* 2: frame record v3 (the cloud-shadow fields); 3: segment v2, RGBA16F layers (the layer
- * info's format and bytes_per_pixel, wxsky_half_to_float, wxsky_display) */
-#define WXSKY_HOST_VERSION_MINOR 3
+ * info's format and bytes_per_pixel, wxsky_half_to_float, wxsky_display); 4: wxsky_display's
+ * curve with a toe of slope 1 */
+#define WXSKY_HOST_VERSION_MINOR 4
 /* The protocol versions this kit speaks (docs/protocol.md). */
 #define WXSKY_PROTOCOL_VERSION 1
 #define WXSKY_SEGMENT_VERSION 2     /* the newest segment layout this kit reads */
@@ -261,11 +262,12 @@ int wxsky_record_decode(const uint8_t *meta, size_t length, wxsky_record *out, c
 float wxsky_half_to_float(uint16_t half);
 
 /* The daemon's display transform of straight (not premultiplied) scene-linear colour:
- * srgb_encode(tone_map(rgb * exposure)), where tone_map is Narkowicz's ACES fit
- * x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), clamped to 0..1, applied to the largest
- * channel with the colour scaled by the same factor and, past the curve's white (7.24), burnt
- * toward white (0.9 of the way at 4 times it: exposure.py `burn`), and srgb_encode the sRGB
- * transfer function. `exposure`: the scale on scene-linear colour (2^EV; 1 is the daemon's EV 0).
+ * srgb_encode(tone_map(rgb * exposure)), where tone_map is Narkowicz's form of the ACES fit
+ * with a toe of slope 1, x (2.51 x + 0.14) / (x (2.43 x + 0.70) + 0.14), clamped to 0..1 (kit
+ * versions before 0.4: the fit's own 0.03 and 0.59, whose toe crushed dark values), applied
+ * to the largest channel with the colour scaled by the same factor and, past the curve's
+ * white (7.24), burnt toward white (0.9 of the way at 4 times it: exposure.py `burn`), and
+ * srgb_encode the sRGB transfer function. `exposure`: the scale on scene-linear colour (2^EV; 1 is the daemon's EV 0).
  * Negative and NaN channels count as 0. out_rgb: display values 0..1. */
 void wxsky_display(const float linear_rgb[3], float exposure, float out_rgb[3]);
 

@@ -60,8 +60,9 @@ extern "C" {
 /* The GL compositor's API version: MAJOR changes break source compatibility. */
 #define WXSKY_HOST_GL_VERSION_MAJOR 0
 /* 2: the cloud-shadow map (wxsky_gl_shadow*); 3: HDR layers (RGBA16F textures,
- * wxsky_gl_layer_format, wxsky_gl_tone_map, WXSKY_GL_DISPLAY_GLSL) */
-#define WXSKY_HOST_GL_VERSION_MINOR 3
+ * wxsky_gl_layer_format, wxsky_gl_tone_map, WXSKY_GL_DISPLAY_GLSL); 4: the tone curve's toe
+ * of slope 1 (the daemon's since issue 41's last change) */
+#define WXSKY_HOST_GL_VERSION_MINOR 4
 
 /* Runtime version of the GL library, (MAJOR << 16) | MINOR, to compare with the header's. */
 uint32_t wxsky_gl_version(void);
@@ -273,7 +274,7 @@ int wxsky_gl_tone_map(wxsky_gl_compositor *comp, unsigned int linear_texture, fl
     "    vec3 c = max(linear * exposure, vec3(0.0));\n"                                       \
     "    float m = max(c.r, max(c.g, c.b));\n"                                                \
     "    if (!(m > 0.0)) return vec3(0.0);\n"                                                 \
-    "    float y = clamp(m * (2.51 * m + 0.03) / (m * (2.43 * m + 0.59) + 0.14), 0.0, 1.0);\n" \
+    "    float y = clamp(m * (2.51 * m + 0.14) / (m * (2.43 * m + 0.70) + 0.14), 0.0, 1.0);\n" \
     "    float b = clamp((m / 7.241657386773973 - 1.0) / 3.0, 0.0, 1.0);\n"                   \
     "    vec3 t = clamp(mix(c * (y / m), vec3(y), 0.9 * b * b * (3.0 - 2.0 * b)), 0.0, 1.0);\n" \
     "    return mix(12.92 * t, 1.055 * pow(t, vec3(1.0 / 2.4)) - 0.055, "                     \

@@ -27,11 +27,11 @@ float wxsky_half_to_float(uint16_t half) {
     return out;
 }
 
-/* exposure.py's constants: Narkowicz's fit of the ACES RRT+ODT. */
+/* exposure.py's constants: Narkowicz's form of the ACES RRT+ODT fit with a toe of slope 1. */
 #define TM_A 2.51
-#define TM_B 0.03
+#define TM_B 0.14
 #define TM_C 2.43
-#define TM_D 0.59
+#define TM_D 0.70
 #define TM_E 0.14
 /* Past the curve's white (TM_WHITE) a colour burns toward white: BURN_MAX of the way at
  * BURN_FULL times the white (exposure.py burn). */

@@ -21,9 +21,9 @@
 uniform float u_exposure;  // scale on scene-linear colour; exposure.py checks it is finite
 
 const float TM_A = 2.51;
-const float TM_B = 0.03;
+const float TM_B = 0.14;
 const float TM_C = 2.43;
-const float TM_D = 0.59;
+const float TM_D = 0.70;
 const float TM_E = 0.14;
 const float LEGACY_EXPOSURE = 1.0;
 const float LEGACY_MAX = 1.0 - 1.0 / 1024.0;
