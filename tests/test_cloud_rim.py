@@ -22,9 +22,12 @@ from wxsky.scene.exposure import display_inverse
 from wxsky.scene.in_cloud import InCloud, in_cloud_fog
 from wxsky.scene.layout import FrameScene, SpriteDraw, shade_for_eye
 from wxsky.scene.shading import display_colours, display_colours_and_rim
-from wxsky.scene.sky import SkyParams, SunPosition, sky_params
+from wxsky.scene.shading_harris import batch_balls, view_depth_and_limb, view_rays
+from wxsky.scene.sky import SkyParams, SunPosition, deck_share, deck_sun_share, sky_params
 from wxsky.scene.sprite_budget import cap_sprites
+from wxsky.scene.sprites import SpriteBatch
 from wxsky.scene.texture_slots import TEX_FOG
+from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -155,3 +158,56 @@ def test_the_shader_shows_the_rim_in_thin_texels_and_the_body_in_thick_ones(
     # A rim of the body's own colour keeps the thin texels near that colour (the texture's
     # shade is left out there), and no rim at all draws exactly what it always did.
     assert abs(straight(same, thin) - straight(plain, thin)) < 0.15
+
+
+def _limb(cloud: SpriteBatch, toward_light: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(limb share, the sprites' offset across the view from their cloud's centre, as a
+    share of its radius) for the cloud seen from EYE."""
+    view = view_rays(cloud.centre_m, EYE)
+    balls = batch_balls(cloud)
+    _, limb = view_depth_and_limb(cloud, view, balls, toward_light)
+    rel = balls[:, :3].astype(np.float64)
+    along = np.einsum("ij,ji->i", rel, view)
+    across = np.sqrt(np.maximum(np.einsum("ij,ij->i", rel, rel) - along**2, 0.0))
+    return limb, across / balls[:, 3]
+
+
+def _unit(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+    return np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
+
+
+def test_a_fringe_on_the_silhouette_is_in_the_beam_only_where_the_beam_misses_the_body() -> None:
+    cloud = _cumulus()
+    # Without a light: the sprites whose edge reaches the silhouette, and none deep inside.
+    bare, across = _limb(cloud, None)
+    assert (bare[across < 0.3] == 0.0).all()
+    assert (bare > 0.5).any() and (bare <= 1.0).all() and (bare >= 0.0).all()
+    # A sun 5 degrees up right behind the cloud (due north, the eye south of it): a ray from
+    # the limb toward it crosses a thin slice of the ball, so the fringe keeps much of it.
+    behind, _ = _limb(cloud, _unit(5.0, 0.0))
+    assert (behind <= bare + 1e-12).all()
+    rim = bare > 0.5
+    assert np.median(behind[rim] / bare[rim]) > 0.3
+    # A sun overhead: the fringe under the cloud (its offset below the centre) would see it
+    # through the whole cloud; the fringe over it sees it straight.
+    overhead, _ = _limb(cloud, _unit(85.0, 0.0))
+    below = batch_balls(cloud)[:, 2] < 0.0
+    assert overhead[rim & below].max() < 0.05
+    assert np.median(overhead[rim & ~below] / bare[rim & ~below]) > 0.5
+
+
+def test_a_deck_stands_in_the_way_of_a_low_sun_not_of_a_high_one() -> None:
+    base = sky_params(WeatherState().apply(load_preset("broken-stratocumulus")))
+    eye = base.ground_m + 2.0  # at the ground, under the deck
+    shares = [
+        deck_sun_share(dataclasses.replace(base, sun=SunPosition(el, 0.0)), eye)
+        for el in (0.0, 5.0, 30.0, 90.0)
+    ]
+    assert deck_share(base, eye) == 1.0
+    assert shares[0] == pytest.approx(1.0 - base.cover)
+    assert shares == sorted(shares) and shares[-1] == pytest.approx(1.0)
+    # Over the deck, and under scattered cloud, nothing stands in the way.
+    assert deck_sun_share(base, 10_000.0) == 1.0
+    scattered = sky_params(WeatherState().apply(load_preset("scattered-cumulus")))
+    assert deck_sun_share(dataclasses.replace(scattered, sun=SunPosition(2.0, 0.0)), 0.0) == 1.0

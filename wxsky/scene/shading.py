@@ -18,6 +18,7 @@ import numpy as np
 from wxsky.scene.cloud_light import key_rgb_at
 from wxsky.scene.shading_harris import (
     BALL_COLUMNS,
+    Lights,
     ParticleLight,
     Scattered,
     close_directions,
@@ -28,12 +29,13 @@ from wxsky.scene.shading_harris import (
     scene_lights,
     shown_channels,
     view_depth,
+    view_depth_and_limb,
     view_rays,
     with_alpha,
 )
 from wxsky.scene.shading_slab import slab_view_radiance
 from wxsky.scene.shading_wang import wang_colours, wang_radiance
-from wxsky.scene.sky import SkyParams
+from wxsky.scene.sky import SkyParams, deck_sun_share
 from wxsky.scene.sprites import F32, F64, SpriteBatch
 
 SHADING_MODELS = ("wang", "harris", "wang-artist")
@@ -117,6 +119,30 @@ def display_colours_and_rim(
     return _colours(batch, sky, eye_m, model, light, scattered, dist_m, balls, True)
 
 
+def _depth_and_limb(
+    batch: SpriteBatch,
+    view: F64,
+    incident: F32,
+    sky: SkyParams,
+    lights: Lights,
+) -> tuple[F64, F64 | None]:
+    """`view_depth_and_limb` from the light's precompute; the fringe's light only under the
+    physical sky (the gradient sky's Harris is the look the golden images hold)."""
+    balls = incident[:, -BALL_COLUMNS:]
+    if sky.atmosphere is None:
+        return view_depth(batch, view, balls), None
+    return view_depth_and_limb(batch, view, balls, lights.directions[0])
+
+
+def _key_at(sky: SkyParams, alt_m: F64, eye_alt_m: float) -> F64 | None:
+    """`key_rgb_at`, less what a deck's other cells take off it (`deck_sun_share`)."""
+    key = key_rgb_at(sky, alt_m)
+    if key is None:
+        return None
+    share = deck_sun_share(sky, eye_alt_m)
+    return key if share >= 1.0 else key * share
+
+
 def _colours(
     batch: SpriteBatch,
     sky: SkyParams,
@@ -149,18 +175,18 @@ def _colours(
         return shown, (shown if want_rim else None)
     if slabs == 0:
         lights = scene_lights(sky, alt_m=_middle_m(batch))
-        key = key_rgb_at(sky, batch.centre_m[:, 2])
+        key = _key_at(sky, batch.centre_m[:, 2], eye_m[2])
         if model == "wang":
             return shown_channels(wang_radiance(batch, lights, view, balls, key), sky), None
         incident = harris_incident(batch, lights, light, scattered)
-        depth = view_depth(batch, view, incident[:, -BALL_COLUMNS:])
+        depth, limb = _depth_and_limb(batch, view, incident, sky, lights)
         if want_rim:
             body, rim = harris_radiance_and_rim(
-                view, incident, lights, batch.height_frac, depth, key
+                view, incident, lights, batch.height_frac, depth, key, limb
             )
             return shown_channels(body, sky), shown_channels(rim, sky)
         return shown_channels(
-            harris_radiance(view, incident, lights, batch.height_frac, depth, key),
+            harris_radiance(view, incident, lights, batch.height_frac, depth, key, limb),
             sky,
         ), None
     # Columns by index (ndarray.take), not by mask: a fifth of the time.
@@ -179,7 +205,7 @@ def _colours(
         return mixed, None
     particle_z = batch.centre_m[:, 2].take(particle)
     lights = scene_lights(sky, alt_m=_middle_m(batch, particle_z))
-    key = key_rgb_at(sky, particle_z)
+    key = _key_at(sky, particle_z, eye_m[2])
     radiance = np.empty((3, n))
     radiance[:, slabs_at] = slab_radiance
     if model == "wang":
@@ -204,15 +230,15 @@ def _colours(
         )
     particles = batch.take(particle)
     particle_view = view.take(particle, axis=1)
-    depth = view_depth(particles, particle_view, incident[:, -BALL_COLUMNS:])
+    depth, limb = _depth_and_limb(particles, particle_view, incident, sky, lights)
     if not want_rim:
         radiance[:, particle] = harris_radiance(
-            particle_view, incident, lights, particles.height_frac, depth, key
+            particle_view, incident, lights, particles.height_frac, depth, key, limb
         )
         return shown_channels(radiance, sky), None
     rim_radiance = radiance.copy()
     body, rim = harris_radiance_and_rim(
-        particle_view, incident, lights, particles.height_frac, depth, key
+        particle_view, incident, lights, particles.height_frac, depth, key, limb
     )
     radiance[:, particle] = body
     rim_radiance[:, particle] = rim

@@ -301,6 +301,7 @@ def harris_radiance(
     height_frac: F32 | F64 | None = None,
     eye_depth: F64 | None = None,
     key_rgb: F64 | None = None,
+    limb: F64 | None = None,
 ) -> F64:
     """(3, N) radiance toward the eye, channel by channel, from the share of each light's beam
     reaching each sprite (`incident`, (N, L) for the L `lights`, `harris_incident`), along
@@ -313,7 +314,7 @@ def harris_radiance(
     redder at a cloud's base than at its top at sunset); None: the lights' key for all.
     Exposed and given the sprites' opacity as alpha (`shading.sprite_colours`), the renderer's
     back-to-front blending is eq. 9's recurrence, with alpha as 1 - T."""
-    return _harris(view, incident, lights, height_frac, eye_depth, key_rgb, False)[0]
+    return _harris(view, incident, lights, height_frac, eye_depth, key_rgb, False, limb)[0]
 
 
 def harris_radiance_and_rim(
@@ -323,6 +324,7 @@ def harris_radiance_and_rim(
     height_frac: F32 | F64 | None,
     eye_depth: F64 | None,
     key_rgb: F64 | None,
+    limb: F64 | None = None,
 ) -> tuple[F64, F64]:
     """`harris_radiance`, and (3, N) the radiance of each sprite's thin outer texels (its
     rim): the same light without the cloud between the sprite's centre and the eye on the
@@ -330,7 +332,7 @@ def harris_radiance_and_rim(
     lies between that edge and the eye, and a cloud between the eye and a low sun shows there
     the forward peak undimmed: the silver lining. (Inside the silhouette the sprites in front
     cover the rim.)"""
-    out, rim = _harris(view, incident, lights, height_frac, eye_depth, key_rgb, True)
+    out, rim = _harris(view, incident, lights, height_frac, eye_depth, key_rgb, True, limb)
     assert rim is not None
     return out, rim
 
@@ -343,6 +345,7 @@ def _harris(
     eye_depth: F64 | None,
     key_rgb: F64 | None,
     want_rim: bool,
+    limb: F64 | None = None,
 ) -> tuple[F64, F64 | None]:
     # Phase angle: between the light's travel and the way to the eye, i.e. between the
     # direction to the light and the view ray: cos 1 with the sprite right before the sun.
@@ -351,16 +354,19 @@ def _harris(
     weight = diffuse_phase(cos)
     weight *= multiple_scattering(beam)
     weight[0] *= DIFFUSE_SHARE
-    single = (1.0 - DIFFUSE_SHARE) * cloud_phase(cos[0]) * beam[0]
-    # What the cloud in front of the sprite takes off its forward beam (the rim keeps it;
-    # the beam's dimming on the way in stays: letting a rim keep that too outlined every
-    # sprite inside a backlit cloud in light).
-    hidden = None
+    forward = (1.0 - DIFFUSE_SHARE) * cloud_phase(cos[0])
+    single = forward * beam[0]
+    # The rim's beam (the forward peak of a sprite's thin outer texels): without what the
+    # cloud in front of the sprite takes off it, and on the silhouette (`limb`) in the sun's
+    # undimmed light, as a fringe past the body is (LIMB_FROM). Inside the silhouette the beam's
+    # dimming on the way in stays: letting every rim keep it outlined each sprite of a backlit
+    # cloud in light.
+    rim_single = single if limb is None else forward * (beam[0] + (1.0 - beam[0]) * limb)
     if eye_depth is not None:
-        kept = np.exp(-eye_depth)
-        if want_rim:
-            hidden = single * (1.0 - kept)
-        single *= kept
+        single = single * np.exp(-eye_depth)
+    if limb is not None:
+        # A sprite on the silhouette is its fringe throughout, not only its thin texels.
+        single = single + (rim_single - single) * limb
     weight[0] += single
     out: F64 = lights.rgb.T @ weight
     key = lights.rgb[0][:, None] if key_rgb is None else key_rgb.T
@@ -373,7 +379,7 @@ def _harris(
     out += lights.ground_rgb[:, None] * (BASE_REFLECTANCE * below)
     if not want_rim:
         return out, None
-    rim: F64 = out if hidden is None else out + key * (ALBEDO * hidden)
+    rim: F64 = out + key * (ALBEDO * (rim_single - single))
     return out, rim
 
 
@@ -425,20 +431,55 @@ def view_depth(batch: SpriteBatch, view: F64, balls: F32 | None = None) -> F64:
     edge of its cloud taken as a ball (`balls`, (N, BALL_COLUMNS) from the light's precompute
     over whole clouds; None: `batch_balls`), times the sprite's extinction (its optical
     depth over its size, `tau_of`). Zero for a sprite on its cloud's near face."""
+    return view_depth_and_limb(batch, view, balls)[0]
+
+
+# A sprite's rim is its cloud's silhouette where the sprite's edge, seen from the eye, reaches
+# past this share of its cloud's ball radius (fully at the ball's edge).
+LIMB_FROM = 0.65
+
+
+def view_depth_and_limb(
+    batch: SpriteBatch,
+    view: F64,
+    balls: F32 | None = None,
+    toward_light: F64 | None = None,
+) -> tuple[F64, F64]:
+    """`view_depth`, and (N,) how much of the key light's undimmed beam each sprite's fringe
+    gets: how far its outer edge reaches the silhouette of its cloud seen from the eye (0
+    inside LIMB_FROM of the ball's radius, 1 at its edge), times what the ball leaves of the
+    beam on its way from `toward_light` ((3,) unit; None: all of it) to that edge. A fringe
+    past a cloud's body is in the sun's own light wherever the sun's ray to it misses the
+    body: a sun theta behind the limb once the fringe is R (1/cos theta - 1) out, 1.5 % of the
+    radius at 10 degrees (the silver lining), but not the base's fringe under a high sun."""
     n = len(batch)
     if n == 0:
-        return np.zeros(0)
+        return np.zeros(0), np.zeros(0)
     ball = batch_balls(batch) if balls is None else balls
     rel = ball[:, :3].astype(np.float64)
     r2 = np.einsum("ij,ij->i", rel, rel)
     size = np.asarray(batch.size_m, np.float64)
+    radius = ball[:, 3].astype(np.float64)
+    extinction = VIEW_EXTINCTION_SHARE * tau_of(batch) / np.maximum(size, 1.0)
     # |rel + t d| = R, d toward the eye (-view): t = -(rel.d) + sqrt((rel.d)^2 - |rel|^2 + R^2).
     along = -np.einsum("ij,ji->i", rel, view)
-    disc = along * along - r2 + ball[:, 3].astype(np.float64) ** 2
+    disc = along * along - r2 + radius**2
     # From the sprite's near side: its own half is in its texture's alpha already.
     chord = np.maximum(-along + np.sqrt(np.maximum(disc, 0.0)) - 0.5 * size, 0.0)
-    out: F64 = chord * (VIEW_EXTINCTION_SHARE * tau_of(batch) / np.maximum(size, 1.0))
-    return out
+    out: F64 = chord * extinction
+    across = np.sqrt(np.maximum(r2 - along * along, 0.0))
+    t = (across + 0.5 * size) / np.maximum(radius, 1.0)
+    t = np.clip((t - LIMB_FROM) / (1.0 - LIMB_FROM), 0.0, 1.0)
+    limb: F64 = t * t * (3.0 - 2.0 * t)
+    if toward_light is None:
+        return out, limb
+    # The fringe seen on the silhouette lies on the ball's limb, R out across the view from
+    # its centre: a ray from there toward the light crosses the ball over 2 R cos(angle from
+    # the inward normal) when it heads inward, and misses it when it heads outward.
+    outward = (rel + along[:, None] * view.T) / np.maximum(across, 1e-6)[:, None]
+    inward_cos = np.maximum(-(outward @ np.asarray(toward_light, np.float64)), 0.0)
+    limb *= np.exp(-2.0 * radius * inward_cos * extinction)
+    return out, limb
 
 
 def with_alpha(rgb: F64 | F32, opacity: F32) -> F32:

@@ -528,6 +528,19 @@ def deck_share(sky: SkyParams, eye_alt_m: float) -> float:
     return smoothstep(0.5, 0.75, sky.cover)
 
 
+def deck_sun_share(sky: SkyParams, eye_alt_m: float) -> float:
+    """The share of the sun's beam that reaches a cell of a deck over the eye past the other
+    cells (`deck_share`): a cloud's own light is worked out over that cloud alone, but in a
+    deck the beam toward a low sun crosses the layer for kilometres and meets the cover's
+    other cells on the way (1 - cover of it gets through at a grazing sun), while a high
+    sun's leaves the layer within a cell (all of it overhead). 1 under scattered cloud."""
+    deck = deck_share(sky, eye_alt_m)
+    if deck <= 0.0:
+        return 1.0
+    grazing = 1.0 - max(math.sin(math.radians(sky.sun.elevation_deg)), 0.0)
+    return 1.0 - deck * min(max(sky.cover, 0.0), 1.0) * grazing
+
+
 def scene_exposure(luts: AtmosphereLuts, cover: float) -> float:
     """The automatic exposure of a scene under `cover` (`display_exposure` of the sky the
     overcast veil has dimmed): the one every part of the picture is shown at, the sky's,
