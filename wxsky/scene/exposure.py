@@ -126,9 +126,13 @@ def check_scale(scale: float) -> float:
 # -- the tone map (display.glsl's twin) -----------------------------------------------------
 
 
+# The tone map runs on every frame's sprites: np.minimum/np.maximum rather than np.clip, whose
+# Python wrapper cost more than the arithmetic on a few hundred values.
+
+
 def tone_curve(x: F64) -> F64:
     x = np.maximum(np.asarray(x, np.float64), 0.0)
-    y: F64 = np.clip(x * (TM_A * x + TM_B) / (x * (TM_C * x + TM_D) + TM_E), 0.0, 1.0)
+    y: F64 = np.minimum(x * (TM_A * x + TM_B) / (x * (TM_C * x + TM_D) + TM_E), 1.0)
     return y
 
 
@@ -147,7 +151,8 @@ def burn(m: F64) -> F64:
     the curve's white (TM_WHITE), rising smoothly to BURN_MAX at BURN_FULL times it. Only
     what the curve has already clipped burns (the sun's disc, a blazing silver lining): the
     colours below it keep their hue exactly, and `tone_map_inverse` stays exact for them."""
-    t = np.clip((np.asarray(m, np.float64) / TM_WHITE - 1.0) / (BURN_FULL - 1.0), 0.0, 1.0)
+    t = (np.asarray(m, np.float64) / TM_WHITE - 1.0) / (BURN_FULL - 1.0)
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
     out: F64 = BURN_MAX * t * t * (3.0 - 2.0 * t)
     return out
 
@@ -176,7 +181,7 @@ def tone_map_inverse(rgb: F64) -> F64:
 
 
 def srgb_encode(linear: F64) -> F64:
-    x = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
+    x = np.minimum(np.maximum(np.asarray(linear, np.float64), 0.0), 1.0)
     out: F64 = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
     return out
 
