@@ -8,9 +8,13 @@ For each preset it runs `wxsky bench --json` with the base build and with this c
 alternating (base, new, base, new ...) so that both see the same machine, and reports per
 build the median over the runs of: the frame median and p95, and the CPU stages (scene +
 sort + publish) median, and, from this checkout, the frame thread's own CPU in those stages
-(`cpu_stages_ms.thread_cpu`). The base build is any other checkout's `wxsky` (issue 19 compares
-against the code at its start: `git worktree add /tmp/base issue19-start`, a venv there,
-`pip install -e /tmp/base`).
+(`cpu_stages_ms.thread_cpu`). "pair ratio" is the median, over the runs, of each new run's
+frame median over the base run just before it (min-max after it): on this shared 2-core
+machine the speed drifts over minutes, by more than the ratio of the medians shows (two
+calls of two runs each gave fair-cumulus 1.05 and 1.32); a pair sees the same minute, and
+more `--repeats` narrow the spread. The base build is any other checkout's `wxsky` (issue 19
+compares against the code at its start: `git worktree add /tmp/base issue19-start`, a venv
+there, `pip install -e /tmp/base`).
 """
 
 from __future__ import annotations
@@ -80,6 +84,7 @@ def main() -> int:
     header = (
         f"{'preset':<22}{'base ms':>9}{'new ms':>8}{'ratio':>7}{'base p95':>10}{'new p95':>9}"
         f"{'p95/med':>9}{'base cpu':>10}{'new cpu':>9}{'new thread cpu':>16}"
+        f"{'pair ratio (min-max)':>24}"
     )
     print(f"wxsky bench --size {args.size} --frames {args.frames}, {args.repeats} runs each")
     print(header)
@@ -90,12 +95,24 @@ def main() -> int:
             runs["new"].append(bench(args.new, preset, args.size, args.frames))
         b, n = summary(runs["base"]), summary(runs["new"])
         ratio = n["frame_median_ms"] / b["frame_median_ms"]
-        report["presets"][preset] = {"base": b, "new": n, "ratio": ratio}
+        pairs = [
+            nr["frame_ms"]["median"] / br["frame_ms"]["median"]
+            for br, nr in zip(runs["base"], runs["new"], strict=True)
+        ]
+        pair = float(statistics.median(pairs))
+        report["presets"][preset] = {
+            "base": b,
+            "new": n,
+            "ratio": ratio,
+            "pair_ratios": pairs,
+            "pair_ratio_median": pair,
+        }
         print(
             f"{preset:<22}{b['frame_median_ms']:>9.1f}{n['frame_median_ms']:>8.1f}"
             f"{ratio:>7.2f}{b['frame_p95_ms']:>10.1f}{n['frame_p95_ms']:>9.1f}"
             f"{n['frame_p95_ms'] / n['frame_median_ms']:>9.2f}{b['cpu_median_ms']:>10.1f}"
             f"{n['cpu_median_ms']:>9.1f}{n['cpu_thread_median_ms']:>16.2f}"
+            f"{pair:>11.2f} ({min(pairs):.2f}-{max(pairs):.2f})"
         )
         sys.stdout.flush()
     report["renderer"] = runs["new"][0]["renderer"]
