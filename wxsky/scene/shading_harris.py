@@ -431,7 +431,38 @@ def view_depth(batch: SpriteBatch, view: F64, balls: F32 | None = None) -> F64:
     edge of its cloud taken as a ball (`balls`, (N, BALL_COLUMNS) from the light's precompute
     over whole clouds; None: `batch_balls`), times the sprite's extinction (its optical
     depth over its size, `tau_of`). Zero for a sprite on its cloud's near face."""
-    return view_depth_and_limb(batch, view, balls)[0]
+    return _ball_chords(batch, view, balls).depth
+
+
+class _BallChords(NamedTuple):
+    """Each sprite's place in its cloud's ball seen along the view (`_ball_chords`)."""
+
+    depth: F64  # (N,) `view_depth`
+    rel: F64  # (N, 3) offset from the ball's centre
+    r2: F64  # (N,) |rel|^2
+    along: F64  # (N,) rel's part toward the eye
+    radius: F64  # (N,) the ball's
+    size: F64  # (N,) the sprite's
+    extinction: F64  # (N,) per metre
+
+
+def _ball_chords(batch: SpriteBatch, view: F64, balls: F32 | None) -> _BallChords:
+    n = len(batch)
+    if n == 0:
+        zero = np.zeros(0)
+        return _BallChords(zero, np.zeros((0, 3)), zero, zero, zero, zero, zero)
+    ball = batch_balls(batch) if balls is None else balls
+    rel = ball[:, :3].astype(np.float64)
+    r2 = np.einsum("ij,ij->i", rel, rel)
+    size = np.asarray(batch.size_m, np.float64)
+    radius = ball[:, 3].astype(np.float64)
+    extinction = VIEW_EXTINCTION_SHARE * tau_of(batch) / np.maximum(size, 1.0)
+    # |rel + t d| = R, d toward the eye (-view): t = -(rel.d) + sqrt((rel.d)^2 - |rel|^2 + R^2).
+    along = -np.einsum("ij,ji->i", rel, view)
+    disc = along * along - r2 + radius**2
+    # From the sprite's near side: its own half is in its texture's alpha already.
+    chord = np.maximum(-along + np.sqrt(np.maximum(disc, 0.0)) - 0.5 * size, 0.0)
+    return _BallChords(chord * extinction, rel, r2, along, radius, size, extinction)
 
 
 # A sprite's rim is its cloud's silhouette where the sprite's edge, seen from the eye, reaches
@@ -452,34 +483,22 @@ def view_depth_and_limb(
     past a cloud's body is in the sun's own light wherever the sun's ray to it misses the
     body: a sun theta behind the limb once the fringe is R (1/cos theta - 1) out, 1.5 % of the
     radius at 10 degrees (the silver lining), but not the base's fringe under a high sun."""
-    n = len(batch)
-    if n == 0:
-        return np.zeros(0), np.zeros(0)
-    ball = batch_balls(batch) if balls is None else balls
-    rel = ball[:, :3].astype(np.float64)
-    r2 = np.einsum("ij,ij->i", rel, rel)
-    size = np.asarray(batch.size_m, np.float64)
-    radius = ball[:, 3].astype(np.float64)
-    extinction = VIEW_EXTINCTION_SHARE * tau_of(batch) / np.maximum(size, 1.0)
-    # |rel + t d| = R, d toward the eye (-view): t = -(rel.d) + sqrt((rel.d)^2 - |rel|^2 + R^2).
-    along = -np.einsum("ij,ji->i", rel, view)
-    disc = along * along - r2 + radius**2
-    # From the sprite's near side: its own half is in its texture's alpha already.
-    chord = np.maximum(-along + np.sqrt(np.maximum(disc, 0.0)) - 0.5 * size, 0.0)
-    out: F64 = chord * extinction
-    across = np.sqrt(np.maximum(r2 - along * along, 0.0))
-    t = (across + 0.5 * size) / np.maximum(radius, 1.0)
-    t = np.clip((t - LIMB_FROM) / (1.0 - LIMB_FROM), 0.0, 1.0)
+    c = _ball_chords(batch, view, balls)
+    if len(c.depth) == 0:
+        return c.depth, np.zeros(0)
+    across = np.sqrt(np.maximum(c.r2 - c.along * c.along, 0.0))
+    t = ((across + 0.5 * c.size) / np.maximum(c.radius, 1.0) - LIMB_FROM) / (1.0 - LIMB_FROM)
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
     limb: F64 = t * t * (3.0 - 2.0 * t)
     if toward_light is None:
-        return out, limb
+        return c.depth, limb
     # The fringe seen on the silhouette lies on the ball's limb, R out across the view from
     # its centre: a ray from there toward the light crosses the ball over 2 R cos(angle from
     # the inward normal) when it heads inward, and misses it when it heads outward.
-    outward = (rel + along[:, None] * view.T) / np.maximum(across, 1e-6)[:, None]
+    outward = (c.rel + c.along[:, None] * view.T) / np.maximum(across, 1e-6)[:, None]
     inward_cos = np.maximum(-(outward @ np.asarray(toward_light, np.float64)), 0.0)
-    limb *= np.exp(-2.0 * radius * inward_cos * extinction)
-    return out, limb
+    limb *= np.exp(-2.0 * c.radius * inward_cos * c.extinction)
+    return c.depth, limb
 
 
 def with_alpha(rgb: F64 | F32, opacity: F32) -> F32:
