@@ -382,11 +382,13 @@ def test_scene_sky_setting_defaults_to_physical_and_checks_its_value(tmp_path: P
 # -- off the frame path, and through the engine and renderer ---------------------------------
 
 
-def test_worker_keeps_the_last_tables_until_the_new_ones_are_made() -> None:
+@pytest.mark.parametrize("process", [False, True], ids=["thread", "process"])
+def test_worker_keeps_the_last_tables_until_the_new_ones_are_made(process: bool) -> None:
     """A live engine's frames never wait for a rebuild: the first call makes its tables,
-    a moved key gets the last tables at once while the worker makes its own, and the next
-    call after they are made gets them."""
-    work = AtmosphereWork(wait=False)
+    a moved key gets the last tables at once while the worker (a thread, or a child process
+    below the frames) makes its own, and the next call after they are made gets them, under
+    a serial no other tables in this process have had."""
+    work = AtmosphereWork(wait=False, process=process)
     try:
         first_key = atm.atmosphere_key(20.0, 30_000.0, 50.0, 2.0)
         first = work.luts_for(first_key)
@@ -400,8 +402,11 @@ def test_worker_keeps_the_last_tables_until_the_new_ones_are_made() -> None:
             got = work.luts_for(moved)
         assert got.key == moved
         assert work.builds == 2
+        assert got.serial != first.serial
+        assert np.array_equal(got.sky_view, atm.build_luts(moved).sky_view)
     finally:
         work.close()
+        work.close()  # idempotent
 
 
 def _sky_layer(renderer: Renderer, sky_mode: str, when: datetime, heading_deg: float) -> F64:

@@ -6,25 +6,51 @@ tables are being made on the worker thread, the frames keep the last tables made
 moves by less than a step of the key meanwhile). Only the first call, with nothing to show,
 waits for its tables; an engine that is not live (a snapshot, a test) waits for every key,
 so its picture is of exactly its own sky.
+
+A daemon's engine makes them in a child process below the frames (`process`, the ring
+builds' `RingWorker`), not on a thread of its own: a rebuild is numpy with the GIL held
+between its calls, and on 2 cores a thread of it beside the frames made one frame in ten of
+the clear preset take 5 ms instead of 1 (the main thread waiting for the GIL, not working:
+docs/performance.md). The child is started at the first rebuild, not with the engine.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 
-from wxsky.scene.atmosphere import AtmosphereKey, AtmosphereLuts, build_luts
+from wxsky.engine.ring_worker import DEFAULT_NICE, RingWorker
+from wxsky.scene.atmosphere import AtmosphereKey, AtmosphereLuts, build_luts, fresh_serial
+from wxsky.scene.gather import BuildCancelled, CancelFlag
 
 log = logging.getLogger(__name__)
 
 
-class AtmosphereWork:
-    """Builds the tables for the latest key asked for, one at a time, on a thread."""
+@dataclass(frozen=True)
+class AtmosphereJob:
+    """One key's tables, made in the worker process (`ring_worker.Job`)."""
 
-    def __init__(self, wait: bool) -> None:
-        """`wait`: every call returns the tables of its own key (built at once if need be)."""
+    key: AtmosphereKey
+
+    def run(self, cancel: CancelFlag | None = None) -> tuple[object, ...]:
+        return (build_luts(self.key),)
+
+
+class AtmosphereWork:
+    """Builds the tables for the latest key asked for, one at a time, off the frame path."""
+
+    def __init__(self, wait: bool, process: bool = False, nice: int = DEFAULT_NICE) -> None:
+        """`wait`: every call returns the tables of its own key (built at once if need be).
+        `process`: the rebuilds run in a child process at `nice` below the frames, else on a
+        thread of this one."""
         self._wait = wait
+        self._process = process
+        self._nice = nice
+        self._worker: RingWorker | None = None
+        self._cancel = threading.Event()
         self._lock = threading.Lock()
         self._pool: ThreadPoolExecutor | None = None
         self._current: AtmosphereLuts | None = None
@@ -62,13 +88,31 @@ class AtmosphereWork:
             return current
 
     def _build(self, key: AtmosphereKey) -> AtmosphereLuts:
-        made = build_luts(key)
+        if not self._process:
+            made = build_luts(key)
+        else:
+            with self._lock:
+                if self._cancel.is_set():
+                    raise BuildCancelled("atmosphere work closed")
+                if self._worker is None:
+                    self._worker = RingWorker(self._nice, label="atmosphere tables")
+                worker = self._worker
+            (got,) = worker.run(AtmosphereJob(key), self._cancel)
+            assert isinstance(got, AtmosphereLuts)
+            # A serial names a set of tables in the process that shows them (the textures,
+            # the caches): the child's counter is not this one's.
+            made = dataclasses.replace(got, serial=fresh_serial())
         self.builds += 1
         return made
 
     def close(self) -> None:
-        """Stop the worker (a build under way is let finish, not waited for)."""
+        """Stop the worker (a build under way on a thread is let finish, not waited for; the
+        child process is told to exit, and killed after a second). Idempotent."""
+        self._cancel.set()
         with self._lock:
             pool, self._pool = self._pool, None
+            worker, self._worker = self._worker, None
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
+        if worker is not None:
+            worker.close(0.1)  # the tables of a closing engine are of no use to anyone

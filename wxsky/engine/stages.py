@@ -187,8 +187,13 @@ class SkyEngine:
         self.transition_step_s = transition_step_s
         self._wall_s = 0.0
         self._live = ring_build == "async"  # a daemon's engine: inputs stamped in real time
-        # The physical sky's tables: off the frame path for a daemon, at once for a snapshot.
-        self._atmosphere = AtmosphereWork(wait=not self._live)
+        # The physical sky's tables: off the frame path for a daemon (in a child process where
+        # the rings are built in one), at once for a snapshot.
+        self._atmosphere = AtmosphereWork(
+            wait=not self._live,
+            process=ring_worker == "process" and self._live,
+            nice=ring_worker_nice,
+        )
         self._advanced_at = time.monotonic()
         self._cockpit_date: tuple[date, float] | None = None  # (date, wall_s it arrived)
         self._since_step_s = 0.0

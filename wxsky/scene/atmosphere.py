@@ -735,7 +735,7 @@ _serial = 0
 def build_luts(key: AtmosphereKey) -> AtmosphereLuts:
     """The tables for a key. The medium's three (which neither the sun nor the eye changes)
     are kept from the last call with the same visibility and humidity."""
-    global _medium_tables, _serial
+    global _medium_tables
     last = _medium_tables  # one read: a worker thread may replace it
     if last is not None and last[0] == key.medium_key:
         med, t_table, ms_table, amb = last[1]
@@ -753,8 +753,14 @@ def build_luts(key: AtmosphereKey) -> AtmosphereLuts:
         if not np.all(np.isfinite(table)):
             raise ArithmeticError(f"atmosphere: non-finite table for {key}")
         table.flags.writeable = False
+    return AtmosphereLuts(key, med, t_table, ms_table, amb, view, fresh_serial())
+
+
+def fresh_serial() -> int:
+    """A serial no set of tables made in this process has had (`AtmosphereLuts.serial`)."""
+    global _serial
     _serial += 1
-    return AtmosphereLuts(key, med, t_table, ms_table, amb, view, _serial)
+    return _serial
 
 
 # -- what the clouds take from it ------------------------------------------------------------
