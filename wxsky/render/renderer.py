@@ -232,11 +232,11 @@ class Renderer:
         self.ctx.disable(moderngl.BLEND)
         physical = sky.atmosphere is not None  # the frame's sky mode: its variants only
         self._sky.use_atmosphere(sky.atmosphere, sky.cover)
-        for stars, moon, dome, sun in itertools.product((False, True), repeat=4):
-            if sun and not physical:
+        for stars, moon, dome, sun, deck in itertools.product((False, True), repeat=5):
+            if (sun and not physical) or (deck and not (physical and dome)):
                 continue
             feats = sky_textures.SkyFeatures(
-                stars=stars, moon=moon, dome=dome, physical=physical, sun=sun
+                stars=stars, moon=moon, dome=dome, physical=physical, sun=sun, deck=deck
             )
             uniforms = self._sky_uniforms(cam, sky, feats, sky_textures.FULL_RECT)
             self._sky_draw("sky warm-up", feats, uniforms)
@@ -541,7 +541,7 @@ class Renderer:
             parts = [
                 (
                     "sky",
-                    dataclasses.replace(feats, moon=False, dome=False, sun=False),
+                    dataclasses.replace(feats, moon=False, dome=False, sun=False, deck=False),
                     sky_textures.FULL_RECT,
                 )
             ]
@@ -578,7 +578,12 @@ class Renderer:
         target.fbo.use()
         self.ctx.disable(moderngl.BLEND)
         for part, rect in draws:
-            self._sky_draw(part.pass_name, part.feats, part.uniforms | {"u_rect": rect})
+            self._sky_draw(part.pass_name, part.feats, part.uniforms | {"u_rect": rect}, False)
+        # One wait for all of them: draws into the same target need none between them (llvmpipe
+        # bins them into one scene), and each wait cost a draw some 0.3 ms of waking its
+        # threads, a 23-row strip of the dome three times what its pixels cost.
+        if self._finish_each_draw:
+            self._finish()
 
     def layer_bands(self, name: str) -> tuple[tuple[int, int, int], ...] | None:
         """For layers kept from frame to frame while nothing they show moves (the sky), the
@@ -635,14 +640,20 @@ class Renderer:
         return camera | sky_textures.frame_uniforms(cam, sky, feats)
 
     def _sky_draw(
-        self, pass_name: str, feats: sky_textures.SkyFeatures, uniforms: dict[str, object]
+        self,
+        pass_name: str,
+        feats: sky_textures.SkyFeatures,
+        uniforms: dict[str, object],
+        finish: bool = True,
     ) -> None:
+        """`finish`: wait for the draw (on a CPU renderer); False where more draws into the
+        same target follow and the caller waits once after them."""
         prog, vao = self._sky.prepare(feats)
         for uniform, value in uniforms.items():
             _set(prog, uniform, value)
         with self._pass(pass_name, "sky"):
             vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
-        if self._finish_each_draw:
+        if finish and self._finish_each_draw:
             self._finish()
 
     def _upsample(self, source: _Target, dest: _Target) -> None:

@@ -127,6 +127,7 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "SKY_PHYSICAL": str(int(feats.physical)),
         "SKY_SCENE_LINEAR": str(int(feats.scene_linear)),
         "SKY_SUN": str(int(feats.sun)),
+        "SKY_DECK": str(int(feats.deck)),
     }
 
 
@@ -193,6 +194,10 @@ class SkyFeatures:
     # With `physical`, in display values: the sky near the sun per pixel (its disc and the
     # aureole's core), which the other variants take from the baked table.
     sun: bool = False
+    # With `physical` and `dome`: under a deck the dome's band fades toward the slab of haze
+    # under it (`deck_share` > 0): a second look-up a pixel, compiled out where there is no
+    # deck (high cirrus redraws its whole dome every frame; the look-up was 7 % of it).
+    deck: bool = False
 
 
 class SkyPass:
@@ -320,12 +325,14 @@ def features(cam: Camera, sky: SkyParams) -> SkyFeatures:
     cos_off_axis = float(np.dot(fwd, moon.direction_enu))
     moon_in_view = max(sky.moon_rgb) > 0.0 and cos_off_axis >= math.cos(min(reach_rad, math.pi))
     dome = dome_frame(sky, cam.position_m[2]).height_m > 0.0
+    physical = sky.atmosphere is not None
     return SkyFeatures(
         stars=sky.stars > 0.0,
         moon=moon_in_view,
         dome=dome,
-        physical=sky.atmosphere is not None,
-        sun=sky.atmosphere is not None and _sun_near_view(cam, sky, half_diagonal_rad),
+        physical=physical,
+        sun=physical and _sun_near_view(cam, sky, half_diagonal_rad),
+        deck=physical and dome and deck_share(sky, cam.position_m[2]) > 0.0,
     )
 
 

@@ -2,12 +2,13 @@
 // of the sky with a flickering star texture and a galaxy band; the sun and moon discs; and
 // the thin cloud dome for high and distant cover. Full-screen triangle.
 // Needs STAR_FACE_PX, STAR_JITTER, STAR_RATE_SCALE_HZ and the switches SKY_STARS, SKY_MOON,
-// SKY_DOME, SKY_PHYSICAL (wxsky/render/sky_textures.py): llvmpipe runs both sides of every branch under a
-// mask, so a feature a frame does not need is compiled out, not skipped. Where a feature does
-// show, it usually covers a small part of the picture (the moon's disc, the distant cloud
-// band above the horizon): the renderer draws the sky without it over the whole picture, then
-// the variant with it over the rectangle where it can be seen (u_rect). Outside a feature the
-// variants give the same colour, bit for bit, so only cost changes.
+// SKY_DOME, SKY_PHYSICAL, SKY_SUN, SKY_DECK (wxsky/render/sky_textures.py): llvmpipe runs
+// both sides of every branch under a mask, so a feature a frame does not need is compiled
+// out, not skipped. Where a feature does show, it usually covers a small part of the picture
+// (the moon's disc, the distant cloud band above the horizon): the renderer draws the sky
+// without it over the whole picture, then the variant with it over the rectangle where it can
+// be seen (u_rect). Outside a feature the variants give the same colour, bit for bit, so only
+// cost changes.
 #include "common.glsl"
 #include "display.glsl"
 
@@ -162,9 +163,9 @@ vec3 baked_sky(vec3 ray, out vec3 air) {
     // A new table or veil (a new bake) is a jump for the kept layer: both are compared.
     col = u_atmosphere_serial < 0.0 || u_overcast.y < 0.0 ? vec3(0.0) : col;
     air = col;
-#if SKY_DOME
+#if SKY_DOME && SKY_DECK
     // Only the dome reads the air over the floor (the ground band reads it below the eye's
-    // level, where it is this row already).
+    // level, where it is this row already), and only under a deck (u_air_floor.z > 0).
     vec3 slab = textureLod(u_sky_display, vec2(u, u_air_floor.y), 0.0).rgb;
     air = mix(air, slab, u_air_floor.z);
 #endif
