@@ -107,9 +107,10 @@ def test_profile_counts_every_pass_and_its_pixels(capsys: pytest.CaptureFixture[
         ring_slice_ms=None,  # one whole impostor a frame
         ring_build="sync",  # from the first frame on, however busy the machine
         lead_in=False,  # the first ring's impostors are the passes counted
-        # A fifth of a second a frame: the sun moves 0.3 of the kept sky's tolerance a frame
-        # (sky_layer.SKY_REUSE_TOLERANCE), so these 20 frames draw some of its strips again.
-        fps=5.0,
+        # Half a second a frame: the sun's azimuth (1.5e-4 rad/s at this noon) turns by the
+        # kept physical sky's tolerance (sky_layer.FLAT_SUN_TOLERANCE_RAD) in 13 frames, so
+        # these 20 frames draw some of its strips again.
+        fps=2.0,
     )
     rows = {r["pass"]: r for r in result.passes}
     # The sky writes every pixel when it is drawn, which a steady view does only when the

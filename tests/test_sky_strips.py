@@ -6,19 +6,28 @@ the sun's motion redrew the dome under it too."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from wxsky.render.sky_layer import (
     DOME_STRIPS,
+    FLAT_SUN_TOLERANCE_RAD,
     SKY_CATCH_UP,
     SKY_STRIPS,
     SkyPart,
+    dome_offset_tolerance,
     plan_sky,
     strip_edges,
     strip_rows,
 )
-from wxsky.render.sky_textures import FULL_RECT, Rect, SkyFeatures
+from wxsky.render.sky_textures import FULL_RECT, Rect, SkyFeatures, pixel_rad, view_top_sin
+from wxsky.scene import atmosphere as atm
+from wxsky.scene.camera import Camera
+from wxsky.scene.sky import SUN_EXACT_DEG, display_sky_view, sky_params, sky_view_elevation
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import WeatherState
 
 PLAIN = SkyFeatures(stars=False, moon=False, dome=False)
 DOME = SkyFeatures(stars=False, moon=False, dome=True)
@@ -134,3 +143,77 @@ def test_a_sky_that_moves_in_steps_is_redrawn_evenly_not_in_bursts() -> None:
     assert max(steady) <= 3
     # Every strip is drawn again in time: as many as the drift asks for, over the frames.
     assert sum(steady) >= len(steady) * 0.12 * SKY_STRIPS / (SKY_CATCH_UP - 1.0) * 0.9
+
+
+@pytest.mark.parametrize(
+    ("sun_deg", "visibility_m"),
+    [(5.0, 60_000.0), (5.0, 8_000.0), (20.0, 30_000.0), (60.0, 60_000.0), (-4.0, 30_000.0)],
+)
+def test_a_sun_turned_by_its_tolerance_moves_the_baked_sky_by_under_a_third_of_a_level(
+    sun_deg: float, visibility_m: float
+) -> None:
+    """The physical sky's kept strips are drawn again once the sun's azimuth has turned by
+    FLAT_SUN_TOLERANCE_RAD: that turn of the baked table (read across its columns as the sky
+    pass reads it, linearly) changes no pixel outside the sun part's rectangle by a third of a
+    display level, low sun and hazy air included (where the sky's colour changes fastest
+    round the horizon)."""
+    luts = atm.build_luts(atm.atmosphere_key(sun_deg, visibility_m, 50.0, 1_500.0))
+    table = display_sky_view(luts, 0.0) * 255.0
+    rows, cols = table.shape[:2]
+    el = sky_view_elevation((np.arange(rows) + 0.5) / rows, luts.horizon_rad)[:, None]
+    az = np.linspace(0.0, math.pi, 4 * cols)[None, :]
+
+    def read(azimuth: np.ndarray) -> np.ndarray:
+        at = np.clip(azimuth / math.pi * cols - 0.5, 0.0, cols - 1.0)
+        lo = np.minimum(np.floor(at).astype(int), cols - 2)
+        w = (at - lo)[..., None]
+        picked = np.arange(rows)[:, None]
+        return np.asarray(table[picked, lo] * (1.0 - w) + table[picked, lo + 1] * w)
+
+    turned = np.abs(read(az + FLAT_SUN_TOLERANCE_RAD) - read(az)).max(axis=2)
+    sun = math.radians(sun_deg)
+    cos_sun = np.cos(el) * np.cos(az) * math.cos(sun) + np.sin(el) * math.sin(sun)
+    # Beyond the sun part (SUN_EXACT_DEG round the sun, less the azimuth turned).
+    outside = cos_sun < math.cos(math.radians(SUN_EXACT_DEG) - FLAT_SUN_TOLERANCE_RAD)
+    assert float(turned[outside].max()) < 1.0 / 3.0
+
+
+@pytest.mark.parametrize(
+    ("pitch_deg", "roll_deg"), [(0.0, 0.0), (10.0, 0.0), (0.0, 30.0), (45.0, 45.0), (-20.0, 0.0)]
+)
+def test_the_view_top_is_never_below_the_highest_ray_of_the_picture(
+    pitch_deg: float, roll_deg: float
+) -> None:
+    """`view_top_sin`, which sets how far the kept dome may drift (the nearest dome the picture
+    shows), against every pixel's ray of a 1280 x 720 picture: not lower (that would let the
+    dome drift visibly), and close (within a degree)."""
+    cam = Camera((0.0, 0.0, 1_500.0), 90.0, pitch_deg, roll_deg, 60.0, 1280, 720)
+    right, up, fwd = cam.basis()
+    a, b = np.meshgrid(np.linspace(-1.0, 1.0, 1280), np.linspace(-1.0, 1.0, 720))
+    rays = (
+        fwd[:, None, None]
+        + a * cam.tan_half_fov_x * right[:, None, None]
+        - b * cam.tan_half_fov_y * up[:, None, None]
+    )
+    highest = float((rays[2] / np.linalg.norm(rays, axis=0)).max())
+    top = view_top_sin(cam)
+    assert top >= highest
+    assert math.asin(min(top, 1.0)) - math.asin(highest) < math.radians(1.0)
+    # The zenith in the picture: the top is the zenith.
+    assert view_top_sin(Camera((0.0, 0.0, 0.0), 0.0, 80.0, 0.0, 60.0, 1280, 720)) == 1.0
+
+
+def test_a_level_view_lets_high_cover_drift_as_far_as_its_nearest_visible_dome_allows() -> None:
+    """Under high cover the dome nearest the eye is overhead; a level view's picture ends some
+    18 deg up, where the dome is 1 / sin(18 deg) as far: its offsets may move that much more
+    before any pixel it shows has moved DOME_REUSE_PX."""
+    state = WeatherState().apply(load_preset("high-cirrus"))
+    sky = sky_params(state)
+    level = Camera((0.0, 0.0, 1_500.0), 90.0, 0.0, 0.0, 60.0, 1280, 720)
+    up = Camera((0.0, 0.0, 1_500.0), 90.0, 80.0, 0.0, 60.0, 1280, 720)
+    px = pixel_rad(level)
+    overhead = dome_offset_tolerance(px, sky, 1_500.0, view_top_sin(up))
+    ahead = dome_offset_tolerance(px, sky, 1_500.0, view_top_sin(level))
+    assert overhead > 0.0
+    assert ahead == pytest.approx(overhead / view_top_sin(level))
+    assert dome_offset_tolerance(px, sky, 1_500.0) == overhead  # the default: the zenith

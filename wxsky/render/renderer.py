@@ -562,7 +562,10 @@ class Renderer:
         tolerances: dict[str, float] = {}
         if feats.dome:
             tol = sky_layer.dome_offset_tolerance(
-                sky_textures.pixel_rad(cam), sky, cam.position_m[2]
+                sky_textures.pixel_rad(cam),
+                sky,
+                cam.position_m[2],
+                sky_textures.view_top_sin(cam),
             )
             tolerances = {f"u_dome_off{i}": tol for i in range(3)}
         new = [

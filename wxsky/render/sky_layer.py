@@ -76,10 +76,18 @@ _NO_RATE = -1.0  # no frame since the layer was drawn whole
 # Uniforms a change of which always redraws the whole layer (the stars twinkle every frame).
 _ALWAYS = frozenset({"u_star_clock_s"})
 _NOT_COMPARED = frozenset({"u_rect"})  # where a part is drawn, compared as the layout
-# The physical sky's sun azimuth (a unit vector in the level plane) moves faster than the sun's
-# direction (by 1 / cos elevation): at SKY_REUSE_TOLERANCE it redrew two strips a frame where the
-# gradient's sun redrew one. Twice that is still a ninth of a pixel at 60 deg across 1280.
-_TOLERANCES = {"u_flat_sun": 2.0 * SKY_REUSE_TOLERANCE}
+# The physical sky's sun azimuth (a unit vector in the level plane) turns its baked table
+# (scene.sky.display_sky_view) about the zenith. Away from the sun part's rectangle, where the
+# sky is drawn per pixel, neighbouring columns of that table (0.94 deg apart) differ by at most
+# 4.2 display levels (sun 5 deg up, the steepest; 1.7 at 60 deg): a turn of 1e-3 rad changes a
+# pixel by at most a quarter of a level. At the colour tolerance the plain sky was drawn again
+# a strip every frame for turns of a fortieth of a level (clear: 22 rows a frame, a third of its
+# frame); `tests/test_sky_strips.py` holds the bound.
+FLAT_SUN_TOLERANCE_RAD = 1e-3
+# The ground's light (`sky_textures.physical_ground_tint`), a factor on its colour at most about
+# 1: 1e-3 moves the ground by a quarter of a level at most; it steps with the sun's 0.01 deg.
+GROUND_TINT_TOLERANCE = 1e-3
+_TOLERANCES = {"u_flat_sun": FLAT_SUN_TOLERANCE_RAD, "u_ground_tint": GROUND_TINT_TOLERANCE}
 # Texture offsets repeat: 0.9999 and 0.0001 are a step of 0.0002.
 _PERIODS = {"u_dome_off0": 1.0, "u_dome_off1": 1.0, "u_dome_off2": 1.0}
 
@@ -341,14 +349,23 @@ def strip_rows(top_ndc: float, bottom_ndc: float, height_px: int) -> tuple[int, 
     return max(0, first), min(height_px, stop)
 
 
-def dome_offset_tolerance(pixel_rad: float, sky: SkyParams, eye_alt_m: float) -> float:
+def dome_offset_tolerance(
+    pixel_rad: float, sky: SkyParams, eye_alt_m: float, view_top_sin: float = 1.0
+) -> float:
     """How far the dome's texture offsets (tile units) may move before the dome nearest the
-    eye has moved DOME_REUSE_PX of a pixel: 0 where no dome is drawn."""
+    eye that the picture shows has moved DOME_REUSE_PX of a pixel: 0 where no dome is drawn.
+    `view_top_sin`: the sine of the highest elevation in the picture (`sky_textures`
+    `view_top_sin`; 1: the zenith)."""
     frame = sky_textures.dome_frame(sky, eye_alt_m)
     if frame.height_m <= 0.0:
         return 0.0
-    # The nearest visible dome: overhead under high cover, else the top of the distant band.
+    # The nearest visible dome: overhead under high cover, else the top of the distant band;
+    # no higher than the picture's top. A level view's top is 17 deg up at 60 deg across
+    # 16:9: the dome there is 3.4 times as far as overhead and moves a third as many pixels
+    # (high cirrus at 120 m/s: the whole band was drawn again every frame for the zenith's
+    # motion, which that view does not show).
     top_z = 1.0 if sky.dome.high_cover > 0.0 else sky_textures.dome_band(sky)[1]
+    top_z = min(top_z, view_top_sin)
     nearest_m = frame.height_m / max(top_z, 1e-3)
     # A texture offset of 1 moves the dome by at most a (stretched) tile.
     tile_m = max(1.0 / min(math.hypot(m[0], m[2]), math.hypot(m[1], m[3])) for m in frame.matrices)

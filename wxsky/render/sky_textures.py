@@ -62,7 +62,7 @@ from wxsky.scene.atmosphere import (
     sky_view_v,
     sun_irradiance,
 )
-from wxsky.scene.camera import Camera
+from wxsky.scene.camera import Camera, camera_basis
 from wxsky.scene.exposure import display
 from wxsky.scene.sky import (
     CLEAR_AIR_HAZE_M,
@@ -649,6 +649,34 @@ def star_sigma(cam: Camera) -> tuple[float, float]:
 
 def pixel_rad(cam: Camera) -> float:
     return 2.0 * cam.tan_half_fov_x / cam.width_px
+
+
+def view_top_sin(cam: Camera) -> float:
+    """The sine of the highest elevation the picture shows (1 with the zenith in it): how far
+    off the nearest point of a layer above the eye that it can see is (`sky_layer`
+    `dome_offset_tolerance`). Not below the true top: the picture's border is sampled and each
+    sample raised by the step to its neighbour."""
+    return _view_top_sin(cam.pitch_deg, cam.roll_deg, cam.tan_half_fov_x, cam.tan_half_fov_y)
+
+
+@functools.lru_cache(maxsize=8)  # per frame; the heading does not change it
+def _view_top_sin(pitch_deg: float, roll_deg: float, tan_x: float, tan_y: float) -> float:
+    right, up, fwd = camera_basis(0.0, pitch_deg, roll_deg)
+    # The ray through (a, b) of the picture (a right, b down, -1..1): fwd + a tx right - b ty up.
+    if fwd[2] > 0.0:
+        a = right[2] / (tan_x * fwd[2])
+        b = -up[2] / (tan_y * fwd[2])
+        if abs(a) <= 1.0 and abs(b) <= 1.0:
+            return 1.0
+    t = np.linspace(-1.0, 1.0, 257)
+    one = np.ones_like(t)
+    edges = [(t, -one), (t, one), (-one, t), (one, t)]
+    top = -1.0
+    for a, b in edges:
+        rays = fwd[:, None] + a * tan_x * right[:, None] - b * tan_y * up[:, None]
+        z = rays[2] / np.linalg.norm(rays, axis=0)
+        top = max(top, float(z.max() + np.abs(np.diff(z)).max()))
+    return min(top, 1.0)
 
 
 def column_major(m: tuple[tuple[float, float, float], ...] | F64) -> tuple[float, ...]:
