@@ -94,6 +94,22 @@ def test_tone_map_keeps_a_bright_sky_blue_blue_and_rolls_highlights_off() -> Non
     assert np.allclose(ex.tone_curve(ex.tone_curve_inverse(y)), y)
 
 
+def test_display_channel_by_channel_is_display() -> None:
+    """`display_channels`, the sprites' every-frame form ((3, N), the burn skipped where nothing
+    reaches the curve's white), gives `display`'s values: black, the toe, the shoulder, past
+    the white (burnt), at two exposures."""
+    rng = np.random.default_rng(41)
+    for top in (0.01, 3.0, 30.0, 1e4):
+        rgb = rng.random((3, 500)) * top
+        rgb[:, :4] = 0.0
+        rgb[1, 4] = 1e-9
+        for scale in (1.0, 0.25):
+            np.testing.assert_allclose(
+                ex.display_channels(rgb, scale), ex.display(rgb.T, scale).T, rtol=0, atol=1e-12
+            )
+    assert ex.display_channels(np.zeros((3, 0)), 1.0).shape == (3, 0)
+
+
 def test_display_glsl_holds_exposure_py_s_constants() -> None:
     """The shader's tone map is exposure.py's: the same numbers, written twice."""
     import re

@@ -197,6 +197,27 @@ def display(linear_rgb: F64, exposure: float) -> F64:
     return srgb_encode(tone_map(np.asarray(linear_rgb, np.float64) * exposure))
 
 
+def display_channels(linear: F64, exposure: float) -> F64:
+    """`display` of (3, N) colours channel by channel, (3, N): a frame's sprites (and their
+    rims) every frame. The same values (to rounding): the largest channel as two maxima of
+    rows rather than a reduction over each colour's three, and the burn left out when nothing
+    reaches the curve's white (almost every frame)."""
+    rgb = np.asarray(linear, np.float64) * exposure
+    np.maximum(rgb, 0.0, out=rgb)
+    m = np.maximum(np.maximum(rgb[0], rgb[1]), rgb[2])
+    lit = m > 0.0
+    safe = np.where(lit, m, 1.0)
+    scale = np.where(lit, tone_curve(safe) / safe, 0.0)
+    out: F64 = rgb * scale
+    if len(m) and float(m.max()) > TM_WHITE:
+        y = m * scale
+        out += (y - out) * burn(m)
+    np.minimum(out, 1.0, out=out)
+    low = out <= 0.0031308
+    encoded: F64 = np.where(low, 12.92 * out, 1.055 * np.power(out, 1.0 / 2.4) - 0.055)
+    return encoded
+
+
 def display_inverse(display_rgb: F64, exposure: float) -> F64:
     """The scene-linear colour `display` turns into `display_rgb` (clipped values: their
     smallest such colour)."""

@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.scene.cloud_light import cloud_lights
-from wxsky.scene.exposure import display
+from wxsky.scene.exposure import display_channels
 from wxsky.scene.scattering import ALBEDO, cloud_phase, diffuse_phase, incident_light
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.sprites import F32, F64, SpriteBatch
@@ -528,8 +528,7 @@ def shown_channels(radiance: F64, sky: SkyParams) -> F64:
     sky behind it shows as that sky does; under the gradient sky, Harris's own curve
     (`exposed_channels`), the look the goldens hold."""
     if sky.atmosphere is not None:
-        out: F64 = display(radiance.T, 1.0).T
-        return out
+        return display_channels(radiance, 1.0)
     return exposed_channels(radiance)
 
 
@@ -567,7 +566,7 @@ def multiple_scattering(incident: F32 | F64) -> F32:
     its optical depth L = -ln I: I' = sum_i a^i exp(-b^i L) / sum_i a^i, for a = b = 1/2 and
     three octaves (I + I^0.5 / 2 + I^0.25 / 4) / 1.75: square roots, not powers (numpy's
     float pow is eight times slower, and a frame's near layer asks for (5, N) of it)."""
-    i = np.clip(incident, 0.0, 1.0)
+    i = np.minimum(np.maximum(incident, 0.0), 1.0)  # np.clip's wrapper costs more here
     half = np.sqrt(i)
     quarter = np.sqrt(half)
     out: F32 = (i + 0.5 * half + 0.25 * quarter) / 1.75

@@ -26,7 +26,6 @@ from wxsky.scene.atmosphere import (
     horizon_elevation_rad,
     sample_table,
     sky_view_elevation,
-    sky_view_v,
     sun_irradiance,
 )
 from wxsky.scene.ephemeris import (
@@ -581,24 +580,40 @@ def _sky_behind(
     orange 5 deg up toward a low sun than just over the horizon) is the air above the haze,
     which the deck hides; taking it had the deck 5 deg up oranger than the horizon under it
     (B/R 0.32 against 0.41 with the sun 5 deg up), a bluish strip under the deck."""
-    d = np.asarray(offsets_m, np.float64).T
+    # Channel by channel on rows of N (as shading_harris.view_rays): a frame's few hundred
+    # sprites each frame, where the numpy calls' own cost is most of it.
+    d = np.asarray(offsets_m, np.float64)
+    x, y, z = d[0], d[1], d[2]
     horizon = luts.horizon_rad
     floor_rad = horizon + math.radians(HAZE_MIN_ELEVATION_DEG)
-    norm = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
-    z = d[:, 2] / norm
-    v_floor = float(sky_view_v(np.array(floor_rad), horizon))
-    flat = d[:, :2] / norm[:, None] + np.array([1e-6, 0.0])
-    flat_norm = np.maximum(np.linalg.norm(flat, axis=1), 1e-12)
-    sun_flat = np.array([sun_enu[0] + 1e-6, sun_enu[1]])
-    sun_flat /= max(float(np.linalg.norm(sun_flat)), 1e-12)
-    u = np.arccos(np.clip((flat @ sun_flat) / flat_norm, -1.0, 1.0)) / math.pi
+    norm = np.sqrt(x * x + y * y + z * z)
+    np.maximum(norm, 1e-9, out=norm)
+    z = z / norm
+    # sky_view_v of the floor, which is above the horizon.
+    v_floor = 0.5 + 0.5 * math.sqrt(
+        min(max((floor_rad - horizon) / (0.5 * math.pi - horizon), 0.0), 1.0)
+    )
+    # The level part of each direction, nudged east as the shader nudges it (never zero).
+    fx = x / norm + 1e-6
+    fy = y / norm
+    flat_norm = np.sqrt(fx * fx + fy * fy)
+    np.maximum(flat_norm, 1e-12, out=flat_norm)
+    sx, sy = sun_enu[0] + 1e-6, sun_enu[1]
+    sun_norm = max(math.hypot(sx, sy), 1e-12)
+    cos_az = (fx * (sx / sun_norm) + fy * (sy / sun_norm)) / flat_norm
+    np.minimum(np.maximum(cos_az, -1.0, out=cos_az), 1.0, out=cos_az)
+    u = np.arccos(cos_az, out=cos_az)
+    u *= 1.0 / math.pi
     table = display_sky_view(luts, cover)
     slab: F64 | None = sample_table(table, u, np.full_like(z, v_floor)).T if deck > 0.0 else None
     if slab is not None and deck >= 1.0:
         return slab  # under a full deck the sky behind is not looked up at all
-    v = np.where(
-        z < math.sin(floor_rad), v_floor, sky_view_v(np.arcsin(np.clip(z, -1.0, 1.0)), horizon)
-    )
+    # sky_view_v above the horizon (every direction here is: those below the floor take its
+    # row), without its other branch.
+    el = np.arcsin(np.minimum(np.maximum(z, -1.0), 1.0))
+    above = (el - horizon) * (1.0 / (0.5 * math.pi - horizon))
+    np.sqrt(np.minimum(np.maximum(above, 0.0, out=above), 1.0, out=above), out=above)
+    v = np.where(z < math.sin(floor_rad), v_floor, 0.5 + 0.5 * above)
     out: F64 = sample_table(table, u, v).T
     if slab is not None:
         out += (slab - out) * deck
