@@ -33,7 +33,7 @@ import math
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -569,8 +569,7 @@ def multiple_scattering(incident: F32 | F64) -> F32:
     i = np.minimum(np.maximum(incident, 0.0), 1.0)  # np.clip's wrapper costs more here
     half = np.sqrt(i)
     quarter = np.sqrt(half)
-    out: F32 = (i + 0.5 * half + 0.25 * quarter) / 1.75
-    return out
+    return cast("F32", (i + 0.5 * half + 0.25 * quarter) / 1.75)
 
 
 def tau_of(batch: SpriteBatch) -> F32:
