@@ -217,3 +217,33 @@ def test_a_level_view_lets_high_cover_drift_as_far_as_its_nearest_visible_dome_a
     assert overhead > 0.0
     assert ahead == pytest.approx(overhead / view_top_sin(level))
     assert dome_offset_tolerance(px, sky, 1_500.0) == overhead  # the default: the zenith
+
+
+def test_a_part_s_numbers_and_tolerances_follow_its_uniforms() -> None:
+    """`SkyPart.of` flattens every uniform (numbers, tuples, nested tuples, arrays) in order,
+    gives each number its uniform's own tolerance, none to what always redraws, the colour
+    tolerance relative past 1 to the rest, and leaves the rectangle out."""
+    part = SkyPart.of(
+        "sky",
+        PLAIN,
+        FULL_RECT,
+        {
+            "u_rect": (-1.0, -1.0, 1.0, 1.0),
+            "u_a": 0.5,
+            "u_big": (2.0e6, -3.0),
+            "u_m": ((1.0, 2.0), (3.0, 4.0)),
+            "u_arr": np.array([7.0, 8.0]),
+            "u_star_clock_s": 12.5,
+            "u_flat_sun": (0.6, 0.8),
+            "u_own": (1.0, 100.0),
+        },
+        {"u_own": 0.25},
+    )
+    tol = 5e-5
+    assert part.values.tolist() == [
+        *(0.5, 2.0e6, -3.0, 1.0, 2.0, 3.0, 4.0, 7.0, 8.0, 12.5, 0.6, 0.8, 1.0, 100.0)
+    ]
+    expected = [tol, tol * 2.0e6, tol * 3.0, tol, tol * 2.0, tol * 3.0, tol * 4.0, tol * 7.0]
+    expected += [tol * 8.0, 0.0, FLAT_SUN_TOLERANCE_RAD, FLAT_SUN_TOLERANCE_RAD, 0.25, 0.25]
+    np.testing.assert_allclose(part.tolerance, expected)
+    assert "u_rect" not in part.uniforms

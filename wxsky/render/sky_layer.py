@@ -152,31 +152,36 @@ class SkyPart:
         """`tolerances`: by uniform name, where not SKY_REUSE_TOLERANCE."""
         tolerances = {**_TOLERANCES, **(tolerances or {})}
         values: list[float] = []
+        # Per number: its own tolerance, or -1 for the default (relative past 1: worked out
+        # on the whole array below, one numpy call a part rather than one a number).
         tolerance: list[float] = []
         period: list[float] = []
         for name, value in uniforms.items():
             if name in _NOT_COMPARED:
                 continue
-            numbers = np.asarray(value, np.float64).ravel().tolist()
-            values.extend(numbers)
+            numbers = _numbers(value)
+            k = len(numbers)
+            values += numbers
             if name in _ALWAYS:
-                tolerance.extend([0.0] * len(numbers))
-            elif name in tolerances:
-                tolerance.extend([tolerances[name]] * len(numbers))
+                tolerance += [0.0] * k
             else:
-                # Relative past 1: the physical sky's radiances are kcd/m^2 (the sun's disc
-                # about 1e6), and an absolute 5e-5 of them redrew the whole sky whenever the
-                # sun moved at all (clear: a full sky every frame or two, not a strip).
-                tolerance.extend(SKY_REUSE_TOLERANCE * max(1.0, abs(n)) for n in numbers)
-            period.extend([_PERIODS.get(name, 0.0)] * len(numbers))
+                tolerance += [tolerances.get(name, -1.0)] * k
+            period += [_PERIODS.get(name, 0.0)] * k
+        array = np.asarray(values, np.float64)
+        tol = np.asarray(tolerance, np.float64)
+        # Relative past 1: the physical sky's radiances are kcd/m^2 (the sun's disc about
+        # 1e6), and an absolute 5e-5 of them redrew the whole sky whenever the sun moved at
+        # all (clear: a full sky every frame or two, not a strip).
+        default = tol < 0.0
+        tol[default] = SKY_REUSE_TOLERANCE * np.maximum(np.abs(array[default]), 1.0)
         drawn = {k: v for k, v in uniforms.items() if k not in _NOT_COMPARED}
         return SkyPart(
             pass_name,
             feats,
             rect,
             drawn,
-            np.asarray(values, np.float64),
-            np.asarray(tolerance, np.float64),
+            array,
+            tol,
             np.asarray(period, np.float64),
         )
 
@@ -286,6 +291,21 @@ def plan_sky(
     return draws, SkyLayerState(
         texture, layout, tuple(strips), latest_values, strip_serials, edges, tuple(rates)
     )
+
+
+def _numbers(value: object) -> list[float]:
+    """A uniform's value as a flat list of floats. Most are a number or a short tuple of
+    numbers, taken as they are: numpy's conversion of each of a frame's hundred-odd values was
+    half of the sky pass's own CPU time."""
+    if isinstance(value, (int, float)):
+        return [float(value)]
+    if isinstance(value, tuple):
+        try:
+            return [float(v) for v in value]  # numbers (a nested tuple raises: numpy's)
+        except TypeError:
+            pass
+    out: list[float] = np.asarray(value, np.float64).ravel().tolist()
+    return out
 
 
 def strip_edges(parts: Sequence[SkyPart]) -> tuple[float, ...]:
