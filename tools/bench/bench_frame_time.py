@@ -79,8 +79,16 @@ def main() -> int:
     parser.add_argument("--preset", action="append", help="only these presets")
     parser.add_argument("--json", type=Path, help="write the figures there")
     parser.add_argument("--png", type=Path, help="draw the medians there")
+    parser.add_argument(
+        "--label", default="base", help="what the base is, in the chart's title (a commit)"
+    )
     args = parser.parse_args()
-    report: dict[str, Any] = {"size": args.size, "frames": args.frames, "presets": {}}
+    report: dict[str, Any] = {
+        "size": args.size,
+        "frames": args.frames,
+        "base_label": args.label,
+        "presets": {},
+    }
     header = (
         f"{'preset':<22}{'base ms':>9}{'new ms':>8}{'ratio':>7}{'base p95':>10}{'new p95':>9}"
         f"{'p95/med':>9}{'base cpu':>10}{'new cpu':>9}{'new thread cpu':>16}"
@@ -145,7 +153,8 @@ def chart(report: dict[str, Any], out: Path) -> None:
     ax.set_xticks(list(x), presets, rotation=20, ha="right")
     ax.set_ylabel("frame ms (bars: median, ticks: p95)")
     ax.set_title(
-        f"wxsky bench {report['size']}, {report['frames']} frames: issue 19's start vs now "
+        f"wxsky bench {report['size']}, {report['frames']} frames: "
+        f"{report.get('base_label', 'base')} vs now "
         f"({report['renderer'].split(' / ')[0]})",
         fontsize=9,
     )
