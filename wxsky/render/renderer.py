@@ -581,12 +581,7 @@ class Renderer:
         target.fbo.use()
         self.ctx.disable(moderngl.BLEND)
         for part, rect in draws:
-            self._sky_draw(part.pass_name, part.feats, part.uniforms | {"u_rect": rect}, False)
-        # One wait for all of them: draws into the same target need none between them (llvmpipe
-        # bins them into one scene), and each wait cost a draw some 0.3 ms of waking its
-        # threads, a 23-row strip of the dome three times what its pixels cost.
-        if self._finish_each_draw:
-            self._finish()
+            self._sky_draw(part.pass_name, part.feats, part.uniforms | {"u_rect": rect})
 
     def layer_bands(self, name: str) -> tuple[tuple[int, int, int], ...] | None:
         """For layers kept from frame to frame while nothing they show moves (the sky), the
@@ -643,20 +638,14 @@ class Renderer:
         return camera | sky_textures.frame_uniforms(cam, sky, feats)
 
     def _sky_draw(
-        self,
-        pass_name: str,
-        feats: sky_textures.SkyFeatures,
-        uniforms: dict[str, object],
-        finish: bool = True,
+        self, pass_name: str, feats: sky_textures.SkyFeatures, uniforms: dict[str, object]
     ) -> None:
-        """`finish`: wait for the draw (on a CPU renderer); False where more draws into the
-        same target follow and the caller waits once after them."""
         prog, vao = self._sky.prepare(feats)
         for uniform, value in uniforms.items():
             _set(prog, uniform, value)
         with self._pass(pass_name, "sky"):
             vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
-        if finish and self._finish_each_draw:
+        if self._finish_each_draw:
             self._finish()
 
     def _upsample(self, source: _Target, dest: _Target) -> None:

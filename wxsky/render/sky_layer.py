@@ -380,8 +380,8 @@ def dome_offset_tolerance(
     if frame.height_m <= 0.0:
         return 0.0
     # The nearest visible dome: overhead under high cover, else the top of the distant band;
-    # no higher than the picture's top. A level view's top is 17 deg up at 60 deg across
-    # 16:9: the dome there is 3.4 times as far as overhead and moves a third as many pixels
+    # no higher than the picture's top. A level view's top is 18 deg up at 60 deg across
+    # 16:9: the dome there is 3.2 times as far as overhead and moves a third as many pixels
     # (high cirrus at 120 m/s: the whole band was drawn again every frame for the zenith's
     # motion, which that view does not show).
     top_z = 1.0 if sky.dome.high_cover > 0.0 else sky_textures.dome_band(sky)[1]

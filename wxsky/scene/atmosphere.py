@@ -571,13 +571,24 @@ def horizon_elevation_rad(eye_alt_m: float) -> float:
 def sky_view_v(elevation_rad: F64, horizon_rad: float) -> F64:
     """Row coordinate 0..1 of the sky-view table for an elevation: 0.5 at the horizon, the
     square root of the angle from it either way, 1 at the zenith and 0 at the nadir."""
-    above = np.sqrt(
-        np.clip((elevation_rad - horizon_rad) / (0.5 * math.pi - horizon_rad), 0.0, 1.0)
-    )
     below = np.sqrt(
         np.clip((horizon_rad - elevation_rad) / (horizon_rad + 0.5 * math.pi), 0.0, 1.0)
     )
-    out: F64 = np.where(elevation_rad >= horizon_rad, 0.5 + 0.5 * above, 0.5 - 0.5 * below)
+    out: F64 = np.where(
+        elevation_rad >= horizon_rad,
+        sky_view_v_above(elevation_rad, horizon_rad),
+        0.5 - 0.5 * below,
+    )
+    return out
+
+
+def sky_view_v_above(elevation_rad: F64 | float, horizon_rad: float) -> F64:
+    """`sky_view_v` for elevations at or above the horizon (below it: the horizon's row),
+    without the other branch: the sprites' haze asks it of a frame's sprites every frame."""
+    a = (np.asarray(elevation_rad, np.float64) - horizon_rad) * (
+        1.0 / (0.5 * math.pi - horizon_rad)
+    )
+    out: F64 = 0.5 + 0.5 * np.sqrt(np.minimum(np.maximum(a, 0.0), 1.0))
     return out
 
 

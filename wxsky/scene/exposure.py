@@ -212,10 +212,7 @@ def display_channels(linear: F64, exposure: float) -> F64:
     if len(m) and float(m.max()) > TM_WHITE:
         y = m * scale
         out += (y - out) * burn(m)
-    np.minimum(out, 1.0, out=out)
-    low = out <= 0.0031308
-    encoded: F64 = np.where(low, 12.92 * out, 1.055 * np.power(out, 1.0 / 2.4) - 0.055)
-    return encoded
+    return srgb_encode(out)
 
 
 def display_inverse(display_rgb: F64, exposure: float) -> F64:

@@ -26,6 +26,7 @@ from wxsky.scene.atmosphere import (
     horizon_elevation_rad,
     sample_table,
     sky_view_elevation,
+    sky_view_v_above,
     sun_irradiance,
 )
 from wxsky.scene.ephemeris import (
@@ -589,10 +590,7 @@ def _sky_behind(
     norm = np.sqrt(x * x + y * y + z * z)
     np.maximum(norm, 1e-9, out=norm)
     z = z / norm
-    # sky_view_v of the floor, which is above the horizon.
-    v_floor = 0.5 + 0.5 * math.sqrt(
-        min(max((floor_rad - horizon) / (0.5 * math.pi - horizon), 0.0), 1.0)
-    )
+    v_floor = float(sky_view_v_above(floor_rad, horizon))
     # The level part of each direction, nudged east as the shader nudges it (never zero).
     fx = x / norm + 1e-6
     fy = y / norm
@@ -608,12 +606,9 @@ def _sky_behind(
     slab: F64 | None = sample_table(table, u, np.full_like(z, v_floor)).T if deck > 0.0 else None
     if slab is not None and deck >= 1.0:
         return slab  # under a full deck the sky behind is not looked up at all
-    # sky_view_v above the horizon (every direction here is: those below the floor take its
-    # row), without its other branch.
+    # Every direction here is over the horizon: those below the floor take its row.
     el = np.arcsin(np.minimum(np.maximum(z, -1.0), 1.0))
-    above = (el - horizon) * (1.0 / (0.5 * math.pi - horizon))
-    np.sqrt(np.minimum(np.maximum(above, 0.0, out=above), 1.0, out=above), out=above)
-    v = np.where(z < math.sin(floor_rad), v_floor, 0.5 + 0.5 * above)
+    v = np.where(z < math.sin(floor_rad), v_floor, sky_view_v_above(el, horizon))
     out: F64 = sample_table(table, u, v).T
     if slab is not None:
         out += (slab - out) * deck
