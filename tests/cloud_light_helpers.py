@@ -140,10 +140,11 @@ def cloud_regions(
     """Every cloud (alpha over 1/2, 4-connected) in a picture at least min_radius_px deep,
     largest first: its radius (deepest pixel's distance from its edge), the mean luminance
     of its core (more than 30 % of the radius from its edge), of its rim (the outer 10 %, at
-    least its edge pixels), of its top third and bottom tenth (by rows), of its brightest
-    half, and of the clear sky beside it (alpha under 0.05 within a quarter of its radius
-    outside it). With `within` (H, W), only clouds with 200 pixels or more there, measured
-    there only. `whole`: only clouds wholly in the picture (not touching its border)."""
+    least its edge pixels) and of that rim's brightest tenth, of its top third and bottom
+    tenth (by rows), of its brightest half, and of the clear sky beside it (alpha under 0.05
+    within a quarter of its radius outside it). With `within` (H, W), only clouds with 200
+    pixels or more there, measured there only. `whole`: only clouds wholly in the picture
+    (not touching its border)."""
     h, w = alpha.shape
     cloud = alpha > 0.5
     clear = alpha < 0.05
@@ -175,12 +176,14 @@ def cloud_regions(
         top_third = mask & (rows < top + tall / 3.0)
         bottom_tenth = mask & (rows > bottom - tall / 10.0)
         vals = np.sort(lum[mask])
+        rim_vals = np.sort(lum[rim])
         out.append(
             {
                 "radius_px": float(radius),
                 "pixels": float(len(pixels)),
                 "core": float(lum[core].mean()),
                 "rim": float(lum[rim].mean()),
+                "rim_bright": float(rim_vals[int(0.9 * len(rim_vals)) :].mean()),
                 "top_third": float(lum[top_third].mean()),
                 "bottom_tenth": float(lum[bottom_tenth].mean()),
                 "bright_half": float(vals[len(vals) // 2 :].mean()),

@@ -235,7 +235,9 @@ def test_sprites_stay_inside_layer_and_near_their_block(name: str) -> None:
     size = batch.size_m.astype(np.float64)
     slack = 1e-3 * size
     margin = np.minimum(0.3 * size, 0.5 * layer.thickness_m)
-    assert np.all(z >= layer.base_m + margin - slack)
+    # A flat-based cloud's sprites may hang below its base, which cuts them (`base_m`).
+    floor = 0.0 if model.flat_base else margin
+    assert np.all(z >= layer.base_m + floor - slack)
     assert np.all(z <= layer.top_m - margin + slack)
     # Horizontally within the block, give or take the widest box of the widest cloud.
     reach = (
@@ -267,6 +269,9 @@ def test_attributes_are_finite_and_in_range(name: str) -> None:
         assert arr.shape[0] == n, f
         if f == "slab_m":  # NaN marks sprites shaded as particles
             assert np.all(np.isnan(arr) != model.slab), f
+        elif f == "base_m":  # NaN marks sprites not cut at a flat base
+            assert np.all(np.isnan(arr) != model.flat_base), f
+            assert np.all(arr[~np.isnan(arr)] == np.float32(layer.base_m)), f
         elif arr.dtype != np.bool_:
             assert np.all(np.isfinite(arr)), f"{f} has NaN/inf"
     assert batch.centre_m.dtype == np.float64 and batch.texture.dtype == np.int32
@@ -291,18 +296,25 @@ def test_only_the_cirrus_family_lies_flat() -> None:
     assert flat == {"cirrus", "cirrostratus", "cirrocumulus"}
 
 
-def test_heaped_clouds_use_upright_flat_bottoms_low_down() -> None:
-    batch = layer_block(0, 0, 0, _layer("cumulus-humilis", 5), 9)
-    flat = batch.texture == TEX_FLAT_BOTTOM[0]
-    assert flat.any() and (~flat).any()
-    assert np.all(batch.rotation_rad[flat] == 0.0)
-    assert batch.height_frac[flat].mean() < 0.3 < batch.height_frac[~flat].mean()
+@pytest.mark.parametrize("name", ["cumulus-humilis", "cumulus-mediocris", "cumulus-congestus"])
+def test_cumulus_share_the_layers_flat_base_and_fill_it(name: str) -> None:
+    """Every sprite of a cumulus layer is cut at the layer's base (one condensation level for
+    every cloud), and the base's sprites reach below it, so the cut is a dense straight
+    edge rather than the round bottoms of puffs kept above it."""
+    layer = _layer(name, 6)
+    batch = layer_block(0, 0, 0, layer, 9)
+    assert np.all(batch.base_m == np.float32(layer.base_m))
+    bottom = batch.centre_m[:, 2] - 0.5 * batch.size_m
+    for cloud in np.unique(batch.cloud_id):
+        mine = batch.cloud_id == cloud
+        assert (bottom[mine] < layer.base_m).sum() >= 3, cloud
+    # No flat-bottomed texture: it paints a little cloud with its own base (a shelf).
+    assert not np.any(batch.texture == TEX_FLAT_BOTTOM[0])
 
 
 def test_shading_groups_point_base_down_and_tops_up() -> None:
     batch = layer_block(0, 0, 0, _layer("cumulus-mediocris", 8), 9)
-    flat = batch.texture == TEX_FLAT_BOTTOM[0]
-    assert np.all(batch.light_dir[flat, 2] < 0.0)
+    assert batch.light_dir[batch.height_frac < 0.05, 2].mean() < -0.3
     assert batch.light_dir[batch.height_frac > 0.8, 2].mean() > 0.3
 
 
@@ -365,12 +377,15 @@ def test_a_take_cuts_each_field_when_first_read_as_an_eager_cut_would() -> None:
         np.testing.assert_array_equal(getattr(back, name), getattr(b, name)[first])
 
 
-def test_shifted_moves_only_centres() -> None:
+def test_shifted_moves_the_centres_and_the_drift_they_carry() -> None:
     b = _batch(3)
     s = b.shifted((10.0, -20.0, 0.5))
     np.testing.assert_array_equal(s.centre_m - b.centre_m, np.tile([10.0, -20.0, 0.5], (3, 1)))
+    # What is fixed to the layer's frame (a deck's relief) goes across with it.
+    np.testing.assert_array_equal(s.drift_m - b.drift_m, np.tile([10.0, -20.0], (3, 1)))
     for name in FIELDS[1:]:
-        np.testing.assert_array_equal(getattr(s, name), getattr(b, name))
+        if name != "drift_m":  # (slab_m and base_m are NaN here: no deck, no flat base)
+            np.testing.assert_array_equal(getattr(s, name), getattr(b, name))
     np.testing.assert_array_equal(b.centre_m[1], [1, 2, 3])  # original untouched
 
 
@@ -428,3 +443,22 @@ def test_cached_blocks_are_read_only() -> None:
         b.centre_m[0, 0] = 1.0
     with pytest.raises(ValueError):
         b.opacity[0] = 0.5
+
+
+def test_drifted_sprites_carry_the_drift_that_moved_them() -> None:
+    """What moves with a layer (a deck's relief, fixed to centre - drift) reads the drift
+    off each sprite: the gather's drift is the one its centres moved by."""
+    from wxsky.scene.conditions import _drifted
+
+    batch = layer_block(0, 0, 0, _layer("stratus", 8), 3)
+    assert np.all(batch.drift_m == 0.0)
+    moved = _drifted(batch, (120.0, -40.0))
+    np.testing.assert_array_equal(
+        moved.drift_m, np.tile(np.float32([120.0, -40.0]), (len(batch), 1))
+    )
+    np.testing.assert_allclose(
+        moved.centre_m[:, :2] - moved.drift_m, batch.centre_m[:, :2], atol=1e-3
+    )
+    # Cut and joined with others, each sprite keeps its own.
+    both = SpriteBatch.concat([moved.take(np.arange(3)), batch.take(np.arange(2))])
+    assert both.drift_m[:3, 0].tolist() == [120.0] * 3 and both.drift_m[3:, 0].tolist() == [0.0] * 2

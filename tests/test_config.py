@@ -63,7 +63,7 @@ def test_defaults() -> None:
     assert cfg.camera == CameraSection(0.0, 12.0, 0.0, 60.0, 960, 540, 2.0)
     assert cfg.scene.ring_radius_m == 8000.0
     assert cfg.scene.max_range_m == 40000.0
-    assert cfg.scene.ring_texture_px == 256
+    assert cfg.scene.ring_texture_px == 512
     assert cfg.scene.block_size_m == BLOCK_SIZE_M == 4000.0
     assert cfg.clock.rate == 1.0
     assert cfg.output.control == ""

@@ -93,7 +93,8 @@ def test_the_ridge_hides_the_far_clouds_and_near_clouds_stay_in_front(
     assert ridge.sum() > 0.1 * W * H
     # Without the terrain, ring clouds stand where the ridge is: the clouds picture differs
     # from the bare sky there.
-    behind = ridge & (np.abs(_f(pic["clouds"]) - _f(pic["sky"]))[..., :3].sum(axis=-1) > 0.12)
+    # (0.06: far clouds fade into the haze, their detail too, docs/cloud-form.md.)
+    behind = ridge & (np.abs(_f(pic["clouds"]) - _f(pic["sky"]))[..., :3].sum(axis=-1) > 0.06)
     assert behind.sum() > 500, behind.sum()
     # With it, the ridge hides them: there the picture is the terrain with only the near
     # layer over it (premultiplied over), to rounding.

@@ -29,7 +29,7 @@ from wxsky.render.renderer import (
     IMPOSTOR_MIN_ROWS,
     NEAR_SCALE,
     Renderer,
-    _mix_runs,
+    _variant_runs,
     impostor_rows,
     near_layer_size,
     turning_round,
@@ -311,9 +311,9 @@ def test_only_flat_bottomed_sprites_part_way_round_need_the_second_read() -> Non
     # A sprite with its own orientation never turns.
     fixed = SpriteDraw(flat.sprites, flat.rgba, np.tile(np.float32([0, -1, 0]), (3, 1)))
     assert not turning_round(fixed, eye).any()
-    runs = _mix_runs(np.array([False, True, True, False, False, True]))
-    assert runs == [(0, 1, False), (1, 3, True), (3, 5, False), (5, 6, True)]
-    assert _mix_runs(np.zeros(4, np.bool_)) == [(0, 4, False)]
+    runs = _variant_runs(np.array([0, 1, 1, 0, 0, 3, 2], np.int8))
+    assert runs == [(0, 1, 0), (1, 3, 1), (3, 5, 0), (5, 6, 3), (6, 7, 2)]
+    assert _variant_runs(np.zeros(4, np.int8)) == [(0, 4, 0)]
 
 
 def test_sprites_drawn_in_runs_match_every_sprite_drawn_with_both_reads(
@@ -345,7 +345,7 @@ def test_sprites_drawn_in_runs_match_every_sprite_drawn_with_both_reads(
     with _near_scale(renderer, 1.0):
         renderer.render_frame(FrameScene(cam, _sky(), draw))
         runs = renderer.read("near").astype(int)
-        monkeypatch.setattr(renderer_module, "_mix_runs", lambda t: [(0, len(t), True)])
+        monkeypatch.setattr(renderer_module, "_variant_runs", lambda t: [(0, len(t), 1)])
         renderer.render_frame(FrameScene(cam, _sky(), draw))
         both = renderer.read("near").astype(int)
     assert runs[..., 3].max() > 200
@@ -470,8 +470,9 @@ def test_ring_impostor_shows_the_sprite_through_its_off_axis_frustum(renderer: R
 
 
 def test_impostor_rows_follow_the_window_shape() -> None:
-    # A window a fifth as tall as wide: twice the square texels' rows, 2 * 256 / 5.
-    assert impostor_rows(256, 0.2 * 2 * 1000.0, 1000.0) == math.ceil(2 * 256 / 5)
+    # A window a fifth as tall as wide: the square texels' rows, 256 / 5 (finer rows than
+    # columns would blur the far clouds sideways only: streaks, docs/cloud-form.md).
+    assert impostor_rows(256, 0.2 * 2 * 1000.0, 1000.0) == math.ceil(256 / 5)
     assert impostor_rows(256, 2 * 1000.0, 1000.0) == 256  # square or taller: all of them
     assert impostor_rows(256, 3 * 2 * 1000.0, 1000.0) == 256
     assert impostor_rows(256, 1.0, 1000.0) == IMPOSTOR_MIN_ROWS
@@ -675,7 +676,7 @@ def test_compile_error_names_the_file(renderer: Renderer, shader_dir: Path) -> N
 def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -> None:
     lib = ShaderLibrary(renderer.ctx)
     with pytest.raises(RenderError, match=r"shaders/sprites\.glsl"):
-        lib.program("sprites.glsl")  # needs SHEET_CELLS, the two slots, the turn, the size
+        lib.program("sprites.glsl")  # needs SHEET_CELLS, the slots, the turn, the size, the base
     defines = {
         "SHEET_CELLS": "4",
         "FLAT_BOTTOM_SLOT": "0",
@@ -684,6 +685,12 @@ def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -
         "ROUND_TO": "0.75",
         "ROUND_MIX": "1",
         "FINE_MIN_PX": "48.0",
+        "BASE_SOFT_FROM": "0.2",
+        "BASE_SOFT_TO": "0.45",
+        "BASE_DIM": "0.55",
+        "BASE_SHADE_DEPTH": "0.5",
+        "BASE_DIM_FROM": "0.1",
+        "BASE_DIM_TO": "0.3",
     }
     prog = lib.program("sprites.glsl", defines)
     assert lib.program("sprites.glsl", dict(defines)) is prog  # compiled once

@@ -102,8 +102,12 @@ def test_towering_cumulus_covers_more_sky_as_its_towers_grow() -> None:
     calm_later, calm_drawn = json.loads(out.splitlines()[-1])
     calm = [covers[0], *calm_later]
     assert drawn > 0 and calm_drawn > 0
-    assert covers[0] < covers[1] < covers[2], covers
-    # Measured: 0.708, 0.712, 0.719 (the towers' share of a sky 70 % covered by cumulus).
+    # With the wind, the clouds also drift through the four views between pictures, by as
+    # much as the towers add in ten minutes (measured 0.692, 0.744, 0.734): later pictures
+    # cover more than the first, in whatever order; the calm sky shows the growth alone.
+    assert covers[0] < min(covers[1], covers[2]), covers
+    # Measured: 0.692, 0.711, 0.721 (0.708, 0.712, 0.719 before the cumulus had one flat
+    # base, issue 42: the towers' share of a sky 70 % covered by cumulus).
     assert calm[0] + 0.002 < calm[1] < calm[2] - 0.002, calm
 
 

@@ -49,13 +49,17 @@ METER_SIZE = (64, 36)
 # host as it draws the layer: fill rate is what limits a CPU renderer, soft sprites look the
 # same, and a host uploads a quarter of the pixels.
 NEAR_SCALE = 0.5
-# The near layer's far band (FrameScene.near_far_count) is drawn no finer than the ring's
-# impostors (ring_px over 45°), unless that would save less than this share of its size.
+# The near layer's far band (FrameScene.near_far_count) is drawn at this many pixels a degree
+# (256 over 45°, what the ring's impostors held before they were drawn at the picture's
+# density), unless that would save less than FAR_BAND_MAX_SCALE of its size.
+FAR_BAND_PX_PER_DEG = 256.0 / 45.0
 FAR_BAND_MAX_SCALE = 0.8
-# Impostor texels are drawn at most this many times finer down than across (`impostor_rows`):
-# the host shows an impostor about as wide as 45° of its view, so across the texels are coarse
-# anyway, while the flat bases of distant clouds want a little more than that down.
-IMPOSTOR_TEXEL_ASPECT = 2.0
+# Impostor texels are drawn at most this many times finer down than across (`impostor_rows`).
+# Square: finer rows than columns blur a distant cloud sideways and not down once the host
+# stretches the impostor over its view, so every lobe and base becomes a horizontal streak
+# (docs/cloud-form.md: at 2, the far field's vertical gradient energy rose by a tenth to a
+# quarter against square texels).
+IMPOSTOR_TEXEL_ASPECT = 1.0
 IMPOSTOR_MIN_ROWS = 8
 IMPOSTOR_SHAPE = "quad"
 FAR_BAND_SHAPE = "quad"
@@ -63,14 +67,33 @@ FAR_BAND_SHAPE = "quad"
 # below or above goes from ROUND_FROM to ROUND_TO (sprites.glsl).
 ROUND_FROM = 0.45
 ROUND_TO = 0.75
+# A sprite's cut at its cloud's flat base (SpriteBatch.base_m) is one pixel sharp while the
+# sine of the angle it is seen at from below is under BASE_SOFT_FROM, and fades in over half
+# the sprite above the base from BASE_SOFT_TO (sprites.glsl): seen steeply, each sprite's
+# straight cut would show as its own edge across the base's outline.
+BASE_SOFT_FROM = 0.2
+BASE_SOFT_TO = 0.45
+# A flat-based sprite's texels are dimmed to BASE_DIM at the base, back to their own colour
+# BASE_SHADE_DEPTH of the sprite's size above it: the base lies in the whole cloud's shadow.
+BASE_DIM = 0.55
+BASE_SHADE_DEPTH = 0.5
+# ... at full strength where the sine of the angle the sprite is seen at from below is at
+# least BASE_DIM_TO (the underside shows), none under BASE_DIM_FROM (the lower side does).
+BASE_DIM_FROM = 0.1
+BASE_DIM_TO = 0.3
+# A stratiform deck's base seen from below: darker and lighter patches, at these scales and
+# strengths (a share of the colour, each), fixed to each sprite (sprites.glsl deck_relief).
+DECK_SCALES_M = (400.0, 120.0, 40.0)
+DECK_RELIEF = (0.12, 0.22, 0.24)
 # Turns this close to none or complete are drawn as such: at most 1/40 of a colour level.
 ROUND_SNAP = 1e-4
 # Sprites at least this many pixels across read no level coarser than the support polygons'
 # fine set holds (trilinear filtering reads level log2(CELL_PX / pixels) and the next), with
 # half as much again to spare; smaller ones are drawn as the polygons that hold every level.
 FINE_MIN_PX = 1.5 * CELL_PX / 2.0 ** (SUPPORT_LEVELS - 1)
-# centre (3) + size + rotation + texture + rgba (4) + normal (3) + rim (3), float32
-_INSTANCE_FLOATS = 16
+# centre (3) + size + rotation + texture + rgba (4) + normal (3) + rim (3) + base + deck (3),
+# float32
+_INSTANCE_FLOATS = 20
 _INSTANCE_LAYOUT = (
     ("in_centre", "3f", 0),
     ("in_size", "f", 3),
@@ -79,7 +102,15 @@ _INSTANCE_LAYOUT = (
     ("in_rgba", "4f", 6),
     ("in_normal", "3f", 10),
     ("in_rim", "3f", 13),
+    ("in_base", "f", 16),
+    ("in_deck", "3f", 17),
 )
+_RELIEF_PERIOD_M = 65536.0
+# Sprite shader variants (bits of the code `_variants` gives each sprite).
+_MIXING = 1
+_DECK = 2
+# A sprite with no flat base is cut this far below the eye: nowhere a picture shows.
+_NO_BASE_M = -1.0e9
 
 
 @dataclass
@@ -133,13 +164,25 @@ class Renderer:
             "ROUND_SLOT": str(TEX_FOG[0]),
             "ROUND_FROM": repr(ROUND_FROM),
             "ROUND_TO": repr(ROUND_TO),
+            "BASE_SOFT_FROM": repr(BASE_SOFT_FROM),
+            "BASE_SOFT_TO": repr(BASE_SOFT_TO),
+            "BASE_DIM": repr(BASE_DIM),
+            "BASE_SHADE_DEPTH": repr(BASE_SHADE_DEPTH),
+            "BASE_DIM_FROM": repr(BASE_DIM_FROM),
+            "BASE_DIM_TO": repr(BASE_DIM_TO),
             "FINE_MIN_PX": repr(FINE_MIN_PX),
+            "DECK_SCALES_M": _glsl_floats(DECK_SCALES_M),
+            "DECK_RELIEF": _glsl_floats(DECK_RELIEF),
         }
         self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
-        # One read of the sheet per fragment, and two for the sprites turning round.
+        # One read of the sheet per fragment, and two for the sprites turning round; the
+        # base of a deck seen from below (DECK) with its relief: variant codes (`_variants`).
         self._sprite_progs = {
-            mixing: self.shaders.program("sprites.glsl", defines | {"ROUND_MIX": str(int(mixing))})
-            for mixing in (False, True)
+            code: self.shaders.program(
+                "sprites.glsl",
+                defines | {"ROUND_MIX": str(code & _MIXING), "DECK": str((code & _DECK) >> 1)},
+            )
+            for code in range(4)
         }
         self._upsample_prog = self.shaders.program("upsample.glsl")
         levels = load_sheet()  # 512 down to 32, as Wang's sheet
@@ -169,7 +212,7 @@ class Renderer:
             _write(prog, "u_cell_shade", shades.tobytes())
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
         self._sprite_vaos = {
-            mixing: self._make_sprite_vao(prog) for mixing, prog in self._sprite_progs.items()
+            code: self._make_sprite_vao(prog) for code, prog in self._sprite_progs.items()
         }
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._meter_prog = self.shaders.program("meter.glsl")
@@ -256,7 +299,10 @@ class Renderer:
             frame.sky,
         )
         if frame.near_front is not None:
-            self._draw_near("near_front", frame.near_front, cam, (0.0, 0.0, 0.0, 0.0))
+            # Its sprites were hazed with the frame's sky: their detail fades by it too.
+            self._draw_near(
+                "near_front", frame.near_front, cam, (0.0, 0.0, 0.0, 0.0), sky=frame.sky
+            )
         self._check("rendering a frame")
 
     def _draw_near(
@@ -284,8 +330,7 @@ class Renderer:
         target = self._target(name, *size)
         far_count = min(far_count, len(draw))
         w, h = target.size
-        impostor_px_per_deg = self.ring_px / (360.0 / RING_SIZE)
-        far_scale = impostor_px_per_deg / (w / cam.fov_deg)
+        far_scale = FAR_BAND_PX_PER_DEG / (w / cam.fov_deg)
         rest = shown
         if far_count > 0 and far_scale <= FAR_BAND_MAX_SCALE:
             far = self._target(
@@ -336,21 +381,26 @@ class Renderer:
         front) after the sprites farther than it."""
         view, proj = cam.view_matrix(), cam.projection_matrix()
         eye = cam.position_m
+        haze_m = math.inf if sky is None else sky.haze_m
         if not towers or sky is None:
             part = draw if (start, stop) == (0, len(draw)) else draw.slice(start, stop)
-            self._draw_sprites(target, part, eye, view, proj, None, shape=shape)
+            self._draw_sprites(target, part, eye, view, proj, None, shape=shape, haze_m=haze_m)
             return
         view_rot = np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes()
         projection = np.ascontiguousarray(proj.T, dtype=np.float32).tobytes()
         for item in towers:
             cut = max(start, min(item.tower.insert_at, stop))
-            self._draw_sprites(target, draw.slice(start, cut), eye, view, proj, None, shape=shape)
+            self._draw_sprites(
+                target, draw.slice(start, cut), eye, view, proj, None, shape=shape, haze_m=haze_m
+            )
             target.fbo.use()
             _set(self.shaders.program("tower_quad.glsl"), "u_exposure", self._exposure)
             with self._pass(f"towers {_sprite_pass_name(target.name)}", "small_sprites"):
                 self._towers.draw(item, cam, view_rot, projection, sky)
             start = cut
-        self._draw_sprites(target, draw.slice(start, stop), eye, view, proj, None, shape=shape)
+        self._draw_sprites(
+            target, draw.slice(start, stop), eye, view, proj, None, shape=shape, haze_m=haze_m
+        )
 
     def render_ring(
         self,
@@ -401,6 +451,7 @@ class Renderer:
             geo.projection_matrix(i),
             clear_rgba=(0.0, 0.0, 0.0, 0.0) if start == 0 else None,
             shape=IMPOSTOR_SHAPE,
+            haze_m=ring.haze_m,
         )
         if work is not target and stop >= len(draw):
             self._upsample(work, target)
@@ -668,10 +719,13 @@ class Renderer:
         proj: npt.NDArray[np.float64],
         clear_rgba: tuple[float, float, float, float] | None = (0.0, 0.0, 0.0, 0.0),
         shape: str = "polygon",
+        haze_m: float = math.inf,
     ) -> None:
         """`clear_rgba`: premultiplied colour under the sprites (the in-cloud fog veil); None
         draws over what the target holds. `shape`: "polygon" (fewest fragments) or "quad"
-        (fewest triangles, for sprites a few pixels wide)."""
+        (fewest triangles, for sprites a few pixels wide). `haze_m`: the haze distance the
+        sprites' colours were faded with (SkyParams.haze_m), by which their flat bases' shade
+        fades too."""
         target.fbo.use()
         if clear_rgba is not None:
             target.fbo.clear(*clear_rgba)
@@ -689,6 +743,16 @@ class Renderer:
         inst[:, 10:13] = 0.0 if draw.normals is None else draw.normals
         # The colour of the sprite's thin outer texels (SpriteDraw.rgba); negative: none.
         inst[:, 13:16] = draw.rgba[:, 4:7] if draw.rgba.shape[1] > 4 else -1.0
+        # The flat base the sprite is cut at, over the eye (SpriteBatch.base_m).
+        base = s.base_m
+        inst[:, 16] = np.where(np.isnan(base), _NO_BASE_M, base - np.float32(eye_m[2]))
+        # A deck's base over the eye, for its relief seen from below (0: not drawn so), and
+        # where the deck has drifted to from the eye: its relief drifts with it (mod 64 km,
+        # so float32 keeps a centimetre of it).
+        deck = s.slab_m[:, 0] - np.float32(eye_m[2])
+        under_deck = deck > 0.0  # NaN (no deck) compares False
+        inst[:, 17] = np.where(under_deck, deck, 0.0)
+        inst[:, 18:20] = np.mod(np.asarray(eye_m[:2], np.float64) - s.drift_m, _RELIEF_PERIOD_M)
         data = inst.tobytes()
         if len(data) > self._instance_buf.size:
             self._instance_buf.orphan(len(data) * 2)
@@ -702,6 +766,8 @@ class Renderer:
             _set(prog, "u_sheet", 0)
             _set(prog, "u_viewport_px", float(target.size[0]))
             _set(prog, "u_exposure", self._exposure)
+            # The shader takes 1/haze (0: no haze) so an endless one needs no infinity.
+            _set(prog, "u_inv_haze_m", 0.0 if not math.isfinite(haze_m) else 1.0 / haze_m)
         self._sheet.filter = (_SHAPES[shape][2], moderngl.LINEAR)
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
@@ -709,9 +775,9 @@ class Renderer:
         kind = "sprites" if shape == "polygon" else "small_sprites"
         with self._pass(_sprite_pass_name(target.name), kind):
             # In order, each run of sprites with the variant it needs (back to front holds).
-            for start, stop, mixing in _mix_runs(turning_round(draw, eye_m)):
-                vao = self._sprite_vaos[mixing]
-                self._bind_instances(vao, self._sprite_progs[mixing], start)
+            for start, stop, code in _variant_runs(_variants(draw, eye_m, under_deck)):
+                vao = self._sprite_vaos[code]
+                self._bind_instances(vao, self._sprite_progs[code], start)
                 vao.render(
                     moderngl.TRIANGLE_STRIP,
                     vertices=_SHAPES[shape][1],
@@ -738,7 +804,9 @@ class Renderer:
         3.3 has no base instance)."""
         stride = _INSTANCE_FLOATS * 4
         for name, fmt, offset in _INSTANCE_LAYOUT:
-            member = prog[name]
+            member = prog.get(name, None)
+            if member is None:
+                continue  # a variant that never reads it (in_deck outside DECK)
             assert isinstance(member, moderngl.Attribute)
             vao.bind(
                 member.location,
@@ -807,15 +875,31 @@ def turning_round(draw: SpriteDraw, eye_m: tuple[float, float, float]) -> npt.ND
     return out
 
 
-def _mix_runs(turning: npt.NDArray[np.bool_]) -> list[tuple[int, int, bool]]:
-    """(start, stop, needs the second read) for each run of equal need, in order."""
-    n = len(turning)
-    if not turning.any():
-        return [(0, n, False)]
-    edges = np.flatnonzero(np.diff(turning.astype(np.int8))) + 1
+def _glsl_floats(values: tuple[float, ...]) -> str:
+    """A GLSL float array constructor of the values, for a define."""
+    return f"float[{len(values)}](" + ", ".join(repr(float(v)) for v in values) + ")"
+
+
+def _variants(
+    draw: SpriteDraw, eye_m: tuple[float, float, float], under_deck: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.int8]:
+    """(N,) each sprite's shader variant: _MIXING for the second read of a flat-bottomed
+    sprite turning round, _DECK for a deck's sprite seen from under its base."""
+    codes = turning_round(draw, eye_m).astype(np.int8)
+    if under_deck.any():
+        codes |= under_deck.astype(np.int8) << 1
+    return codes
+
+
+def _variant_runs(codes: npt.NDArray[np.int8]) -> list[tuple[int, int, int]]:
+    """(start, stop, variant) for each run of one variant, in order."""
+    n = len(codes)
+    if n == 0 or not codes.any():
+        return [(0, n, 0)]
+    edges = np.flatnonzero(np.diff(codes)) + 1
     starts = np.concatenate(([0], edges))
     stops = np.concatenate((edges, [n]))
-    return [(int(a), int(b), bool(turning[a])) for a, b in zip(starts, stops, strict=True)]
+    return [(int(a), int(b), int(codes[a])) for a, b in zip(starts, stops, strict=True)]
 
 
 def _sprite_pass_name(target: str) -> str:

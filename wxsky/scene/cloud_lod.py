@@ -94,6 +94,8 @@ def collapse_far_clouds(
         core_frac=np.zeros(len(lod), np.float32),
         flat=np.zeros(len(lod), np.bool_),
         slab_m=sprites.slab_m[first[lod]],
+        base_m=sprites.base_m[first[lod]],
+        drift_m=sprites.drift_m[first[lod]],
     )
     one_rgba = colour[lod]
     one_rgba[:, 3] = alpha[lod] * t[lod]

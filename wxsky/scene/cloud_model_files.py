@@ -150,6 +150,7 @@ MODEL_TABLE = Table(
         "slab": Field(Bool(), False),
         "grows_up": Field(Bool(), False),
         "formation_spread_oktas": Field(Number(0.1, 4.0, unit="oktas"), 1.5),
+        "flat_base": Field(Bool(), False),
         "box": Field(Tables(BOX_TABLE, "box"), REQUIRED),
     },
     rules=(
@@ -226,6 +227,7 @@ def model_from_values(v: dict[str, Any], name: str) -> CloudModel:
         slab=v["slab"],
         grows_up=v["grows_up"],
         formation_spread_oktas=v["formation_spread_oktas"],
+        flat_base=v["flat_base"],
         boxes=boxes,
     )
 

@@ -63,6 +63,8 @@ class CloudModel:
     slab: bool  # stratiform: shaded as a plane-parallel slab (Bouthors), not particle by particle
     grows_up: bool  # heaped: the core is the cloud's low middle, so it forms from the base up
     formation_spread_oktas: float  # cover change over which one cloud forms
+    # Every sprite of the cloud is cut at the layer's base: the flat condensation level.
+    flat_base: bool
     boxes: tuple[BoxTemplate, ...]
 
 

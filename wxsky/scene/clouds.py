@@ -130,7 +130,10 @@ def generate_block_clouds(
     # Keep sprite discs inside the layer: centres a third of a sprite from base and top, or
     # the middle of a layer too thin for that, never outside it.
     margin = np.minimum(0.3 * size, 0.5 * thickness_m)
-    pos[:, 2] = np.clip(pos[:, 2], margin, thickness_m - margin)
+    # A flat-based cloud's sprites may hang below its base: the cut there (`base_m`) makes the
+    # straight, dense edge that sprites kept above it would leave rounded and thin.
+    floor = np.zeros_like(margin) if model.flat_base else margin
+    pos[:, 2] = np.clip(pos[:, 2], floor, thickness_m - margin)
     # Sprites are cloud-major, per_cloud to a cloud, as the cull walks them.
     keep = cull_mask_clouds(
         pos.reshape(n, per_cloud, 3), (model.cull_frac * size).reshape(n, per_cloud)
@@ -165,6 +168,8 @@ def generate_block_clouds(
             np.array([0.0, thickness_m] if model.slab else [np.nan, np.nan], np.float32),
             (count, 1),
         ),
+        # Heaped clouds share the layer's base (z = 0 here): their sprites are cut there.
+        base_m=np.full(count, 0.0 if model.flat_base else np.nan, np.float32),
     )
     for f in dataclasses.fields(sprites):
         getattr(sprites, f.name).flags.writeable = False

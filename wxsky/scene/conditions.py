@@ -169,4 +169,6 @@ def _drifted(batch: SpriteBatch, drift_m: tuple[float, float]) -> SpriteBatch:
     (x + dx, y + dy, z + base either way)."""
     if not len(batch) or drift_m == (0.0, 0.0):
         return batch
-    return batch.with_centres(batch.centre_m + np.array((drift_m[0], drift_m[1], 0.0)))
+    drift = np.empty((len(batch), 2), np.float32)
+    drift[:] = drift_m
+    return batch.with_centres(batch.centre_m + np.array((drift_m[0], drift_m[1], 0.0)), drift)

@@ -355,11 +355,13 @@ class NearBlocks:
                 self._shares.clear()
             self._shares[weights] = share
         centre = self.batch.centre_m.copy()
+        moved = np.zeros((len(centre), 2), np.float32)
         for li, start, stop in self.layer_rows:
             dx, dy = drift[li]
             centre[start:stop, 0] += dx
             centre[start:stop, 1] += dy
-        return self.batch.with_centres(centre), share
+            moved[start:stop] = (dx, dy)
+        return self.batch.with_centres(centre, moved), share
 
 
 class SetKey:

@@ -78,7 +78,7 @@ SKY_MODELS = ("physical", "roden-parberry")  # [scene] sky
 class SceneSettings:
     ring_radius_m: float = 8000.0
     max_range_m: float = 40000.0
-    ring_texture_px: int = 256
+    ring_texture_px: int = 512
     shading: str = DEFAULT_SHADING  # "wang" or "harris" (wxsky.scene.shading)
     # The sky: "physical" (wxsky.scene.atmosphere's tables) or "roden-parberry" (the gradient).
     sky: str = "physical"
@@ -139,6 +139,9 @@ class RingScene:
     # The clouds' shadow on the ground over the ring's area (2 ring radii square), made with
     # the ring's drift and sun; None for an empty ring or with `shadow_map_px` 0.
     shadow: CloudShadow | None = None
+    # The sky's haze distance the impostors were hazed with (SkyParams.haze_m): the renderer
+    # fades the flat bases' shade into the air by it as the shading faded the colours.
+    haze_m: float = math.inf
     # Unique to this ring in the process: what a publisher names its images by, so a slot
     # that already holds them keeps them (`FrameWriter.keep_layer`).
     serial: int = field(init=False, compare=False)
@@ -375,7 +378,9 @@ def build_ring(
             settings.max_range_m,
             cancel,
         )
-    return RingScene(geometry=geometry, impostors=impostors, drift=drift, shadow=shadow)
+    return RingScene(
+        geometry=geometry, impostors=impostors, drift=drift, shadow=shadow, haze_m=sky.haze_m
+    )
 
 
 def empty_ring(centre_m: tuple[float, float, float], radius_m: float, drift: Drift) -> RingScene:

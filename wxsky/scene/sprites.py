@@ -29,6 +29,14 @@ def _no_slabs() -> F32:
     return np.zeros((0, 2), np.float32)
 
 
+def _no_bases() -> F32:
+    return np.zeros(0, np.float32)
+
+
+def _no_drift() -> F32:
+    return np.zeros((0, 2), np.float32)
+
+
 @dataclass(frozen=True)
 class SpriteBatch:
     """N cloud sprites as parallel arrays."""
@@ -52,6 +60,12 @@ class SpriteBatch:
     # (N, 2) base and top MSL of the stratiform layer whose slab shades the sprite (Bouthors),
     # NaN for sprites shaded as particles. Batches built without it have no slab sprites.
     slab_m: F32 = field(default_factory=_no_slabs)
+    # (N,) MSL of the flat base the sprite is cut at (a heaped cloud's condensation level: no
+    # texel of it shows below), NaN for none. Batches built without it cut nothing.
+    base_m: F32 = field(default_factory=_no_bases)
+    # (N, 2) east and north the wind has moved the sprite's layer (gather.Drift): what moves
+    # with a deck, such as its base's relief, is fixed to centre - drift. Zero where unset.
+    drift_m: F32 = field(default_factory=_no_drift)
 
     def __post_init__(self) -> None:
         n = int(self.size_m.shape[0])
@@ -63,6 +77,14 @@ class SpriteBatch:
             if self.slab_m.shape[0] != 0:
                 raise ValueError(f"slab_m has {self.slab_m.shape[0]} entries for {n} sprites")
             object.__setattr__(self, "slab_m", np.full((n, 2), np.nan, np.float32))
+        if self.base_m.shape[0] != n:
+            if self.base_m.shape[0] != 0:
+                raise ValueError(f"base_m has {self.base_m.shape[0]} entries for {n} sprites")
+            object.__setattr__(self, "base_m", np.full(n, np.nan, np.float32))
+        if self.drift_m.shape[0] != n:
+            if self.drift_m.shape[0] != 0:
+                raise ValueError(f"drift_m has {self.drift_m.shape[0]} entries for {n} sprites")
+            object.__setattr__(self, "drift_m", np.zeros((n, 2), np.float32))
 
     @functools.cached_property
     def slab(self) -> B:
@@ -119,15 +141,20 @@ class SpriteBatch:
             state.update((name, getattr(self, name)) for name in _FIELD_NAMES)
         return state
 
-    def with_centres(self, centre_m: F64) -> SpriteBatch:
-        """These sprites at other centres ((N, 3), as many): the other fields are this batch's
-        own arrays, not checked again (a frame moves its near set by the drift this way;
+    def with_centres(self, centre_m: F64, drift_m: F32 | None = None) -> SpriteBatch:
+        """These sprites at other centres ((N, 3), as many), and with `drift_m` ((N, 2)) the
+        drift that moved them there: the other fields are this batch's own arrays, not
+        checked again (a frame moves its near set by the drift this way;
         `dataclasses.replace` checking every field was 20 us of it)."""
         if centre_m.shape != self.centre_m.shape:
             raise ValueError(f"{centre_m.shape[0]} centres for {len(self)} sprites")
         out = object.__new__(SpriteBatch)
         out.__dict__.update(self.__dict__)
         out.__dict__["centre_m"] = centre_m
+        if drift_m is not None:
+            if drift_m.shape != (len(self), 2):
+                raise ValueError(f"{drift_m.shape} drifts for {len(self)} sprites")
+            out.__dict__["drift_m"] = drift_m
         return out
 
     def shifted(self, offset_m: tuple[float, float, float]) -> SpriteBatch:
@@ -135,6 +162,9 @@ class SpriteBatch:
             self,
             centre_m=self.centre_m + np.asarray(offset_m, dtype=np.float64),
             slab_m=(self.slab_m + np.float32(offset_m[2])).astype(np.float32),
+            base_m=(self.base_m + np.float32(offset_m[2])).astype(np.float32),
+            # Moved across with everything of its layer: the drift's way (layer_block).
+            drift_m=(self.drift_m + np.float32(offset_m[:2])).astype(np.float32),
         )
 
     @staticmethod
@@ -152,6 +182,8 @@ class SpriteBatch:
             core_frac=np.zeros(0, np.float32),
             flat=np.zeros(0, np.bool_),
             slab_m=np.zeros((0, 2), np.float32),
+            base_m=np.zeros(0, np.float32),
+            drift_m=np.zeros((0, 2), np.float32),
         )
 
     @staticmethod

@@ -188,7 +188,7 @@ class SceneSection(_Section):
 
     ring_radius_m: float = _opt(8000.0, _num(100.0, 200_000.0, "m"))
     max_range_m: float = _opt(40_000.0, _num(1000.0, 500_000.0, "m"))
-    ring_texture_px: int = _opt(256, _int(16, 4096, "px"))
+    ring_texture_px: int = _opt(512, _int(16, 4096, "px"))
     # A new ring cross-fades over the old one for this long (Wang); 0 swaps at once.
     ring_fade_s: float = _opt(1.0, _num(0.0, 30.0, "s"))
     # A rebuild draws an impostor over as many frames as it takes to spend about this long on

@@ -7,6 +7,7 @@
 // fragment; llvmpipe pays for that read in every fragment of a draw whatever the branch says,
 // so the renderer draws only the few sprites half-way through that turn with it, and all
 // others with ROUND_MIX 0: one read, of the round texture where the turn is complete.
+// DECK 1 draws a stratiform deck's sprites seen from under its base, with the base's relief.
 
 #if defined VERTEX_SHADER
 in vec2 in_corner;        // per vertex: 8 unused (the polygon's), then a quad's corners
@@ -18,6 +19,11 @@ in vec4 in_rgba;
 in vec3 in_normal;        // ENU unit normal, or zero: face the camera
 in vec3 in_rim;           // display colour of the thin outer texels (SpriteDraw.rgba's
                           // rim), or negative: none (the texel's own colour to the edge)
+in float in_base;         // the flat base the sprite is cut at, metres over the eye
+#if DECK
+in vec3 in_deck;          // its deck's base, metres over the eye (the eye is under it), and
+                          // the eye's east and north less the deck's drift (mod 64 km)
+#endif
 uniform mat3 u_view_rot;
 uniform mat4 u_proj;
 // Per sheet slot, and last for a flat-bottomed sprite part-way to the round one, the convex
@@ -32,6 +38,7 @@ uniform mat4 u_proj;
 uniform vec4 u_polygon[POLYGONS * 8];  // fine set, then coarse
 uniform vec4 u_box[POLYGONS * 2];  // each set's bounding boxes: fine, then coarse
 uniform float u_viewport_px;  // the target's width
+uniform float u_inv_haze_m;  // 1 / the haze distance the sprites' colours were faded with
 // Per sheet slot, its mean shade (sprite_sheet.cell_shades): texels are divided by it, so a
 // sprite's mean colour is the one its cloud was shaded and hazed to.
 uniform float u_cell_shade[SHEET_CELLS * SHEET_CELLS];
@@ -43,6 +50,15 @@ out float v_round_mix;
 #endif
 out vec4 v_rgba;
 flat out vec4 v_rim;  // rgb, and 1 where the sprite has a rim, else 0
+out float v_above_base_m;  // how far the quad's point is above its cloud's flat base
+flat out float v_base_soft_m;  // over how many metres above the base the cut fades in
+flat out float v_base_depth_m;  // how far above the base the base's shadow reaches
+flat out float v_base_dim;  // the shade at the base, its haze taken into account
+flat out float v_haze;  // the share of the sprite's colour that is air (layout.hazed)
+#if DECK
+out vec3 v_ray;  // the quad's point, eye-relative (ENU): the ray the fragment is seen along
+flat out vec3 v_deck;  // in_deck
+#endif
 
 vec2 cell_uv(float cell, vec2 local) {
     vec2 origin = vec2(mod(cell, float(SHEET_CELLS)), floor(cell / float(SHEET_CELLS)));
@@ -99,6 +115,10 @@ void main() {
         vec3 u, v;
         quad_axes(n, u, v);
         vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
+        v_above_base_m = world.z - in_base;
+#if DECK
+        v_ray = world;
+#endif
         c = u_view_rot * world;
         // Seen edge-on a quad is a line: fade it by the angle to the eye (Wang's in-cloud rule).
         alpha *= abs(dot(n, normalize(-in_centre)));
@@ -108,12 +128,35 @@ void main() {
         // one camera meet without seams, and a rolled view does not roll the clouds' bases.
         vec3 u, v;
         quad_axes(-in_centre / max(length(in_centre), 1e-6), u, v);
-        c = u_view_rot * (in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size);
+        vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
+        v_above_base_m = world.z - in_base;
+#if DECK
+        v_ray = world;
+#endif
+        c = u_view_rot * world;
         // Sprites the eye is about to pass through fade out instead of filling the screen.
         float dist = length(u_view_rot * in_centre);
         alpha *= smoothstep(0.1 * in_size, 0.6 * in_size, dist);
     }
     gl_Position = u_proj * vec4(c, 1.0);
+    // Seen edge-on, every sprite's cut lies on one line: the cloud's flat base. Seen more
+    // steeply, each cut is its own straight edge across the base's outline, so it softens
+    // into the sprite's round lower half instead, as the angle goes from BASE_SOFT_FROM to
+    // BASE_SOFT_TO (the way a flat-bottomed texture turns round).
+    float steep = abs(in_centre.z) / max(length(in_centre), 1e-3);
+    v_base_soft_m = 0.5 * in_size * smoothstep(BASE_SOFT_FROM, BASE_SOFT_TO, steep);
+    v_base_depth_m = BASE_SHADE_DEPTH * in_size;
+    // A sprite's colour is cloud x (1 - haze) + air x haze (layout.hazed): its texels' shade
+    // and its base's darken the cloud's light, not the air's before it, so both fade by the
+    // haze (aerial perspective takes a far cloud's detail, not only its colour).
+    v_haze = 1.0 - exp(-length(in_centre) * u_inv_haze_m);
+    // From below, the base is the cloud's underside, in the whole cloud's shadow; seen near
+    // edge-on, what shows of it is the cloud's lower side, which the sun reaches sideways.
+    float underside = smoothstep(BASE_DIM_FROM, BASE_DIM_TO, steep);
+    v_base_dim = mix(mix(1.0, BASE_DIM, underside), 1.0, v_haze);
+#if DECK
+    v_deck = in_deck;
+#endif
 #if ROUND_MIX
     v_uv = cell_uv(in_texture, local);
     v_round_uv = cell_uv(float(ROUND_SLOT), local);
@@ -143,8 +186,49 @@ in float v_round_mix;
 in vec4 v_rgba;
 flat in float v_inv_shade;
 flat in vec4 v_rim;
+in float v_above_base_m;
+flat in float v_base_soft_m;
+flat in float v_base_depth_m;
+flat in float v_base_dim;
+flat in float v_haze;
+#if DECK
+in vec3 v_ray;
+flat in vec3 v_deck;
+#endif
 uniform sampler2D u_sheet;
 out vec4 f_colour;
+#if DECK
+// Value noise in -1..1 on a unit lattice, smooth between its points: no tile repeats.
+float lattice(vec2 q) {
+    return fract(sin(dot(q, vec2(127.1, 311.7))) * 43758.5453) * 2.0 - 1.0;
+}
+float value_noise(vec2 p) {
+    vec2 i = floor(p), f = fract(p);
+    vec2 w = f * f * (3.0 - 2.0 * f);
+    return mix(mix(lattice(i), lattice(i + vec2(1.0, 0.0)), w.x),
+               mix(lattice(i + vec2(0.0, 1.0)), lattice(i + vec2(1.0, 1.0)), w.x), w.y);
+}
+// The deck's base as the eye sees it from below: where this fragment's ray meets the base's
+// plane, a darker or lighter patch (thicker and thinner parts of the deck; DECK_SCALES_M,
+// each weighed by DECK_RELIEF), in the deck's own frame, so every sprite of it shows the one
+// relief and it drifts with the wind. Each scale fades out once a pixel spans a third of it,
+// so nothing shimmers toward the horizon.
+float deck_relief() {
+    vec2 seen = v_ray.xy * (v_deck.x / max(v_ray.z, 1e-3));
+    vec2 p = seen + v_deck.yz;
+    float pixel_m = length(fwidth(seen));
+    float n = 0.0;
+    for (int k = 0; k < 3; k++) {
+        float scale = DECK_SCALES_M[k];
+        float keep = 1.0 - smoothstep(0.1 * scale, 0.33 * scale, pixel_m);
+        // Each scale's lattice turned its own way, so no grid lines up across them.
+        float a = 0.9 * float(k + 1);
+        vec2 q = mat2(cos(a), sin(a), -sin(a), cos(a)) * p;
+        n += DECK_RELIEF[k] * keep * value_noise(q / scale + 17.0 * float(k + 1));
+    }
+    return 1.0 + n;
+}
+#endif
 void main() {
     vec4 t = texture(u_sheet, v_uv);
 #if ROUND_MIX
@@ -152,7 +236,12 @@ void main() {
         t = mix(t, texture(u_sheet, v_round_uv), v_round_mix);
     }
 #endif
-    float a = t.a * v_rgba.a;
+    // A heaped cloud's sprites end at its flat base, the condensation level, antialiased
+    // over the pixel the base crosses (a round puff's lower half would hang below it), or
+    // seen steeply, fading in over v_base_soft_m above it.
+    float pixel_m = max(fwidth(v_above_base_m), 1e-3);
+    float cut = clamp((v_above_base_m + 0.5 * pixel_m) / max(pixel_m, v_base_soft_m), 0.0, 1.0);
+    float a = t.a * v_rgba.a * cut;
     // Most of a soft sprite is empty: skip the blend there (fill rate is what sprites cost).
     if (a < 1.0 / 512.0) {
         discard;
@@ -160,7 +249,15 @@ void main() {
     // A texel's opacity is how thick the cloud is there: the thinner, the more it shows the
     // light its sprite's centre is shaded without (the rim: the forward peak that the cloud
     // before the centre hides, which a silhouette's thin edge lets through).
-    vec3 body = v_rgba.rgb * (t.rgb * v_inv_shade);
-    f_colour = legacy_output(vec4(mix(body, v_rim.rgb, (1.0 - t.a) * v_rim.a) * a, a));
+    vec3 body = v_rgba.rgb * mix(t.rgb * v_inv_shade, vec3(1.0), v_haze);
+#if DECK
+    body *= mix(deck_relief(), 1.0, v_haze);
+#endif
+    // The lowest part of a flat-based cloud is in the shadow of all of it: darker toward the
+    // base within each sprite, so the base is one dark band under the cloud, not the lit
+    // lower halves of the puffs its cut ends (a sprite's own colour is one value).
+    // (Not the rim: the silver lining is the sun's forward beam through the thin edge.)
+    float base_shade = mix(v_base_dim, 1.0, clamp(v_above_base_m / v_base_depth_m, 0.0, 1.0));
+    f_colour = legacy_output(vec4(mix(body * base_shade, v_rim.rgb, (1.0 - t.a) * v_rim.a) * a, a));
 }
 #endif
