@@ -52,6 +52,7 @@ out vec4 v_rgba;
 flat out vec4 v_rim;  // rgb, and 1 where the sprite has a rim, else 0
 out float v_above_base_m;  // how far the quad's point is above its cloud's flat base
 flat out float v_base_soft_m;  // over how many metres above the base the cut fades in
+flat out float v_pixel_m;  // a pixel's size at the sprite, metres
 flat out float v_base_depth_m;  // how far above the base the base's shadow reaches
 flat out float v_base_dim;  // the shade at the base, its haze taken into account
 flat out float v_haze;  // the share of the sprite's colour that is air (layout.hazed)
@@ -144,7 +145,10 @@ void main() {
     // into the sprite's round lower half instead, as the angle goes from BASE_SOFT_FROM to
     // BASE_SOFT_TO (the way a flat-bottomed texture turns round).
     float steep = abs(in_centre.z) / max(length(in_centre), 1e-3);
-    v_base_soft_m = 0.5 * in_size * smoothstep(BASE_SOFT_FROM, BASE_SOFT_TO, steep);
+    // A pixel's size at the sprite, in metres (a facing quad's both ways): the cut's
+    // antialiasing, without a derivative per fragment.
+    v_pixel_m = max(length(in_centre) / (0.5 * u_viewport_px * u_proj[0][0]), 1e-3);
+    v_base_soft_m = max(v_pixel_m, 0.5 * in_size * smoothstep(BASE_SOFT_FROM, BASE_SOFT_TO, steep));
     v_base_depth_m = BASE_SHADE_DEPTH * in_size;
     // A sprite's colour is cloud x (1 - haze) + air x haze (layout.hazed): its texels' shade
     // and its base's darken the cloud's light, not the air's before it, so both fade by the
@@ -188,6 +192,7 @@ flat in float v_inv_shade;
 flat in vec4 v_rim;
 in float v_above_base_m;
 flat in float v_base_soft_m;
+flat in float v_pixel_m;
 flat in float v_base_depth_m;
 flat in float v_base_dim;
 flat in float v_haze;
@@ -239,8 +244,7 @@ void main() {
     // A heaped cloud's sprites end at its flat base, the condensation level, antialiased
     // over the pixel the base crosses (a round puff's lower half would hang below it), or
     // seen steeply, fading in over v_base_soft_m above it.
-    float pixel_m = max(fwidth(v_above_base_m), 1e-3);
-    float cut = clamp((v_above_base_m + 0.5 * pixel_m) / max(pixel_m, v_base_soft_m), 0.0, 1.0);
+    float cut = clamp((v_above_base_m + 0.5 * v_pixel_m) / v_base_soft_m, 0.0, 1.0);
     float a = t.a * v_rgba.a * cut;
     // Most of a soft sprite is empty: skip the blend there (fill rate is what sprites cost).
     if (a < 1.0 / 512.0) {

@@ -69,9 +69,14 @@ void main() {
     vec4 acc = vec4(0.0);
     if (leave > enter) {
         float dt = (leave - enter) / float(u_steps);
+        // Each texel's samples start at its own fraction of a step (interleaved gradient
+        // noise): samples at the same depths for every texel would cut the volume into
+        // slices, shelves stacked up a tower; staggered, what is left is a texel-fine dither
+        // that the impostor's filtering evens out.
+        float jitter = fract(52.9829189 * fract(dot(gl_FragCoord.xy, vec2(0.06711056, 0.00583715))));
         float keep = 1.0;
         for (int i = 0; i < u_steps; ++i) {
-            vec3 p = u_eye + dir * (enter + (float(i) + 0.5) * dt);
+            vec3 p = u_eye + dir * (enter + (float(i) + jitter) * dt);
             vec3 tc = p / (2.0 * u_half) + 0.5;
             vec4 b = texture(u_light1, tc);
             if (b.b > DENSITY_FLOOR) {
