@@ -685,6 +685,8 @@ def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -
         "ROUND_TO": "0.75",
         "ROUND_MIX": "1",
         "FINE_MIN_PX": "48.0",
+        "DECK": "0",
+        "FLAT_BASE": "1",
         "BASE_SOFT_FROM": "0.2",
         "BASE_SOFT_TO": "0.45",
         "BASE_DIM": "0.55",

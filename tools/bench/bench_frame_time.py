@@ -39,6 +39,7 @@ PRESETS = (
     "overcast-stratus",
     "high-cirrus",
     "thunderstorm",
+    "towering-cumulus",
 )
 
 

@@ -109,6 +109,7 @@ _RELIEF_PERIOD_M = 65536.0
 # Sprite shader variants (bits of the code `_variants` gives each sprite).
 _MIXING = 1
 _DECK = 2
+_FLAT_BASE = 4
 # A sprite with no flat base is cut this far below the eye: nowhere a picture shows.
 _NO_BASE_M = -1.0e9
 
@@ -176,13 +177,19 @@ class Renderer:
         }
         self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
         # One read of the sheet per fragment, and two for the sprites turning round; the
-        # base of a deck seen from below (DECK) with its relief: variant codes (`_variants`).
+        # base of a deck seen from below (DECK) with its relief; the flat base of heaped
+        # clouds (FLAT_BASE): variant codes (`_variants`), each compiled out where not drawn.
         self._sprite_progs = {
             code: self.shaders.program(
                 "sprites.glsl",
-                defines | {"ROUND_MIX": str(code & _MIXING), "DECK": str((code & _DECK) >> 1)},
+                defines
+                | {
+                    "ROUND_MIX": str(int(bool(code & _MIXING))),
+                    "DECK": str(int(bool(code & _DECK))),
+                    "FLAT_BASE": str(int(bool(code & _FLAT_BASE))),
+                },
             )
-            for code in range(4)
+            for code in range(8)
         }
         self._upsample_prog = self.shaders.program("upsample.glsl")
         levels = load_sheet()  # 512 down to 32, as Wang's sheet
@@ -745,7 +752,8 @@ class Renderer:
         inst[:, 13:16] = draw.rgba[:, 4:7] if draw.rgba.shape[1] > 4 else -1.0
         # The flat base the sprite is cut at, over the eye (SpriteBatch.base_m).
         base = s.base_m
-        inst[:, 16] = np.where(np.isnan(base), _NO_BASE_M, base - np.float32(eye_m[2]))
+        based = ~np.isnan(base)
+        inst[:, 16] = np.where(based, base - np.float32(eye_m[2]), _NO_BASE_M)
         # A deck's base over the eye, for its relief seen from below (0: not drawn so), and
         # where the deck has drifted to from the eye: its relief drifts with it (mod 64 km,
         # so float32 keeps a centimetre of it).
@@ -775,7 +783,7 @@ class Renderer:
         kind = "sprites" if shape == "polygon" else "small_sprites"
         with self._pass(_sprite_pass_name(target.name), kind):
             # In order, each run of sprites with the variant it needs (back to front holds).
-            for start, stop, code in _variant_runs(_variants(draw, eye_m, under_deck)):
+            for start, stop, code in _variant_runs(_variants(draw, eye_m, under_deck, based)):
                 vao = self._sprite_vaos[code]
                 self._bind_instances(vao, self._sprite_progs[code], start)
                 vao.render(
@@ -881,13 +889,19 @@ def _glsl_floats(values: tuple[float, ...]) -> str:
 
 
 def _variants(
-    draw: SpriteDraw, eye_m: tuple[float, float, float], under_deck: npt.NDArray[np.bool_]
+    draw: SpriteDraw,
+    eye_m: tuple[float, float, float],
+    under_deck: npt.NDArray[np.bool_],
+    based: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.int8]:
     """(N,) each sprite's shader variant: _MIXING for the second read of a flat-bottomed
-    sprite turning round, _DECK for a deck's sprite seen from under its base."""
+    sprite turning round, _DECK for a deck's sprite seen from under its base, _FLAT_BASE for
+    a heaped cloud's sprite cut at its flat base."""
     codes = turning_round(draw, eye_m).astype(np.int8)
     if under_deck.any():
-        codes |= under_deck.astype(np.int8) << 1
+        codes |= under_deck.astype(np.int8) * np.int8(_DECK)
+    if based.any():
+        codes |= based.astype(np.int8) * np.int8(_FLAT_BASE)
     return codes
 
 

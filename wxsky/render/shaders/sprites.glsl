@@ -7,7 +7,8 @@
 // fragment; llvmpipe pays for that read in every fragment of a draw whatever the branch says,
 // so the renderer draws only the few sprites half-way through that turn with it, and all
 // others with ROUND_MIX 0: one read, of the round texture where the turn is complete.
-// DECK 1 draws a stratiform deck's sprites seen from under its base, with the base's relief.
+// DECK 1 draws a stratiform deck's sprites seen from under its base, with the base's relief;
+// FLAT_BASE 1 heaped clouds' sprites, cut at and shaded toward their layer's flat base.
 
 #if defined VERTEX_SHADER
 in vec2 in_corner;        // per vertex: 8 unused (the polygon's), then a quad's corners
@@ -19,7 +20,9 @@ in vec4 in_rgba;
 in vec3 in_normal;        // ENU unit normal, or zero: face the camera
 in vec3 in_rim;           // display colour of the thin outer texels (SpriteDraw.rgba's
                           // rim), or negative: none (the texel's own colour to the edge)
+#if FLAT_BASE
 in float in_base;         // the flat base the sprite is cut at, metres over the eye
+#endif
 #if DECK
 in vec3 in_deck;          // its deck's base, metres over the eye (the eye is under it), and
                           // the eye's east and north less the deck's drift (mod 64 km)
@@ -50,11 +53,13 @@ out float v_round_mix;
 #endif
 out vec4 v_rgba;
 flat out vec4 v_rim;  // rgb, and 1 where the sprite has a rim, else 0
+#if FLAT_BASE
 out float v_above_base_m;  // how far the quad's point is above its cloud's flat base
 flat out float v_base_soft_m;  // over how many metres above the base the cut fades in
 flat out float v_pixel_m;  // a pixel's size at the sprite, metres
 flat out float v_base_depth_m;  // how far above the base the base's shadow reaches
 flat out float v_base_dim;  // the shade at the base, its haze taken into account
+#endif
 flat out float v_haze;  // the share of the sprite's colour that is air (layout.hazed)
 #if DECK
 out vec3 v_ray;  // the quad's point, eye-relative (ENU): the ray the fragment is seen along
@@ -116,7 +121,9 @@ void main() {
         vec3 u, v;
         quad_axes(n, u, v);
         vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
+#if FLAT_BASE
         v_above_base_m = world.z - in_base;
+#endif
 #if DECK
         v_ray = world;
 #endif
@@ -130,7 +137,9 @@ void main() {
         vec3 u, v;
         quad_axes(-in_centre / max(length(in_centre), 1e-6), u, v);
         vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
+#if FLAT_BASE
         v_above_base_m = world.z - in_base;
+#endif
 #if DECK
         v_ray = world;
 #endif
@@ -140,6 +149,11 @@ void main() {
         alpha *= smoothstep(0.1 * in_size, 0.6 * in_size, dist);
     }
     gl_Position = u_proj * vec4(c, 1.0);
+    // A sprite's colour is cloud x (1 - haze) + air x haze (layout.hazed): its texels' shade
+    // and its base's darken the cloud's light, not the air's before it, so both fade by the
+    // haze (aerial perspective takes a far cloud's detail, not only its colour).
+    v_haze = 1.0 - exp(-length(in_centre) * u_inv_haze_m);
+#if FLAT_BASE
     // Seen edge-on, every sprite's cut lies on one line: the cloud's flat base. Seen more
     // steeply, each cut is its own straight edge across the base's outline, so it softens
     // into the sprite's round lower half instead, as the angle goes from BASE_SOFT_FROM to
@@ -150,14 +164,11 @@ void main() {
     v_pixel_m = max(length(in_centre) / (0.5 * u_viewport_px * u_proj[0][0]), 1e-3);
     v_base_soft_m = max(v_pixel_m, 0.5 * in_size * smoothstep(BASE_SOFT_FROM, BASE_SOFT_TO, steep));
     v_base_depth_m = BASE_SHADE_DEPTH * in_size;
-    // A sprite's colour is cloud x (1 - haze) + air x haze (layout.hazed): its texels' shade
-    // and its base's darken the cloud's light, not the air's before it, so both fade by the
-    // haze (aerial perspective takes a far cloud's detail, not only its colour).
-    v_haze = 1.0 - exp(-length(in_centre) * u_inv_haze_m);
     // From below, the base is the cloud's underside, in the whole cloud's shadow; seen near
     // edge-on, what shows of it is the cloud's lower side, which the sun reaches sideways.
     float underside = smoothstep(BASE_DIM_FROM, BASE_DIM_TO, steep);
     v_base_dim = mix(mix(1.0, BASE_DIM, underside), 1.0, v_haze);
+#endif
 #if DECK
     v_deck = in_deck;
 #endif
@@ -190,11 +201,13 @@ in float v_round_mix;
 in vec4 v_rgba;
 flat in float v_inv_shade;
 flat in vec4 v_rim;
+#if FLAT_BASE
 in float v_above_base_m;
 flat in float v_base_soft_m;
 flat in float v_pixel_m;
 flat in float v_base_depth_m;
 flat in float v_base_dim;
+#endif
 flat in float v_haze;
 #if DECK
 in vec3 v_ray;
@@ -244,8 +257,11 @@ void main() {
     // A heaped cloud's sprites end at its flat base, the condensation level, antialiased
     // over the pixel the base crosses (a round puff's lower half would hang below it), or
     // seen steeply, fading in over v_base_soft_m above it.
-    float cut = clamp((v_above_base_m + 0.5 * v_pixel_m) / v_base_soft_m, 0.0, 1.0);
-    float a = t.a * v_rgba.a * cut;
+#if FLAT_BASE
+    float a = t.a * v_rgba.a * clamp((v_above_base_m + 0.5 * v_pixel_m) / v_base_soft_m, 0.0, 1.0);
+#else
+    float a = t.a * v_rgba.a;
+#endif
     // Most of a soft sprite is empty: skip the blend there (fill rate is what sprites cost).
     if (a < 1.0 / 512.0) {
         discard;
@@ -261,7 +277,9 @@ void main() {
     // base within each sprite, so the base is one dark band under the cloud, not the lit
     // lower halves of the puffs its cut ends (a sprite's own colour is one value).
     // (Not the rim: the silver lining is the sun's forward beam through the thin edge.)
-    float base_shade = mix(v_base_dim, 1.0, clamp(v_above_base_m / v_base_depth_m, 0.0, 1.0));
-    f_colour = legacy_output(vec4(mix(body * base_shade, v_rim.rgb, (1.0 - t.a) * v_rim.a) * a, a));
+#if FLAT_BASE
+    body *= mix(v_base_dim, 1.0, clamp(v_above_base_m / v_base_depth_m, 0.0, 1.0));
+#endif
+    f_colour = legacy_output(vec4(mix(body, v_rim.rgb, (1.0 - t.a) * v_rim.a) * a, a));
 }
 #endif
