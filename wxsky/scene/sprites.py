@@ -164,7 +164,7 @@ class SpriteBatch:
             slab_m=(self.slab_m + np.float32(offset_m[2])).astype(np.float32),
             base_m=(self.base_m + np.float32(offset_m[2])).astype(np.float32),
             # Moved across with everything of its layer: the drift's way (layer_block).
-            drift_m=(self.drift_m + np.float32(offset_m[:2])).astype(np.float32),
+            drift_m=(self.drift_m + np.asarray(offset_m[:2], np.float32)).astype(np.float32),
         )
 
     @staticmethod
