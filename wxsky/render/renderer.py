@@ -759,8 +759,12 @@ class Renderer:
         # so float32 keeps a centimetre of it).
         deck = s.slab_m[:, 0] - np.float32(eye_m[2])
         under_deck = deck > 0.0  # NaN (no deck) compares False
-        inst[:, 17] = np.where(under_deck, deck, 0.0)
-        inst[:, 18:20] = np.mod(np.asarray(eye_m[:2], np.float64) - s.drift_m, _RELIEF_PERIOD_M)
+        inst[:, 17:20] = 0.0
+        if under_deck.any():  # (the drift is read, and cut, only for a deck's sprites)
+            inst[under_deck, 17] = deck[under_deck]
+            inst[under_deck, 18:20] = np.mod(
+                np.asarray(eye_m[:2], np.float64) - s.drift_m[under_deck], _RELIEF_PERIOD_M
+            )
         data = inst.tobytes()
         if len(data) > self._instance_buf.size:
             self._instance_buf.orphan(len(data) * 2)
