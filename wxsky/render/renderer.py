@@ -110,6 +110,7 @@ _RELIEF_PERIOD_M = 65536.0
 _MIXING = 1
 _DECK = 2
 _FLAT_BASE = 4
+_SPRITE_VARIANTS = 8
 # A sprite with no flat base is cut this far below the eye: nowhere a picture shows.
 _NO_BASE_M = -1.0e9
 
@@ -179,18 +180,11 @@ class Renderer:
         # One read of the sheet per fragment, and two for the sprites turning round; the
         # base of a deck seen from below (DECK) with its relief; the flat base of heaped
         # clouds (FLAT_BASE): variant codes (`_variants`), each compiled out where not drawn.
-        self._sprite_progs = {
-            code: self.shaders.program(
-                "sprites.glsl",
-                defines
-                | {
-                    "ROUND_MIX": str(int(bool(code & _MIXING))),
-                    "DECK": str(int(bool(code & _DECK))),
-                    "FLAT_BASE": str(int(bool(code & _FLAT_BASE))),
-                },
-            )
-            for code in range(8)
-        }
+        # Made at their first draw (`_sprite_variant`; the daemon's warm_up makes them all):
+        # a test's renderer draws one or two of the eight.
+        self._sprite_defines = defines
+        self._sprite_progs: dict[int, moderngl.Program] = {}
+        self._sprite_vaos: dict[int, moderngl.VertexArray] = {}
         self._upsample_prog = self.shaders.program("upsample.glsl")
         levels = load_sheet()  # 512 down to 32, as Wang's sheet
         size = (levels[0].shape[1], levels[0].shape[0])
@@ -212,15 +206,13 @@ class Renderer:
         boxes = np.concatenate(
             [np.concatenate([p.min(axis=1), p.max(axis=1)], axis=1) for p in (fine, coarse)]
         )
-        shades = cell_shades(levels)
-        for prog in self._sprite_progs.values():
-            _write(prog, "u_polygon", np.concatenate([fine, coarse]).tobytes())
-            _write(prog, "u_box", boxes.tobytes())
-            _write(prog, "u_cell_shade", shades.tobytes())
+        # What every variant is given once, when it is made.
+        self._sprite_constants = (
+            np.concatenate([fine, coarse]).tobytes(),
+            boxes.tobytes(),
+            cell_shades(levels).tobytes(),
+        )
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
-        self._sprite_vaos = {
-            code: self._make_sprite_vao(prog) for code, prog in self._sprite_progs.items()
-        }
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
         self._meter_prog = self.shaders.program("meter.glsl")
         self._meter_vao = self.ctx.vertex_array(self._meter_prog, [])
@@ -271,6 +263,8 @@ class Renderer:
         sky layer is drawn whole the first time; both made the first frame the slowest."""
         self.render_frame(frame)
         self._warm_sky_variants(frame.camera, frame.sky)
+        for code in range(_SPRITE_VARIANTS):  # a deck or a flat base may come later
+            self._sprite_variant(code)
         self.finish()
 
     def _warm_sky_variants(self, cam: Camera, sky: SkyParams) -> None:
@@ -772,7 +766,9 @@ class Renderer:
         # GLSL matrices are column-major: hand it the transpose of numpy's row-major layout.
         view_rot = np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes()
         projection = np.ascontiguousarray(proj.T, dtype=np.float32).tobytes()
-        for prog in self._sprite_progs.values():
+        runs = _variant_runs(_variants(draw, eye_m, under_deck, based))
+        for code in {code for _, _, code in runs}:
+            prog = self._sprite_variant(code)[0]
             _write(prog, "u_view_rot", view_rot)
             _write(prog, "u_proj", projection)
             _set(prog, "u_sheet", 0)
@@ -787,9 +783,9 @@ class Renderer:
         kind = "sprites" if shape == "polygon" else "small_sprites"
         with self._pass(_sprite_pass_name(target.name), kind):
             # In order, each run of sprites with the variant it needs (back to front holds).
-            for start, stop, code in _variant_runs(_variants(draw, eye_m, under_deck, based)):
-                vao = self._sprite_vaos[code]
-                self._bind_instances(vao, self._sprite_progs[code], start)
+            for start, stop, code in runs:
+                prog, vao = self._sprite_variant(code)
+                self._bind_instances(vao, prog, start)
                 vao.render(
                     moderngl.TRIANGLE_STRIP,
                     vertices=_SHAPES[shape][1],
@@ -803,6 +799,28 @@ class Renderer:
             self._finish()
 
     # -- plumbing ---------------------------------------------------------------------
+
+    def _sprite_variant(self, code: int) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        """The sprite program of a variant code (`_variants`) and its vertex array, made and
+        given its constants at the first call."""
+        prog = self._sprite_progs.get(code)
+        if prog is None:
+            prog = self.shaders.program(
+                "sprites.glsl",
+                self._sprite_defines
+                | {
+                    "ROUND_MIX": str(int(bool(code & _MIXING))),
+                    "DECK": str(int(bool(code & _DECK))),
+                    "FLAT_BASE": str(int(bool(code & _FLAT_BASE))),
+                },
+            )
+            polygons, boxes, shades = self._sprite_constants
+            _write(prog, "u_polygon", polygons)
+            _write(prog, "u_box", boxes)
+            _write(prog, "u_cell_shade", shades)
+            self._sprite_progs[code] = prog
+            self._sprite_vaos[code] = self._make_sprite_vao(prog)
+        return prog, self._sprite_vaos[code]
 
     def _make_sprite_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
         vao = self.ctx.vertex_array(prog, [(self._corner_buf, "2f", "in_corner")])
