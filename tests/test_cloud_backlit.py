@@ -23,7 +23,7 @@ from tests.cloud_light_helpers import (
 )
 from wxsky.app.snapshot import take_snapshot
 from wxsky.errors import ConfigError
-from wxsky.host.compositor import composite, layers_from_images
+from wxsky.host.compositor import clouds_alpha
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
@@ -65,15 +65,7 @@ def shot(
     )
     taken = take_snapshot(state, camera, SETTINGS, renderer)
 
-    def over(level: int) -> npt.NDArray[np.float64]:
-        images = dict(taken.layers)
-        images["sky"] = np.full_like(images["sky"], level)
-        images["sky"][..., 3] = 255
-        rgb = composite(layers_from_images(images, taken.ring_quads_m), camera)[..., :3]
-        return rgb.astype(np.float64) / 255.0
-
-    # Over black the clouds alone (premultiplied); over white, what they leave of the sky.
-    alpha = 1.0 - (over(255) - over(0)).mean(axis=2)
+    alpha = clouds_alpha(taken.layers, taken.ring_quads_m, camera)
     return picture_luminance(taken.image), alpha, camera
 
 

@@ -16,7 +16,7 @@ import pytest
 from wxsky.app.snapshot import LAYER_NAMES, picture
 from wxsky.cli import main as cli_main
 from wxsky.engine.stages import SkyEngine
-from wxsky.host.compositor import composite, layers_from_images
+from wxsky.host.compositor import clouds_alpha
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import SceneSettings
@@ -44,14 +44,8 @@ def _cloud_cover(renderer: Renderer, engine: SkyEngine, heading: float) -> float
     )
     engine.set_camera(cam)
     snap = picture(renderer, engine.advance(0.0))
-    seen = []
-    for sky in (0, 255):
-        images = {name: snap.layers[name] for name in LAYER_NAMES}
-        images["sky"] = np.full_like(images["sky"], sky)
-        images["sky"][..., 3] = 255
-        seen.append(composite(layers_from_images(images, snap.ring_quads_m), cam) / 255.0)
-    through = (seen[1] - seen[0])[..., :3].mean()
-    return float(1.0 - through)
+    images = {name: snap.layers[name] for name in LAYER_NAMES}
+    return float(clouds_alpha(images, snap.ring_quads_m, cam).mean())
 
 
 def _cover_at(state: WeatherState, renderer: Renderer, minutes: int) -> float:

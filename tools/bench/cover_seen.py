@@ -28,9 +28,9 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tools.bench.flat_bases import ray_elevation_deg  # noqa: E402
+from tools.bench.banding import ray_elevation_deg  # noqa: E402
 from wxsky.app.snapshot import take_snapshot  # noqa: E402
-from wxsky.host.compositor import composite, layers_from_images  # noqa: E402
+from wxsky.host.compositor import clouds_alpha  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
 from wxsky.scene.camera import Camera  # noqa: E402
 from wxsky.scene.layout import SceneSettings  # noqa: E402
@@ -61,15 +61,7 @@ def cloud_alpha(renderer: Renderer, state: WeatherState, heading_deg: float) -> 
         height_px=SIZE[1],
     )
     shot = take_snapshot(state, camera, SceneSettings(), renderer=renderer)
-    pictures = []
-    for level in (0, 255):
-        sky = np.zeros_like(shot.layers["sky"])
-        sky[..., :3] = level
-        sky[..., 3] = 255
-        layers = layers_from_images({**shot.layers, "sky": sky}, shot.ring_quads_m)
-        pictures.append(composite(layers, camera)[..., :3].astype(np.float64) / 255.0)
-    through = (pictures[1] - pictures[0]).mean(axis=2)
-    alpha: F64 = np.clip(1.0 - through, 0.0, 1.0)
+    alpha: F64 = np.clip(clouds_alpha(shot.layers, shot.ring_quads_m, camera), 0.0, 1.0)
     return alpha
 
 

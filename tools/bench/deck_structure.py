@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from tools.bench.banding import LUMA  # noqa: E402
 from tools.gallery import light_sheet as sheet  # noqa: E402
 from wxsky.app.snapshot import take_snapshot  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
@@ -46,7 +47,6 @@ PITCH_DEG = 30.0
 FOV_DEG = 60.0
 EYE_AGL_M = 2.0
 SMALL_PX, LARGE_PX = 9, 61
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 BAR = 1.5
 MOMENTS: tuple[tuple[str, float | None], ...] = (("noon", None), ("sun+5", 5.0))
 

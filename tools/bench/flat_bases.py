@@ -31,9 +31,10 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from tools.bench.banding import ray_elevation_deg  # noqa: E402
 from wxsky.engine.stages import SkyEngine  # noqa: E402
 from wxsky.render.renderer import Renderer  # noqa: E402
-from wxsky.scene.camera import Camera, camera_basis  # noqa: E402
+from wxsky.scene.camera import Camera  # noqa: E402
 from wxsky.scene.layout import SceneSettings  # noqa: E402
 from wxsky.settings.presets import load_preset  # noqa: E402
 from wxsky.weather.state import CloudType, WeatherState  # noqa: E402
@@ -67,20 +68,6 @@ class CloudBase:
     @property
     def flat(self) -> bool:
         return abs(self.error_deg) <= TOLERANCE_DEG
-
-
-def ray_elevation_deg(size: tuple[int, int], pitch_deg: float, fov_deg: float) -> F64:
-    """(H, W) elevation of each pixel's ray through its centre (row 0 the top), level roll."""
-    width, height = size
-    right, up, fwd = camera_basis(0.0, pitch_deg, 0.0)
-    tan_x = math.tan(math.radians(fov_deg) / 2.0)
-    tan_y = tan_x * height / width
-    x = ((np.arange(width) + 0.5) / width * 2.0 - 1.0)[None, :]
-    y = ((np.arange(height) + 0.5) / height * 2.0 - 1.0)[:, None]
-    rays = [fwd[i] + x * tan_x * right[i] - y * tan_y * up[i] for i in range(3)]
-    norm = np.sqrt(rays[0] ** 2 + rays[1] ** 2 + rays[2] ** 2)
-    out: F64 = np.degrees(np.arcsin(np.clip(rays[2] / norm, -1.0, 1.0)))
-    return out
 
 
 def cumulus_base_m(state: WeatherState) -> float:

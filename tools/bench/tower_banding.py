@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from tools.bench.banding import LUMA  # noqa: E402
 from tools.gallery.tower_sky_strip import SETTINGS, watched_cell  # noqa: E402
 from wxsky.app.snapshot import picture  # noqa: E402
 from wxsky.engine.stages import SkyEngine  # noqa: E402
@@ -39,7 +40,6 @@ from wxsky.weather.state import WeatherState  # noqa: E402
 
 SIZE = (480, 400)
 PITCH_DEG = 20.0
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 def box_rect(

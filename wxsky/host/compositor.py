@@ -151,6 +151,23 @@ def composite(layers: Layers, camera: Camera, ground: Ground | None = None) -> U
     return result
 
 
+def clouds_alpha(images: Mapping[str, Image], ring_quads_m: F64, camera: Camera) -> F64:
+    """(H, W) how opaque a frame's clouds are together at each pixel (the layers named as
+    `layers_from_images` names them), exactly rather than guessed from colours: composited
+    over a black sky and over a white one, the two pictures differ by what the clouds let
+    through (premultiplied layers: out = clouds + (1 - alpha) x sky). Not clipped: to the
+    8-bit pictures' rounding."""
+    seen = []
+    for level in (0, 255):
+        sky = np.zeros_like(images["sky"])
+        sky[..., :3] = level
+        sky[..., 3] = 255
+        layers = layers_from_images({**images, "sky": sky}, ring_quads_m)
+        seen.append(composite(layers, camera)[..., :3].astype(np.float64) / 255.0)
+    alpha: F64 = 1.0 - (seen[1] - seen[0]).mean(axis=2)
+    return alpha
+
+
 def composite_linear(layers: Layers, camera: Camera, ground: Ground | None = None) -> F64:
     """(H, W, 3) the composite of float layers (a linear renderer's: scene-linear colour), as
     `composite` makes it, unclipped."""

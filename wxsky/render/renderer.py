@@ -82,7 +82,8 @@ BASE_SHADE_DEPTH = 0.5
 BASE_DIM_FROM = 0.1
 BASE_DIM_TO = 0.3
 # A stratiform deck's base seen from below: darker and lighter patches, at these scales and
-# strengths (a share of the colour, each), fixed to each sprite (sprites.glsl deck_relief).
+# strengths (a share of the colour, each), in the deck's drifting frame (sprites.glsl
+# deck_relief).
 DECK_SCALES_M = (400.0, 120.0, 40.0)
 DECK_RELIEF = (0.12, 0.22, 0.24)
 # Turns this close to none or complete are drawn as such: at most 1/40 of a colour level.
@@ -111,8 +112,6 @@ _MIXING = 1
 _DECK = 2
 _FLAT_BASE = 4
 _SPRITE_VARIANTS = 8
-# A sprite with no flat base is cut this far below the eye: nowhere a picture shows.
-_NO_BASE_M = -1.0e9
 
 
 @dataclass
@@ -746,8 +745,8 @@ class Renderer:
         inst[:, 13:16] = draw.rgba[:, 4:7] if draw.rgba.shape[1] > 4 else -1.0
         # The flat base the sprite is cut at, over the eye (SpriteBatch.base_m).
         base = s.base_m
-        based = ~np.isnan(base)
-        inst[:, 16] = np.where(based, base - np.float32(eye_m[2]), _NO_BASE_M)
+        based = ~np.isnan(base)  # (only the FLAT_BASE variant reads it)
+        inst[:, 16] = np.where(based, base - np.float32(eye_m[2]), 0.0)
         # A deck's base over the eye, for its relief seen from below (0: not drawn so), and
         # where the deck has drifted to from the eye: its relief drifts with it (mod 64 km,
         # so float32 keeps a centimetre of it).

@@ -112,42 +112,32 @@ void main() {
     }
     float s = sin(in_rotation), k = cos(in_rotation);
     vec2 corner = mat2(k, s, -s, k) * local;
-    vec3 c;
     float alpha = in_rgba.a;
+    vec3 u, v;
     if (!facing) {
         // Spanned across the normal as a facing sprite is (quad_axes), so a sprite whose
         // facing locks with the eye straight along its normal does not move.
         vec3 n = normalize(in_normal);
-        vec3 u, v;
         quad_axes(n, u, v);
-        vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
-#if FLAT_BASE
-        v_above_base_m = world.z - in_base;
-#endif
-#if DECK
-        v_ray = world;
-#endif
-        c = u_view_rot * world;
         // Seen edge-on a quad is a line: fade it by the angle to the eye (Wang's in-cloud rule).
         alpha *= abs(dot(n, normalize(-in_centre)));
     } else {
         // Face the eye point, upright (the world's up across the picture): the same quad in
         // the world whichever way a view from this eye looks, so display channels turned from
         // one camera meet without seams, and a rolled view does not roll the clouds' bases.
-        vec3 u, v;
         quad_axes(-in_centre / max(length(in_centre), 1e-6), u, v);
-        vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
-#if FLAT_BASE
-        v_above_base_m = world.z - in_base;
-#endif
-#if DECK
-        v_ray = world;
-#endif
-        c = u_view_rot * world;
         // Sprites the eye is about to pass through fade out instead of filling the screen.
         float dist = length(u_view_rot * in_centre);
         alpha *= smoothstep(0.1 * in_size, 0.6 * in_size, dist);
     }
+    vec3 world = in_centre + (corner.x * u + corner.y * v) * 0.5 * in_size;
+#if FLAT_BASE
+    v_above_base_m = world.z - in_base;
+#endif
+#if DECK
+    v_ray = world;
+#endif
+    vec3 c = u_view_rot * world;
     gl_Position = u_proj * vec4(c, 1.0);
     // A sprite's colour is cloud x (1 - haze) + air x haze (layout.hazed): its texels' shade
     // and its base's darken the cloud's light, not the air's before it, so both fade by the
