@@ -10,11 +10,17 @@ daemon test that lacks the marker skips too rather than failing.)
 Under pytest-xdist (the README's command runs the suite on every core) each worker is a
 process of its own: "the session" is the worker's, with its own context and renderer. Tests
 that share something fixed on the machine (a multicast port, an in-tree build) carry
-`pytest.mark.xdist_group`, which keeps them on one worker (`--dist loadgroup`)."""
+`pytest.mark.xdist_group`, which keeps them on one worker (`--dist loadgroup`).
+
+The atmosphere's tables made by any process of the suite (the daemons and snapshots it
+starts inherit the environment) are kept in build/test-cache, not the user's own cache
+(`wxsky/engine/lut_cache.py`): the suite makes each set once, not once a process."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
@@ -22,6 +28,10 @@ from gl_probe import gl_context, release, skip_without_gl
 
 if TYPE_CHECKING:
     from wxsky.render.renderer import Renderer
+
+os.environ.setdefault(
+    "WXSKY_CACHE_DIR", str(Path(__file__).resolve().parents[1] / "build" / "test-cache")
+)
 
 # Ring impostor texture size for GL tests and golden images: small keeps llvmpipe fast.
 GL_RING_PX = 128

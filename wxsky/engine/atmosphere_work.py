@@ -1,6 +1,7 @@
 """The physical atmosphere's tables (`wxsky.scene.atmosphere`), made off the frame path.
 
-A rebuild costs some 0.1 to 1 s of numpy (docs/atmosphere.md): far more than a frame. The
+A rebuild costs some 0.1 to 1 s of numpy (docs/atmosphere.md): far more than a frame. Sets
+made once are kept on disk and read back by any later process (`lut_cache.py`). The
 frames ask `luts_for` with the key of their sun, visibility, humidity and eye; while a key's
 tables are being made on the worker thread, the frames keep the last tables made (the sky
 moves by less than a step of the key meanwhile). Only the first call, with nothing to show,
@@ -22,8 +23,9 @@ import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
+from wxsky.engine.lut_cache import cached_luts
 from wxsky.engine.ring_worker import DEFAULT_NICE, RingWorker
-from wxsky.scene.atmosphere import AtmosphereKey, AtmosphereLuts, build_luts, fresh_serial
+from wxsky.scene.atmosphere import AtmosphereKey, AtmosphereLuts, fresh_serial
 from wxsky.scene.gather import BuildCancelled, CancelFlag
 
 log = logging.getLogger(__name__)
@@ -36,7 +38,7 @@ class AtmosphereJob:
     key: AtmosphereKey
 
     def run(self, cancel: CancelFlag | None = None) -> tuple[object, ...]:
-        return (build_luts(self.key),)
+        return (cached_luts(self.key),)
 
 
 class AtmosphereWork:
@@ -76,7 +78,7 @@ class AtmosphereWork:
             if current is not None and current.key == key:
                 return current
             if current is None or self._wait:
-                made = build_luts(key)
+                made = cached_luts(key)
                 self.builds += 1
                 self._current = made
                 return made
@@ -89,7 +91,7 @@ class AtmosphereWork:
 
     def _build(self, key: AtmosphereKey) -> AtmosphereLuts:
         if not self._process:
-            made = build_luts(key)
+            made = cached_luts(key)
         else:
             with self._lock:
                 if self._cancel.is_set():

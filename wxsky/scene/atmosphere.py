@@ -51,7 +51,9 @@ them on a thread and the renderer keeps the last until the next is ready).
 from __future__ import annotations
 
 import functools
+import io
 import math
+import zipfile
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -751,19 +753,61 @@ def build_luts(key: AtmosphereKey) -> AtmosphereLuts:
     if last is not None and last[0] == key.medium_key:
         med, t_table, ms_table, amb = last[1]
     else:
-        # The key's step may land a hair outside the range the visibility was checked against.
-        vis_lo, vis_hi = VISIBILITY_M.bounds
-        med = medium(min(max(key.visibility_m, vis_lo), vis_hi), key.humidity_pct)
+        med = key_medium(key)
         t_table = transmittance_table(med)
         ms_table = multiscatter_table(med, t_table)
         amb = ambient_table(med, t_table, ms_table)
         _medium_tables = (key.medium_key, (med, t_table, ms_table, amb))
     view = sky_view_table(med, t_table, ms_table, key.eye_alt_m, key.sun_elevation_deg)
-    tables = [t_table, ms_table, amb, view]
-    for table in tables:
+    return luts_of(key, med, (t_table, ms_table, amb, view))
+
+
+TABLE_SHAPES = {
+    "transmittance": (*TRANSMITTANCE_SIZE, 3),
+    "multiscatter": (*MULTISCATTER_SIZE, 3),
+    "ambient": (*AMBIENT_SIZE, 2, 3),
+    "sky_view": (*SKY_VIEW_SIZE, 3),
+}
+
+
+def luts_to_bytes(luts: AtmosphereLuts) -> bytes:
+    """The four tables as one `.npz` (exact float64), for a cache to keep."""
+    out = io.BytesIO()
+    np.savez(out, **{name: getattr(luts, name) for name in TABLE_SHAPES})
+    return out.getvalue()
+
+
+def luts_from_bytes(key: AtmosphereKey, data: bytes) -> AtmosphereLuts:
+    """A set kept by `luts_to_bytes`, for `key`; ValueError where the bytes are not one
+    (cut short, another layout, a table misshapen or not finite)."""
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as kept:
+            tables = tuple(np.asarray(kept[name]) for name in TABLE_SHAPES)
+        return luts_of(key, key_medium(key), tables)
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, ArithmeticError) as exc:
+        raise ValueError(f"not a set of atmosphere tables: {exc}") from None
+
+
+def key_medium(key: AtmosphereKey) -> Medium:
+    """The medium a key's tables are made in."""
+    # The key's step may land a hair outside the range the visibility was checked against.
+    vis_lo, vis_hi = VISIBILITY_M.bounds
+    return medium(min(max(key.visibility_m, vis_lo), vis_hi), key.humidity_pct)
+
+
+def luts_of(key: AtmosphereKey, med: Medium, tables: tuple[F64, ...]) -> AtmosphereLuts:
+    """One set of tables (transmittance, multiple scattering, ambient, sky view: TABLE_SHAPES'
+    order), made read-only, under a fresh serial; ArithmeticError for a non-finite or
+    misshapen table (a set read back from a cache is checked as a set made here)."""
+    if len(tables) != len(TABLE_SHAPES):
+        raise ArithmeticError(f"atmosphere: {len(tables)} tables for {key}, not 4")
+    for (name, shape), table in zip(TABLE_SHAPES.items(), tables, strict=True):
+        if table.shape != shape or table.dtype != np.float64:
+            raise ArithmeticError(f"atmosphere: {name} table {table.shape} for {key}")
         if not np.all(np.isfinite(table)):
-            raise ArithmeticError(f"atmosphere: non-finite table for {key}")
+            raise ArithmeticError(f"atmosphere: non-finite {name} table for {key}")
         table.flags.writeable = False
+    t_table, ms_table, amb, view = tables
     return AtmosphereLuts(key, med, t_table, ms_table, amb, view, fresh_serial())
 
 
