@@ -234,7 +234,7 @@ float deck_relief() {
         vec2 q = mat2(cos(a), sin(a), -sin(a), cos(a)) * p;
         n += DECK_RELIEF[k] * keep * value_noise(q / scale + 17.0 * float(k + 1));
     }
-    return 1.0 + n;
+    return clamp(1.0 + n, 0.4, 1.6);  // a thick patch darkens the base, never blackens it
 }
 #endif
 void main() {
