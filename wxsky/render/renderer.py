@@ -83,9 +83,9 @@ BASE_DIM_FROM = 0.1
 BASE_DIM_TO = 0.3
 # A stratiform deck's base seen from below: darker and lighter patches, at these scales and
 # strengths (a share of the colour, each), in the deck's drifting frame (sprites.glsl
-# deck_relief). The haze between the eye and the base takes most of it (4 km visibility under
-# an 830 m deck, seen 30 deg up, leaves a fifth): at half these, the base at sun +5, its light half of
-# noon's, was an even grey (tools/bench/deck_structure.py, docs/cloud-form.md).
+# deck_relief). The haze between the eye and the base takes most of it (4 km visibility
+# under an 830 m deck, seen 30 deg up, leaves a fifth): at half these, the base at sun +5,
+# its light half of noon's, was an even grey (tools/bench/deck_structure.py).
 DECK_SCALES_M = (400.0, 120.0, 40.0)
 DECK_RELIEF = (0.25, 0.50, 0.40)
 # Turns this close to none or complete are drawn as such: at most 1/40 of a colour level.
