@@ -98,9 +98,12 @@ class Cell:
     pitch_deg: float
     alt_m: float
     size: tuple[int, int]
+    fov_deg: float | None = None  # `wxsky snapshot`'s default where None
 
     def args(self) -> list[str]:
+        fov = [] if self.fov_deg is None else ["--fov-deg", f"{self.fov_deg:.3f}"]
         return [
+            *fov,
             "--preset",
             self.preset,
             "--time",
