@@ -113,6 +113,10 @@ SUN_OVER_SKY_LIGHT = 12.0
 # The shipped files: wxsky/render/data/, written by tools/generate/build_sky_textures.py.
 DATA_PACKAGE = "wxsky.render"
 DATA_DIR = "data"
+# The 22 deg halo over a cirrostratus veil (sky.glsl `halo`): its ring's peak as a share of
+# the sun's light, and how much darker the veil is inside the ring, as a share of its own.
+HALO_GAIN = 0.45
+HALO_DARK_INSIDE = 0.08
 
 
 def shader_defines(feats: SkyFeatures) -> dict[str, str]:
@@ -121,6 +125,8 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "STAR_FACE_PX": str(STAR_FACE_PX),
         "STAR_JITTER": f"{STAR_JITTER:.6f}",
         "STAR_RATE_SCALE_HZ": f"{STAR_RATE_SCALE_HZ:.6f}",
+        "HALO_GAIN": f"{HALO_GAIN:.6f}",
+        "HALO_DARK_INSIDE": f"{HALO_DARK_INSIDE:.6f}",
         "SKY_STARS": str(int(feats.stars)),
         "SKY_MOON": str(int(feats.moon)),
         "SKY_DOME": str(int(feats.dome)),
@@ -531,6 +537,7 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
                 "u_sunset_tex": SkyPass.UNITS["u_sunset_tex"],
                 "u_dome_height_m": frame.height_m,
                 "u_dome_controls": (dome.high_cover, dome.cover, dome.density, dome.sunset),
+                "u_dome_veil": dome.veil,
                 "u_dome_band": (band_lo, band_hi),
                 "u_dome_m0": frame.matrices[0],
                 "u_dome_m1": frame.matrices[1],

@@ -107,6 +107,8 @@ class DomeControls:
     high_cover: float = 0.0  # cover of ice/high layers: the part shown overhead
     horizon_deg: float = 0.0  # the sprites' far edge seen from the ground, elevation
     drift_toward_deg: float = 0.0  # where the wind aloft carries the dome, true
+    # Cover of cirrostratus, the veil of ice prisms that bends sunlight into the 22° halo.
+    veil: float = 0.0
     # The ground band below the horizon (sky.glsl `ground_band`): the flat ground under the
     # observer, MSL, and the haze distance in the air over it (the surface visibility's, also
     # when the eye is above the hazy layer and SkyParams.haze_m is the clear air's).
@@ -124,6 +126,7 @@ class DomeControls:
             "high_cover": self.high_cover,
             "horizon_deg": self.horizon_deg,
             "drift_toward_deg": self.drift_toward_deg,
+            "veil": self.veil,
             "ground_m": self.ground_m,
             "surface_haze_m": self.surface_haze_m,
         }
@@ -411,6 +414,8 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
         )
     high = [lay for lay in layers if _is_high(lay)]
     high_cover = 1.0 - math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in high)
+    veils = [lay for lay in layers if lay.type is CloudType.CIRROSTRATUS]
+    veil = 1.0 - math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in veils)
     weight = sum(lay.cover_oktas for lay in layers)
     type_density = (
         sum(_TYPE_DENSITY.get(lay.type, 0.5) * lay.cover_oktas for lay in layers) / weight
@@ -431,6 +436,7 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
         speed=min(1.0, math.hypot(wind_e, wind_n) / DOME_MAX_WIND_MPS),
         time=solar_time,
         high_cover=high_cover,
+        veil=veil,
         horizon_deg=math.degrees(math.atan2(max(edge_m, 0.0), DISTANT_CLOUD_M)),
         drift_toward_deg=math.degrees(math.atan2(wind_e, wind_n)) % 360.0,
         ground_m=ground_m,

@@ -1,0 +1,91 @@
+"""The 22° halo of a cirrostratus veil (issue 42 item 6): the sky pass draws a ring 22° from
+the sun over the veil, red on its sharp inner edge, the veil inside it darker, and nothing of
+the kind without cirrostratus. Pictures: `wxsky snapshot`'s own path, facing the sun."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from tools.gallery.light_sheet import sun_time
+from wxsky.app.snapshot import take_snapshot
+from wxsky.scene.camera import Camera
+from wxsky.settings.config import load_config
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+
+pytestmark = pytest.mark.gl
+
+SIZE = (480, 300)
+FOV_DEG = 100.0
+SUN_DEG = 30.0
+
+
+def _picture(layer: CloudLayer | None) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(picture 0..1 RGB, each pixel's angle from the sun in degrees), looking at the sun."""
+    state = WeatherState().apply(load_preset("high-cirrus"))
+    obs = state.observer
+    sun = sun_time(state.time_utc, obs.lat_deg, obs.lon_deg, SUN_DEG)
+    state = dataclasses.replace(
+        state, time_utc=sun.time_utc, layers=() if layer is None else (layer,)
+    )
+    camera = Camera(
+        position_m=(0.0, 0.0, obs.alt_m + 2.0),
+        heading_deg=sun.azimuth_deg,
+        pitch_deg=sun.elevation_deg,
+        fov_deg=FOV_DEG,
+        width_px=SIZE[0],
+        height_px=SIZE[1],
+    )
+    image = take_snapshot(state, camera, load_config(None).scene).image
+    tan_x = math.tan(math.radians(FOV_DEG) / 2.0)
+    tan_y = tan_x * SIZE[1] / SIZE[0]
+    x = ((np.arange(SIZE[0]) + 0.5) / SIZE[0] * 2.0 - 1.0)[None, :] * tan_x
+    y = ((np.arange(SIZE[1]) + 0.5) / SIZE[1] * 2.0 - 1.0)[:, None] * tan_y
+    angle = np.degrees(np.arctan(np.hypot(x, y)))
+    return image[..., :3].astype(np.float64) / 255.0, angle
+
+
+def _ring(
+    rgb: npt.NDArray[np.float64], angle: npt.NDArray[np.float64], lo: float, hi: float
+) -> npt.NDArray[np.float64]:
+    """Mean colour of the annulus lo..hi degrees from the sun, above the picture's middle row
+    (the sky, not the ground)."""
+    upper = np.zeros(angle.shape, bool)
+    upper[: SIZE[1] // 2] = True
+    inside = (angle >= lo) & (angle < hi) & upper
+    out: npt.NDArray[np.float64] = rgb[inside].mean(axis=0)
+    return out
+
+
+def test_a_cirrostratus_veil_shows_the_22_degree_halo() -> None:
+    veil = CloudLayer(8, 9900.0, 10600.0, CloudType.CIRROSTRATUS)
+    rgb, angle = _picture(veil)
+    ring = _ring(rgb, angle, 21.6, 23.0)
+    inside = _ring(rgb, angle, 18.0, 20.0)
+    outside = _ring(rgb, angle, 27.0, 29.0)
+    ring_l, inside_l = (
+        float(ring @ [0.2126, 0.7152, 0.0722]),
+        float(inside @ [0.2126, 0.7152, 0.0722]),
+    )
+    outside_l = float(outside @ [0.2126, 0.7152, 0.0722])
+    assert ring_l > inside_l + 0.02 and ring_l > outside_l + 0.01, (inside_l, ring_l, outside_l)
+    # Red bends least: the ring's inner edge is redder than its outer side.
+    inner_edge = _ring(rgb, angle, 21.2, 21.9)
+    outer_side = _ring(rgb, angle, 23.0, 24.5)
+    assert inner_edge[0] / inner_edge[2] > outer_side[0] / outer_side[2] + 0.01
+
+
+def test_no_halo_without_cirrostratus() -> None:
+    streaks = CloudLayer(8, 8500.0, 9600.0, CloudType.CIRRUS)
+    rgb, angle = _picture(streaks)
+    ring = _ring(rgb, angle, 21.6, 23.0) @ [0.2126, 0.7152, 0.0722]
+    between = 0.5 * (
+        _ring(rgb, angle, 18.0, 20.0) @ [0.2126, 0.7152, 0.0722]
+        + _ring(rgb, angle, 27.0, 29.0) @ [0.2126, 0.7152, 0.0722]
+    )
+    assert abs(float(ring) - float(between)) < 0.015, (ring, between)
