@@ -117,6 +117,11 @@ DATA_DIR = "data"
 # the sun's light, and how much darker the veil is inside the ring, as a share of its own.
 HALO_GAIN = 0.45
 HALO_DARK_INSIDE = 0.08
+# Cirrus fibres on the dome (sky.glsl cloud_dome): the detail noise FIBRE_ACROSS times finer
+# across the wind (a whole number: the texture's offset wraps at 1, and the fibres with it),
+# its rows bent by FIBRE_BEND of a tile where the broad shape changes.
+FIBRE_ACROSS = 6.0
+FIBRE_BEND = 0.3
 
 
 def shader_defines(feats: SkyFeatures) -> dict[str, str]:
@@ -126,6 +131,8 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "STAR_JITTER": f"{STAR_JITTER:.6f}",
         "STAR_RATE_SCALE_HZ": f"{STAR_RATE_SCALE_HZ:.6f}",
         "HALO_GAIN": f"{HALO_GAIN:.6f}",
+        "FIBRE_ACROSS": f"{FIBRE_ACROSS:.6f}",
+        "FIBRE_BEND": f"{FIBRE_BEND:.6f}",
         "HALO_DARK_INSIDE": f"{HALO_DARK_INSIDE:.6f}",
         "SKY_STARS": str(int(feats.stars)),
         "SKY_MOON": str(int(feats.moon)),

@@ -305,7 +305,12 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     // horizon the lowest mips average the clouds into a band.
     float c0 = texture(u_dome_tex, u_dome_m0 * plane_m + u_dome_off0).r;
     float c1 = texture(u_dome_tex, u_dome_m1 * plane_m + u_dome_off1).g;
-    float detail = texture(u_dome_tex, u_dome_m2 * plane_m + u_dome_off2).b;
+    vec2 q = u_dome_m2 * plane_m + u_dome_off2;
+    float detail = texture(u_dome_tex, q).b;
+    // Thin ice cloud in fibres (cirrus): the detail noise, drawn out along the wind already
+    // (the texture's x), packed finer across it, its rows bent by the broad shapes, so the
+    // fibres curve, fan out and run together as mares' tails do, not in even dashes.
+    float fibre = texture(u_dome_tex, vec2(q.x, q.y * FIBRE_ACROSS + FIBRE_BEND * (c0 - 0.5))).b;
     float high_cover = u_dome_controls.x, cover = u_dome_controls.y;
     float density = u_dome_controls.z, sunset = u_dome_controls.w;
     // Distant parts of every layer show below the sprites' far edge; seen ever more
@@ -321,7 +326,9 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     // firmer edges, is smooth and nearly opaque; seen edge-on, every layer is opaque.
     float softness = mix(0.22, 0.1, density);
     float a = smoothstep(threshold - 0.3 * softness, threshold + softness, c) * step(0.001, here);
-    a *= mix(mix(0.25 + 0.75 * detail, 1.0, density) * mix(0.45, 0.95, density), 1.0,
+    float strands = mix(0.25 + 0.75 * detail, 0.15 + 0.85 * smoothstep(0.3, 0.8, fibre),
+                        1.0 - smoothstep(0.1, 0.3, density));
+    a *= mix(mix(strands, 1.0, density) * mix(0.45, 0.95, density), 1.0,
              grazing * step(0.001, band));
     // The distant band fades out upwards as a whole rather than by thinning its cover, which
     // would cut a hard edge where the averaged far texture crosses the threshold.
