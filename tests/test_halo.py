@@ -1,6 +1,7 @@
-"""The 22° halo of a cirrostratus veil (issue 42 item 6): the sky pass draws a ring 22° from
-the sun over the veil, red on its sharp inner edge, the veil inside it darker, and nothing of
-the kind without cirrostratus. Pictures: `wxsky snapshot`'s own path, facing the sun."""
+"""A cirrostratus veil and its 22° halo (issue 42 item 6): the sky pass draws the veil as a
+milky film, more even than cirrus of the same cover, and a ring 22° from the sun over it, red
+on its sharp inner edge, the veil inside it darker; nothing of the kind without cirrostratus.
+Pictures: `wxsky snapshot`'s own path, facing the sun."""
 
 from __future__ import annotations
 
@@ -89,3 +90,24 @@ def test_no_halo_without_cirrostratus() -> None:
         + _ring(rgb, angle, 27.0, 29.0) @ [0.2126, 0.7152, 0.0722]
     )
     assert abs(float(ring) - float(between)) < 0.015, (ring, between)
+
+
+def _local_detail(layer: CloudLayer) -> float:
+    """Spread of the luma less its 21x21 box mean, over the sky more than 30° from the sun."""
+    rgb, angle = _picture(layer)
+    luma = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    k = np.ones(21) / 21.0
+    mean = np.apply_along_axis(lambda v: np.convolve(v, k, "same"), 0, luma)
+    mean = np.apply_along_axis(lambda v: np.convolve(v, k, "same"), 1, mean)
+    sky = (angle > 30.0) & (np.arange(SIZE[1])[:, None] < SIZE[1] // 2)
+    sky[:12] = False
+    sky[:, :12] = False
+    sky[:, -12:] = False
+    return float((luma - mean)[sky].std())
+
+
+def test_a_cirrostratus_veil_is_more_even_than_cirrus() -> None:
+    veil = _local_detail(CloudLayer(8, 9900.0, 10600.0, CloudType.CIRROSTRATUS))
+    streaks = _local_detail(CloudLayer(8, 8500.0, 9600.0, CloudType.CIRRUS))
+    # Before the veil was a film of its own, it was patchier than cirrus (0.022 against 0.015).
+    assert veil < 0.9 * streaks, (veil, streaks)

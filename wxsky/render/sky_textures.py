@@ -117,6 +117,10 @@ DATA_DIR = "data"
 # the sun's light, and how much darker the veil is inside the ring, as a share of its own.
 HALO_GAIN = 0.45
 HALO_DARK_INSIDE = 0.08
+# A cirrostratus veil's opacity where it lies (sky.glsl cloud_dome): a milky film.
+VEIL_ALPHA = 0.35
+# ... and how much fainter the dome's patches are where all the high cover is veil.
+VEIL_PATCHES = 0.7
 # Cirrus fibres on the dome (sky.glsl cloud_dome): the detail noise FIBRE_ACROSS times finer
 # across the wind (a whole number: the texture's offset wraps at 1, and the fibres with it),
 # its rows bent by FIBRE_BEND of a tile where the broad shape changes.
@@ -134,6 +138,8 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "FIBRE_ACROSS": f"{FIBRE_ACROSS:.6f}",
         "FIBRE_BEND": f"{FIBRE_BEND:.6f}",
         "HALO_DARK_INSIDE": f"{HALO_DARK_INSIDE:.6f}",
+        "VEIL_ALPHA": f"{VEIL_ALPHA:.6f}",
+        "VEIL_PATCHES": f"{VEIL_PATCHES:.6f}",
         "SKY_STARS": str(int(feats.stars)),
         "SKY_MOON": str(int(feats.moon)),
         "SKY_DOME": str(int(feats.dome)),

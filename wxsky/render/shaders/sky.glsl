@@ -333,6 +333,17 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     // The distant band fades out upwards as a whole rather than by thinning its cover, which
     // would cut a hard edge where the averaged far texture crosses the threshold.
     // The dome is a plane above the eye: nothing of it below the eye's level.
+    // A cirrostratus veil is a milky sheet, not patches: where its cover reaches (the broad
+    // shape alone, soft-edged), a near-even film with faint fibres, under whatever else the
+    // dome shows there.
+    float veil_threshold = u_dome_veil < 0.5 ? 1.0 - sqrt(0.5 * u_dome_veil)
+                                             : sqrt(0.5 * (1.0 - u_dome_veil));
+    float veil = smoothstep(veil_threshold - 0.15, veil_threshold + 0.15, c0)
+               * step(0.001, u_dome_veil) * VEIL_ALPHA * (0.8 + 0.2 * fibre);
+    // The patches are the other high cloud's (cirrus): as much fainter as the veil is of the
+    // high cover.
+    a *= 1.0 - VEIL_PATCHES * clamp(u_dome_veil / max(high_cover, 1e-3), 0.0, 1.0);
+    a = 1.0 - (1.0 - a) * (1.0 - veil);
     a *= max(band, step(0.001, high_cover)) * step(0.0, ray.z);
     vec3 rgb = u_dome_rgb * mix(0.8, 1.05, detail) * (1.0 - 0.3 * density * a);
     // Thin ice cloud glows around the sun.
