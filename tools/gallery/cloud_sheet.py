@@ -143,21 +143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             per[name] = got
     every = [c for cells, _ in per.values() for c in cells]
-    after_key = sheet.checkout_key(ROOT)
-    commit, before_key = sheet.revision_key(args.before)
-    titles = (
-        f"before: {args.before} (wxsky/ {before_key[:7]})",
-        f"after: this checkout (wxsky/ {after_key[:7]})",
-    )
-    print(f"{len(every)} cells a side; before {commit[:10]}, after {after_key}")
-    after = sheet.render_all(ROOT, after_key, every, args.cache_dir, args.jobs)
-    if before_key == after_key:
-        before = after
-    elif all((args.cache_dir / before_key / f"{c.key()}.png").is_file() for c in every):
-        before = sheet.render_all(ROOT, before_key, every, args.cache_dir, args.jobs)
-    else:
-        with sheet.temporary_worktree(commit) as tree:
-            before = sheet.render_all(tree, before_key, every, args.cache_dir, args.jobs)
+    before, after, titles = sheet.render_sides(args.before, every, args.cache_dir, args.jobs)
     args.out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     for name, (cells, about) in per.items():

@@ -278,6 +278,33 @@ def render_all(
     return result
 
 
+def render_sides(
+    before_ref: str, cells: Sequence[Cell], cache: Path, jobs: int
+) -> tuple[dict[Cell, Path | str], dict[Cell, Path | str], tuple[str, str]]:
+    """Every cell drawn by `before_ref`'s code (in a temporary worktree, unless cached or the
+    same `wxsky/` tree) and by this checkout's: (before, after, their titles)."""
+    after_key = checkout_key(ROOT)
+    # Labelled by the wxsky/ tree, not the commit: a commit that leaves wxsky/ alone (a
+    # sheet's own, say) redraws nothing and changes no pixel of the sheets.
+    after_title = f"after: this checkout (wxsky/ {after_key[:7]})"
+    commit, before_key = revision_key(before_ref)
+    before_title = f"before: {before_ref} (wxsky/ {before_key[:7]})"
+    if before_key == after_key:
+        after_title += ", the same"
+    print(
+        f"{len(cells)} cells a side; before {commit[:10]} (wxsky {before_key}), after {after_key}"
+    )
+    after = render_all(ROOT, after_key, cells, cache, jobs)
+    if before_key == after_key:
+        before = after
+    elif all((cache / before_key / f"{c.key()}.png").is_file() for c in cells):
+        before = render_all(ROOT, before_key, cells, cache, jobs)  # all cached
+    else:
+        with temporary_worktree(commit) as tree:
+            before = render_all(tree, before_key, cells, cache, jobs)
+    return before, after, (before_title, after_title)
+
+
 # --- the sheet ------------------------------------------------------------------------------
 
 
@@ -490,28 +517,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     )
     every = [c for per in cells.values() for c in per.values()]
 
-    after_key = checkout_key(ROOT)
-    # Labelled by the wxsky/ tree, not the commit: a commit that leaves wxsky/ alone (this
-    # sheet's own, say) redraws nothing and changes no pixel of the sheets.
-    after_title = f"after: this checkout (wxsky/ {after_key[:7]})"
-    commit, before_key = revision_key(args.before)
-    before_title = f"before: {args.before} (wxsky/ {before_key[:7]})"
-    if before_key == after_key:
-        after_title += ", the same"
-    print(
-        f"{len(every)} cells a side; before {commit[:10]} (wxsky {before_key}), after {after_key}"
-    )
-    after = render_all(ROOT, after_key, every, args.cache_dir, args.jobs)
-    if before_key == after_key:
-        before = after
-    elif all((args.cache_dir / before_key / f"{c.key()}.png").is_file() for c in every):
-        before = render_all(ROOT, before_key, every, args.cache_dir, args.jobs)  # all cached
-    else:
-        with temporary_worktree(commit) as tree:
-            before = render_all(tree, before_key, every, args.cache_dir, args.jobs)
+    before, after, titles = render_sides(args.before, every, args.cache_dir, args.jobs)
 
     args.out_dir.mkdir(parents=True, exist_ok=True)
-    titles = (before_title, after_title)
     low_sun: list[U8] = []
     for name in names:
         sheet = preset_sheet(name, rows[name], before, after, cells[name], size, titles)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
@@ -399,6 +400,11 @@ def _sky_params(
     )
 
 
+def _combined_cover(layers: Iterable[CloudLayer]) -> float:
+    """The sky share the layers cover together, each independent of the others (0..1)."""
+    return 1.0 - math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in layers)
+
+
 def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeControls:
     """The cloud dome's controls from the weather (cover and sunset as sky_params has them)."""
     layers = state.layers
@@ -412,10 +418,8 @@ def dome_controls(state: WeatherState, cover: float, sunset: float) -> DomeContr
         return DomeControls(
             sunset=sunset, time=solar_time, ground_m=ground_m, surface_haze_m=surface_haze_m
         )
-    high = [lay for lay in layers if _is_high(lay)]
-    high_cover = 1.0 - math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in high)
-    veils = [lay for lay in layers if lay.type is CloudType.CIRROSTRATUS]
-    veil = 1.0 - math.prod(1.0 - min(1.0, lay.cover_oktas / 8.0) for lay in veils)
+    high_cover = _combined_cover(lay for lay in layers if _is_high(lay))
+    veil = _combined_cover(lay for lay in layers if lay.type is CloudType.CIRROSTRATUS)
     weight = sum(lay.cover_oktas for lay in layers)
     type_density = (
         sum(_TYPE_DENSITY.get(lay.type, 0.5) * lay.cover_oktas for lay in layers) / weight

@@ -62,7 +62,7 @@ uniform vec2 u_dome_off0;
 uniform vec2 u_dome_off1;
 uniform vec2 u_dome_off2;
 uniform vec3 u_dome_rgb;          // cloud lit by sky and sun
-uniform float u_dome_veil;        // cirrostratus cover: the 22 deg halo's strength
+uniform float u_dome_veil;        // cirrostratus cover: the milky film and the 22 deg halo
 uniform vec3 u_dome_haze_rgb;     // the air between the eye and the layer (SkyParams.haze_rgb)
 uniform float u_haze_m;
 uniform float u_haze_depth_m;     // of the dome's height, how much lies in the hazy layer
@@ -275,12 +275,6 @@ vec3 moon_light(vec3 ray, out float coverage) {
 #endif
 
 #if SKY_DOME
-// Roden & Parberry's cloud dome as a plane at the dome height: two shape layers blended,
-// cover as a threshold, density smoothing and darkening, and the sunset gradient. Along the
-// horizon it stands for the distant part of every layer, which carries on into the horizon
-// haze: seen edge-on it closes its gaps and turns opaque, and the air in front of it (a deck
-// 400 m up is 23 km away at 1° and 230 km at 0.1°) takes it over, so under a deck the
-// horizon is the deck's underside in haze, never a strip of clear sky (issue 41 item 5).
 // The 22 deg halo: sunlight bent by the hexagonal ice prisms of a cirrostratus veil (their
 // least deviation is 21.8 deg; red bends least, so the ring's inner edge is red and sharp and
 // it fades bluish-white outward), and the veil inside the ring a little darker, where no
@@ -298,6 +292,12 @@ vec3 halo(vec3 ray) {
     return u_sun_rgb * HALO_GAIN * ring - u_dome_rgb * HALO_DARK_INSIDE * inside;
 }
 
+// Roden & Parberry's cloud dome as a plane at the dome height: two shape layers blended,
+// cover as a threshold, density smoothing and darkening, and the sunset gradient. Along the
+// horizon it stands for the distant part of every layer, which carries on into the horizon
+// haze: seen edge-on it closes its gaps and turns opaque, and the air in front of it (a deck
+// 400 m up is 23 km away at 1° and 230 km at 0.1°) takes it over, so under a deck the
+// horizon is the deck's underside in haze, never a strip of clear sky (issue 41 item 5).
 vec4 cloud_dome(vec3 ray, vec3 air) {
     float z = max(ray.z, 0.002);
     vec2 plane_m = ray.xy / z * u_dome_height_m;
@@ -307,12 +307,17 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     float c1 = texture(u_dome_tex, u_dome_m1 * plane_m + u_dome_off1).g;
     vec2 q = u_dome_m2 * plane_m + u_dome_off2;
     float detail = texture(u_dome_tex, q).b;
-    // Thin ice cloud in fibres (cirrus): the detail noise, drawn out along the wind already
-    // (the texture's x), packed finer across it, its rows bent by the broad shapes, so the
-    // fibres curve, fan out and run together as mares' tails do, not in even dashes.
-    float fibre = texture(u_dome_tex, vec2(q.x, q.y * FIBRE_ACROSS + FIBRE_BEND * (c0 - 0.5))).b;
     float high_cover = u_dome_controls.x, cover = u_dome_controls.y;
     float density = u_dome_controls.z, sunset = u_dome_controls.w;
+    // Thin ice cloud in fibres (cirrus): the detail noise, drawn out along the wind already
+    // (the texture's x), packed finer across it, its rows bent by the broad shapes, so the
+    // fibres curve, fan out and run together as mares' tails do, not in even dashes. Fetched
+    // only where something reads it (thin cloud, a veil): the branch is on uniforms, so the
+    // derivatives stay true.
+    float fibre = 0.0;
+    if (density < 0.3 || u_dome_veil > 0.0) {
+        fibre = texture(u_dome_tex, vec2(q.x, q.y * FIBRE_ACROSS + FIBRE_BEND * (c0 - 0.5))).b;
+    }
     // Distant parts of every layer show below the sprites' far edge; seen ever more
     // obliquely towards the horizon, their gaps close.
     float band = 1.0 - smoothstep(u_dome_band.x, u_dome_band.y, ray.z);
@@ -330,9 +335,6 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
                         1.0 - smoothstep(0.1, 0.3, density));
     a *= mix(mix(strands, 1.0, density) * mix(0.45, 0.95, density), 1.0,
              grazing * step(0.001, band));
-    // The distant band fades out upwards as a whole rather than by thinning its cover, which
-    // would cut a hard edge where the averaged far texture crosses the threshold.
-    // The dome is a plane above the eye: nothing of it below the eye's level.
     // A cirrostratus veil is a milky sheet, not patches: where its cover reaches (the broad
     // shape alone, soft-edged), a near-even film with faint fibres, under whatever else the
     // dome shows there.
@@ -344,6 +346,9 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     // high cover.
     a *= 1.0 - VEIL_PATCHES * clamp(u_dome_veil / max(high_cover, 1e-3), 0.0, 1.0);
     a = 1.0 - (1.0 - a) * (1.0 - veil);
+    // The distant band fades out upwards as a whole rather than by thinning its cover, which
+    // would cut a hard edge where the averaged far texture crosses the threshold.
+    // The dome is a plane above the eye: nothing of it below the eye's level.
     a *= max(band, step(0.001, high_cover)) * step(0.0, ray.z);
     vec3 rgb = u_dome_rgb * mix(0.8, 1.05, detail) * (1.0 - 0.3 * density * a);
     // Thin ice cloud glows around the sun.
@@ -360,7 +365,9 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     vec3 sunset_rgb = textureLod(u_sunset_tex, sunset_uv, 0.0).rgb
                       * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
     rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
-    rgb += halo(ray) * u_dome_veil;
+    if (u_dome_veil > 0.0) {
+        rgb += halo(ray) * u_dome_veil;
+    }
     // Aerial perspective as the sprites have it (scene.layout.hazed): the layer's contrast
     // falls by exp(-distance / haze distance) along the ray to its plane, towards `air`, the
     // colour the sprites fade into in this direction; at the horizon the ray is endless and
