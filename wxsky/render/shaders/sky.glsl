@@ -337,9 +337,8 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
              grazing * step(0.001, band));
     // A cirrostratus veil is a milky sheet, not patches: where its cover reaches (the broad
     // shape alone, soft-edged), a near-even film with faint fibres, under whatever else the
-    // dome shows there.
-    float veil_threshold = u_dome_veil < 0.5 ? 1.0 - sqrt(0.5 * u_dome_veil)
-                                             : sqrt(0.5 * (1.0 - u_dome_veil));
+    // dome shows there. One shape layer is uniform on 0..1: a threshold at 1 - x keeps x.
+    float veil_threshold = 1.0 - u_dome_veil;
     float veil = smoothstep(veil_threshold - 0.15, veil_threshold + 0.15, c0)
                * step(0.001, u_dome_veil) * VEIL_ALPHA * (0.8 + 0.2 * fibre);
     // The patches are the other high cloud's (cirrus): as much fainter as the veil is of the
