@@ -9,6 +9,12 @@ import numpy as np
 import pytest
 from tool_loader import load_tool
 
+from wxsky.app.snapshot import take_snapshot
+from wxsky.scene.camera import Camera
+from wxsky.settings.config import DaemonConfig
+from wxsky.settings.presets import load_preset
+from wxsky.weather.state import Source, WeatherPatch, WeatherState
+
 banding = load_tool("bench/banding")
 SIZE = (320, 180)
 
@@ -48,3 +54,34 @@ def test_stripes_across_read_high_stripes_down_low_and_noise_near_one() -> None:
     outside = _picture(0.3 + 4.0 * noise + 0.2 * ((rows % 2) * (el < 0.0)))
     assert banding.banding(outside, el, band) == pytest.approx(1.0, abs=0.15)
     assert math.isnan(banding.banding(_picture(np.full((SIZE[1], SIZE[0]), 0.4)), el, band))
+
+
+@pytest.mark.parametrize(
+    ("preset", "moment", "facing"),
+    [
+        # The two highest of the tool's twelve cases (1.55 and 1.56 when written; 2.35 and
+        # 2.19 at 712da9a, before issue 42).
+        ("towering-cumulus", "noon", "away from the sun"),
+        ("fair-cumulus", "sun+5", "away from the sun"),
+    ],
+)
+def test_the_far_field_of_cumulus_is_under_the_bar(preset: str, moment: str, facing: str) -> None:
+    """Issue 42's "no streaking" check on the real picture, drawn as `wxsky snapshot` draws
+    the tool's case: under 1.6 (the flat bases cut a pixel sharp at every distance, 1.9-2.0)."""
+    (cell,) = [c for c in banding.cases([preset]) if c.moment == moment and c.facing == facing]
+    state = WeatherState().apply(load_preset(preset, ()))
+    weather_time = state.time_utc
+    state = state.apply(WeatherPatch(source=Source.CONTROL, time_utc=cell.time_utc))
+    camera = Camera(
+        position_m=(0.0, 0.0, cell.alt_m),
+        heading_deg=cell.heading_deg % 360.0,
+        pitch_deg=cell.pitch_deg,
+        fov_deg=banding.FOV_DEG,
+        width_px=cell.size[0],
+        height_px=cell.size[1],
+    )
+    drift_s = (state.time_utc - weather_time).total_seconds()
+    shot = take_snapshot(state, camera, DaemonConfig().scene.settings(), drift_s=drift_s)
+    elevation = banding.ray_elevation_deg(cell.size, cell.pitch_deg, banding.FOV_DEG)
+    figure = banding.banding(shot.image, elevation, banding.BAND_DEG)
+    assert figure <= banding.BAR, f"{preset}, {moment}, {facing}: {figure:.2f}"

@@ -26,6 +26,9 @@ from wxsky.render import shaders as shaders_mod
 from wxsky.render import sky_textures
 from wxsky.render.profile import PassProfiler
 from wxsky.render.renderer import (
+    BASE_FEATHER_FROM_M,
+    BASE_FEATHER_M,
+    BASE_FEATHER_TO_M,
     IMPOSTOR_MIN_ROWS,
     NEAR_SCALE,
     Renderer,
@@ -274,6 +277,46 @@ def test_sprite_textures_are_upright(renderer: Renderer, scale: float, margin: f
     half_px = 0.1 / math.tan(math.radians(FOV / 2.0)) * (W / 2.0)
     assert r1 <= CR + 0.3 * half_px + margin
     assert r0 <= CR - 0.8 * half_px
+
+
+def _base_ramp_m(renderer: Renderer, distance_m: float) -> tuple[float, float]:
+    """A flat-based sprite seen edge-on (its base at the eye's height), `distance_m` away with
+    a view about 6 m a pixel there: (metres above the base where its cut lets a tenth of the
+    sprite through, metres over which it goes from a tenth to nine tenths), down the middle
+    column, against the same sprite uncut."""
+    px_m = 6.0
+    fov = math.degrees(2.0 * math.atan(px_m * (W / 2.0) / distance_m))
+    cam = _camera(fov_deg=fov)
+    size = 400.0
+    batch = _sprites([(0.0, distance_m, 1000.0 + 0.25 * size)], [size])
+
+    def alpha(b: SpriteBatch) -> np.ndarray:
+        with _near_scale(renderer, 1.0):
+            renderer.render_frame(FrameScene(cam, _sky(), _draw(b)))
+        return renderer.read("near")[:, CC, 3].astype(float)
+
+    uncut = alpha(batch)
+    cut = alpha(dataclasses.replace(batch, base_m=np.float32([1000.0])))
+    rows = np.arange(H)
+    # Row r's centre is (CR - r) pixels above the eye's level (the base).
+    above_m = (CR - rows) * distance_m * math.tan(math.radians(fov / 2.0)) / (W / 2.0)
+    seen = uncut > 40.0
+    share = np.where(seen, cut / np.maximum(uncut, 1.0), np.nan)
+    lit = above_m[seen & (share >= 0.1)].min()
+    full = above_m[seen & (share >= 0.9)].min()
+    return float(lit), float(full - lit)
+
+
+def test_a_far_cloud_base_fades_in_over_its_lowest_metres_and_a_near_one_is_sharp(
+    renderer: Renderer,
+) -> None:
+    # Far, the ragged base's lowest metres average into a ramp (BASE_FEATHER_M); near, the
+    # cut stays a pixel sharp. Both start on the base's line.
+    near_lit, near_ramp = _base_ramp_m(renderer, 0.5 * BASE_FEATHER_FROM_M)
+    far_lit, far_ramp = _base_ramp_m(renderer, 1.5 * BASE_FEATHER_TO_M)
+    assert near_ramp <= 2 * 6.0
+    assert 0.6 * BASE_FEATHER_M <= far_ramp <= 1.0 * BASE_FEATHER_M
+    assert abs(near_lit) <= 6.0 and 0.0 <= far_lit <= 0.2 * BASE_FEATHER_M
 
 
 def test_a_flat_bottomed_sprite_seen_from_below_turns_into_the_round_one(
@@ -689,6 +732,9 @@ def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -
         "FLAT_BASE": "1",
         "BASE_SOFT_FROM": "0.2",
         "BASE_SOFT_TO": "0.45",
+        "BASE_FEATHER_M": "90.0",
+        "BASE_FEATHER_FROM_M": "2000.0",
+        "BASE_FEATHER_TO_M": "8000.0",
         "BASE_DIM": "0.55",
         "BASE_SHADE_DEPTH": "0.5",
         "BASE_DIM_FROM": "0.1",

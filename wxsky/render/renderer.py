@@ -73,6 +73,18 @@ ROUND_TO = 0.75
 # straight cut would show as its own edge across the base's outline.
 BASE_SOFT_FROM = 0.2
 BASE_SOFT_TO = 0.45
+# A cloud's base is no plane: it is ragged by tens of metres (each thermal's condensation
+# level) and thin at its lowest. Seen edge-on, a ray just above the base runs through bumps
+# at every depth of the cloud and is only partly in cloud, so a far base is a ramp over its
+# lowest tens of metres; near, the sprites' own textured edges draw the bumps, and a ramp
+# would blur the crisp base a pilot sees close by. So the cut fades in over BASE_FEATHER_M
+# above the base, from none of it at BASE_FEATHER_FROM_M away to all at BASE_FEATHER_TO_M.
+# Cut one pixel sharp at every distance, the far field's bases were stacked horizontal edges
+# (docs/cloud-form.md: the banding of fair and towering cumulus, 1.57-2.02, falls to
+# 1.32-1.57 with it, the bases still on their line).
+BASE_FEATHER_M = 90.0
+BASE_FEATHER_FROM_M = 2000.0
+BASE_FEATHER_TO_M = 8000.0
 # A flat-based sprite's texels are dimmed to BASE_DIM at the base, back to their own colour
 # BASE_SHADE_DEPTH of the sprite's size above it: the base lies in the whole cloud's shadow.
 BASE_DIM = 0.55
@@ -169,6 +181,9 @@ class Renderer:
             "ROUND_TO": repr(ROUND_TO),
             "BASE_SOFT_FROM": repr(BASE_SOFT_FROM),
             "BASE_SOFT_TO": repr(BASE_SOFT_TO),
+            "BASE_FEATHER_M": repr(BASE_FEATHER_M),
+            "BASE_FEATHER_FROM_M": repr(BASE_FEATHER_FROM_M),
+            "BASE_FEATHER_TO_M": repr(BASE_FEATHER_TO_M),
             "BASE_DIM": repr(BASE_DIM),
             "BASE_SHADE_DEPTH": repr(BASE_SHADE_DEPTH),
             "BASE_DIM_FROM": repr(BASE_DIM_FROM),

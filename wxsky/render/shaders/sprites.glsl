@@ -152,7 +152,11 @@ void main() {
     // A pixel's size at the sprite, in metres (a facing quad's both ways): the cut's
     // antialiasing, without a derivative per fragment.
     v_pixel_m = max(length(in_centre) / (0.5 * u_viewport_px * u_proj[0][0]), 1e-3);
-    v_base_soft_m = max(v_pixel_m, 0.5 * in_size * smoothstep(BASE_SOFT_FROM, BASE_SOFT_TO, steep));
+    // Far, the base's ragged lowest metres average into a ramp (renderer.BASE_FEATHER_M).
+    float feather_m = BASE_FEATHER_M * smoothstep(BASE_FEATHER_FROM_M, BASE_FEATHER_TO_M,
+                                                  length(in_centre));
+    v_base_soft_m = max(max(v_pixel_m, feather_m),
+                        0.5 * in_size * smoothstep(BASE_SOFT_FROM, BASE_SOFT_TO, steep));
     v_base_depth_m = BASE_SHADE_DEPTH * in_size;
     // From below, the base is the cloud's underside, in the whole cloud's shadow; seen near
     // edge-on, what shows of it is the cloud's lower side, which the sun reaches sideways.
