@@ -23,6 +23,7 @@ from wxsky.scene.tower_field import (
     lit_volume,
     occupied_part,
     place_towers,
+    tower_share,
 )
 from wxsky.settings.presets import load_preset
 from wxsky.towers.volume import TowerSpec, TowerVolume
@@ -94,7 +95,18 @@ def test_the_nearest_cells_within_the_budget_are_towers_aged_by_their_epoch() ->
         round(d, 3) for d in dists[:4]
     ]
     assert placed.left_out == len(found) - 4
-    assert set(placed.drop_ids.tolist()) == {t.cloud_id for t in placed.shows}
+    turned = {*placed.drop_ids.tolist(), *placed.fade_ids.tolist()}
+    assert turned == {t.cloud_id for t in placed.shows}
+    # A tower within TOWER_FADE_M of the nearest cell past the budget is part tower, part
+    # sprite cloud; the rest are all tower.
+    for t in placed.shows:
+        share_in = tower_share(dists[4] - t.distance_m)
+        assert t.alpha == pytest.approx(share_in, abs=1e-6)
+        fading = t.cloud_id in set(placed.fade_ids.tolist())
+        assert fading == (share_in < 1.0)
+    for cloud_id, kept in zip(placed.fade_ids.tolist(), placed.fade_keep.tolist(), strict=True):
+        (t,) = [t for t in placed.shows if t.cloud_id == cloud_id]
+        assert kept == pytest.approx(1.0 - t.alpha, abs=1e-6)
     for t in placed.shows:
         assert t.age_s == pytest.approx(2400.0 - t.spec.born_s)
         assert 0.0 < t.haze < 1.0
@@ -103,9 +115,37 @@ def test_the_nearest_cells_within_the_budget_are_towers_aged_by_their_epoch() ->
     # not drawn.
     now = place_towers(found, drift, share, eye, _set_at(tc, 0.0), sky, 4, 40_000.0)
     born = {c.cloud_id for c in found if c.spec.born_s <= 0.0}
-    assert len(now.drop_ids) == 4
-    assert {t.cloud_id for t in now.shows} == set(now.drop_ids.tolist()) & born
+    now_turned = {*now.drop_ids.tolist(), *now.fade_ids.tolist()}
+    assert len(now_turned) == 4
+    assert {t.cloud_id for t in now.shows} == now_turned & born
     assert len(now.shows) < 4  # some of the four nearest are still to be born
+
+
+def test_a_cell_crossing_the_budget_edge_cross_fades_with_its_sprite_cloud() -> None:
+    # The eye flies 4 km east in 20 m steps: cells enter and leave the four nearest, and each
+    # cell's tower share and its sprites' share change a little a step, never all at once.
+    tc = _state("towering-cumulus")
+    drift, blocks = _near(tc)
+    sky = sky_params(tc)
+    clock = _set_at(tc, 40.0)
+    found = candidates(blocks, tc, clock.epochs)
+    share = np.ones(len(blocks.batch), np.float32)
+    ids = [c.cloud_id for c in found]
+    tower, sprites = [], []
+    for x in np.arange(0.0, 4000.0, 20.0):
+        eye = (float(x), 0.0, tc.observer.alt_m + 2.0)
+        placed = place_towers(found, drift, share, eye, clock, sky, 4, 40_000.0)
+        alpha = {t.cloud_id: t.alpha for t in placed.shows}
+        kept = dict(zip(placed.fade_ids.tolist(), placed.fade_keep.tolist(), strict=True))
+        dropped = set(placed.drop_ids.tolist())
+        tower.append([alpha.get(i, 0.0) for i in ids])
+        sprites.append([0.0 if i in dropped else kept.get(i, 1.0) for i in ids])
+    t, s = np.asarray(tower), np.asarray(sprites)
+    assert ((t[0] > 0) != (t[-1] > 0)).sum() >= 2  # cells came in and went out
+    assert np.abs(np.diff(t, axis=0)).max() < 0.1
+    assert np.abs(np.diff(s, axis=0)).max() < 0.1
+    # Where a cell is part tower, its sprites carry the rest: the two add up to one.
+    assert np.allclose(t + s, 1.0, atol=1e-6)
 
 
 def test_the_eye_inside_a_cell_leaves_it_to_the_sprites() -> None:
@@ -129,7 +169,9 @@ def test_a_frame_draws_towers_between_the_sprites_at_their_distance() -> None:
     plain = build_frame(tc, drift, cam, (ring,), sky, settings)
     frame = build_frame(tc, drift, cam, (ring,), sky, settings, towers=_set_at(tc, 40.0))
     assert plain.towers == () and len(frame.towers) == 5
-    tower_ids = {t.cloud_id for t in frame.towers}
+    # Whole towers replace their clouds' sprites; one at the budget's edge shares its cloud's.
+    tower_ids = {t.cloud_id for t in frame.towers if t.alpha == 1.0}
+    assert tower_ids
     assert not np.isin(frame.near.sprites.cloud_id, list(tower_ids)).any()
     assert np.isin(plain.near.sprites.cloud_id, list(tower_ids)).any()
     dist = np.linalg.norm(frame.near.sprites.centre_m - np.asarray(cam.position_m), axis=1)

@@ -436,6 +436,7 @@ def build_frame(
         )
         if fill_towers is not None and placed.shows:
             placed = _filled(placed, fill_towers(placed.shows))
+        share = fading_share(near, share, placed)
     with (clock or NO_CLOCK).stage("sort"):
         offsets = eye_offsets(near, eye)
         d2 = squares(offsets)
@@ -533,9 +534,33 @@ def _filled(placed: PlacedTowers, filled: tuple[TowerShow, ...]) -> PlacedTowers
     waiting = [t.cloud_id for t in filled if not t.volumes]
     if not waiting:
         return dataclasses.replace(placed, shows=filled)
-    keep = ~np.isin(placed.drop_ids, np.asarray(waiting, np.int64))
+    ids = np.asarray(waiting, np.int64)
+    keep = ~np.isin(placed.drop_ids, ids)
+    fading = ~np.isin(placed.fade_ids, ids)
     shows = tuple(t for t in filled if t.volumes)
-    return dataclasses.replace(placed, shows=shows, drop_ids=placed.drop_ids[keep])
+    return dataclasses.replace(
+        placed,
+        shows=shows,
+        drop_ids=placed.drop_ids[keep],
+        fade_ids=placed.fade_ids[fading],
+        fade_keep=placed.fade_keep[fading],
+    )
+
+
+def fading_share(
+    near: SpriteBatch, share: npt.NDArray[np.float32], placed: PlacedTowers
+) -> npt.NDArray[np.float32]:
+    """The near layer's alpha share with the clouds at the tower budget's edge faded by what
+    their towers take (`PlacedTowers.fade_keep`; rain shafts keep theirs)."""
+    if not len(placed.fade_ids):
+        return share
+    out = np.array(share, np.float32, copy=True)
+    if len(out) != len(near):
+        out = np.ones(len(near), np.float32)
+    shaft = is_shaft(near)
+    for cloud_id, kept in zip(placed.fade_ids.tolist(), placed.fade_keep.tolist(), strict=True):
+        out[(near.cloud_id == cloud_id) & ~shaft] *= kept
+    return out
 
 
 def gather_inputs(

@@ -4,7 +4,10 @@ each is, and the volumes' light (issue 17, items 2 and 4; docs/towers.md).
 A convective layer's cells (`convection.tower_specs`) are found once per near set, in the
 layers' drifting frames. Each frame places them with the drift and keeps the `max_towers`
 nearest the eye as towers; their clouds' sprites leave the near layer (their rain shafts
-stay). The rest stay sprite clouds, as do cells the eye is in or at (the in-cloud rules of
+stay). At the budget's edge a cell turns from one to the other over TOWER_FADE_M of distance
+(the tower fading in as its cloud's sprites fade out), so a cell entering or leaving the
+budget as the eye flies on cross-fades instead of switching in one frame. The rest stay
+sprite clouds, as do cells the eye is in or at (the in-cloud rules of
 the sprites then apply) and every cell beyond the near layer (the ring's impostors draw them).
 
 A tower's age is the sim time since its layer's weather was set (`LayerEpoch`, kept by the
@@ -46,6 +49,10 @@ DENSITY_CHANNEL = 6
 # Density below this is not drawn as cloud (the smoothed field's faint fringe and the odd lone
 # cell): the impostor is fitted to the rest.
 OCCUPIED_FLOOR = 0.05
+# A cell this much nearer than the nearest cell past the budget is all tower; nearer the edge
+# its tower fades out and its sprite cloud in (at the edge, all sprites). Two cells trading
+# places at the edge are at the same distance as they pass, both all sprites: no frame jumps.
+TOWER_FADE_M = 1000.0
 
 
 @dataclass(frozen=True)
@@ -133,6 +140,10 @@ class PlacedTowers:
     drop_ids: npt.NDArray[np.int64]  # clouds whose sprites the towers replace
     left_out: int  # cells past the budget, drawn as sprite clouds
     candidates: int = 0
+    # Clouds at the budget's edge, their sprites kept at this share of their alpha while
+    # their towers fade in (TOWER_FADE_M).
+    fade_ids: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    fade_keep: npt.NDArray[np.float32] = field(default_factory=lambda: np.zeros(0, np.float32))
 
 
 NO_TOWERS = PlacedTowers((), np.zeros(0, np.int64), 0)
@@ -243,7 +254,9 @@ def place_towers(
     # Nearest first, ties in candidate order; only the chosen few become Python objects (the
     # candidates are a whole near set's worth of cells, every frame).
     scored = np.flatnonzero(~inside)
-    ranked = scored[np.lexsort((scored, dists[scored]))][:budget]
+    ordered = scored[np.lexsort((scored, dists[scored]))]
+    ranked = ordered[:budget]
+    edge_m = float(dists[ordered[budget]]) if len(ordered) > budget else math.inf
     chosen = [
         (
             float(dists[i]),
@@ -253,11 +266,22 @@ def place_towers(
         for i in ranked.tolist()
     ]
     shows = []
+    drop: list[int] = []
+    fade_ids: list[int] = []
+    fade_keep: list[float] = []
     for dist, c, centre in chosen:
+        turned = tower_share(edge_m - dist)
+        if turned <= 0.0:
+            continue  # at the edge: all sprite cloud
+        if turned < 1.0:
+            fade_ids.append(c.cloud_id)
+            fade_keep.append(1.0 - turned)
+        else:
+            drop.append(c.cloud_id)
         since_s = (clock.time_utc - _set_utc(clock, c.layer)).total_seconds()
         age = c.spec.age_s(since_s)
         if age < 0.0:
-            continue
+            continue  # not born yet: clear air (its cloud's sprites go as a tower's would)
         shows.append(
             TowerShow(
                 spec=c.spec,
@@ -270,12 +294,27 @@ def place_towers(
                     min(1.0, c.formed)
                     * (share[c.row] if c.row < len(share) else 1.0)
                     * _edge(dist, max_range_m)
+                    * turned
                 ),
                 haze=float(1.0 - math.exp(-dist / sky.haze_m)),
             )
         )
-    drop = np.asarray([c.cloud_id for _, c, _ in chosen], np.int64)
-    return PlacedTowers(tuple(shows), drop, len(scored) - len(chosen), len(found))
+    return PlacedTowers(
+        tuple(shows),
+        np.asarray(drop, np.int64),
+        len(scored) - len(chosen),
+        len(found),
+        np.asarray(fade_ids, np.int64),
+        np.asarray(fade_keep, np.float32),
+    )
+
+
+def tower_share(inside_edge_m: float) -> float:
+    """How much of a cell within the budget is tower (the rest its sprite cloud), by how much
+    nearer it is than the nearest cell past the budget: smooth from 0 at the edge to 1 at
+    TOWER_FADE_M."""
+    t = min(max(inside_edge_m / TOWER_FADE_M, 0.0), 1.0)
+    return t * t * (3.0 - 2.0 * t)
 
 
 @dataclass(frozen=True)
