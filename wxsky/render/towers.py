@@ -26,7 +26,7 @@ import numpy.typing as npt
 from wxsky.render.context import release_framebuffer
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.scene.camera import Camera
-from wxsky.scene.shading_harris import EXPOSURE, TOE, WHITEN_FROM, WHITEN_TO
+from wxsky.scene.shading_harris import EXPOSURE, TOE, WHITEN_FROM, WHITEN_TO, scene_lights
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.tower_field import MAX_LIGHTS, OCCUPIED_FLOOR, LitVolume, TowerShow
 from wxsky.scene.tower_shading import view_weights
@@ -48,8 +48,18 @@ NOISE_TEXELS = 32
 # 60 m cells): billows a quarter to an eighth of that; a cumulonimbus's are as much larger.
 NOISE_TILE_CELLS = 8.0
 EROSION = 0.6
-VIEW_EXTINCTION = 6.0
+# The view's extinction over the light's, and how sharply thin cloud firms up (the shader's
+# smoothstep, 0.15-0.35 of full density): a cumulus tower's edge is a hard, opaque outline a
+# cell or two deep, not a fringe fading over a few hundred metres (at 6 and 0-0.5 before
+# issue 42 the volumes were soft, see-through blobs beside the sprite clouds' crisp ones).
+VIEW_EXTINCTION = 20.0
 SHARPEN = 1.0
+# The billows' own shade: a point where the detail noise rises over BILLOW_PROBE_M toward the
+# key light is on a billow's far side from it, its direct light cut by exp(-BILLOW_SHADOW x
+# the rise). The lit cells (40-160 m) hold the tower's shade, not its billows': without it a
+# tower's inside is an even blend, a cotton ball where a pilot sees cauliflower.
+BILLOW_SHADOW = 4.0
+BILLOW_PROBE_M = 40.0
 # A new quad covers the cloudy part of the box and this much more of its size on each side,
 # so a growing tower keeps its quad (and the image of the step before) for a while.
 GROWTH_ROOM = 0.1
@@ -147,6 +157,7 @@ class TowerPass:
         # its light is soft (1: the same, as numpy's tower colours composite).
         self.view_extinction = VIEW_EXTINCTION
         self.sharpen = SHARPEN  # 0..1: how much thin cloud firms up toward the eye
+        self.billow_shadow = BILLOW_SHADOW  # how deep a billow's own shade goes (0: none)
         self.march_steps = MARCH_STEPS
         self.drawn = 0  # images completed, for tests and the bench
         # Towers of the last frame that could not be drawn: no lit step yet, or their first
@@ -321,6 +332,7 @@ class TowerPass:
                     "WHITEN_FROM": repr(WHITEN_FROM),
                     "WHITEN_TO": repr(WHITEN_TO),
                     "DENSITY_FLOOR": repr(OCCUPIED_FLOOR),
+                    "BILLOW_PROBE_M": repr(BILLOW_PROBE_M),
                     "CLOUD_DISPLAY_SHARED": str(int(physical)),
                 },
             )
@@ -365,6 +377,9 @@ class TowerPass:
         detail = min(1.0, max(0.0, 2.0 - texel_m / (tile_m / 8.0)))
         _set(prog, "u_erosion", float(self.erosion) * detail)
         _set(prog, "u_sharpen", float(self.sharpen))
+        key = np.asarray(scene_lights(sky).directions[0], np.float64)
+        _set(prog, "u_key_dir", _vec(key / max(float(np.linalg.norm(key)), 1e-9)))
+        _set(prog, "u_billow_shadow", float(self.billow_shadow) * detail)
         _set(prog, "u_steps", int(self.march_steps))
         light0, light1 = self._textures(image.volume)
         light0.use(0)

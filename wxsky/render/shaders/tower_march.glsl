@@ -34,6 +34,8 @@ uniform int u_steps;       // samples along a ray through the cloudy part
 uniform vec3 u_weights[6];
 uniform vec3 u_ambient;
 uniform float u_ext_per_m;  // extinction per metre at density 1
+uniform vec3 u_key_dir;     // toward the key light (the sun or moon), unit
+uniform float u_billow_shadow;  // how deep a billow's own shade goes (0: none)
 out vec4 f_colour;
 
 #if CLOUD_DISPLAY_SHARED
@@ -72,8 +74,9 @@ void main() {
         // Each texel's samples start at its own fraction of a step (interleaved gradient
         // noise): samples at the same depths for every texel would cut the volume into
         // slices, shelves stacked up a tower; staggered, what is left is a texel-fine dither
-        // that the impostor's filtering evens out.
-        float jitter = fract(52.9829189 * fract(dot(gl_FragCoord.xy, vec2(0.06711056, 0.00583715))));
+        // that the impostor's filtering evens out. A hash, not interleaved gradient noise:
+        // IGN's rows of near-equal offsets showed as vertical streaks once the edge was sharp.
+        float jitter = fract(sin(dot(gl_FragCoord.xy, vec2(12.9898, 78.233))) * 43758.5453);
         float keep = 1.0;
         for (int i = 0; i < u_steps; ++i) {
             vec3 p = u_eye + dir * (enter + (float(i) + jitter) * dt);
@@ -82,13 +85,20 @@ void main() {
             if (b.b > DENSITY_FLOOR) {
                 // Billows finer than the automaton's cells: the noise eats thin cloud, the
                 // core keeps its density (a remap of the density by the noise).
-                float bite = u_erosion * texture(u_noise, (p + u_half) * u_noise_per_m).r;
+                vec3 q = (p + u_half) * u_noise_per_m;
+                float billow = texture(u_noise, q).r;
+                float bite = u_erosion * billow;
                 float dens = clamp((b.b - bite) / max(1.0 - bite, 1e-3), 0.0, 1.0);
                 // A cumulus's edge is sharp: thin cloud firms up quickly (u_sharpen 0: as is).
-                dens = mix(dens, smoothstep(0.0, 0.5, dens), u_sharpen);
+                dens = mix(dens, smoothstep(0.15, 0.35, dens), u_sharpen);
                 vec4 a = texture(u_light0, tc);
-                vec3 rad = a.r * u_weights[0] + a.g * u_weights[1] + a.b * u_weights[2]
-                         + a.a * u_weights[3] + b.r * u_weights[4] + b.g * u_weights[5]
+                // The billows' own light, finer than the lit cells: where the billows
+                // thicken toward the light, this point is on a billow's shaded side (the
+                // noise's rise over BILLOW_PROBE_M toward the light, as a depth).
+                float toward = texture(u_noise, q + u_key_dir * (BILLOW_PROBE_M * u_noise_per_m)).r;
+                float own = exp(-u_billow_shadow * max(toward - billow, 0.0));
+                vec3 rad = (a.r * u_weights[0] + a.g * u_weights[1] + a.b * u_weights[2]
+                          + a.a * u_weights[3] + b.r * u_weights[4] + b.g * u_weights[5]) * own
                          + u_ambient;
                 float alpha = 1.0 - exp(-u_ext_per_m * dens * dt);
                 acc.rgb += keep * alpha * exposed(rad);
