@@ -218,6 +218,9 @@ class SkyEngine:
         self._rings: RingFrame | None = None
         self._capping = False  # the near-sprite cap left sprites out last frame
         self._locks: Locks = NO_LOCKS  # in-cloud facing locks, carried frame to frame
+        # Each convective cell's progress from sprite cloud to tower (None until a frame is
+        # drawn: the first frame shows each as the budget makes it).
+        self._tower_fades: dict[int, float] | None = None
         self._bodies: Bodies | None = None  # the latest frame's sun and moon
         self.weather_version = 0  # bumped when the applied weather or the target changes
         self.target_version = 0  # bumped when the target (or the clock, set from outside) changes
@@ -661,8 +664,11 @@ class SkyEngine:
             towers=towers,
             gathered=gathered,
             fill_towers=lambda shows: self._towers.fill(shows, sky),
+            tower_fades=self._tower_fades,
+            dt_s=dt_wall_s,
         )
         self._locks = frame.locks
+        self._tower_fades = dict(frame.tower_fades)
         events = rings.events
         waiting = self._near_work is not None and drawn_state is not state
         if waiting:

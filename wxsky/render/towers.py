@@ -58,8 +58,8 @@ SHARPEN = 1.0
 # key light is on a billow's far side from it, its direct light cut by exp(-BILLOW_SHADOW x
 # the rise). The lit cells (40-160 m) hold the tower's shade, not its billows': without it a
 # tower's inside is an even blend, a cotton ball where a pilot sees cauliflower.
-BILLOW_SHADOW = 4.0
-BILLOW_PROBE_M = 40.0
+BILLOW_SHADOW = 3.0
+BILLOW_PROBE_M = 80.0
 # A new quad covers the cloudy part of the box and this much more of its size on each side,
 # so a growing tower keeps its quad (and the image of the step before) for a while.
 GROWTH_ROOM = 0.1

@@ -13,7 +13,7 @@ import contextlib
 import dataclasses
 import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -172,6 +172,9 @@ class FrameScene:
     # how many more the budget left as sprite clouds.
     towers: tuple[TowerShow, ...] = ()
     towers_left_out: int = 0
+    # Each convective cell's progress from sprite cloud to tower, to carry into the next
+    # frame (`tower_field.place_towers`'s fades).
+    tower_fades: tuple[tuple[int, float], ...] = ()
 
 
 class StageClock(Protocol):
@@ -406,6 +409,8 @@ def build_frame(
     towers: TowerClock | None = None,
     gathered: NearInputs | None = None,
     fill_towers: Callable[[tuple[TowerShow, ...]], tuple[TowerShow, ...]] | None = None,
+    tower_fades: Mapping[int, float] | None = None,
+    dt_s: float = 0.0,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
@@ -416,7 +421,10 @@ def build_frame(
     frames, which never make a set: `engine.near_work`); by default gathered here, and what
     is missing made at once. `fill_towers`: gives the towers their lit steps
     (`engine.tower_work.TowerWork.fill`); a tower it leaves without any stays the sprite
-    cloud it grew from until one is made, rather than a hole in the sky."""
+    cloud it grew from until one is made, rather than a hole in the sky. `tower_fades`: the
+    previous frame's `FrameScene.tower_fades`, `dt_s` (wall-clock) before it: cells coming
+    into the towers' budget or leaving it cross-fade between sprites and tower; None (a
+    first frame, a picture): none is part-way."""
     if gathered is None:
         gathered = gather_inputs(state, drift, rings, sky, settings, near_radius_m, towers)
     near, share, blocks, scattered = (
@@ -432,7 +440,16 @@ def build_frame(
         if found is None:
             found = candidates(blocks, state, towers.epochs)
         placed = place_towers(
-            found, drift, share, eye, towers, sky, settings.max_towers, settings.max_range_m
+            found,
+            drift,
+            share,
+            eye,
+            towers,
+            sky,
+            settings.max_towers,
+            settings.max_range_m,
+            tower_fades,
+            dt_s,
         )
         if fill_towers is not None and placed.shows:
             placed = _filled(placed, fill_towers(placed.shows))
@@ -526,6 +543,7 @@ def build_frame(
         near_dropped=dropped,
         towers=shows,
         towers_left_out=placed.left_out,
+        tower_fades=placed.fades,
     )
 
 
@@ -538,12 +556,15 @@ def _filled(placed: PlacedTowers, filled: tuple[TowerShow, ...]) -> PlacedTowers
     keep = ~np.isin(placed.drop_ids, ids)
     fading = ~np.isin(placed.fade_ids, ids)
     shows = tuple(t for t in filled if t.volumes)
+    # A tower waiting for its first lit step fades in from nothing once it has one.
+    unset = set(waiting)
     return dataclasses.replace(
         placed,
         shows=shows,
         drop_ids=placed.drop_ids[keep],
         fade_ids=placed.fade_ids[fading],
         fade_keep=placed.fade_keep[fading],
+        fades=tuple((cid, p) for cid, p in placed.fades if cid not in unset),
     )
 
 

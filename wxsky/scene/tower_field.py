@@ -4,11 +4,12 @@ each is, and the volumes' light (issue 17, items 2 and 4; docs/towers.md).
 A convective layer's cells (`convection.tower_specs`) are found once per near set, in the
 layers' drifting frames. Each frame places them with the drift and keeps the `max_towers`
 nearest the eye as towers; their clouds' sprites leave the near layer (their rain shafts
-stay). At the budget's edge a cell turns from one to the other over TOWER_FADE_M of distance
-(the tower fading in as its cloud's sprites fade out), so a cell entering or leaving the
-budget as the eye flies on cross-fades instead of switching in one frame. The rest stay
-sprite clouds, as do cells the eye is in or at (the in-cloud rules of
-the sprites then apply) and every cell beyond the near layer (the ring's impostors draw them).
+stay). A cell entering or leaving the budget as the eye flies on turns from one to the
+other over TOWER_FADE_S (the tower fading in as its cloud's sprites fade out) instead of
+switching in one frame: each frame carries the cells' progress to the next
+(`PlacedTowers.fades`, as the in-cloud locks are carried). The rest stay sprite clouds, as
+do cells the eye is in or at (the in-cloud rules of the sprites then apply) and every cell
+beyond the near layer (the ring's impostors draw them).
 
 A tower's age is the sim time since its layer's weather was set (`LayerEpoch`, kept by the
 engine as it keeps the drift's anchor) less its birth: a picture at a later time shows the
@@ -21,6 +22,7 @@ from __future__ import annotations
 import math
 import threading
 import weakref
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 
@@ -49,10 +51,12 @@ DENSITY_CHANNEL = 6
 # Density below this is not drawn as cloud (the smoothed field's faint fringe and the odd lone
 # cell): the impostor is fitted to the rest.
 OCCUPIED_FLOOR = 0.05
-# A cell this much nearer than the nearest cell past the budget is all tower; nearer the edge
-# its tower fades out and its sprite cloud in (at the edge, all sprites). Two cells trading
-# places at the edge are at the same distance as they pass, both all sprites: no frame jumps.
-TOWER_FADE_M = 1000.0
+# A cell entering the budget turns from sprite cloud to tower over this long (and back when
+# it leaves), wall-clock; the ring's impostors cross-fade over 1 s, and a tower's look
+# changes more. By time, not by the distance to the budget's edge: that left the cell
+# nearest the edge a ghost of both for as long as the eye kept its distance (drifting with
+# the layer, for ever).
+TOWER_FADE_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -140,10 +144,13 @@ class PlacedTowers:
     drop_ids: npt.NDArray[np.int64]  # clouds whose sprites the towers replace
     left_out: int  # cells past the budget, drawn as sprite clouds
     candidates: int = 0
-    # Clouds at the budget's edge, their sprites kept at this share of their alpha while
-    # their towers fade in (TOWER_FADE_M).
+    # Clouds part-way between sprites and tower, their sprites kept at this share of their
+    # alpha (TOWER_FADE_S).
     fade_ids: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     fade_keep: npt.NDArray[np.float32] = field(default_factory=lambda: np.zeros(0, np.float32))
+    # Every cell's progress from sprite cloud (0) to tower (1) where it is above 0, for the
+    # next frame's `place_towers`.
+    fades: tuple[tuple[int, float], ...] = ()
 
 
 NO_TOWERS = PlacedTowers((), np.zeros(0, np.int64), 0)
@@ -234,10 +241,15 @@ def place_towers(
     sky: SkyParams,
     budget: int,
     max_range_m: float,
+    fades: Mapping[int, float] | None = None,
+    dt_s: float = 0.0,
 ) -> PlacedTowers:
     """The `budget` cells nearest the eye, placed with the frame's drift: the born ones as
     towers, their clouds' sprites (born or not: a cell not born yet is clear air) to drop.
-    Cells the eye is in or at stay sprite clouds and do not count."""
+    Cells the eye is in or at stay sprite clouds and do not count. `fades`: the previous
+    frame's `PlacedTowers.fades`, `dt_s` (wall-clock) before: cells that came into the budget
+    or left it since move toward tower or sprites by dt_s / TOWER_FADE_S; None (a first
+    frame, a picture): every cell is already what the budget makes it."""
     if budget <= 0 or not found:
         return PlacedTowers((), np.zeros(0, np.int64), len(found), len(found))
     eye = np.asarray(eye_m, np.float64)
@@ -254,25 +266,36 @@ def place_towers(
     # Nearest first, ties in candidate order; only the chosen few become Python objects (the
     # candidates are a whole near set's worth of cells, every frame).
     scored = np.flatnonzero(~inside)
-    ordered = scored[np.lexsort((scored, dists[scored]))]
-    ranked = ordered[:budget]
-    edge_m = float(dists[ordered[budget]]) if len(ordered) > budget else math.inf
+    ranked: list[int] = scored[np.lexsort((scored, dists[scored]))][:budget].tolist()
+    step = math.inf if fades is None else max(dt_s, 0.0) / TOWER_FADE_S
+    progress = {found[i].cloud_id: _toward(fades, found[i].cloud_id, 1.0, step) for i in ranked}
+    kept = len(ranked)
+    if fades:
+        # Cells that left the budget (not for the eye entering them) fade back to sprites.
+        leaving = [cid for cid in fades if cid not in progress]
+        if leaving:
+            where = {c.cloud_id: i for i, c in enumerate(found)}
+            for cid in leaving:
+                i = where.get(cid, -1)
+                if i >= 0 and not inside[i]:
+                    ranked.append(i)
+                    progress[cid] = _toward(fades, cid, 0.0, step)
     chosen = [
         (
             float(dists[i]),
             found[i],
             (float(centres[i, 0]), float(centres[i, 1]), float(centres[i, 2])),
         )
-        for i in ranked.tolist()
+        for i in ranked
     ]
     shows = []
     drop: list[int] = []
     fade_ids: list[int] = []
     fade_keep: list[float] = []
     for dist, c, centre in chosen:
-        turned = tower_share(edge_m - dist)
+        turned = _smooth(progress[c.cloud_id])
         if turned <= 0.0:
-            continue  # at the edge: all sprite cloud
+            continue  # faded back: all sprite cloud
         if turned < 1.0:
             fade_ids.append(c.cloud_id)
             fade_keep.append(1.0 - turned)
@@ -302,18 +325,25 @@ def place_towers(
     return PlacedTowers(
         tuple(shows),
         np.asarray(drop, np.int64),
-        len(scored) - len(chosen),
+        len(scored) - kept,
         len(found),
         np.asarray(fade_ids, np.int64),
         np.asarray(fade_keep, np.float32),
+        tuple((cid, p) for cid, p in progress.items() if p > 0.0),
     )
 
 
-def tower_share(inside_edge_m: float) -> float:
-    """How much of a cell within the budget is tower (the rest its sprite cloud), by how much
-    nearer it is than the nearest cell past the budget: smooth from 0 at the edge to 1 at
-    TOWER_FADE_M."""
-    t = min(max(inside_edge_m / TOWER_FADE_M, 0.0), 1.0)
+def _toward(fades: Mapping[int, float] | None, cloud_id: int, target: float, step: float) -> float:
+    """A cell's progress toward tower (1) or sprites (0), `step` on from the last frame's."""
+    if fades is None or math.isinf(step):
+        return target
+    was = fades.get(cloud_id, 0.0)
+    return min(target, was + step) if target > was else max(target, was - step)
+
+
+def _smooth(progress: float) -> float:
+    """How much of a cell is tower (the rest its sprite cloud) at a linear `progress`."""
+    t = min(max(progress, 0.0), 1.0)
     return t * t * (3.0 - 2.0 * t)
 
 
