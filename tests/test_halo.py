@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from datetime import UTC, datetime
 
 import numpy as np
 import numpy.typing as npt
@@ -15,6 +16,7 @@ import pytest
 from tools.gallery.light_sheet import sun_time
 from wxsky.app.snapshot import take_snapshot
 from wxsky.scene.camera import Camera
+from wxsky.scene.sky import sky_params
 from wxsky.settings.config import load_config
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState
@@ -26,18 +28,30 @@ FOV_DEG = 100.0
 SUN_DEG = 30.0
 
 
-def _picture(layer: CloudLayer | None) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """(picture 0..1 RGB, each pixel's angle from the sun in degrees), looking at the sun."""
+# A night over the preset's field with the moon 34° up, three quarters lit, the sun 14° down.
+MOON_NIGHT = datetime(2026, 5, 25, 21, 0, tzinfo=UTC)
+
+
+def _picture(
+    layer: CloudLayer | None, moon: bool = False
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(picture 0..1 RGB, each pixel's angle from the sun in degrees), looking at the sun
+    (`moon`: at the moon on MOON_NIGHT, the angles from it)."""
     state = WeatherState().apply(load_preset("high-cirrus"))
     obs = state.observer
-    sun = sun_time(state.time_utc, obs.lat_deg, obs.lon_deg, SUN_DEG)
-    state = dataclasses.replace(
-        state, time_utc=sun.time_utc, layers=() if layer is None else (layer,)
-    )
+    if moon:
+        state = dataclasses.replace(state, time_utc=MOON_NIGHT)
+        body = sky_params(state).moon
+        azimuth, elevation = body.azimuth_deg, body.elevation_deg
+    else:
+        sun = sun_time(state.time_utc, obs.lat_deg, obs.lon_deg, SUN_DEG)
+        state = dataclasses.replace(state, time_utc=sun.time_utc)
+        azimuth, elevation = sun.azimuth_deg, sun.elevation_deg
+    state = dataclasses.replace(state, layers=() if layer is None else (layer,))
     camera = Camera(
         position_m=(0.0, 0.0, obs.alt_m + 2.0),
-        heading_deg=sun.azimuth_deg,
-        pitch_deg=sun.elevation_deg,
+        heading_deg=azimuth,
+        pitch_deg=elevation,
         fov_deg=FOV_DEG,
         width_px=SIZE[0],
         height_px=SIZE[1],
@@ -111,3 +125,18 @@ def test_a_cirrostratus_veil_is_more_even_than_cirrus() -> None:
     streaks = _local_detail(CloudLayer(8, 8500.0, 9600.0, CloudType.CIRRUS))
     # Before the veil was a film of its own, it was patchier than cirrus (0.022 against 0.015).
     assert veil < 0.9 * streaks, (veil, streaks)
+
+
+def test_the_moon_has_its_halo_over_the_veil_at_night() -> None:
+    """The same ring 22° from the moon (three quarters lit, 34° up, the sun 14° down): over
+    cirrostratus it stands out of the dark veil; over cirrus there is none."""
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    rgb, angle = _picture(CloudLayer(8, 9900.0, 10600.0, CloudType.CIRROSTRATUS), moon=True)
+    ring = float(_ring(rgb, angle, 21.6, 23.0) @ lum)
+    inside = float(_ring(rgb, angle, 18.0, 20.0) @ lum)
+    outside = float(_ring(rgb, angle, 27.0, 29.0) @ lum)
+    assert ring > inside + 0.01 and ring > outside + 0.01, (inside, ring, outside)
+    rgb, angle = _picture(CloudLayer(8, 8500.0, 9600.0, CloudType.CIRRUS), moon=True)
+    ring = float(_ring(rgb, angle, 21.6, 23.0) @ lum)
+    between = 0.5 * float((_ring(rgb, angle, 18.0, 20.0) + _ring(rgb, angle, 27.0, 29.0)) @ lum)
+    assert abs(ring - between) < 0.005, (ring, between)

@@ -77,6 +77,7 @@ from wxsky.scene.sky import (
     display_sky_view,
     display_veil,
     layer_reaches_horizon,
+    moon_veiled,
     scene_exposure,
 )
 
@@ -117,6 +118,11 @@ DATA_DIR = "data"
 # the sun's light, and how much darker the veil is inside the ring, as a share of its own.
 HALO_GAIN = 0.45
 HALO_DARK_INSIDE = 0.08
+# The moon's halo: its light on the veil as a share of its disc's (`SkyParams.moon_rgb`, a
+# near-white disc at full moon). At night the veil is lit by the sky's ambient alone, some 3
+# levels of 255; at 0.4 the ring of a three-quarter moon stands some 5 levels over it, plain
+# to an eye used to the dark as a moon's halo is, and as faint as the moon's phase makes it.
+MOON_HALO_GAIN = 0.4
 # A cirrostratus veil's opacity where it lies (sky.glsl cloud_dome): a milky film.
 VEIL_ALPHA = 0.35
 # ... and how much fainter the dome's patches are where all the high cover is veil.
@@ -551,6 +557,8 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
                 "u_dome_height_m": frame.height_m,
                 "u_dome_controls": (dome.high_cover, dome.cover, dome.density, dome.sunset),
                 "u_dome_veil": dome.veil,
+                "u_moon_halo_dir": sky.moon.direction_enu,
+                "u_moon_halo_rgb": moon_halo_rgb(sky),
                 "u_dome_band": (band_lo, band_hi),
                 "u_dome_m0": frame.matrices[0],
                 "u_dome_m1": frame.matrices[1],
@@ -633,6 +641,19 @@ def _dome_frame(sky: SkyParams, eye_alt_m: float) -> DomeFrame:
         matrices.append((float(m[0, 0]), float(m[1, 0]), float(m[0, 1]), float(m[1, 1])))
         offsets.append((float(offset[0]), float(offset[1])))
     return DomeFrame(clearance_m, tuple(matrices), tuple(offsets))
+
+
+def moon_halo_rgb(sky: SkyParams) -> tuple[float, float, float]:
+    """The moon's light for its 22° halo over a cirrostratus veil (sky.glsl `halo`), in
+    the units the sun's is: its disc's light (`SkyParams.moon_rgb`, reddened low down) as it
+    reaches the veil (not dimmed by the cloud it shines through to the eye), times its lit
+    share, MOON_HALO_GAIN of it, and only once the sun is down (by day the moon's halo drowns
+    in the sun's light on the veil)."""
+    night = 1.0 - _smoothstep(-8.0, -2.0, sky.sun.elevation_deg)
+    veiled = max(moon_veiled(sky.cover), 1e-3)
+    gain = MOON_HALO_GAIN * sky.moon.illuminated_fraction * night / veiled
+    r, g, b = (float(c) * gain for c in sky.moon_rgb)
+    return r, g, b
 
 
 def dome_light_rgb(sky: SkyParams) -> F64:

@@ -374,7 +374,7 @@ def _sky_params(
     low = 1.0 - smoothstep(0.0, 12.0, moon.elevation_deg)
     moon_rgb = _mix((0.96, 0.94, 0.88), (1.0, 0.72, 0.48), low * 0.8)
     moon_gain = (0.95 - 0.65 * day) * (1.0 - 0.35 * low)
-    moon_gain *= 1.0 - 0.85 * smoothstep(0.6, 1.0, cover)
+    moon_gain *= moon_veiled(cover)
     moon_rgb = _scale(moon_rgb, moon_gain * smoothstep(-1.0, 0.0, moon.elevation_deg))
 
     return SkyParams(
@@ -505,6 +505,12 @@ HAZE_MIN_ELEVATION_DEG = 0.5
 # the table is symmetric about the sun's vertical), at HAZE_AVERAGE_ELEVATION_DEG.
 HAZE_AVERAGE_AZIMUTHS = 16
 HAZE_AVERAGE_ELEVATION_DEG = 2.0
+
+
+def moon_veiled(cover: float) -> float:
+    """What of the moon's disc shows through the sky's cloud `cover` (0..1): all of it under
+    broken cloud, 15 % under a whole deck (`SkyParams.moon_rgb`)."""
+    return 1.0 - 0.85 * smoothstep(0.6, 1.0, cover)
 
 
 def overcast_veil(cover: float) -> tuple[float, float]:

@@ -63,6 +63,8 @@ uniform vec2 u_dome_off1;
 uniform vec2 u_dome_off2;
 uniform vec3 u_dome_rgb;          // cloud lit by sky and sun
 uniform float u_dome_veil;        // cirrostratus cover: the milky film and the 22 deg halo
+uniform vec3 u_moon_halo_dir;     // the moon, for its halo (toward it, unit)
+uniform vec3 u_moon_halo_rgb;     // the moon's light on the veil, as u_sun_rgb is the sun's
 uniform vec3 u_dome_haze_rgb;     // the air between the eye and the layer (SkyParams.haze_rgb)
 uniform float u_haze_m;
 uniform float u_haze_depth_m;     // of the dome's height, how much lies in the hazy layer
@@ -275,21 +277,21 @@ vec3 moon_light(vec3 ray, out float coverage) {
 #endif
 
 #if SKY_DOME
-// The 22 deg halo: sunlight bent by the hexagonal ice prisms of a cirrostratus veil (their
-// least deviation is 21.8 deg; red bends least, so the ring's inner edge is red and sharp and
-// it fades bluish-white outward), and the veil inside the ring a little darker, where no
-// prism sends light. Over the veil only: the dome's alpha carries it.
-vec3 halo(vec3 ray) {
-    if (u_sun_dir.z < -0.01) {
+// The 22 deg halo: sunlight (or moonlight) bent by the hexagonal ice prisms of a cirrostratus
+// veil (their least deviation is 21.8 deg; red bends least, so the ring's inner edge is red
+// and sharp and it fades bluish-white outward), and the veil inside the ring a little darker,
+// where no prism sends light. Over the veil only: the dome's alpha carries it.
+vec3 halo(vec3 ray, vec3 light_dir, vec3 light_rgb) {
+    if (light_dir.z < -0.01) {
         return vec3(0.0);
     }
-    float deg = degrees(acos(clamp(dot(ray, u_sun_dir), -1.0, 1.0)));
+    float deg = degrees(acos(clamp(dot(ray, light_dir), -1.0, 1.0)));
     vec3 off = deg - vec3(21.7, 22.0, 22.3);
     // Sharp inside (0.35 deg), a long outer tail (2.5 deg).
     vec3 width = mix(vec3(0.35), vec3(2.5), step(0.0, off));
     vec3 ring = exp(-0.5 * off * off / (width * width));
     float inside = 1.0 - smoothstep(17.0, 21.5, deg);
-    return u_sun_rgb * HALO_GAIN * ring - u_dome_rgb * HALO_DARK_INSIDE * inside;
+    return light_rgb * HALO_GAIN * ring - u_dome_rgb * HALO_DARK_INSIDE * inside;
 }
 
 // Roden & Parberry's cloud dome as a plane at the dome height: two shape layers blended,
@@ -365,7 +367,10 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
                       * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
     rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
     if (u_dome_veil > 0.0) {
-        rgb += halo(ray) * u_dome_veil;
+        rgb += halo(ray, u_sun_dir, u_sun_rgb) * u_dome_veil;
+        if (u_moon_halo_rgb.r > 0.0) {
+            rgb += halo(ray, u_moon_halo_dir, u_moon_halo_rgb) * u_dome_veil;
+        }
     }
     // Aerial perspective as the sprites have it (scene.layout.hazed): the layer's contrast
     // falls by exp(-distance / haze distance) along the ray to its plane, towards `air`, the
