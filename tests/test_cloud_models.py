@@ -261,6 +261,10 @@ def test_a_minimal_model_loads_with_defaults(tmp_path: Path) -> None:
             ("sprites = 10", "grid = [5, 5]"),
             "box[0].grid: lattice spacing 0.1 cloud widths is inside the cull distance 0.12",
         ),
+        (
+            ('textures = ["puffy"]', 'textures = ["puffy"]\nunder_base = "yes"'),
+            "box[0].under_base: must be true or false, got 'yes'",
+        ),
     ],
 )
 def test_bad_models_are_errors_naming_file_and_key(
@@ -300,3 +304,18 @@ def test_two_models_for_the_same_layers_are_an_error(tmp_path: Path) -> None:
     _write(tmp_path, MINIMAL, "cumulus-twin.toml")
     with pytest.raises(ConfigError, match="serve the same layers"):
         load_cloud_models(tmp_path)
+
+
+def test_nimbostratus_scud_hangs_under_the_base_and_the_rest_stays_in_the_layer() -> None:
+    layer = SLABS["nimbostratus"]
+    (model,) = [m for m in ALL_MODELS if m.name == "nimbostratus"]
+    assert any(box.under_base for box in model.boxes)
+    thickness = layer.top_m - layer.base_m
+    batch = block_clouds(0, 0, 7, model, thickness, 11).sprites
+    z = batch.centre_m[:, 2]  # above the layer's base
+    under = z < 0.0
+    assert 10 <= under.sum() < 0.5 * len(z)
+    # A few hundred metres down: scud, not a second layer near the ground.
+    assert z[under].min() > -400.0 and z[under].max() < -20.0
+    # The rest keep inside the layer, as before.
+    assert (z[~under] >= 0.0).all() and (z <= thickness).all()

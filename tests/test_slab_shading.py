@@ -14,7 +14,16 @@ import pytest
 from wxsky.scene.clouds import SpriteBatch
 from wxsky.scene.formation import layer_block
 from wxsky.scene.shading import prepare_lighting, sprite_colours
-from wxsky.scene.shading_slab import BETA, G_S, KAPPA_S_PER_M, limb, slab_energy, slab_radiance
+from wxsky.scene.shading_slab import (
+    BETA,
+    G_S,
+    KAPPA_S_PER_M,
+    SCUD_TRANSMITTANCE,
+    limb,
+    slab_energy,
+    slab_radiance,
+    slab_view_radiance,
+)
 from wxsky.scene.sky import sky_params
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
@@ -176,3 +185,16 @@ def test_the_sky_above_a_deck_is_clear() -> None:
     # The surface mist stays under the deck: an eye above it sees far.
     assert above.haze_m >= 5.0 * below.haze_m
     assert sky_params(state).cover == covers[0]  # the default eye is the observer's
+
+
+def test_scud_under_the_base_is_darker_than_the_base_behind_it() -> None:
+    # Two sprites of one deck seen from under it along the same ray: one in the deck's base,
+    # one of its scud 150 m under it. The scud is the base's light through its own thickness.
+    state = WeatherState().apply(load_preset("overcast-stratus"))
+    sky = sky_params(state)
+    slab = np.array([[1000.0, 2500.0]] * 2, np.float32)
+    view = np.array([[0.0, 0.0], [0.6, 0.6], [0.8, 0.8]])
+    out = slab_view_radiance(np.array([1010.0, 850.0]), slab, view, sky, 2.0)
+    assert out[:, 0].min() > 0.0
+    np.testing.assert_allclose(out[:, 1], SCUD_TRANSMITTANCE * out[:, 0], rtol=1e-9)
+    assert 0.4 <= SCUD_TRANSMITTANCE <= 0.8

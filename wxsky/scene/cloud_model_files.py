@@ -131,6 +131,7 @@ BOX_TABLE = Table(
         ),
         "textures": Field(Items(Custom(_texture, "a texture category"), min_len=1), REQUIRED),
         "shading_group": Field(Number(0, MAX_SHADING_GROUP, integer=True), 0),
+        "under_base": Field(Bool(), False),
     },
     rules=(Rule(("sprites", "grid", "width", "depth", "height", "sprite_size"), _box_rules),),
 )
@@ -248,4 +249,5 @@ def _box(v: dict[str, Any]) -> BoxTemplate:
         rotation_deg=tuple(v["rotation_deg"]),
         textures=tuple(slots),
         shading_group=v["shading_group"],
+        under_base=v["under_base"],
     )

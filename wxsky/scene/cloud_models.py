@@ -41,6 +41,9 @@ class BoxTemplate:
     rotation_deg: tuple[float, float]
     textures: tuple[int, ...]  # sheet slots of the box's texture categories
     shading_group: int  # 0: by octant around the cloud's centre; n: boxes numbered n shade as one
+    # Hangs under the layer's base (scud, fractus): its sprites are not kept inside the layer
+    # and, under a slab, are shaded as a small cloud in the deck's light, not as the deck.
+    under_base: bool = False
 
     @property
     def count(self) -> int:

@@ -126,6 +126,10 @@ def generate_block_clouds(
     rot: F64 = np.concatenate([p.rot for p in parts], axis=1).reshape(-1)
     tex: I64 = np.concatenate([p.tex for p in parts], axis=1).reshape(-1)
     group: I64 = np.concatenate([p.group for p in parts], axis=1).reshape(-1)
+    under = np.concatenate(
+        [np.full(p.size.shape, box.under_base) for p, box in zip(parts, model.boxes, strict=True)],
+        axis=1,
+    ).reshape(-1)
     cloud: I64 = np.repeat(cells, per_cloud)
     # Keep sprite discs inside the layer: centres a third of a sprite from base and top, or
     # the middle of a layer too thin for that, never outside it.
@@ -133,6 +137,8 @@ def generate_block_clouds(
     # A flat-based cloud's sprites may hang below its base: the cut there (`base_m`) makes the
     # straight, dense edge that sprites kept above it would leave rounded and thin.
     floor = np.zeros_like(margin) if model.flat_base else margin
+    # Scud boxes hang under the base: only kept from reaching into the layer's top.
+    floor = np.where(under, -np.inf, floor)
     pos[:, 2] = np.clip(pos[:, 2], floor, thickness_m - margin)
     # Sprites are cloud-major, per_cloud to a cloud, as the cull walks them.
     keep = cull_mask_clouds(

@@ -73,6 +73,11 @@ _TABLE = np.array(
 )
 GROUND_ALBEDO = 0.15  # fields and towns; we know nothing of the ground under the deck
 MIN_MU = 0.02  # views and lights closer than ~1 degree to the slab's plane count as 1 degree
+# Scud under a deck (`BoxTemplate.under_base`): the light under a deck is diffuse, from
+# above, and a ragged fragment 100-300 m thick sends down what its own thickness lets through
+# of it (diffuse transmission of a thin cloud, about half to two thirds): seen from below it
+# is darker than the base behind it, the dark shreds a pilot sees under nimbostratus.
+SCUD_TRANSMITTANCE = 0.6
 # Light from a uniformly bright hemisphere crosses a slab on average as a beam 60 degrees from
 # the normal does (its mean cosine is 1/2).
 DIFFUSE_ANGLE_DEG = 60.0
@@ -298,6 +303,11 @@ def slab_view_radiance(
     out: F64 = key_rgb * key
     out += sky_rgb[:, None] * sky_share
     out += NIGHT_FLOOR_RGB[:, None]
+    # Scud under the base (a box's `under_base`): a small cloud in the light the deck lets
+    # through, seen from below through its own thickness, darker than the base behind it.
+    under = centre_z_m < base_m
+    if under.any():
+        out[:, under] *= SCUD_TRANSMITTANCE
     return out
 
 
