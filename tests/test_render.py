@@ -743,3 +743,56 @@ def test_missing_define_is_a_compile_error_naming_the_file(renderer: Renderer) -
     prog = lib.program("sprites.glsl", defines)
     assert lib.program("sprites.glsl", dict(defines)) is prog  # compiled once
     lib.release()
+
+
+def test_interleaved_variants_drawn_as_one_match_each_drawn_as_its_own(
+    renderer: Renderer, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Deck sprites seen from below, flat-based ones and plain ones, interleaved back to
+    front: past MAX_VARIANT_RUNS they are drawn in one run of the variant holding every
+    feature (each sprite's data switching off what it lacks), and the picture is the one
+    drawing each run with its own variant makes."""
+    rng = np.random.default_rng(9)
+    n = 90
+    elevation = rng.uniform(0.1, 0.9, n)
+    azimuth = rng.uniform(-0.5, 0.5, n)
+    dist = np.sort(rng.uniform(800.0, 4000.0, n))[::-1]  # back to front
+    centres = np.stack(
+        [
+            dist * np.cos(elevation) * np.sin(azimuth),
+            dist * np.cos(elevation) * np.cos(azimuth),
+            1000.0 + dist * np.sin(elevation),
+        ],
+        axis=1,
+    )
+    kind = np.arange(n) % 3  # 0 plain, 1 a deck's, 2 flat-based: a new variant every sprite
+    z = centres[:, 2]
+    batch = sprite_batch(centres.tolist(), rng.uniform(200.0, 500.0, n).tolist())
+    batch = dataclasses.replace(
+        batch,
+        slab_m=np.where(
+            (kind == 1)[:, None], np.stack([z - 100.0, z + 200.0], axis=1), np.nan
+        ).astype(np.float32),
+        base_m=np.where(kind == 2, z - 50.0, np.nan).astype(np.float32),
+    )
+    draw = SpriteDraw(batch, rng.uniform(0.3, 1.0, (n, 4)).astype(np.float32))
+    cam = _camera(pitch_deg=30.0, fov_deg=120.0)
+    drawn: list[int] = []
+    real_runs = renderer_module._variant_runs
+    limit = renderer_module.MAX_VARIANT_RUNS
+
+    def counted(codes: np.ndarray) -> list[tuple[int, int, int]]:
+        runs = real_runs(codes)
+        drawn.append(len(runs))
+        return runs
+
+    monkeypatch.setattr(renderer_module, "_variant_runs", counted)
+    with _near_scale(renderer, 1.0):
+        renderer.render_frame(FrameScene(cam, _sky(), draw))
+        merged = renderer.read("near").astype(int)
+        monkeypatch.setattr(renderer_module, "MAX_VARIANT_RUNS", 10**6)
+        renderer.render_frame(FrameScene(cam, _sky(), draw))
+        apart = renderer.read("near").astype(int)
+    assert drawn[0] <= 2 and drawn[1] > limit
+    assert merged[..., 3].max() > 200
+    assert np.abs(merged - apart).max() <= 1

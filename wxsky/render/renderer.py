@@ -126,6 +126,14 @@ _MIXING = 1
 _DECK = 2
 _FLAT_BASE = 4
 _SPRITE_VARIANTS = 8
+# A draw whose sprites change variant more often than this (layers of decks, sheets and
+# heaped clouds interleaved back to front: the thunderstorm's far band made 410 draws of 950
+# sprites, a third of its frame) draws them all with the variant holding every feature any
+# of them needs, each sprite's own data switching off what it lacks (no base: NO_BASE_M
+# under it; no deck: 0), at the cost of the features' arithmetic in every fragment.
+MAX_VARIANT_RUNS = 16
+# The flat base of a sprite that has none, over the eye: so far below that nothing is cut.
+NO_BASE_M = -1.0e9
 
 
 @dataclass
@@ -763,7 +771,7 @@ class Renderer:
         # The flat base the sprite is cut at, over the eye (SpriteBatch.base_m).
         base = s.base_m
         based = ~np.isnan(base)  # (only the FLAT_BASE variant reads it)
-        inst[:, 16] = np.where(based, base - np.float32(eye_m[2]), 0.0)
+        inst[:, 16] = np.where(based, base - np.float32(eye_m[2]), NO_BASE_M)
         # A deck's base over the eye, for its relief seen from below (0: not drawn so), and
         # where the deck has drifted to from the eye: its relief drifts with it (mod 64 km,
         # so float32 keeps a centimetre of it).
@@ -944,11 +952,17 @@ def _variants(
 
 
 def _variant_runs(codes: npt.NDArray[np.int8]) -> list[tuple[int, int, int]]:
-    """(start, stop, variant) for each run of one variant, in order."""
+    """(start, stop, variant) for each run of one variant, in order; past MAX_VARIANT_RUNS,
+    the runs of the variant holding every deck and flat-base feature any sprite needs (the
+    second texture read of a turning sprite stays its own: few sprites need it)."""
     n = len(codes)
     if n == 0 or not codes.any():
         return [(0, n, 0)]
     edges = np.flatnonzero(np.diff(codes)) + 1
+    if len(edges) >= MAX_VARIANT_RUNS:
+        shared = np.bitwise_or.reduce(codes) & np.int8(_DECK | _FLAT_BASE)
+        codes = codes | shared
+        edges = np.flatnonzero(np.diff(codes)) + 1
     starts = np.concatenate(([0], edges))
     stops = np.concatenate((edges, [n]))
     return [(int(a), int(b), int(codes[a])) for a, b in zip(starts, stops, strict=True)]

@@ -265,7 +265,11 @@ void main() {
     // before the centre hides, which a silhouette's thin edge lets through).
     vec3 body = v_rgba.rgb * mix(t.rgb * v_inv_shade, vec3(1.0), v_haze);
 #if DECK
-    body *= mix(deck_relief(), 1.0, v_haze);
+    // A sprite of no deck drawn with this variant (renderer.MAX_VARIANT_RUNS) has none
+    // (v_deck.x is 0); the branch is the same over each sprite, whose derivatives it takes.
+    if (v_deck.x > 0.0) {
+        body *= mix(deck_relief(), 1.0, v_haze);
+    }
 #endif
     // The lowest part of a flat-based cloud is in the shadow of all of it: darker toward the
     // base within each sprite, so the base is one dark band under the cloud, not the lit
