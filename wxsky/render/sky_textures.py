@@ -118,6 +118,8 @@ DATA_DIR = "data"
 # the sun's light, and how much darker the veil is inside the ring, as a share of its own.
 HALO_GAIN = 0.45
 HALO_DARK_INSIDE = 0.08
+# How far from the sun (or moon) the halo is drawn at all: its outer tail is under 1 % there.
+HALO_REACH_DEG = 32.0
 # The moon's halo: its light on the veil as a share of its disc's (`SkyParams.moon_rgb`, a
 # near-white disc at full moon). At night the veil is lit by the sky's ambient alone, some 3
 # levels of 255; at 0.4 the ring of a three-quarter moon stands some 5 levels over it, plain
@@ -144,6 +146,7 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "FIBRE_ACROSS": f"{FIBRE_ACROSS:.6f}",
         "FIBRE_BEND": f"{FIBRE_BEND:.6f}",
         "HALO_DARK_INSIDE": f"{HALO_DARK_INSIDE:.6f}",
+        "HALO_COS_REACH": f"{math.cos(math.radians(HALO_REACH_DEG)):.6f}",
         "VEIL_ALPHA": f"{VEIL_ALPHA:.6f}",
         "VEIL_PATCHES": f"{VEIL_PATCHES:.6f}",
         "SKY_STARS": str(int(feats.stars)),

@@ -282,10 +282,13 @@ vec3 moon_light(vec3 ray, out float coverage) {
 // and sharp and it fades bluish-white outward), and the veil inside the ring a little darker,
 // where no prism sends light. Over the veil only: the dome's alpha carries it.
 vec3 halo(vec3 ray, vec3 light_dir, vec3 light_rgb) {
-    if (light_dir.z < -0.01) {
+    // Nothing of it past 32 deg (its outer tail is under 1 % there): most of the sky skips
+    // the acos and the three exponentials.
+    float cos_a = dot(ray, light_dir);
+    if (light_dir.z < -0.01 || cos_a < HALO_COS_REACH) {
         return vec3(0.0);
     }
-    float deg = degrees(acos(clamp(dot(ray, light_dir), -1.0, 1.0)));
+    float deg = degrees(acos(min(cos_a, 1.0)));
     vec3 off = deg - vec3(21.7, 22.0, 22.3);
     // Sharp inside (0.35 deg), a long outer tail (2.5 deg).
     vec3 width = mix(vec3(0.35), vec3(2.5), step(0.0, off));
@@ -361,11 +364,14 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     // Roden & Parberry's sunset gradient: redder low down, pinker high up, golden while the sun
     // is still well up. Scaled to the dome's light so the tint never brightens a dark sky.
     // Coordinates land on the first and last texel centres at 0 and 1.
-    vec2 sunset_px = vec2(textureSize(u_sunset_tex, 0));
-    vec2 sunset_uv = (vec2(sunset, sqrt(z)) * (sunset_px - 1.0) + 0.5) / sunset_px;
-    vec3 sunset_rgb = textureLod(u_sunset_tex, sunset_uv, 0.0).rgb
-                      * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
-    rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
+    // Read only when the sun is low (a uniform branch): by day it added nothing but a fetch.
+    if (sunset > 0.0) {
+        vec2 sunset_px = vec2(textureSize(u_sunset_tex, 0));
+        vec2 sunset_uv = (vec2(sunset, sqrt(z)) * (sunset_px - 1.0) + 0.5) / sunset_px;
+        vec3 sunset_rgb = textureLod(u_sunset_tex, sunset_uv, 0.0).rgb
+                          * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
+        rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
+    }
     if (u_dome_veil > 0.0) {
         rgb += halo(ray, u_sun_dir, u_sun_rgb) * u_dome_veil;
         if (u_moon_halo_rgb.r > 0.0) {
