@@ -571,8 +571,8 @@ def _filled(placed: PlacedTowers, filled: tuple[TowerShow, ...]) -> PlacedTowers
 def fading_share(
     near: SpriteBatch, share: npt.NDArray[np.float32], placed: PlacedTowers
 ) -> npt.NDArray[np.float32]:
-    """The near layer's alpha share with the clouds at the tower budget's edge faded by what
-    their towers take (`PlacedTowers.fade_keep`; rain shafts keep theirs)."""
+    """The near layer's alpha share with the clouds part-way to or from being towers faded
+    by what their towers take (`PlacedTowers.fade_keep`; rain shafts keep theirs)."""
     if not len(placed.fade_ids):
         return share
     out = np.array(share, np.float32, copy=True)
