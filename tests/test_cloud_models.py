@@ -20,7 +20,7 @@ from wxsky.scene.cloud_model_files import (
     load_cloud_model,
     load_cloud_models,
 )
-from wxsky.scene.clouds import BLOCK_SIZE_M, SpriteBatch, block_clouds
+from wxsky.scene.clouds import BLOCK_SIZE_M, UNDER_BASE_MAX_M, SpriteBatch, block_clouds
 from wxsky.scene.formation import layer_block
 from wxsky.scene.texture_slots import CATEGORIES
 from wxsky.weather.metar_clouds import CLOUD_TABLE
@@ -319,3 +319,12 @@ def test_nimbostratus_scud_hangs_under_the_base_and_the_rest_stays_in_the_layer(
     assert z[under].min() > -400.0 and z[under].max() < -20.0
     # The rest keep inside the layer, as before.
     assert (z[~under] >= 0.0).all() and (z <= thickness).all()
+
+
+def test_a_scud_box_reaches_no_farther_than_under_base_max_under_the_base(tmp_path: Path) -> None:
+    deep = MINIMAL.replace("centre = [0.0, 0.0, 0.5]", "centre = [0.0, 0.0, -1.9]").replace(
+        'textures = ["puffy"]', 'textures = ["puffy"]\nunder_base = true'
+    )
+    model = load_cloud_model(_write(tmp_path, deep))
+    z = block_clouds(0, 0, 3, model, 2000.0, 5).sprites.centre_m[:, 2]
+    assert len(z) and z.min() >= -UNDER_BASE_MAX_M and (z < -0.5 * UNDER_BASE_MAX_M).any()

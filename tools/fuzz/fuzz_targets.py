@@ -78,7 +78,7 @@ from wxsky.protocols.cigi_weather import weather_patch as cigi_weather_patch  # 
 from wxsky.protocols.nmea import NmeaDecoder, NmeaSettings  # noqa: E402
 from wxsky.protocols.result import Decoded  # noqa: E402
 from wxsky.scene.cloud_model_files import MODEL_TABLE, model_from_values  # noqa: E402
-from wxsky.scene.clouds import generate_block_clouds  # noqa: E402
+from wxsky.scene.clouds import UNDER_BASE_MAX_M, generate_block_clouds  # noqa: E402
 from wxsky.schema import Kind, Number, Table, Tables  # noqa: E402
 from wxsky.schema.toml_file import check_toml_bytes  # noqa: E402
 from wxsky.settings.config import (  # noqa: E402
@@ -1103,7 +1103,9 @@ def check_cloud_model(data: bytes) -> None:
     # Uncached: no fuzz model may stay in the process-wide block cache.
     clouds = generate_block_clouds(0, 0, 0, model, thickness_m, 1)
     pos = clouds.sprites.centre_m
-    assert pos.size == 0 or bool(((pos[:, 2] >= 0.0) & (pos[:, 2] <= thickness_m)).all()), (
+    # Scud boxes (`under_base`) may hang under the base, no farther than the model allows.
+    floor_m = -UNDER_BASE_MAX_M if any(box.under_base for box in model.boxes) else 0.0
+    assert pos.size == 0 or bool(((pos[:, 2] >= floor_m) & (pos[:, 2] <= thickness_m)).all()), (
         "sprites outside the layer"
     )
 

@@ -35,6 +35,10 @@ __all__ = [
 ]
 
 BLOCK_SIZE_M = 4000.0
+# A box that hangs under its layer's base (`BoxTemplate.under_base`: scud, fractus) reaches at
+# most this far down: scud forms in the moist air just under a rain layer, a few hundred
+# metres (a model file cannot put it on the ground).
+UNDER_BASE_MAX_M = 600.0
 # Shading groups 1..31 come from the model; sprites of group 0 boxes are grouped by their
 # octant around the cloud's centre, as keys 32..39.
 _OCTANT_GROUP = 32
@@ -137,8 +141,8 @@ def generate_block_clouds(
     # A flat-based cloud's sprites may hang below its base: the cut there (`base_m`) makes the
     # straight, dense edge that sprites kept above it would leave rounded and thin.
     floor = np.zeros_like(margin) if model.flat_base else margin
-    # Scud boxes hang under the base: only kept from reaching into the layer's top.
-    floor = np.where(under, -np.inf, floor)
+    # Scud boxes hang under the base, at most UNDER_BASE_MAX_M (and out of the layer's top).
+    floor = np.where(under, -UNDER_BASE_MAX_M, floor)
     pos[:, 2] = np.clip(pos[:, 2], floor, thickness_m - margin)
     # Sprites are cloud-major, per_cloud to a cloud, as the cull walks them.
     keep = cull_mask_clouds(
