@@ -370,6 +370,26 @@ def test_moon_is_faint_by_day_bright_by_night_and_gone_below_the_horizon() -> No
     assert below.moon.elevation_deg < -1.0 and below.moon_rgb == (0.0, 0.0, 0.0)
 
 
+def test_the_moon_shows_through_a_cirrostratus_veil_and_not_through_a_deck() -> None:
+    """A whole sky of thin ice cloud leaves most of the moon's light (it is ringed by its halo
+    there); a whole deck of water cloud hides most of it."""
+    t = _at(2026, 6, 21, 22, 30)
+
+    def moon_under(*layers: CloudLayer) -> float:
+        return _lum(sky_params(_state(t, layers=layers)).moon_rgb)
+
+    clear = moon_under()
+    veil = moon_under(CloudLayer(8, 9900.0, 10600.0, CloudType.CIRROSTRATUS))
+    deck = moon_under(CloudLayer(8, 800.0, 1300.0, CloudType.STRATUS))
+    both = moon_under(
+        CloudLayer(8, 9900.0, 10600.0, CloudType.CIRROSTRATUS),
+        CloudLayer(8, 800.0, 1300.0, CloudType.STRATUS),
+    )
+    assert clear > 0.3
+    assert 0.6 * clear <= veil < clear
+    assert deck <= 0.2 * clear and both <= deck
+
+
 def test_star_field_turns_with_sidereal_time_in_whole_seconds() -> None:
     t = _at(2026, 6, 21, 22, 0, 0)
     a = sky_params(_state(t))

@@ -77,7 +77,6 @@ from wxsky.scene.sky import (
     display_sky_view,
     display_veil,
     layer_reaches_horizon,
-    moon_veiled,
     scene_exposure,
 )
 
@@ -653,7 +652,7 @@ def moon_halo_rgb(sky: SkyParams) -> tuple[float, float, float]:
     share, MOON_HALO_GAIN of it, and only once the sun is down (by day the moon's halo drowns
     in the sun's light on the veil)."""
     night = 1.0 - _smoothstep(-8.0, -2.0, sky.sun.elevation_deg)
-    veiled = max(moon_veiled(sky.cover), 1e-3)
+    veiled = max(sky.moon_seen, 1e-3)
     gain = MOON_HALO_GAIN * sky.moon.illuminated_fraction * night / veiled
     r, g, b = (float(c) * gain for c in sky.moon_rgb)
     return r, g, b

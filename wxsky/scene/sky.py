@@ -60,6 +60,9 @@ SKY_EPOCH_UTC = datetime(2000, 1, 1, tzinfo=UTC)
 # layer's thin cirrus sheets leave the sky between them bare.
 HIGH_TYPES = frozenset({CloudType.CIRRUS, CloudType.CIRROSTRATUS, CloudType.CIRROCUMULUS})
 HIGH_BASE_M = 6000.0
+# How much a whole sky of high ice cloud dims the moon's disc (a cirrostratus veil's optical
+# depth is under one: the moon shows through it, ringed by its halo).
+THIN_MOON_DIM = 0.3
 # The dome's "height" control is a layer base between sea level and this (MSL).
 DOME_TOP_M = 13_000.0
 # The wind aloft that makes the dome's "speed" control 1.
@@ -148,6 +151,7 @@ class SkyParams:
     haze_m: float  # distance over which clouds fade into the horizon colour
     moon: MoonPosition = _MOON_DOWN
     moon_rgb: RGB = (0.0, 0.0, 0.0)  # light of the moon's sunlit face over the sky
+    moon_seen: float = 1.0  # the share of that light the cloud lets through (moon_veiled)
     # The sky above all cloud (what lights the top of a deck); None: as zenith/horizon_rgb.
     open_zenith_rgb: RGB | None = None
     open_horizon_rgb: RGB | None = None
@@ -291,7 +295,7 @@ def sky_params(
     obs = state.observer
     known = bodies_for(state, bodies)
     eye_m = obs.alt_m if eye_alt_m is None else eye_alt_m
-    clear, haze_top_m, haze_m = _seen_from(state, eye_m)
+    clear, haze_top_m, haze_m, thick_clear = _seen_from(state, eye_m)
     whole_second = state.time_utc.replace(microsecond=0)
     clock_s = (state.time_utc - SKY_EPOCH_UTC).total_seconds()
     # The eye's height only through the cover and haze it sees, so a climb in clear air
@@ -301,7 +305,9 @@ def sky_params(
     last = _last_sky  # one read: another thread may replace it
     if last is not None and last[0] == key:
         return last[1].at_clock(clock_s)
-    made = _sky_params(state, known, 1.0 - clear, haze_m, haze_top_m, whole_second, clock_s)
+    made = _sky_params(
+        state, known, 1.0 - clear, haze_m, haze_top_m, whole_second, clock_s, 1.0 - thick_clear
+    )
     _last_sky = (key, made)
     return made
 
@@ -309,8 +315,9 @@ def sky_params(
 _last_sky: tuple[tuple[object, ...], SkyParams] | None = None
 
 
-def _seen_from(state: WeatherState, eye_m: float) -> tuple[float, float, float]:
-    """(clear share of the sky, top of the hazy layer, haze distance) for an eye at eye_m:
+def _seen_from(state: WeatherState, eye_m: float) -> tuple[float, float, float, float]:
+    """(clear share of the sky, top of the hazy layer, haze distance, the share clear of all
+    but high ice cloud) for an eye at eye_m:
     kept for the last layers (by identity: a state's frames share them), visibility, ground
     and eye, which a level flight's frames share."""
     global _last_seen
@@ -321,16 +328,20 @@ def _seen_from(state: WeatherState, eye_m: float) -> tuple[float, float, float]:
         return last[2]
     # Layers overlap at random (the usual assumption for total cloud amount): two 4/8 layers
     # hide 3/4 of the sky, not all of it, so a forming layer darkens the sky gradually.
-    clear = math.prod(
-        1.0 - min(1.0, lay.cover_oktas / 8.0) * _share_above(lay, eye_m) for lay in layers
+    hidden = [min(1.0, lay.cover_oktas / 8.0) * _share_above(lay, eye_m) for lay in layers]
+    clear = math.prod(1.0 - h for h in hidden)
+    thick_clear = math.prod(
+        1.0 - h for h, lay in zip(hidden, layers, strict=True) if not _is_high(lay)
     )
     haze_top_m = _haze_top_m(state)
-    seen = (clear, haze_top_m, _haze_m(state, eye_m, haze_top_m))
+    seen = (clear, haze_top_m, _haze_m(state, eye_m, haze_top_m), thick_clear)
     _last_seen = (layers, key, seen)
     return seen
 
 
-_last_seen: tuple[tuple[CloudLayer, ...], tuple[float, ...], tuple[float, float, float]] | None
+_last_seen: (
+    tuple[tuple[CloudLayer, ...], tuple[float, ...], tuple[float, float, float, float]] | None
+)
 _last_seen = None
 
 
@@ -342,6 +353,7 @@ def _sky_params(
     haze_top_m: float,
     whole_second: datetime,
     clock_s: float,
+    thick_cover: float | None = None,
 ) -> SkyParams:
     obs = state.observer
     sun, moon = known.sun, known.moon
@@ -374,7 +386,9 @@ def _sky_params(
     low = 1.0 - smoothstep(0.0, 12.0, moon.elevation_deg)
     moon_rgb = _mix((0.96, 0.94, 0.88), (1.0, 0.72, 0.48), low * 0.8)
     moon_gain = (0.95 - 0.65 * day) * (1.0 - 0.35 * low)
-    moon_gain *= moon_veiled(cover)
+    # Thin ice cloud dims the moon a little; water cloud hides it (`moon_veiled`).
+    moon_seen = moon_veiled(cover if thick_cover is None else thick_cover, cover)
+    moon_gain *= moon_seen
     moon_rgb = _scale(moon_rgb, moon_gain * smoothstep(-1.0, 0.0, moon.elevation_deg))
 
     return SkyParams(
@@ -390,6 +404,7 @@ def _sky_params(
         haze_top_m=haze_top_m,
         moon=moon,
         moon_rgb=moon_rgb,
+        moon_seen=moon_seen,
         open_zenith_rgb=open_zenith,
         open_horizon_rgb=open_horizon,
         stars=stars,
@@ -507,10 +522,13 @@ HAZE_AVERAGE_AZIMUTHS = 16
 HAZE_AVERAGE_ELEVATION_DEG = 2.0
 
 
-def moon_veiled(cover: float) -> float:
-    """What of the moon's disc shows through the sky's cloud `cover` (0..1): all of it under
-    broken cloud, 15 % under a whole deck (`SkyParams.moon_rgb`)."""
-    return 1.0 - 0.85 * smoothstep(0.6, 1.0, cover)
+def moon_veiled(thick_cover: float, cover: float | None = None) -> float:
+    """What of the moon's disc shows through the sky's cloud (`SkyParams.moon_rgb`): all of
+    it under broken cloud, 15 % under a whole deck of water cloud (`thick_cover`, 0..1: every
+    layer but high ice cloud), and THIN_MOON_DIM less where high ice cloud makes up the rest
+    of `cover` (a cirrostratus veil lets the moon through, ringed by its halo)."""
+    thin = 0.0 if cover is None else max(0.0, cover - thick_cover)
+    return (1.0 - 0.85 * smoothstep(0.6, 1.0, thick_cover)) * (1.0 - THIN_MOON_DIM * thin)
 
 
 def overcast_veil(cover: float) -> tuple[float, float]:
