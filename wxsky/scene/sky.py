@@ -353,7 +353,7 @@ def _sky_params(
     haze_top_m: float,
     whole_second: datetime,
     clock_s: float,
-    thick_cover: float | None = None,
+    thick_cover: float,
 ) -> SkyParams:
     obs = state.observer
     sun, moon = known.sun, known.moon
@@ -387,7 +387,7 @@ def _sky_params(
     moon_rgb = _mix((0.96, 0.94, 0.88), (1.0, 0.72, 0.48), low * 0.8)
     moon_gain = (0.95 - 0.65 * day) * (1.0 - 0.35 * low)
     # Thin ice cloud dims the moon a little; water cloud hides it (`moon_veiled`).
-    moon_seen = moon_veiled(cover if thick_cover is None else thick_cover, cover)
+    moon_seen = moon_veiled(thick_cover, cover)
     moon_gain *= moon_seen
     moon_rgb = _scale(moon_rgb, moon_gain * smoothstep(-1.0, 0.0, moon.elevation_deg))
 
@@ -522,12 +522,12 @@ HAZE_AVERAGE_AZIMUTHS = 16
 HAZE_AVERAGE_ELEVATION_DEG = 2.0
 
 
-def moon_veiled(thick_cover: float, cover: float | None = None) -> float:
+def moon_veiled(thick_cover: float, cover: float) -> float:
     """What of the moon's disc shows through the sky's cloud (`SkyParams.moon_rgb`): all of
     it under broken cloud, 15 % under a whole deck of water cloud (`thick_cover`, 0..1: every
     layer but high ice cloud), and THIN_MOON_DIM less where high ice cloud makes up the rest
     of `cover` (a cirrostratus veil lets the moon through, ringed by its halo)."""
-    thin = 0.0 if cover is None else max(0.0, cover - thick_cover)
+    thin = max(0.0, cover - thick_cover)
     return (1.0 - 0.85 * smoothstep(0.6, 1.0, thick_cover)) * (1.0 - THIN_MOON_DIM * thin)
 
 

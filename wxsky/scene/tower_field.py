@@ -267,7 +267,7 @@ def place_towers(
     # candidates are a whole near set's worth of cells, every frame).
     scored = np.flatnonzero(~inside)
     ranked: list[int] = scored[np.lexsort((scored, dists[scored]))][:budget].tolist()
-    step = math.inf if fades is None else max(dt_s, 0.0) / TOWER_FADE_S
+    step = max(dt_s, 0.0) / TOWER_FADE_S
     progress = {found[i].cloud_id: _toward(fades, found[i].cloud_id, 1.0, step) for i in ranked}
     kept = len(ranked)
     if fades:
@@ -335,7 +335,7 @@ def place_towers(
 
 def _toward(fades: Mapping[int, float] | None, cloud_id: int, target: float, step: float) -> float:
     """A cell's progress toward tower (1) or sprites (0), `step` on from the last frame's."""
-    if fades is None or math.isinf(step):
+    if fades is None:
         return target
     was = fades.get(cloud_id, 0.0)
     return min(target, was + step) if target > was else max(target, was - step)
