@@ -9,7 +9,8 @@ every machine makes the same bytes (the tool's `--check` would say if one did no
 - stars: a share of the cube-map cells hold a star, three times as many along the Milky Way,
   with power-law brightnesses, flicker rates, variances and phases.
 - galaxy: the glow of the galactic plane, wider and brighter at the bulge, with a dark rift.
-- dome noise: four tileable spectral-noise fields of different roughness.
+- dome noise: three tileable spectral-noise fields of different roughness and the finest
+  drawn out into fibres.
 - sunset: the dome cloud's tint at dusk, a smooth gradient over the `sunset` control and the
   height in the sky (see `_make_sunset` for its axes and colours); no noise.
 """
@@ -28,6 +29,9 @@ STAR_FACE_PX = 256  # cells along a cube face: 0.35° each
 GALAXY_SIZE_PX = (512, 256)  # longitude, latitude
 DOME_NOISE_PX = 256
 SUNSET_SIZE_PX = (64, 32)  # sunset control, elevation
+# Cirrus fibres (the dome noise's A): the detail noise this many times finer across the wind
+# (the texture's y) than along it; a whole number, so the fibres tile as the detail does.
+FIBRE_ACROSS = 6
 
 SEED_STARS = 0x5EED_57A2
 SEED_GALAXY = 0x5EED_6A1A
@@ -128,15 +132,32 @@ def _make_stars(galaxy: U8) -> U8:
 
 
 def _make_dome_noise() -> U8:
-    """(N, N, 4) tileable noise: R, G cloud shapes; B detail; A the moon's maria."""
+    """(N, N, 4) tileable noise: R, G cloud shapes (R is the moon's maria too); B detail;
+    A cirrus fibres, the detail drawn out along x (`_fibres`)."""
     n = DOME_NOISE_PX
     rng = np.random.default_rng(SEED_DOME)
     shape1 = _spectral_noise(rng, (n, n), beta=3.0, min_cycles=2)
     shape2 = _spectral_noise(rng, (n, n), beta=2.7, min_cycles=2)
     detail = _spectral_noise(rng, (n, n), beta=2.0, min_cycles=8)
-    maria = _spectral_noise(rng, (n, n), beta=3.4)
-    out = np.stack([shape1, shape2, detail, maria], -1)
+    out = np.stack([shape1, shape2, detail, _fibres(detail, FIBRE_ACROSS)], -1)
     return np.round(out * 255.0).astype(np.uint8)
+
+
+def _fibres(detail: F64, across: int) -> F64:
+    """`detail` at (x, across * y), band-limited (the rows' frequencies past the grid's
+    Nyquist left out, not folded back), flattened to 0..1 as the detail is: the fibres the
+    dome once fetched at those coordinates, now in the same fetch as the detail (sky.glsl
+    `cloud_dome`; one texture read fewer for every dome pixel)."""
+    h = detail.shape[0]
+    spectrum = np.fft.fft(detail - detail.mean(), axis=0)
+    ky = np.fft.fftfreq(h) * h
+    spectrum[np.abs(ky) * across >= h / 2] = 0.0
+    smooth = np.fft.ifft(spectrum, axis=0).real
+    field = smooth[(np.arange(h) * across) % h]
+    ranks = np.empty(field.size)
+    ranks[np.argsort(field, axis=None)] = np.arange(field.size)
+    result: F64 = (ranks / (field.size - 1)).reshape(field.shape)
+    return result
 
 
 # The sunset gradient's stops (RGB tints, 0..1, as the shader mixes them). With the sun on

@@ -18,8 +18,9 @@ Every file is 8-bit RGBA, so all are stored losslessly:
   with a bulge towards Sagittarius and a dark rift. Stars are denser inside it and the shader
   brightens them there as well. It is one 8-bit channel; `sky_galaxy.png` (512 x 256) holds it
   in R, G and B alike with A = 255, and loading keeps R.
-- dome noise: four tileable noise fields (RGBA8, mipmapped): two cloud-shape layers, a
-  detail layer and the moon's maria. `sky_dome_noise.png` (256 x 256): the texture's bytes.
+- dome noise: four tileable noise fields (RGBA8, mipmapped): two cloud-shape layers (the
+  first is the moon's maria too), a detail layer and cirrus fibres (the detail drawn out along
+  x, read in the same fetch). `sky_dome_noise.png` (256 x 256): the texture's bytes.
 - sunset: the paper's sunset gradient, the dome cloud's tint at dusk (RGB; A = 255), linearly
   filtered and clamped. Columns run along the `sunset` control (0 golden late afternoon, 1 the
   sun on the horizon), rows up the sky as sqrt(sin elevation) (row 0 the horizon): golden-yellow
@@ -47,6 +48,7 @@ from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sky_texture_gen import (
     DOME_FILE,
     DOME_NOISE_PX,
+    FIBRE_ACROSS,
     GALACTIC_FROM_EQUATORIAL,
     GALAXY_FILE,
     GALAXY_SIZE_PX,
@@ -128,10 +130,9 @@ MOON_HALO_GAIN = 0.4
 VEIL_ALPHA = 0.35
 # ... and how much fainter the dome's patches are where all the high cover is veil.
 VEIL_PATCHES = 0.7
-# Cirrus fibres on the dome (sky.glsl cloud_dome): the detail noise FIBRE_ACROSS times finer
-# across the wind (a whole number: the texture's offset wraps at 1, and the fibres with it),
-# its rows bent by FIBRE_BEND of a tile where the broad shape changes.
-FIBRE_ACROSS = 6.0
+# Cirrus fibres on the dome (sky.glsl cloud_dome): the dome noise's A channel, the detail
+# drawn out along the wind (`sky_texture_gen.FIBRE_ACROSS`), its rows bent by FIBRE_BEND of a
+# tile (in the fibres' own finer rows) where the broad shape changes.
 FIBRE_BEND = 0.3
 
 
@@ -142,7 +143,7 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "STAR_JITTER": f"{STAR_JITTER:.6f}",
         "STAR_RATE_SCALE_HZ": f"{STAR_RATE_SCALE_HZ:.6f}",
         "HALO_GAIN": f"{HALO_GAIN:.6f}",
-        "FIBRE_ACROSS": f"{FIBRE_ACROSS:.6f}",
+        "FIBRE_ACROSS": f"{float(FIBRE_ACROSS):.6f}",
         "FIBRE_BEND": f"{FIBRE_BEND:.6f}",
         "HALO_DARK_INSIDE": f"{HALO_DARK_INSIDE:.6f}",
         "HALO_COS_REACH": f"{math.cos(math.radians(HALO_REACH_DEG)):.6f}",
@@ -182,8 +183,8 @@ def galaxy_texture() -> U8:
 
 @functools.cache
 def dome_noise_texture() -> U8:
-    """(N, N, 4) tileable noise: R, G cloud shapes; B detail; A the moon's maria; shipped,
-    read-only."""
+    """(N, N, 4) tileable noise: R, G cloud shapes (R the moon's maria too); B detail; A
+    cirrus fibres; shipped, read-only."""
     return _load(DOME_FILE, (DOME_NOISE_PX, DOME_NOISE_PX, 4))
 
 

@@ -50,7 +50,7 @@ uniform float u_moon_sin_radius;
 uniform vec3 u_moon_rgb;
 uniform vec3 u_earthshine_rgb;
 // Cloud dome
-uniform sampler2D u_dome_tex;     // R, G cloud shapes; B detail; A maria
+uniform sampler2D u_dome_tex;     // R, G cloud shapes (R: maria too); B detail; A fibres
 uniform sampler2D u_sunset_tex;   // tint at (sunset, sqrt(sin elevation)); clamped
 uniform float u_dome_height_m;    // of the dome plane above the eye; 0 = none
 uniform vec4 u_dome_controls;     // high cover, total cover, density, sunset
@@ -270,7 +270,7 @@ vec3 moon_light(vec3 ray, out float coverage) {
     vec3 side = cross(u_moon_dir, vec3(0.0, 0.0, 1.0));
     side = dot(side, side) > 1e-6 ? normalize(side) : vec3(1.0, 0.0, 0.0);
     vec2 st = vec2(dot(p, side), dot(p, cross(side, u_moon_dir)));
-    float maria = textureLod(u_dome_tex, st * 0.3 + vec2(0.37, 0.61), 0.0).a;
+    float maria = textureLod(u_dome_tex, st * 0.3 + vec2(0.37, 0.61), 0.0).r;
     float albedo = mix(1.0, 0.6, smoothstep(0.5, 0.8, maria));
     return (u_moon_rgb * lit + u_earthshine_rgb * (1.0 - lit)) * albedo;
 }
@@ -311,18 +311,16 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     float c0 = texture(u_dome_tex, u_dome_m0 * plane_m + u_dome_off0).r;
     float c1 = texture(u_dome_tex, u_dome_m1 * plane_m + u_dome_off1).g;
     vec2 q = u_dome_m2 * plane_m + u_dome_off2;
-    float detail = texture(u_dome_tex, q).b;
     float high_cover = u_dome_controls.x, cover = u_dome_controls.y;
     float density = u_dome_controls.z, sunset = u_dome_controls.w;
-    // Thin ice cloud in fibres (cirrus): the detail noise, drawn out along the wind already
-    // (the texture's x), packed finer across it, its rows bent by the broad shapes, so the
-    // fibres curve, fan out and run together as mares' tails do, not in even dashes. Fetched
-    // only where something reads it (thin cloud, a veil): the branch is on uniforms, so the
-    // derivatives stay true.
-    float fibre = 0.0;
-    if (density < 0.3 || u_dome_veil > 0.0) {
-        fibre = texture(u_dome_tex, vec2(q.x, q.y * FIBRE_ACROSS + FIBRE_BEND * (c0 - 0.5))).b;
-    }
+    // Thin ice cloud in fibres (cirrus): the detail noise drawn out along the wind (the
+    // texture's x) and packed finer across it, in the texture's A beside the detail itself
+    // (sky_texture_gen._fibres), its rows bent by the broad shapes, so the fibres curve, fan
+    // out and run together as mares' tails do, not in even dashes. One fetch for both: the
+    // bend shifts the detail too, by at most a fortieth of a tile, which no one can see, and
+    // a second fetch cost the dome a seventh of its time on a CPU renderer.
+    vec4 fine = texture(u_dome_tex, q + vec2(0.0, FIBRE_BEND / FIBRE_ACROSS * (c0 - 0.5)));
+    float detail = fine.b, fibre = fine.a;
     // Distant parts of every layer show below the sprites' far edge; seen ever more
     // obliquely towards the horizon, their gaps close.
     float band = 1.0 - smoothstep(u_dome_band.x, u_dome_band.y, ray.z);
@@ -356,16 +354,19 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
     a *= max(band, step(0.001, high_cover)) * step(0.0, ray.z);
     vec3 rgb = u_dome_rgb * mix(0.8, 1.05, detail) * (1.0 - 0.3 * density * a);
     // Thin ice cloud glows around the sun.
+    // (cos^8 by three products: pow is an exp and a log a pixel on a CPU renderer)
     float toward_sun = max(dot(ray, u_sun_dir), 0.0);
-    rgb += u_sun_rgb * pow(toward_sun, 8.0) * 0.35 * (1.0 - density);
-    vec2 flat_ray = normalize(ray.xy + vec2(1e-6, 0.0));
-    vec2 flat_sun = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
-    float sunward = 0.35 + 0.65 * max(dot(flat_ray, flat_sun), 0.0);
+    float toward_sun2 = toward_sun * toward_sun;
+    float toward_sun4 = toward_sun2 * toward_sun2;
+    rgb += u_sun_rgb * (toward_sun4 * toward_sun4) * 0.35 * (1.0 - density);
     // Roden & Parberry's sunset gradient: redder low down, pinker high up, golden while the sun
     // is still well up. Scaled to the dome's light so the tint never brightens a dark sky.
     // Coordinates land on the first and last texel centres at 0 and 1.
     // Read only when the sun is low (a uniform branch): by day it added nothing but a fetch.
     if (sunset > 0.0) {
+        vec2 flat_ray = normalize(ray.xy + vec2(1e-6, 0.0));
+        vec2 flat_sun = normalize(u_sun_dir.xy + vec2(1e-6, 0.0));
+        float sunward = 0.35 + 0.65 * max(dot(flat_ray, flat_sun), 0.0);
         vec2 sunset_px = vec2(textureSize(u_sunset_tex, 0));
         vec2 sunset_uv = (vec2(sunset, sqrt(z)) * (sunset_px - 1.0) + 0.5) / sunset_px;
         vec3 sunset_rgb = textureLod(u_sunset_tex, sunset_uv, 0.0).rgb
