@@ -20,6 +20,7 @@ from wxsky.towers.automaton import (
     cell_rng,
     density_between,
     ellipsoid_weight,
+    flat_based,
     grow,
     smoothed,
     step,
@@ -224,3 +225,33 @@ def test_same_seed_same_volume_in_two_processes() -> None:
     spec = TowerSpec(weather_seed=2026, block=(-3, 5), cell=1, mature_s=900.0)
     here = hashlib.sha256(TowerVolume(spec).density_at(612.5).tobytes()).hexdigest()
     assert out[0] == out[1] == here
+
+
+def test_flat_based_stands_the_band_on_its_floor() -> None:
+    """In the lowest rows each column takes the most cloud it has up to the band's top; above
+    the band nothing changes, and nothing is made where a column has no cloud in the band."""
+    rng = np.random.default_rng(5)
+    density = rng.random((12, 6, 6)).astype(np.float32)
+    density[:, 0, 0] = 0.0  # a clear column stays clear
+    out = flat_based(density, 4)
+    for z in range(4):
+        np.testing.assert_array_equal(out[z], density[z:4].max(axis=0))
+    np.testing.assert_array_equal(out[4:], density[4:])
+    assert not out[:, 0, 0].any()
+    assert np.array_equal(flat_based(density, 0), density)
+
+
+def test_a_grown_tower_has_one_flat_base() -> None:
+    """A cumulus's base is flat at the condensation level (issue 42): at 20 minutes a
+    congestus's floor row holds as much cloud as the widest row in the 400 m above it, where
+    the automaton's bubbles alone leave the floor a few percent of it."""
+    spec = TowerSpec(weather_seed=7, block=(2, -1), cell=0, mature_s=1800.0)
+    tower = TowerVolume(spec)
+    density = tower.density_at(1200.0)
+    rows = tower.flat_base_rows
+    assert 4 <= rows <= 8  # 400 m of a 4.4 km box in 64 rows
+    area = (density > 0.3).sum(axis=(1, 2))
+    assert area[0] > 0 and area[0] == area[:rows].max()
+    bare = smoothed(tower.cells_at(120).cld)
+    bare_area = (bare > 0.3).sum(axis=(1, 2))
+    assert bare_area[0] < 0.5 * bare_area[:rows].max()

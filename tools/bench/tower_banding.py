@@ -72,8 +72,30 @@ def banding(rgb: npt.NDArray[np.uint8]) -> float:
     return float(np.sum(down * down) / max(float(np.sum(across * across)), 1e-12))
 
 
-def run(minutes: Sequence[float]) -> list[tuple[float, float, npt.NDArray[np.uint8]]]:
-    """(minutes, figure, the picture with the box outlined) for each moment."""
+def periodic_steps(rgb: npt.NDArray[np.uint8], half_width_px: int = 4) -> float:
+    """How periodic the steps are in the vertical luminance profile through the middle of
+    `rgb` (its middle columns averaged): over lags k of 3 pixels up to a quarter of the
+    height, the largest of the smaller of the autocorrelations at k and 2k of the profile's
+    row to row differences. Slices or shelves stacked at an even spacing repeat their steps
+    at one and two spacings; any two edges (a cloud's top and its base) match at one lag
+    only, and cloud's own texture at none."""
+    luma = (rgb[..., :3].astype(np.float64) / 255.0) @ LUMA
+    mid = luma.shape[1] // 2
+    profile = luma[:, max(0, mid - half_width_px) : mid + half_width_px + 1].mean(axis=1)
+    steps = np.diff(profile)
+    steps -= steps.mean()
+    energy = float(steps @ steps)
+    if energy <= 1e-12 or len(steps) < 12:
+        return 0.0
+
+    def r(k: int) -> float:
+        return float(steps[:-k] @ steps[k:]) / energy
+
+    return max(0.0, *(min(r(k), r(2 * k)) for k in range(3, max(4, len(steps) // 4))))
+
+
+def run(minutes: Sequence[float]) -> list[tuple[float, float, float, npt.NDArray[np.uint8]]]:
+    """(minutes, figure, periodic steps, the picture with the box outlined) per moment."""
     base = WeatherState().apply(load_preset("towering-cumulus"))
     eye0 = (0.0, 0.0, base.observer.alt_m + 600.0)
     watch = watched_cell(base, eye0, minutes[0])
@@ -97,10 +119,11 @@ def run(minutes: Sequence[float]) -> list[tuple[float, float, npt.NDArray[np.uin
                 camera, np.array([cx + dx, cy + dy, cz]), watch.spec.box_size_m
             )
             figure = banding(image[y0:y1, x0:x1])
+            periodic = periodic_steps(image[y0:y1, x0:x1])
             marked = image.copy()
             marked[[y0, max(y0, y1 - 1)], x0:x1, :3] = (255, 60, 60)
             marked[y0:y1, [x0, max(x0, x1 - 1)], :3] = (255, 60, 60)
-            out.append((m, figure, marked))
+            out.append((m, figure, periodic, marked))
     return out
 
 
@@ -111,15 +134,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--png", type=Path, help="the pictures side by side, boxes outlined")
     args = p.parse_args(argv)
     found = run([float(v) for v in args.minutes.split(",")])
-    print("tower banding: vertical / horizontal gradient energy inside the watched tower's box")
-    for m, figure, _ in found:
-        print(f"  {m:5.0f} min  {figure:6.2f}")
+    print("tower banding: vertical / horizontal gradient energy inside the watched tower's box;")
+    print("periodic steps: the most the profile's steps repeat, down the box's middle")
+    for m, figure, periodic, _ in found:
+        print(f"  {m:5.0f} min  {figure:6.2f}  periodic steps {periodic:5.2f}")
     if args.json is not None:
-        args.json.write_text(json.dumps([{"minutes": m, "banding": f} for m, f, _ in found]))
+        args.json.write_text(
+            json.dumps([{"minutes": m, "banding": f, "periodic": p} for m, f, p, _ in found])
+        )
     if args.png is not None:
         from wxsky.png import write_png
 
-        write_png(args.png, np.concatenate([im for _, _, im in found], axis=1))
+        write_png(args.png, np.concatenate([im for _, _, _, im in found], axis=1))
     return 0
 
 

@@ -44,9 +44,11 @@ IMPOSTOR_MAX_PX = 256
 VOLUMES_KEPT_BYTES = 64 << 20
 VOLUMES_MIN = 3 * 8
 NOISE_TEXELS = 32
-# The detail noise repeats every this many of the tower's cells (500 m for a congestus's
-# 60 m cells): billows a quarter to an eighth of that; a cumulonimbus's are as much larger.
-NOISE_TILE_CELLS = 8.0
+# The detail noise repeats every this many of the tower's cells (1.1 km for a congestus's
+# 70 m cells): billows a quarter, an eighth and a sixteenth of that (`detail_noise`), lobes
+# of 70-280 m on the automaton's bubbles; a cumulonimbus's are as much larger. At 8 cells
+# (issue 17) the billows were 70-140 m, a speckle at 5 km where a pilot sees cauliflower.
+NOISE_TILE_CELLS = 16.0
 EROSION = 0.6
 # The view's extinction over the light's, and how sharply thin cloud firms up (the shader's
 # smoothstep, 0.15-0.35 of full density): a cumulus tower's edge is a hard, opaque outline a
@@ -58,8 +60,9 @@ SHARPEN = 1.0
 # key light is on a billow's far side from it, its direct light cut by exp(-BILLOW_SHADOW x
 # the rise). The lit cells (40-160 m) hold the tower's shade, not its billows': without it a
 # tower's inside is an even blend, a cotton ball where a pilot sees cauliflower.
-BILLOW_SHADOW = 3.0
-BILLOW_PROBE_M = 80.0
+# (3 and 80 m for the finer billows before; the probe is about half a lobe.)
+BILLOW_SHADOW = 5.0
+BILLOW_PROBE_M = 160.0
 # A new quad covers the cloudy part of the box and this much more of its size on each side,
 # so a growing tower keeps its quad (and the image of the step before) for a while.
 GROWTH_ROOM = 0.1
@@ -405,12 +408,12 @@ def _occupied_m(tower: TowerShow) -> tuple[F64, F64]:
 
 
 def detail_noise(n: int, seed: int = 17) -> npt.NDArray[np.uint8]:
-    """(n, n, n) tileable value noise, two octaves (lattices of n/8 and n/4 cells), 0..255:
-    the billows that erode a tower's thin edges (the automaton's cells are 40-80 m; this
-    adds detail a few times finer)."""
+    """(n, n, n) tileable value noise, three octaves (lattices of n/8, n/4 and n/2 cells),
+    0..255: the billows that erode a tower's thin edges and shade their own far sides (the
+    automaton's cells are 40-80 m; its bubbles hundreds of metres)."""
     rng = np.random.default_rng(seed)
     out = np.zeros((n, n, n), np.float64)
-    for cells, gain in ((n // 8, 0.65), (n // 4, 0.35)):
+    for cells, gain in ((n // 8, 0.45), (n // 4, 0.3), (n // 2, 0.25)):
         lattice = rng.random((cells, cells, cells))
         x = np.arange(n) * cells / n
         i0 = np.floor(x).astype(int)

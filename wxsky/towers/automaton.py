@@ -250,6 +250,20 @@ def smoothed(cld: B) -> F32:
     return out
 
 
+def flat_based(density: F32, rows: int) -> F32:
+    """The density with a flat base: in the lowest `rows` rows each column holds the most
+    cloud it has from there up to the top of that band, so the band's widest part reaches
+    straight down to the grid's floor (the condensation level) and is cut flat there. The
+    automaton grows a rounded blob from its bubbles (and the smoothing rounds its floor
+    more), where a cumulus is one flat base with the cloud standing on it (issue 42)."""
+    if rows <= 0:
+        return density
+    out = density.copy()
+    band = out[:rows][::-1]
+    np.maximum.accumulate(band, axis=0, out=band)
+    return out
+
+
 def density_between(before: B, after: B, frac: float) -> F32:
     """The density a fraction `frac` of the way from one state's cloud to the next one's:
     growth looks continuous, not stepwise."""
