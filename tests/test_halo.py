@@ -140,3 +140,31 @@ def test_the_moon_has_its_halo_over_the_veil_at_night() -> None:
     ring = float(_ring(rgb, angle, 21.6, 23.0) @ lum)
     between = 0.5 * float((_ring(rgb, angle, 18.0, 20.0) + _ring(rgb, angle, 27.0, 29.0)) @ lum)
     assert abs(ring - between) < 0.005, (ring, between)
+
+
+def test_the_halo_is_drawn_only_where_it_can_show() -> None:
+    """The halo is its own part of the sky pass (`sky_textures.halo_rect_ndc`), drawn over
+    the pixels within 32° of the sun: a view of the veil facing the sun holds its rectangle,
+    with the sun inside it; a view facing away holds none (the dome then runs without the
+    halo's code), and without a veil there is none anywhere."""
+    from wxsky.render import sky_textures
+
+    state = WeatherState().apply(load_preset("high-cirrus"))
+    sky = sky_params(state)
+    assert sky.dome.veil > 0.0
+    sun = sky.sun
+    # Facing the sun the ring's 32° holds the whole picture; with the sun some 38° to the
+    # right of the view's middle, the right part of it only.
+    toward = Camera((0.0, 0.0, 500.0), sun.azimuth_deg, sun.elevation_deg - 10.0)
+    assert sky_textures.halo_rect_ndc(toward, sky) == sky_textures.FULL_RECT
+    aside = Camera((0.0, 0.0, 500.0), sun.azimuth_deg - 70.0, sun.elevation_deg)
+    rect = sky_textures.halo_rect_ndc(aside, sky)
+    assert rect is not None and rect[2] == 1.0 and -1.0 < rect[0] < 0.5
+    assert sky_textures.features(aside, sky).halo
+    away = Camera((0.0, 0.0, 500.0), sun.azimuth_deg + 180.0, 0.0)
+    assert sky_textures.halo_rect_ndc(away, sky) is None
+    assert not sky_textures.features(away, sky).halo
+    cirrus_only = dataclasses.replace(
+        state, layers=tuple(lay for lay in state.layers if lay.type is CloudType.CIRRUS)
+    )
+    assert sky_textures.halo_rect_ndc(toward, sky_params(cirrus_only)) is None

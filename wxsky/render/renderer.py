@@ -300,11 +300,11 @@ class Renderer:
         self.ctx.disable(moderngl.BLEND)
         physical = sky.atmosphere is not None  # the frame's sky mode: its variants only
         self._sky.use_atmosphere(sky.atmosphere, sky.cover)
-        for stars, moon, dome, sun, deck in itertools.product((False, True), repeat=5):
-            if (sun and not physical) or (deck and not (physical and dome)):
+        for stars, moon, dome, sun, deck, halo in itertools.product((False, True), repeat=6):
+            if (sun and not physical) or (deck and not (physical and dome)) or (halo and not dome):
                 continue
             feats = sky_textures.SkyFeatures(
-                stars=stars, moon=moon, dome=dome, physical=physical, sun=sun, deck=deck
+                stars=stars, moon=moon, dome=dome, physical=physical, sun=sun, deck=deck, halo=halo
             )
             uniforms = self._sky_uniforms(cam, sky, feats, sky_textures.FULL_RECT)
             self._sky_draw("sky warm-up", feats, uniforms)
@@ -617,7 +617,9 @@ class Renderer:
             parts = [
                 (
                     "sky",
-                    dataclasses.replace(feats, moon=False, dome=False, sun=False, deck=False),
+                    dataclasses.replace(
+                        feats, moon=False, dome=False, sun=False, deck=False, halo=False
+                    ),
                     sky_textures.FULL_RECT,
                 )
             ]
@@ -625,7 +627,17 @@ class Renderer:
                 rect = sky_textures.dome_rect_ndc(cam, sky)
                 if rect is not None:
                     parts.append(
-                        ("sky dome", dataclasses.replace(feats, moon=False, sun=False), rect)
+                        (
+                            "sky dome",
+                            dataclasses.replace(feats, moon=False, sun=False, halo=False),
+                            rect,
+                        )
+                    )
+            if feats.halo:
+                rect = sky_textures.halo_rect_ndc(cam, sky)
+                if rect is not None:
+                    parts.append(
+                        ("sky halo", dataclasses.replace(feats, moon=False, sun=False), rect)
                     )
             if feats.moon:
                 rect = sky_textures.moon_rect_ndc(cam, sky)

@@ -32,6 +32,7 @@ SUNSET_SIZE_PX = (64, 32)  # sunset control, elevation
 # Cirrus fibres (the dome noise's A): the detail noise this many times finer across the wind
 # (the texture's y) than along it; a whole number, so the fibres tile as the detail does.
 FIBRE_ACROSS = 6
+FIBRE_CONTRAST = 1.4
 
 SEED_STARS = 0x5EED_57A2
 SEED_GALAXY = 0x5EED_6A1A
@@ -145,18 +146,27 @@ def _make_dome_noise() -> U8:
 
 def _fibres(detail: F64, across: int) -> F64:
     """`detail` at (x, across * y), band-limited (the rows' frequencies past the grid's
-    Nyquist left out, not folded back), flattened to 0..1 as the detail is: the fibres the
-    dome once fetched at those coordinates, now in the same fetch as the detail (sky.glsl
-    `cloud_dome`; one texture read fewer for every dome pixel)."""
-    h = detail.shape[0]
-    spectrum = np.fft.fft(detail - detail.mean(), axis=0)
-    ky = np.fft.fftfreq(h) * h
-    spectrum[np.abs(ky) * across >= h / 2] = 0.0
-    smooth = np.fft.ifft(spectrum, axis=0).real
-    field = smooth[(np.arange(h) * across) % h]
-    ranks = np.empty(field.size)
-    ranks[np.argsort(field, axis=None)] = np.arange(field.size)
-    result: F64 = (ranks / (field.size - 1)).reshape(field.shape)
+    Nyquist left out, not folded back; along x, what the fetch at those coordinates kept),
+    about the detail's mean: the fibres the dome once fetched at those coordinates, now in
+    the same fetch as the detail (sky.glsl `cloud_dome`; one texture read fewer for every
+    dome pixel)."""
+    h, w = detail.shape
+    spectrum = np.fft.fft2(detail - detail.mean())
+    ky = np.fft.fftfreq(h)[:, None] * h
+    kx = np.fft.fftfreq(w)[None, :] * w
+    # Along x as smooth as the stretched fetch's mip level made it (a level log2(across)
+    # coarser: long strands, not grain), across y as fine as the grid holds.
+    # A Gaussian roll-off (down to e^-4 at the band's edge) as a mip chain's filtering is,
+    # not a brick wall, which rang into ripples beside every strand.
+    band = (ky * across / (h / 2)) ** 2 + (kx * across / (w / 2)) ** 2
+    weight = np.where(band < 1.0, np.exp(-4.0 * band), 0.0)
+    smooth = np.fft.ifft2(spectrum * weight).real
+    # Not flattened again: the filtering narrows the values toward the mean as the mip
+    # levels did, which is the strands' soft contrast (FIBRE_CONTRAST of it: crisper than
+    # the stretched fetch's, which blurred them across the wind too, and no harsher, or
+    # they flicker as they drift).
+    deviation = FIBRE_CONTRAST * smooth[(np.arange(h) * across) % h]
+    result: F64 = np.clip(detail.mean() + deviation, 0.0, 1.0)
     return result
 
 

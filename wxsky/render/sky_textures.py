@@ -156,6 +156,7 @@ def shader_defines(feats: SkyFeatures) -> dict[str, str]:
         "SKY_SCENE_LINEAR": str(int(feats.scene_linear)),
         "SKY_SUN": str(int(feats.sun)),
         "SKY_DECK": str(int(feats.deck)),
+        "SKY_HALO": str(int(feats.halo)),
     }
 
 
@@ -226,6 +227,11 @@ class SkyFeatures:
     # under it (`deck_share` > 0): a second look-up a pixel, compiled out where there is no
     # deck (high cirrus redraws its whole dome every frame; the look-up was 7 % of it).
     deck: bool = False
+    # With `dome`: the 22° halo round the sun or moon over a cirrostratus veil, drawn as its
+    # own part over the ring's rectangle only (`halo_rect_ndc`): the halo's code in the dome
+    # variant, though it drew nothing past 32° from its light, cost high cirrus's dome a tenth
+    # of its time on llvmpipe (issue 42's cost check).
+    halo: bool = False
 
 
 class SkyPass:
@@ -361,6 +367,46 @@ def features(cam: Camera, sky: SkyParams) -> SkyFeatures:
         physical=physical,
         sun=physical and _sun_near_view(cam, sky, half_diagonal_rad),
         deck=physical and dome and deck_share(sky, cam.position_m[2]) > 0.0,
+        halo=dome and halo_rect_ndc(cam, sky) is not None,
+    )
+
+
+def halo_lights(sky: SkyParams) -> list[tuple[float, float, float]]:
+    """The directions of the lights that ring a halo on the dome's veil now (sky.glsl
+    `halo`): none without a veil; the sun unless it is below the horizon, the moon while
+    its halo has light (`moon_halo_rgb`)."""
+    if sky.dome.veil <= 0.0:
+        return []
+    out = []
+    if sky.sun.direction_enu[2] >= -0.01:
+        out.append(sky.sun.direction_enu)
+    if moon_halo_rgb(sky)[0] > 0.0 and sky.moon.direction_enu[2] >= -0.01:
+        out.append(sky.moon.direction_enu)
+    return out
+
+
+def halo_rect_ndc(cam: Camera, sky: SkyParams) -> Rect | None:
+    """The rectangle (as `moon_rect_ndc`) holding every pixel within HALO_REACH_DEG of a
+    light that rings a halo (`halo_lights`); None when no halo shows in the picture."""
+    reach_rad = math.radians(HALO_REACH_DEG) + 3.0 * pixel_rad(cam)
+    # Past the cone holding the picture no pixel is near enough (the rectangle alone would
+    # be the whole picture whenever the ring reaches behind the eye).
+    half_diagonal_rad = math.atan(math.hypot(cam.tan_half_fov_x, cam.tan_half_fov_y))
+    cos_limit = math.cos(min(half_diagonal_rad + reach_rad, math.pi))
+    fwd = cam.basis()[2]
+    rects = [
+        r
+        for d in halo_lights(sky)
+        if float(np.dot(fwd, d)) >= cos_limit
+        and (r := _disc_rect_ndc(cam, d, reach_rad, SUN_RECT_GRID_PX)) is not None
+    ]
+    if not rects:
+        return None
+    return (
+        min(r[0] for r in rects),
+        min(r[1] for r in rects),
+        max(r[2] for r in rects),
+        max(r[3] for r in rects),
     )
 
 
@@ -560,8 +606,6 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
                 "u_dome_height_m": frame.height_m,
                 "u_dome_controls": (dome.high_cover, dome.cover, dome.density, dome.sunset),
                 "u_dome_veil": dome.veil,
-                "u_moon_halo_dir": sky.moon.direction_enu,
-                "u_moon_halo_rgb": moon_halo_rgb(sky),
                 "u_dome_band": (band_lo, band_hi),
                 "u_dome_m0": frame.matrices[0],
                 "u_dome_m1": frame.matrices[1],
@@ -583,6 +627,13 @@ def frame_uniforms(cam: Camera, sky: SkyParams, feats: SkyFeatures) -> dict[str,
             # (sky.glsl `baked_sky`), as the sprites do (SkyParams.haze_toward); the
             # gradient's into the one haze colour.
             out["u_dome_haze_rgb"] = sky.haze_rgb
+    if feats.halo:
+        out.update(
+            {
+                "u_moon_halo_dir": sky.moon.direction_enu,
+                "u_moon_halo_rgb": moon_halo_rgb(sky),
+            }
+        )
     return out
 
 

@@ -281,6 +281,7 @@ vec3 moon_light(vec3 ray, out float coverage) {
 // veil (their least deviation is 21.8 deg; red bends least, so the ring's inner edge is red
 // and sharp and it fades bluish-white outward), and the veil inside the ring a little darker,
 // where no prism sends light. Over the veil only: the dome's alpha carries it.
+#if SKY_HALO
 vec3 halo(vec3 ray, vec3 light_dir, vec3 light_rgb) {
     // Nothing of it past 32 deg (its outer tail is under 1 % there): most of the sky skips
     // the acos and the three exponentials.
@@ -296,6 +297,7 @@ vec3 halo(vec3 ray, vec3 light_dir, vec3 light_rgb) {
     float inside = 1.0 - smoothstep(17.0, 21.5, deg);
     return light_rgb * HALO_GAIN * ring - u_dome_rgb * HALO_DARK_INSIDE * inside;
 }
+#endif
 
 // Roden & Parberry's cloud dome as a plane at the dome height: two shape layers blended,
 // cover as a threshold, density smoothing and darkening, and the sunset gradient. Along the
@@ -373,12 +375,16 @@ vec4 cloud_dome(vec3 ray, vec3 air) {
                           * max(max(u_dome_rgb.r, u_dome_rgb.g), 0.05) * 1.1;
         rgb = mix(rgb, sunset_rgb, clamp(sunset * sunward, 0.0, 1.0) * 0.85);
     }
+#if SKY_HALO
+    // Compiled into the halo's own part only (sky_textures.halo_rect_ndc): elsewhere the
+    // code alone, never run, slowed the dome on a CPU renderer.
     if (u_dome_veil > 0.0) {
         rgb += halo(ray, u_sun_dir, u_sun_rgb) * u_dome_veil;
         if (u_moon_halo_rgb.r > 0.0) {
             rgb += halo(ray, u_moon_halo_dir, u_moon_halo_rgb) * u_dome_veil;
         }
     }
+#endif
     // Aerial perspective as the sprites have it (scene.layout.hazed): the layer's contrast
     // falls by exp(-distance / haze distance) along the ray to its plane, towards `air`, the
     // colour the sprites fade into in this direction; at the horizon the ray is endless and
