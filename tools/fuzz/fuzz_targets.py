@@ -1277,6 +1277,18 @@ def control_seeds() -> list[bytes]:
         ("subscribe", {"topics": ["weather", "target", "scene", "frame"]}),
         ("unsubscribe", {"topics": ["frame"]}),
         ("no_such_command", {"x": 1}),
+        ("set_weather", {"visibility_m": 1500.0, "present_weather": ["+TSRA"], "now": True}),
+        (
+            "set_weather",
+            {
+                "layers": [
+                    {"type": "stratus", "cover_oktas": 6, "base_m": 650.0, "top_m": 900.0},
+                    {"type": "cumulus", "cover_oktas": 3, "base_m": 1400.0, "top_m": 2600.0},
+                ],
+                "wind": [{"alt_m": 10.0, "dir_deg": 240.0, "speed_mps": 8.0, "gust_mps": 15.0}],
+            },
+        ),
+        ("set_weather", {"layers": [], "temperature_c": 3.0, "dewpoint_c": 2.5, "qnh_hpa": 990.0}),
         *(("apply_preset", {"name": name}) for name in presets),
         *(("apply_metar", {"report": r}) for r in reports[:16]),
         *(

@@ -298,6 +298,50 @@ def apply_metar(engine: SkyEngine, params: dict[str, Any]) -> str:
     return decoded.station or ""
 
 
+# The weather an instructor sets directly (14 CFR Part 60, Appendix C, Table C3B 9.a: cloud
+# base, density and visibility), in the keys and units of a preset file; the site, the clock
+# and the cloud seed are not an instructor's weather (`set_time`, `set_camera`).
+SET_WEATHER_KEYS = (
+    "visibility_m",
+    "layers",
+    "wind",
+    "temperature_c",
+    "dewpoint_c",
+    "qnh_hpa",
+    "present_weather",
+)
+
+
+def set_weather(engine: SkyEngine, params: dict[str, Any]) -> list[str]:
+    """Any of SET_WEATHER_KEYS, checked as a preset's are, become the control channel's
+    override (held until `release`; `layers` replaces the whole list, as in a preset); the
+    sky moves there at the [transition] rates, or at once with `now`. Returns the fields set.
+    A bad value is a one-line error naming the field; nothing of the request is applied."""
+    from wxsky.settings.preset_check import parse_preset_data
+
+    weather = {k: v for k, v in params.items() if k != "now"}
+    unknown = sorted(k for k in weather if k not in SET_WEATHER_KEYS)
+    if unknown:
+        raise ControlError(
+            f"set_weather: {clip(str(unknown[0]), 64)}: unknown key "
+            f"(known: {', '.join(SET_WEATHER_KEYS)}, now)"
+        )
+    now = params.get("now", False)
+    if not isinstance(now, bool):
+        raise ControlError(f"set_weather: now: must be true or false, got {clip(repr(now), 64)}")
+    if not weather:
+        raise ControlError(f"set_weather: give at least one of {', '.join(SET_WEATHER_KEYS)}")
+    _, patch, problems = parse_preset_data({"description": "set_weather", **weather})
+    if problems:
+        first = problems[0]
+        where = ".".join(str(part) for part in first.path)
+        raise ControlError(clip(f"set_weather: {where}: {first.message}", ERROR_MAX_CHARS))
+    engine.apply(dataclasses.replace(patch, source=Source.CONTROL))
+    if now:
+        engine.settle()
+    return sorted(weather)
+
+
 def dispatch_table(
     handlers: dict[str, Callable[[dict[str, Any]], Any]],
 ) -> Callable[[str, dict[str, Any]], Any]:

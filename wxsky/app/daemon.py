@@ -37,6 +37,7 @@ from wxsky.app.control import (
     release,
     set_aircraft,
     set_time,
+    set_weather,
 )
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.frame_times import FrameTimes
@@ -204,6 +205,7 @@ class Daemon:
             ),
             "release": lambda p: release(self.engine, p),
             "apply_metar": lambda p: apply_metar(self.engine, p),
+            "set_weather": lambda p: set_weather(self.engine, p),
             "export_textures": self._export_textures,
             "output_format": lambda p: output_format(
                 p, config.output.layer_format, self._segment_version()

@@ -68,7 +68,7 @@ OVERTAKEN_WITHIN_S = 1.5
 # A channel that sees no master this long after joining says so, once (not started, or it
 # refused this channel's certificate: Zenoh does not tell the refused side why).
 NO_MASTER_WARN_S = 5.0
-WEATHER_COMMANDS = ("apply_preset", "apply_metar", "release", "set_time")
+WEATHER_COMMANDS = ("apply_preset", "apply_metar", "set_weather", "release", "set_time")
 
 
 class SharePart(Part):

@@ -25,7 +25,15 @@ import traceback
 from collections.abc import Sequence
 
 from wxsky import __version__
-from wxsky.cli import bench_cmd, cigi_cmd, daemon_cmd, metar_cmd, preset_cmd, sun_cmd
+from wxsky.cli import (
+    bench_cmd,
+    cigi_cmd,
+    daemon_cmd,
+    metar_cmd,
+    preset_cmd,
+    sun_cmd,
+    weather_cmd,
+)
 from wxsky.cli.common import (
     DEFAULT_LOG_LEVEL,
     EXIT_FAILURE,
@@ -105,7 +113,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _command_name(args: argparse.Namespace) -> str:
     words = [args.command] if getattr(args, "command", None) else []
-    for group in ("metar_command", "preset_command", "cigi_command"):
+    for group in ("metar_command", "preset_command", "cigi_command", "weather_command"):
         word = getattr(args, group, None)
         if word:
             words.append(word)
@@ -156,4 +164,5 @@ def build_parser() -> argparse.ArgumentParser:
     sun_cmd.add_commands(sub)
     bench_cmd.add_commands(sub)
     cigi_cmd.add_commands(sub)
+    weather_cmd.add_commands(sub)
     return p
