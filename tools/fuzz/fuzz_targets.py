@@ -1289,6 +1289,9 @@ def control_seeds() -> list[bytes]:
             },
         ),
         ("set_weather", {"layers": [], "temperature_c": 3.0, "dewpoint_c": 2.5, "qnh_hpa": 990.0}),
+        ("radar", {}),
+        ("radar", {"range_nm": 10.0, "tilt_deg": -15.0, "size_px": 64}),
+        ("radar", {"range_nm": 320.0, "tilt_deg": 15.0, "size_px": 1024}),
         *(("apply_preset", {"name": name}) for name in presets),
         *(("apply_metar", {"report": r}) for r in reports[:16]),
         *(

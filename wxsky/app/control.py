@@ -8,14 +8,17 @@ is what `wire.MAX_REQUEST_SIZE` is sized for (docs/protocol.md §2.2, §5)."""
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from wxsky.engine.radar_work import Made
 from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.errors import ProtocolError, WxskyError
 from wxsky.logs import clip
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX, Camera
+from wxsky.scene.radar import RANGE_NM, SIZE_PX, TILT_DEG
 from wxsky.schema import (
     REQUIRED,
     Bool,
@@ -137,6 +140,40 @@ APPLY_METAR = Table(
         "month": Field(Number(1, 12, integer=True)),
     }
 )
+
+
+# The weather radar's picture (scene/radar.py): range, antenna tilt, picture size.
+RADAR = Table(
+    {
+        "range_nm": Field(Number(*RANGE_NM, unit="NM"), 40.0),
+        "tilt_deg": Field(Number(*TILT_DEG, unit="deg"), 0.0),
+        "size_px": Field(Number(*SIZE_PX, integer=True), 256),
+    }
+)
+
+
+def radar_reply(made: Made | None, key: tuple[float, float, int]) -> dict[str, Any]:
+    """`radar`'s answer: the last picture made for these settings, or `pending`."""
+    range_nm, tilt_deg, size_px = key
+    out: dict[str, Any] = {"range_nm": range_nm, "tilt_deg": tilt_deg, "size_px": size_px}
+    if made is None:
+        return out | {"pending": True}
+    pic = made.picture
+    return out | {
+        "pending": False,
+        "centre_m": list(pic.centre_m),
+        "time_utc": made.time_utc,
+        "age_s": max(0.0, time.monotonic() - made.made_s),
+        "took_s": made.took_s,
+        "dbz_offset": -32.0,
+        "dbz_step": 0.5,
+        "pixels": pic.to_bytes(),
+    }
+
+
+def radar_key(params: dict[str, Any]) -> tuple[float, float, int]:
+    v = checked_params("radar", RADAR, params)
+    return float(v["range_nm"]), float(v["tilt_deg"]), int(v["size_px"])
 
 
 def checked_params(command: str, table: Table, params: dict[str, Any]) -> dict[str, Any]:

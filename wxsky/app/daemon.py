@@ -34,6 +34,8 @@ from wxsky.app.control import (
     dispatch_table,
     no_params,
     output_format,
+    radar_key,
+    radar_reply,
     release,
     set_aircraft,
     set_time,
@@ -46,6 +48,7 @@ from wxsky.app.memory import trim as trim_heap
 from wxsky.app.part_factory import parts_from_config
 from wxsky.app.parts import Part, PartContext, PublishedFrame
 from wxsky.app.trace import TraceWriter
+from wxsky.engine.radar_work import RadarWork
 from wxsky.engine.stages import FramePlan, SkyEngine
 from wxsky.errors import ConfigError, RenderError, WxskyError
 from wxsky.inputs.stats import InputStats
@@ -194,6 +197,7 @@ class Daemon:
         self._trims = 0
         self._trimmed_kib = 0
         self._control_log = RateLimitedLog(log)
+        self._radar_work: RadarWork | None = None  # made at the first `radar` request
         self._commands: dict[str, Callable[[dict[str, Any]], Any]] = {
             "status": lambda p: no_params("status", p) or self.status(),
             "scene": lambda p: no_params("scene", p) or self.scene_info(),
@@ -206,6 +210,7 @@ class Daemon:
             "release": lambda p: release(self.engine, p),
             "apply_metar": lambda p: apply_metar(self.engine, p),
             "set_weather": lambda p: set_weather(self.engine, p),
+            "radar": self._radar,
             "export_textures": self._export_textures,
             "output_format": lambda p: output_format(
                 p, config.output.layer_format, self._segment_version()
@@ -319,6 +324,9 @@ class Daemon:
         self._stop.set()
         # First, so a ring build in flight gives up while the rest shuts down.
         self.engine.cancel_scene_work()
+        if self._radar_work is not None:
+            self._radar_work.close(wait_s=max(0.05, timeout / 4))
+            self._radar_work = None
         # Then the parts, together: a master's channels see the bus go at once and keep the
         # last sky; readers and feeds stop.
         await self._close_parts(time.monotonic() + max(0.05, timeout / 4))
@@ -561,6 +569,16 @@ class Daemon:
         if self.engine.target_version != self._target_version:
             self._target_version = self.engine.target_version
             self._server_broadcast("target", weather_to_dict(self.engine.target))
+
+    def _radar(self, params: dict[str, Any]) -> dict[str, Any]:
+        """The weather radar's last picture for these settings (or `pending`), and a new one
+        set going on the radar's thread from this moment's weather and aircraft."""
+        key = radar_key(params)
+        if self._radar_work is None:
+            self._radar_work = RadarWork()
+        engine = self.engine
+        made = self._radar_work.ask(key, engine.state, engine.drift, engine.camera.position_m)
+        return radar_reply(made, key)
 
     def status(self) -> dict[str, Any]:
         # The parts' first: one may refresh the detail of its inputs.

@@ -99,11 +99,30 @@ def block_clouds(
     )
 
 
-def generate_block_clouds(
+@dataclass(frozen=True)
+class BlockLayout:
+    """Where a block's clouds stand, before any sprite: what the radar (`scene/radar.py`)
+    reads of the very clouds that are drawn, at a small part of a block's cost."""
+
+    axis_m: F64  # (n, 2) each cloud's axis in the layer's drifting frame
+    width_m: F64  # (n,)
+    height_m: F64  # (n,)
+    rank: I32  # (n,) each cloud's place in the block's formation order
+    rank_offset: float
+    cloud_id: I64  # (n,)
+
+
+def block_layout(
     block_x: int, block_y: int, layer_key: int, model: CloudModel, thickness_m: float, seed: int
-) -> BlockClouds:
-    """`block_clouds` without the cache."""
+) -> BlockLayout:
+    """The layout `generate_block_clouds` draws first, from the same stream."""
     rng = np.random.default_rng(block_seed(seed, layer_key, block_x, block_y))
+    return _layout(rng, block_x, block_y, model, thickness_m)
+
+
+def _layout(
+    rng: np.random.Generator, block_x: int, block_y: int, model: CloudModel, thickness_m: float
+) -> BlockLayout:
     per_side = max(1, round(BLOCK_SIZE_M / model.cell_m))
     cell_m = BLOCK_SIZE_M / per_side
     n = per_side * per_side
@@ -122,6 +141,19 @@ def generate_block_clouds(
         ],
         axis=1,
     )
+    return BlockLayout(axis_m, width_m, height_m, rank, rank_offset, cloud_id)
+
+
+def generate_block_clouds(
+    block_x: int, block_y: int, layer_key: int, model: CloudModel, thickness_m: float, seed: int
+) -> BlockClouds:
+    """`block_clouds` without the cache."""
+    rng = np.random.default_rng(block_seed(seed, layer_key, block_x, block_y))
+    lay = _layout(rng, block_x, block_y, model, thickness_m)
+    axis_m, width_m, height_m = lay.axis_m, lay.width_m, lay.height_m
+    rank, rank_offset, cloud_id = lay.rank, lay.rank_offset, lay.cloud_id
+    n = len(rank)
+    cells = np.arange(n)
     parts = [_box_sprites(rng, box, axis_m, width_m, height_m) for box in model.boxes]
     # Cloud-major order, boxes in file order within a cloud: the order Wang's cull walks.
     per_cloud = sum(p.size.shape[1] for p in parts)
