@@ -39,7 +39,7 @@ PALETTE = ((20.0, (0, 150, 0)), (30.0, (230, 220, 0)), (40.0, (230, 30, 0)), (50
 
 
 def colour(dbz: npt.NDArray[np.float64]) -> npt.NDArray[np.uint8]:
-    out = np.zeros(dbz.shape + (4,), np.uint8)
+    out = np.zeros((*dbz.shape, 4), np.uint8)
     out[..., 3] = 255
     for lo, rgb in PALETTE:
         out[dbz >= lo, :3] = rgb
