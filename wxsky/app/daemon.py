@@ -647,8 +647,14 @@ class Daemon:
                 "camera": camera_to_dict(meta.camera),
                 "sun_direction_enu": list(meta.sun_direction_enu),
                 **plan.frame.in_cloud.to_dict(),
+                # Lightning lighting the clouds in this frame: each flash's id and glow 0..1.
+                "flashes": [{"id": f.id, "glow": g} for f, g in plan.frame.flashes],
             },
         )
+        for flash in plan.frame.new_flashes:
+            self._server_broadcast(
+                "lightning", {"frame_number": meta.frame_number, **flash.to_dict()}
+            )
 
     def _server_broadcast(self, topic: str, params: dict[str, Any]) -> None:
         if self._server is not None:

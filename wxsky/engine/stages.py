@@ -201,6 +201,7 @@ class SkyEngine:
         # since the anchor (the moment the applied weather last changed, at the drift it had
         # then), so setting the clock anywhere puts the clouds where that time has them.
         self._drift: Drift = zero_drift(state)
+        self._last_frame_s: float | None = None  # the last frame's simulated time (lightning)
         self._anchor_utc = state.time_utc
         self._anchor_drift: Drift = self._drift
         self._clock_jumps = 0  # bumped by each clock set that moves it more than CLOCK_JUMP_S
@@ -649,6 +650,11 @@ class SkyEngine:
                 drawn_state, drawn_drift, gathered, towers = self._held_near(
                     state, drift, near, sky, towers
                 )
+        # Lightning goes by the frame's own moment, whatever weather the near layer was
+        # gathered for (`flash_times_s`).
+        now_s = state.time_utc.timestamp()
+        if self._last_frame_s is None or not 0.0 <= now_s - self._last_frame_s <= 1.0:
+            self._last_frame_s = now_s - 1.0 / 30.0
         frame = build_frame(
             drawn_state,
             drawn_drift,
@@ -666,7 +672,9 @@ class SkyEngine:
             fill_towers=lambda shows: self._towers.fill(shows, sky),
             tower_fades=self._tower_fades,
             dt_s=dt_wall_s,
+            flash_times_s=(self._last_frame_s, now_s),
         )
+        self._last_frame_s = now_s
         self._locks = frame.locks
         self._tower_fades = dict(frame.tower_fades)
         events = rings.events

@@ -26,6 +26,7 @@ import numpy.typing as npt
 from wxsky.render.context import release_framebuffer
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.scene.camera import Camera
+from wxsky.scene.lightning import FLASH_RGB
 from wxsky.scene.shading_harris import EXPOSURE, TOE, WHITEN_FROM, WHITEN_TO, scene_lights
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.tower_field import MAX_LIGHTS, OCCUPIED_FLOOR, LitVolume, TowerShow
@@ -215,6 +216,7 @@ class TowerPass:
         _set(prog, "u_haze", float(item.tower.haze))
         _set(prog, "u_haze_rgb", _vec(sky.haze_rgb))
         _set(prog, "u_alpha", float(item.tower.alpha))
+        _set(prog, "u_flash_rgb", tuple(float(c) * item.tower.flash for c in FLASH_RGB))
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         self._quad_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)

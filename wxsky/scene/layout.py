@@ -45,6 +45,16 @@ from wxsky.scene.in_cloud import (
     lock_facing,
     lock_reach_frac,
 )
+from wxsky.scene.lightning import (
+    FLASH_RGB,
+    LONGEST_S,
+    Flash,
+    StormCell,
+    flash_light,
+    flashes_between,
+    lit_flashes,
+    storm_rate_per_min,
+)
 from wxsky.scene.near_sets import NearInputs, near_scattered_light
 from wxsky.scene.rain import is_shaft
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
@@ -61,6 +71,7 @@ from wxsky.scene.sprite_budget import cap_sprites
 from wxsky.scene.sprites import F64
 from wxsky.scene.tower_field import (
     NO_TOWERS,
+    Candidate,
     PlacedTowers,
     TowerClock,
     TowerShow,
@@ -175,6 +186,10 @@ class FrameScene:
     # Each convective cell's progress from sprite cloud to tower, to carry into the next
     # frame (`tower_field.place_towers`'s fades).
     tower_fades: tuple[tuple[int, float], ...] = ()
+    # Lightning (`lightning.py`): the flashes lighting the clouds at this frame's moment with
+    # their glow, and every flash that started since the frame before (for the stream).
+    flashes: tuple[tuple[Flash, float], ...] = ()
+    new_flashes: tuple[Flash, ...] = ()
 
 
 class StageClock(Protocol):
@@ -411,6 +426,7 @@ def build_frame(
     fill_towers: Callable[[tuple[TowerShow, ...]], tuple[TowerShow, ...]] | None = None,
     tower_fades: Mapping[int, float] | None = None,
     dt_s: float = 0.0,
+    flash_times_s: tuple[float, float] | None = None,
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
@@ -424,7 +440,10 @@ def build_frame(
     cloud it grew from until one is made, rather than a hole in the sky. `tower_fades`: the
     previous frame's `FrameScene.tower_fades`, `dt_s` (wall-clock) before it: cells coming
     into the towers' budget or leaving it cross-fade between sprites and tower; None (a
-    first frame, a picture): none is part-way."""
+    first frame, a picture): none is part-way. `flash_times_s`: (the frame before's,
+    this frame's) simulated time, seconds since the epoch: the flashes lit now and those
+    started since (`FrameScene.flashes`, `new_flashes`); None: `state`'s time, and the flashes
+    of the second before it."""
     if gathered is None:
         gathered = gather_inputs(state, drift, rings, sky, settings, near_radius_m, towers)
     near, share, blocks, scattered = (
@@ -435,10 +454,26 @@ def build_frame(
     )
     eye = camera.position_m
     placed = NO_TOWERS
-    if towers is not None and blocks is not None and settings.max_towers > 0:
+    found = None
+    storms = storm_rate_per_min(state)
+    if towers is not None and blocks is not None and (settings.max_towers > 0 or storms > 0.0):
         found = gathered.found
         if found is None:
             found = candidates(blocks, state, towers.epochs)
+    if flash_times_s is None:
+        now_s = state.time_utc.timestamp()
+        flash_times_s = (now_s - 1.0, now_s)
+    since_s, now_s = flash_times_s
+    lit: list[tuple[Flash, float]] = []
+    started: list[Flash] = []
+    if found and storms > 0.0:
+        cells = storm_cells(found, drift, state.observer.alt_m)
+        lit = lit_flashes(cells, state.seed, storms, now_s)
+        # A frame more than a flash's length after the last (a clock set) reports only
+        # the last second's.
+        since_s = max(since_s, now_s - LONGEST_S)
+        started = flashes_between(cells, state.seed, storms, since_s + 1e-9, now_s + 1e-9)
+    if found is not None and towers is not None and settings.max_towers > 0:
         placed = place_towers(
             found,
             drift,
@@ -483,6 +518,8 @@ def build_frame(
         scattered=scattered,
         dist_m=dist,
     )
+    if lit:
+        shaded = lit_by_flashes(shaded, lit)
     drawn_dist: F64 | None = dist[order]  # of the sprites drawn, while they are these
     if collapsing:
         drawn_dist = None
@@ -541,10 +578,53 @@ def build_frame(
         split_distance_m=split_m,
         near_far_count=far_count,
         near_dropped=dropped,
-        towers=shows,
+        towers=tuple(
+            dataclasses.replace(t, flash=float(flash_light(lit, np.array([t.centre_m]))[0]))
+            for t in shows
+        )
+        if lit
+        else shows,
         towers_left_out=placed.left_out,
         tower_fades=placed.fades,
+        flashes=tuple(lit),
+        new_flashes=tuple(started),
     )
+
+
+def storm_cells(
+    found: tuple[Candidate, ...], drift: Drift, ground_m: float
+) -> tuple[StormCell, ...]:
+    """The cumulonimbus cells among a near set's convective cells, where they stand now."""
+    out = []
+    for c in found:
+        if not c.spec.anvil:
+            continue
+        dx, dy = drift[c.layer] if c.layer < len(drift) else (0.0, 0.0)
+        out.append(
+            StormCell(
+                cloud_id=c.cloud_id,
+                axis_m=(c.spec.axis_m[0] + dx, c.spec.axis_m[1] + dy),
+                base_m=c.spec.base_m,
+                top_m=c.spec.base_m + c.spec.height_m,
+                formed=c.formed,
+                ground_m=ground_m,
+            )
+        )
+    return tuple(out)
+
+
+def lit_by_flashes(draw: SpriteDraw, lit: list[tuple[Flash, float]]) -> SpriteDraw:
+    """The sprites' display colours (and rims) with the flashes' light added where it reaches
+    them (`lightning.flash_light` at each sprite's centre), clipped to white."""
+    light = flash_light(lit, draw.sprites.centre_m)
+    if not np.any(light > 1e-4):
+        return draw
+    rgba = draw.rgba.copy()
+    add = (light[:, None] * np.asarray(FLASH_RGB)[None, :]).astype(np.float32)
+    rgba[:, 0:3] = np.minimum(rgba[:, 0:3] + add, 1.0)
+    if rgba.shape[1] >= 7:
+        rgba[:, 4:7] = np.minimum(rgba[:, 4:7] + add, 1.0)
+    return dataclasses.replace(draw, rgba=rgba)
 
 
 def _filled(placed: PlacedTowers, filled: tuple[TowerShow, ...]) -> PlacedTowers:

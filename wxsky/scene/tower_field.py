@@ -119,6 +119,7 @@ class TowerShow:
     # Filled in by the engine: the lit steps around the tower's age, and how far between.
     volumes: tuple[LitVolume, ...] = ()
     frac: float = 0.0
+    flash: float = 0.0  # lightning's light on it this frame (`lightning.flash_light`)
 
     @property
     def step(self) -> int:

@@ -27,9 +27,11 @@ uniform float u_mix;
 uniform float u_haze;
 uniform vec3 u_haze_rgb;
 uniform float u_alpha;
+uniform vec3 u_flash_rgb;  // lightning's light on the tower (scene/lightning.py), or 0
 out vec4 f_colour;
 void main() {
     vec4 c = mix(texture(u_first, v_uv), texture(u_second, v_uv), u_mix);
+    c.rgb = min(c.rgb + u_flash_rgb * c.a, vec3(c.a));
     c.rgb = c.rgb * (1.0 - u_haze) + u_haze_rgb * (c.a * u_haze);
     c *= u_alpha;
     if (c.a < 1.0 / 512.0) {
