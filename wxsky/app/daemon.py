@@ -198,6 +198,7 @@ class Daemon:
         self._trimmed_kib = 0
         self._control_log = RateLimitedLog(log)
         self._radar_work: RadarWork | None = None  # made at the first `radar` request
+        self._at_eye: dict[str, Any] | None = None  # the last published frame's
         self._commands: dict[str, Callable[[dict[str, Any]], Any]] = {
             "status": lambda p: no_params("status", p) or self.status(),
             "scene": lambda p: no_params("scene", p) or self.scene_info(),
@@ -603,6 +604,7 @@ class Daemon:
             "clock_rate": self.engine.clock_rate,
             "clock_at_end": self.engine.clock_at_end,
             "frames": self._frame_times.to_dict(),
+            "at_eye": self._at_eye,
             "scene_work": self.engine.scene_work(),
             "block_cache": BLOCK_CACHE.info().to_dict(),
             "memory": memory_status(self._trims, self._trimmed_kib),
@@ -649,8 +651,11 @@ class Daemon:
                 **plan.frame.in_cloud.to_dict(),
                 # Lightning lighting the clouds in this frame: each flash's id and glow 0..1.
                 "flashes": [{"id": f.id, "glow": g} for f, g in plan.frame.flashes],
+                # What falls at the eye and how far one sees in it (scene/precip_eye.py).
+                "at_eye": _at_eye(plan),
             },
         )
+        self._at_eye = _at_eye(plan)
         for flash in plan.frame.new_flashes:
             self._server_broadcast(
                 "lightning", {"frame_number": meta.frame_number, **flash.to_dict()}
@@ -773,3 +778,17 @@ def _parse(text: str) -> Address:
 def _source_name(patches: list[WeatherPatch]) -> str:
     kinds = {Source.PRESET: "preset", Source.METAR: "metar"}
     return "+".join(kinds.get(p.source, p.source.value) for p in patches)
+
+
+def _at_eye(plan: FramePlan) -> dict[str, Any]:
+    """What falls at the eye in a frame, and how far one sees there: without it (a frame
+    not built by `build_frame`), the weather's visibility and nothing falling."""
+    at_eye = plan.frame.at_eye
+    if at_eye is None:
+        return {
+            "precipitation": None,
+            "rate_mm_h": 0.0,
+            "intensity": None,
+            "visibility_m": plan.state.visibility_m,
+        }
+    return at_eye.to_dict()

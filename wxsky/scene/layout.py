@@ -56,7 +56,8 @@ from wxsky.scene.lightning import (
     storm_rate_per_min,
 )
 from wxsky.scene.near_sets import NearInputs, near_scattered_light
-from wxsky.scene.rain import is_shaft
+from wxsky.scene.precip_eye import AtEye, Shaft, precipitation_at
+from wxsky.scene.rain import SHAFT_RADIUS_FRAC, is_shaft, rain_of
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
 from wxsky.scene.shading import (
     DEFAULT_SHADING,
@@ -190,6 +191,8 @@ class FrameScene:
     # their glow, and every flash that started since the frame before (for the stream).
     flashes: tuple[tuple[Flash, float], ...] = ()
     new_flashes: tuple[Flash, ...] = ()
+    # What falls at the eye, how hard, how far one sees in it (`precip_eye.py`).
+    at_eye: AtEye | None = None
 
 
 class StageClock(Protocol):
@@ -456,10 +459,29 @@ def build_frame(
     placed = NO_TOWERS
     found = None
     storms = storm_rate_per_min(state)
-    if towers is not None and blocks is not None and (settings.max_towers > 0 or storms > 0.0):
+    falling = rain_of(state) is not None
+    if (
+        towers is not None
+        and blocks is not None
+        and (settings.max_towers > 0 or storms > 0.0 or falling)
+    ):
         found = gathered.found
         if found is None:
             found = candidates(blocks, state, towers.epochs)
+    rain = rain_of(state)
+    shafts = (
+        ()
+        if found is None or rain is None
+        else tuple(
+            Shaft(cell.axis_m, SHAFT_RADIUS_FRAC[rain.snow] * 0.5 * c.spec.width_m, cell.base_m)
+            for c, cell in zip(
+                (c for c in found if c.spec.anvil),
+                storm_cells(found, drift, state.observer.alt_m),
+                strict=True,
+            )
+        )
+    )
+    at_eye = precipitation_at(state, eye, shafts)
     if flash_times_s is None:
         now_s = state.time_utc.timestamp()
         flash_times_s = (now_s - 1.0, now_s)
@@ -588,6 +610,7 @@ def build_frame(
         tower_fades=placed.fades,
         flashes=tuple(lit),
         new_flashes=tuple(started),
+        at_eye=at_eye,
     )
 
 
