@@ -36,9 +36,9 @@ def add_commands(sub: Subparsers) -> None:
     put.add_argument(
         "--no-layers", action="store_true", help="clear the sky of cloud (an empty list)"
     )
-    put.add_argument("--temperature-c", type=float, metavar="C")
-    put.add_argument("--dewpoint-c", type=float, metavar="C")
-    put.add_argument("--qnh-hpa", type=float, metavar="HPA")
+    put.add_argument("--temperature-c", type=float, metavar="C", help="surface temperature")
+    put.add_argument("--dewpoint-c", type=float, metavar="C", help="surface dewpoint")
+    put.add_argument("--qnh-hpa", type=float, metavar="HPA", help="QNH, hectopascals")
     put.add_argument(
         "--present-weather",
         action="append",
