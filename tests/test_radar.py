@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -189,6 +192,7 @@ def test_the_daemon_answers_radar_requests_without_waiting(tmp_path: Path) -> No
     from daemon_harness import HANG_S, running_daemon
 
     from wxsky.host.client import RemoteError
+    from wxsky.png import read_png
 
     with running_daemon(tmp_path, args=("--preset", "thunderstorm")) as d, d.client() as c:
         params = {"range_nm": 20.0, "tilt_deg": 1.0, "size_px": 128}
@@ -209,6 +213,36 @@ def test_the_daemon_answers_radar_requests_without_waiting(tmp_path: Path) -> No
             c.call("radar", {"range_nm": 1000.0})
         with pytest.raises(RemoteError, match=r"^radar: beam: unknown key"):
             c.call("radar", {"beam": 2})
+        # The reference host shows it as a cockpit does: heading-up, in colour.
+        script = Path(__file__).resolve().parents[1] / "plugins" / "reference-host"
+        out_png = tmp_path / "radar.png"
+        proc = subprocess.run(
+            [
+                sys.executable,
+                str(script / "reference_host.py"),
+                "--control",
+                d.address,
+                "--out",
+                str(tmp_path / "sky.png"),
+                "--size",
+                "96x54",
+                "--radar-out",
+                str(out_png),
+                "--radar-range-nm",
+                "20",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=HANG_S * 2,
+            env={**os.environ, "PYTHONPATH": str(script.parents[1])},
+            check=False,
+        )
+        assert proc.returncode == 0, proc.stderr
+        shown = read_png(out_png)
+        assert shown.shape == (256, 256, 4)
+        # Red (40 dBZ and more) where the storm's cores are; black where the air is clear.
+        red = (shown[..., 0] > 200) & (shown[..., 1] < 60) & (shown[..., 2] < 60)
+        assert red.any() and (shown[..., :3].sum(axis=-1) == 0).any()
         before = c.call("status")["frames_published"]
         # Asked far faster than pictures are made: each answer at once, the last picture.
         for _ in range(20):

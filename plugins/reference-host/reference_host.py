@@ -3,6 +3,11 @@
     python plugins/reference-host/reference_host.py --out sky.png [--control ADDR]
         [--frames N] [--heading-deg D --pitch-deg D --fov-deg D --size WxH]
         [--exposure EV] [--linear-out FILE.pfm|FILE.npy]
+        [--radar-out radar.png [--radar-range-nm N --radar-tilt-deg D]]
+
+With --radar-out it also asks the daemon for its weather radar picture (the `radar` command,
+docs/radar.md) and writes it as a cockpit display shows it: heading-up on the camera's
+heading, the usual colours, range rings at each quarter of the range.
 
 A daemon with `[output] layer_format = "rgba16f"` publishes scene-linear half-float layers:
 this host composites them in linear, writes that composite with --linear-out, and exposes
@@ -25,7 +30,7 @@ import numpy as np
 from wxsky.app.snapshot import LINEAR_SUFFIXES, write_linear
 from wxsky.cli.common import parse_size
 from wxsky.errors import WxskyError
-from wxsky.host.reference import ReferenceHost
+from wxsky.host.reference import ReferenceHost, radar_display
 from wxsky.output.transport import default_address, parse_address
 from wxsky.png import write_png
 from wxsky.scene.exposure import scale_of_ev
@@ -42,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--size", help="WIDTHxHEIGHT")
     p.add_argument("--exposure", type=float, default=0.0, help="EV for rgba16f layers")
     p.add_argument("--linear-out", type=Path, help="scene-linear composite (.pfm or .npy)")
+    p.add_argument("--radar-out", type=Path, help="the weather radar's display (PNG)")
+    p.add_argument("--radar-range-nm", type=float, default=40.0, help="radar range, 10..320")
+    p.add_argument("--radar-tilt-deg", type=float, default=0.0, help="antenna tilt, -15..15")
     args = p.parse_args(argv)
     try:
         exposure = scale_of_ev(args.exposure)  # ValueError outside -20..20 EV
@@ -78,6 +86,13 @@ def main(argv: list[str] | None = None) -> int:
                     lin = lin if args.frames == 1 else lin.with_stem(f"{lin.stem}_{n}")
                     write_linear(lin, linear.astype(np.float32))
                     print(f"frame {frame.meta.frame_number} -> {lin} (scene-linear)")
+            if args.radar_out is not None:
+                dbz = host.radar(args.radar_range_nm, args.radar_tilt_deg)
+                heading = float(host.call("scene")["camera"]["heading_deg"])
+                write_png(args.radar_out, radar_display(dbz, heading))
+                print(
+                    f"radar {args.radar_range_nm:g} NM, max {dbz.max():.0f} dBZ -> {args.radar_out}"
+                )
     except (WxskyError, ValueError) as exc:
         print(f"reference-host: error: {exc}", file=sys.stderr)
         return 2

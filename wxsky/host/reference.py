@@ -4,6 +4,7 @@ picture; the tests hold the two to that, which is how we know the protocol is su
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -144,6 +145,29 @@ class ReferenceHost:
             frame = self.wait_frame(frame.meta.frame_number, deadline - time.monotonic())
         return self.wait_frame(frame.meta.frame_number, max(0.1, deadline - time.monotonic()))
 
+    def radar(
+        self,
+        range_nm: float = 40.0,
+        tilt_deg: float = 0.0,
+        size_px: int = 256,
+        timeout_s: float = 30.0,
+    ) -> npt.NDArray[np.float64]:
+        """The daemon's weather radar picture (dBZ, north-up, the camera in the middle: the
+        `radar` command), asking again until the first one for these settings is made."""
+        params = {"range_nm": range_nm, "tilt_deg": tilt_deg, "size_px": size_px}
+        deadline = time.monotonic() + timeout_s
+        reply = self.call("radar", params)
+        while reply["pending"]:
+            if time.monotonic() > deadline:
+                raise WxskyError(f"no radar picture within {timeout_s} s")
+            time.sleep(0.05)
+            reply = self.call("radar", params)
+        raw = np.frombuffer(reply["pixels"], np.uint8).reshape(size_px, size_px)
+        out: npt.NDArray[np.float64] = raw.astype(np.float64) * float(reply["dbz_step"]) + float(
+            reply["dbz_offset"]
+        )
+        return out
+
     def read_latest(self) -> HostFrame:
         return host_frame(self.reader.read(timeout_s=1.0))
 
@@ -159,3 +183,36 @@ class ReferenceHost:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+# A weather radar display's usual colours: green from 20 dBZ, yellow 30, red 40, magenta 50.
+RADAR_PALETTE = (
+    (20.0, (0, 150, 0)),
+    (30.0, (230, 220, 0)),
+    (40.0, (230, 30, 0)),
+    (50.0, (220, 0, 220)),
+)
+
+
+def radar_display(dbz: npt.NDArray[np.float64], heading_deg: float) -> npt.NDArray[np.uint8]:
+    """(N, N, 4) RGBA of a north-up radar picture as a cockpit shows it: turned so that
+    `heading_deg` points up, in the usual colours on black, range rings at each quarter of the
+    range in grey (nearest pixel)."""
+    n = dbz.shape[0]
+    half = n / 2.0
+    y, x = np.mgrid[0:n, 0:n] + 0.5
+    a = math.radians(heading_deg)
+    right, up = x - half, half - y
+    east = right * math.cos(a) + up * math.sin(a)
+    north = -right * math.sin(a) + up * math.cos(a)
+    cols = np.clip((east + half).astype(int), 0, n - 1)
+    rows = np.clip((half - north).astype(int), 0, n - 1)
+    turned = dbz[rows, cols]
+    out = np.zeros((n, n, 4), np.uint8)
+    out[..., 3] = 255
+    r = np.hypot(right, up) / half
+    for ring in (0.25, 0.5, 0.75, 1.0):
+        out[np.abs(r - ring) < 0.5 / half, :3] = (90, 90, 90)
+    for lo, rgb in RADAR_PALETTE:
+        out[turned >= lo, :3] = rgb
+    return out
