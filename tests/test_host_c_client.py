@@ -216,6 +216,8 @@ class ServerThread(LoopServer):
             }
         if method in ("set_aircraft", "set_time", "apply_preset", "apply_metar", "release"):
             return {"method": method}
+        if method == "radar":
+            return _radar_answer(params)
         raise WxskyError(f"unknown method {method!r}")
 
 
@@ -517,11 +519,30 @@ def fuzz_inputs(seed: int, count: int) -> list[bytes]:
         data: bytes = msgpack.packb(obj, use_bin_type=True)
         return data
 
+    def radar() -> bytes:
+        """A `radar` answer's body (wxsky_radar_decode's input), often a little wrong."""
+        size = rng.choice([0, 1, 2, 3, 8, 2**32 + 1])
+        body: dict[str, Any] = {
+            "pending": rng.choice([False, False, True, 1, None]),
+            "size_px": size,
+            "range_nm": rng.choice([40.0, "x", None]),
+            "dbz_offset": -32.0,
+            "dbz_step": rng.choice([0.5, 0.0, -1.0]),
+            "centre_m": rng.choice([[1.0, 2.0, 3.0], [1.0], "c"]),
+            "pixels": rng.randbytes(max(0, min(size, 9) ** 2 + rng.choice([0, 0, -1, 1]))),
+        }
+        for key in rng.sample(sorted(body), rng.randrange(3)):
+            del body[key]
+        data: bytes = msgpack.packb(body, use_bin_type=True)
+        return data
+
     headers = [bytes([b]) for b in (0xC1, 0xC7, 0xD4, 0xD6, 0xDB, 0xDD, 0xDF, 0xC6)]
     out: list[bytes] = []
     for _ in range(count):
-        pick = rng.randrange(6)
-        if pick == 0:
+        pick = rng.randrange(7)
+        if pick == 6:
+            out.append(radar())
+        elif pick == 0:
             out.append(rng.randbytes(rng.randrange(64)))
         elif pick == 1:
             out.append(b"".join(message() for _ in range(rng.randrange(1, 4))))
@@ -605,6 +626,51 @@ def test_typed_requests_send_the_documented_params(
         ("release", {"source": "cockpit"}),
         ("status", {}),
     ]  # subscribe/unsubscribe are answered by the server itself
+
+
+def _radar_answer(params: dict[str, Any]) -> dict[str, Any]:
+    """The test server's `radar`: pending at tilt 9; at size 65 pixels one byte short (not
+    the protocol); else a picture whose brightest byte is 200 (68 dBZ)."""
+    size = int(params["size_px"])
+    out = {k: params[k] for k in ("range_nm", "tilt_deg", "size_px")}
+    if params["tilt_deg"] == 9.0:
+        return out | {"pending": True}
+    pixels = bytearray(size * size - (1 if size == 65 else 0))
+    pixels[size + 3] = 200
+    return out | {
+        "pending": False,
+        "centre_m": [1.0, 2.0, 1500.0],
+        "time_utc": "2026-07-22T15:00:00+00:00",
+        "age_s": 0.25,
+        "took_s": 0.1,
+        "dbz_offset": -32.0,
+        "dbz_step": 0.5,
+        "pixels": bytes(pixels),
+    }
+
+
+def test_the_radar_is_asked_for_and_decoded(
+    kit: Kit, server: ServerThread, sock_path: Path
+) -> None:
+    """`wxsky_request_radar` sends the documented params; `wxsky_radar_decode` reads a
+    picture and a pending answer, and refuses pixels that are not size_px squared."""
+    out = kit.session(f"unix:{sock_path}", "radar:40,1.5,64", "radar:20,9,64").ok()
+    assert server.received[:2] == [
+        ("radar", {"range_nm": 40.0, "tilt_deg": 1.5, "size_px": 64}),
+        ("radar", {"range_nm": 20.0, "tilt_deg": 9.0, "size_px": 64}),
+    ]
+    picture, pending = (line["radar"] for line in out.lines if "radar" in line)
+    assert picture == {
+        "pending": False,
+        "size_px": 64,
+        "range_nm": 40.0,
+        "tilt_deg": 1.5,
+        "max_dbz": 68.0,
+        "bytes": 64 * 64,
+    }
+    assert pending["pending"] is True and pending["bytes"] == 0
+    bad = kit.session(f"unix:{sock_path}", "radar:40,0,65")
+    assert bad.returncode == 1 and "WXSKY_EFORMAT" in bad.stderr
 
 
 def test_subscribe_delivers_in_order_and_call_queues_what_arrives_meanwhile(

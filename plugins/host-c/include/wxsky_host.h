@@ -25,8 +25,8 @@ extern "C" {
 #define WXSKY_HOST_VERSION_MAJOR 0
 /* 2: frame record v3 (the cloud-shadow fields); 3: segment v2, RGBA16F layers (the layer
  * info's format and bytes_per_pixel, wxsky_half_to_float, wxsky_display); 4: wxsky_display's
- * curve with a toe of slope 1 */
-#define WXSKY_HOST_VERSION_MINOR 4
+ * curve with a toe of slope 1; 5: the weather radar (wxsky_request_radar, wxsky_radar_decode) */
+#define WXSKY_HOST_VERSION_MINOR 5
 /* The protocol versions this kit speaks (docs/protocol.md). */
 #define WXSKY_PROTOCOL_VERSION 1
 #define WXSKY_SEGMENT_VERSION 2     /* the newest segment layout this kit reads */
@@ -446,6 +446,30 @@ int wxsky_apply_metar(wxsky_client *c, const char *report, uint32_t *msgid);
 /* source NULL: "control". */
 int wxsky_release(wxsky_client *c, const char *source, uint32_t *msgid);
 int wxsky_request_status(wxsky_client *c, uint32_t *msgid);
+
+/* `radar` (§5, docs/radar.md): the weather radar's picture of the clouds wxsky draws, from the
+ * camera. range_nm 10..320, tilt_deg -15..15, size_px 64..1024: the daemon checks them (a bad
+ * one is WXSKY_EREMOTE naming the field). The answer comes at once: the last picture made for
+ * these settings, or `pending` until the first one is (ask again). Decode it with
+ * wxsky_radar_decode. */
+int wxsky_request_radar(wxsky_client *c, double range_nm, double tilt_deg, uint32_t size_px,
+                        uint32_t *msgid);
+
+typedef struct wxsky_radar {
+    int pending;                 /* 1: no picture yet for these settings; the rest is 0 */
+    uint32_t size_px;            /* the picture is size_px x size_px */
+    double range_nm, tilt_deg;   /* as asked */
+    double age_s;                /* since the picture was made */
+    double dbz_offset, dbz_step; /* dBZ = byte * dbz_step + dbz_offset (-32, 0.5) */
+    double centre_m[3];          /* where it was taken from (east, north, up) */
+    const uint8_t *pixels;       /* size_px * size_px bytes, rows north to south, columns west
+                                    to east, the camera in the middle (north-up); points into
+                                    the message's body: valid as long as it is; NULL pending */
+} wxsky_radar;
+
+/* A `radar` response's result (wxsky_message.body) into *out: WXSKY_OK, or WXSKY_EFORMAT when
+ * it is not one (a missing or mistyped field, pixels not size_px^2 bytes). */
+int wxsky_radar_decode(const uint8_t *body, size_t len, wxsky_radar *out);
 
 typedef enum wxsky_message_kind {
     WXSKY_RESPONSE = 1,

@@ -735,6 +735,83 @@ int wxsky_request_status(wxsky_client *c, uint32_t *msgid) {
     return wxsky_client_request(c, "status", NULL, 0, msgid);
 }
 
+int wxsky_request_radar(wxsky_client *c, double range_nm, double tilt_deg, uint32_t size_px,
+                        uint32_t *msgid) {
+    if (c == NULL) return WXSKY_EINVAL;
+    wxsky_mp_writer w;
+    int st = begin_request(c, "radar", &w);
+    if (st != WXSKY_OK) return st;
+    wxsky_mp_write_map(&w, 3);
+    wxsky_mp_write_cstr(&w, "range_nm");
+    wxsky_mp_write_double(&w, range_nm);
+    wxsky_mp_write_cstr(&w, "tilt_deg");
+    wxsky_mp_write_double(&w, tilt_deg);
+    wxsky_mp_write_cstr(&w, "size_px");
+    wxsky_mp_write_uint(&w, size_px);
+    return finish_request(c, &w, "radar", msgid);
+}
+
+static int key_is(const char *key, uint32_t len, const char *want) {
+    return len == strlen(want) && memcmp(key, want, len) == 0;
+}
+
+int wxsky_radar_decode(const uint8_t *body, size_t len, wxsky_radar *out) {
+    if (body == NULL || out == NULL) return WXSKY_EINVAL;
+    memset(out, 0, sizeof *out);
+    wxsky_mp_reader r;
+    wxsky_mp_reader_init(&r, body, len);
+    uint32_t count = 0;
+    if (wxsky_mp_read_map(&r, &count) != WXSKY_OK) return WXSKY_EFORMAT;
+    int seen_pending = 0, seen_size = 0;
+    uint32_t pixels_len = 0;
+    for (uint32_t i = 0; i < count; i++) {
+        const char *key;
+        uint32_t key_len;
+        if (wxsky_mp_read_str(&r, &key, &key_len) != WXSKY_OK) return WXSKY_EFORMAT;
+        int st;
+        if (key_is(key, key_len, "pending")) {
+            st = wxsky_mp_read_bool(&r, &out->pending);
+            seen_pending = 1;
+        } else if (key_is(key, key_len, "size_px")) {
+            uint64_t v = 0;
+            st = wxsky_mp_read_uint(&r, &v);
+            if (st == WXSKY_OK && (v == 0 || v > 4096)) return WXSKY_EFORMAT;
+            out->size_px = (uint32_t)v;
+            seen_size = 1;
+        } else if (key_is(key, key_len, "range_nm")) {
+            st = wxsky_mp_read_double(&r, &out->range_nm);
+        } else if (key_is(key, key_len, "tilt_deg")) {
+            st = wxsky_mp_read_double(&r, &out->tilt_deg);
+        } else if (key_is(key, key_len, "age_s")) {
+            st = wxsky_mp_read_double(&r, &out->age_s);
+        } else if (key_is(key, key_len, "dbz_offset")) {
+            st = wxsky_mp_read_double(&r, &out->dbz_offset);
+        } else if (key_is(key, key_len, "dbz_step")) {
+            st = wxsky_mp_read_double(&r, &out->dbz_step);
+        } else if (key_is(key, key_len, "centre_m")) {
+            uint32_t n = 0;
+            st = wxsky_mp_read_array(&r, &n);
+            if (st == WXSKY_OK && n != 3) return WXSKY_EFORMAT;
+            for (uint32_t k = 0; st == WXSKY_OK && k < 3; k++)
+                st = wxsky_mp_read_double(&r, &out->centre_m[k]);
+        } else if (key_is(key, key_len, "pixels")) {
+            st = wxsky_mp_read_bin(&r, &out->pixels, &pixels_len);
+        } else {
+            st = wxsky_mp_skip(&r);
+        }
+        if (st != WXSKY_OK) return WXSKY_EFORMAT;
+    }
+    if (!seen_pending || !seen_size) return WXSKY_EFORMAT;
+    if (out->pending) {
+        out->pixels = NULL;
+        return WXSKY_OK;
+    }
+    if (out->pixels == NULL || out->dbz_step <= 0.0 ||
+        (uint64_t)pixels_len != (uint64_t)out->size_px * out->size_px)
+        return WXSKY_EFORMAT;
+    return WXSKY_OK;
+}
+
 int wxsky_client_reconnect(wxsky_client *c) {
     if (c == NULL) return WXSKY_EINVAL;
     if (!c->have_address) return FAIL(c, WXSKY_EINVAL, "reconnect: never connected");

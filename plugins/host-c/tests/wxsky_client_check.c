@@ -13,6 +13,7 @@
  *                                       the script goes on)
  *         status  camera:E,N,U,H,P,R,FOV[,W,H]  aircraft:E,N,U|none  time:ISO[,RATE]
  *         rate:R  preset:NAME  metar:REPORT  release[:SOURCE]     typed request + wait
+ *         radar:RANGE_NM,TILT_DEG,SIZE_PX   wxsky_request_radar + wait + wxsky_radar_decode
  *         poll:N                        the next N messages
  *         note:TOPIC                    messages until a notification TOPIC
  *         expect:WXSKY_NAME             messages until poll returns that (negative) status
@@ -500,6 +501,35 @@ static int run_session(int argc, char **argv) {
         } else if (strcmp(verb, "release") == 0) {
             st = wxsky_release(s.c, arg, &id);
             finish(&s, st, id);
+        } else if (strcmp(verb, "radar") == 0) {
+            if (!arg) die_usage("radar:RANGE_NM,TILT_DEG,SIZE_PX");
+            double range_nm = 0, tilt_deg = 0;
+            unsigned size_px = 0;
+            if (sscanf(arg, "%lf,%lf,%u", &range_nm, &tilt_deg, &size_px) != 3)
+                die_usage("radar:RANGE_NM,TILT_DEG,SIZE_PX");
+            st = wxsky_request_radar(s.c, range_nm, tilt_deg, size_px, &id);
+            if (st != WXSKY_OK) fail_step(&s, st);
+            wxsky_message m;
+            st = wxsky_client_wait(s.c, id, s.timeout_ms, &m);
+            if (st != WXSKY_OK && st != WXSKY_EREMOTE) fail_step(&s, st);
+            if (st == WXSKY_EREMOTE) {
+                print_message(&s, st, &m);
+            } else {
+                wxsky_radar radar;
+                st = wxsky_radar_decode(m.body, m.body_len, &radar);
+                if (st != WXSKY_OK) fail_step(&s, st);
+                unsigned max_byte = 0;
+                uint64_t n = radar.pending ? 0 : (uint64_t)radar.size_px * radar.size_px;
+                for (uint64_t k = 0; k < n; k++)
+                    if (radar.pixels[k] > max_byte) max_byte = radar.pixels[k];
+                printf("{\"radar\": {\"pending\": %s, \"size_px\": %u, \"range_nm\": %.17g, "
+                       "\"tilt_deg\": %.17g, \"max_dbz\": %.17g, \"bytes\": %llu}}\n",
+                       radar.pending ? "true" : "false", radar.size_px, radar.range_nm,
+                       radar.tilt_deg,
+                       radar.pending ? -32.0 : max_byte * radar.dbz_step + radar.dbz_offset,
+                       (unsigned long long)n);
+                fflush(stdout);
+            }
         } else if (strcmp(verb, "poll") == 0 || strcmp(verb, "note") == 0) {
             long want = verb[0] == 'p' ? (arg ? atol(arg) : 1) : -1;
             if (want < 0 && !arg) die_usage("note:TOPIC");
@@ -1039,6 +1069,14 @@ static void fuzz_walk(FILE *sink, const uint8_t *data, size_t n) {
     (void)(wxsky_mp_read_str(&r, &s, &len) + wxsky_mp_read_bin(&r, &b, &len) +
            wxsky_mp_read_int(&r, &i) + wxsky_mp_read_uint(&r, &u) +
            wxsky_mp_read_double(&r, &d) + wxsky_mp_read_bool(&r, &bl) + wxsky_mp_read_nil(&r));
+    /* the radar answer's decoder: a picture it accepts has every pixel in the body */
+    wxsky_radar radar;
+    if (wxsky_radar_decode(data, n, &radar) == WXSKY_OK && !radar.pending) {
+        unsigned sum = 0;
+        for (uint64_t k = 0; k < (uint64_t)radar.size_px * radar.size_px; k++)
+            sum += radar.pixels[k];
+        fprintf(sink, "%u\n", sum);
+    }
 }
 
 static void fuzz_prefixes(const uint8_t *data, size_t n) {
