@@ -445,3 +445,45 @@ def test_the_quick_reach_check_never_leaves_out_a_region_that_holds() -> None:
                 plon,
             )
     assert held > 1000
+
+
+def test_random_lightning_makes_a_thunderstorm_of_the_layers_severity() -> None:
+    """A cloud layer with random lightning enabled puts a thunderstorm in the present weather
+    (`-TS`, `TS`, `+TS` by its severity), which wxsky's lightning flashes at; without it, or
+    in a layer of no cloud, none."""
+    atm = make("atmosphere_control", temperature_c=25.0, visibility_m=20_000.0)
+    for severity, code in ((0, "-TS"), (3, "TS"), (5, "+TS")):
+        cb = layer(
+            2,
+            cloud_type=int(CloudType.CUMULONIMBUS),
+            coverage_pct=50.0,
+            severity=severity,
+            random_lightning_enable=1,
+        )
+        s = send(HostState(), ownship(), cb, atm).state
+        assert weather_patch(s, *ZRH, 1500.0).present_weather == (code,)
+    quiet = layer(2, cloud_type=int(CloudType.CUMULONIMBUS), coverage_pct=50.0, severity=5)
+    assert (
+        weather_patch(send(HostState(), ownship(), quiet, atm).state, *ZRH, 1500.0).present_weather
+        == ()
+    )
+    # A stronger layer wins; a layer of no cloud asks for nothing.
+    both = (
+        layer(
+            1,
+            cloud_type=int(CloudType.CUMULUS),
+            coverage_pct=30.0,
+            severity=1,
+            random_lightning_enable=1,
+        ),
+        layer(
+            2,
+            cloud_type=int(CloudType.CUMULONIMBUS),
+            coverage_pct=50.0,
+            severity=4,
+            random_lightning_enable=1,
+        ),
+        layer(4, cloud_type=0, coverage_pct=0.0, severity=5, random_lightning_enable=1),
+    )
+    s = send(HostState(), ownship(), *both, atm).state
+    assert weather_patch(s, *ZRH, 1500.0).present_weather == ("+TS",)

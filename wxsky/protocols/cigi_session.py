@@ -120,6 +120,7 @@ class Layer:
     wind_speed_mps: float
     wind_dir_deg: float
     severity: int
+    random_lightning: bool = False  # the host asks for lightning in this (cloud) layer
 
 
 @dataclass(frozen=True)
@@ -456,6 +457,7 @@ def _layer(p: Packet) -> Layer:
         float(p["wind_speed_mps"]),
         float(p["wind_dir_deg"]),
         int(p["severity"]),
+        bool(p["random_lightning_enable"]),
     )
 
 

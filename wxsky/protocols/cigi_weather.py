@@ -135,6 +135,9 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
         fields["layers"] = tuple(sorted(clouds, key=lambda c: -c.cover_oktas)[:MAX_LAYERS])
         fields["precipitation"] = tuple(precip)
         codes = [p.metar_code for p in precip]
+        storm = _lightning_code(host, rid, ids)
+        if storm is not None:
+            codes.append(storm)
         if fog is not None:
             codes.append("FG" if fog.visibility_m < FOG_CODE_BELOW_M else "BR")
         fields["present_weather"] = tuple(codes)
@@ -151,6 +154,23 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
     if winds:  # a host that gives no wind leaves it to the sources below
         fields["wind"] = tuple(winds)
     return WeatherPatch(source=Source.CIGI, **fields)  # type: ignore[arg-type]
+
+
+def _lightning_code(host: HostState, rid: int | None, ids: Sequence[int]) -> str | None:
+    """A thunderstorm in the present weather where a cloud layer the host sends (its global
+    one, or the region's where the place is in one) asks for random lightning: `-TS`, `TS` or
+    `+TS` by its severity (0-1, 2-3, 4-5), the strongest such layer's; wxsky's lightning
+    (scene/lightning.py) flashes in the cumulonimbus at that storm's rate."""
+    strongest = -1
+    for lid in ids:
+        if lid not in CLOUD_LAYERS:
+            continue
+        for layer in (host.layers.get((None, lid)), host.layers.get((rid, lid))):
+            if layer is not None and layer.random_lightning and layer.cloud_type != 0:
+                strongest = max(strongest, layer.severity)
+    if strongest < 0:
+        return None
+    return "-TS" if strongest <= 1 else "TS" if strongest <= 3 else "+TS"
 
 
 def host_clouds(host: HostState) -> tuple[tuple[CloudLayer, int], ...]:
