@@ -18,7 +18,7 @@ from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.errors import ProtocolError, WxskyError
 from wxsky.logs import clip
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX, Camera
-from wxsky.scene.radar import RANGE_NM, SIZE_PX, TILT_DEG
+from wxsky.scene.radar import DBZ_OFFSET, DBZ_STEP, RANGE_NM, SIZE_PX, TILT_DEG
 from wxsky.schema import (
     REQUIRED,
     Bool,
@@ -165,8 +165,8 @@ def radar_reply(made: Made | None, key: tuple[float, float, int]) -> dict[str, A
         "time_utc": made.time_utc,
         "age_s": max(0.0, time.monotonic() - made.made_s),
         "took_s": made.took_s,
-        "dbz_offset": -32.0,
-        "dbz_step": 0.5,
+        "dbz_offset": DBZ_OFFSET,
+        "dbz_step": DBZ_STEP,
         "pixels": pic.to_bytes(),
     }
 

@@ -59,6 +59,7 @@ from wxsky.output.transport import Address, ControlServer, WithFds, default_addr
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M
+from wxsky.scene.precip_eye import AtEye
 from wxsky.settings.config import DaemonConfig
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
 
@@ -636,6 +637,7 @@ class Daemon:
         }
 
     def _broadcast_frame(self, plan: FramePlan, meta: FrameMeta, published_s: float) -> None:
+        self._at_eye = _at_eye(plan)
         self._server_broadcast(
             "frame",
             {
@@ -652,10 +654,9 @@ class Daemon:
                 # Lightning lighting the clouds in this frame: each flash's id and glow 0..1.
                 "flashes": [{"id": f.id, "glow": g} for f, g in plan.frame.flashes],
                 # What falls at the eye and how far one sees in it (scene/precip_eye.py).
-                "at_eye": _at_eye(plan),
+                "at_eye": self._at_eye,
             },
         )
-        self._at_eye = _at_eye(plan)
         for flash in plan.frame.new_flashes:
             self._server_broadcast(
                 "lightning", {"frame_number": meta.frame_number, **flash.to_dict()}
@@ -783,12 +784,5 @@ def _source_name(patches: list[WeatherPatch]) -> str:
 def _at_eye(plan: FramePlan) -> dict[str, Any]:
     """What falls at the eye in a frame, and how far one sees there: without it (a frame
     not built by `build_frame`), the weather's visibility and nothing falling."""
-    at_eye = plan.frame.at_eye
-    if at_eye is None:
-        return {
-            "precipitation": None,
-            "rate_mm_h": 0.0,
-            "intensity": None,
-            "visibility_m": plan.state.visibility_m,
-        }
+    at_eye = plan.frame.at_eye or AtEye(None, 0.0, None, plan.state.visibility_m)
     return at_eye.to_dict()

@@ -77,18 +77,6 @@ class RadarWork:
                 self._made.move_to_end(key)
             return made
 
-    def wait_made(self, key: RadarKey, after: int, timeout_s: float) -> bool:
-        """Whether more than `after` pictures were made (one for `key` among them) within
-        `timeout_s`: for tests and tools, never the frame loop."""
-        deadline = time.monotonic() + timeout_s
-        with self._lock:
-            while not (self.made_count > after and key in self._made):
-                left = deadline - time.monotonic()
-                if left <= 0.0:
-                    return False
-                self._lock.wait(left)
-            return True
-
     def close(self, wait_s: float = 2.0) -> None:
         with self._lock:
             if self._closed:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import numpy.typing as npt
 
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModels
@@ -44,10 +45,20 @@ SPRITE_RAMP = 0.3
 
 def cloud_progress(block: BlockClouds, cover_oktas: float) -> F32:
     """(N,) how far each sprite's cloud has formed at this cover: 0 not at all .. 1 whole."""
-    spread = block.spread_oktas
-    share = FULL_OKTAS * (block.cloud_rank + block.rank_offset) / block.n_clouds
+    out: F32 = progress_of_ranks(
+        block.cloud_rank, block.rank_offset, block.n_clouds, block.spread_oktas, cover_oktas
+    ).astype(np.float32)
+    return out
+
+
+def progress_of_ranks(
+    rank: npt.NDArray[np.int32], rank_offset: float, n_clouds: int, spread: float, cover: float
+) -> npt.NDArray[np.float64]:
+    """How far clouds of these formation ranks (of `n_clouds` in a block) have formed at
+    `cover` oktas, the rule above: per sprite (`cloud_progress`) or per cloud (the radar)."""
+    share = FULL_OKTAS * (rank + rank_offset) / n_clouds
     start = np.clip(share - 0.5 * spread, 0.0, FULL_OKTAS - spread)
-    out: F32 = np.clip((cover_oktas - start) / spread, 0.0, 1.0).astype(np.float32)
+    out: npt.NDArray[np.float64] = np.clip((cover - start) / spread, 0.0, 1.0)
     return out
 
 

@@ -459,26 +459,27 @@ def build_frame(
     placed = NO_TOWERS
     found = None
     storms = storm_rate_per_min(state)
-    falling = rain_of(state) is not None
+    rain = rain_of(state)
     if (
         towers is not None
         and blocks is not None
-        and (settings.max_towers > 0 or storms > 0.0 or falling)
+        and (settings.max_towers > 0 or storms > 0.0 or rain is not None)
     ):
         found = gathered.found
         if found is None:
             found = candidates(blocks, state, towers.epochs)
-    rain = rain_of(state)
+    # The storms (the near set's cumulonimbus cells, where they stand now): their lightning
+    # and the rain shafts under them.
+    cells = (
+        storm_cells(found, drift, state.observer.alt_m)
+        if found and (storms > 0.0 or rain is not None)
+        else ()
+    )
     shafts = (
         ()
-        if found is None or rain is None
+        if rain is None
         else tuple(
-            Shaft(cell.axis_m, SHAFT_RADIUS_FRAC[rain.snow] * 0.5 * c.spec.width_m, cell.base_m)
-            for c, cell in zip(
-                (c for c in found if c.spec.anvil),
-                storm_cells(found, drift, state.observer.alt_m),
-                strict=True,
-            )
+            Shaft(c.axis_m, SHAFT_RADIUS_FRAC[rain.snow] * 0.5 * c.width_m, c.base_m) for c in cells
         )
     )
     at_eye = precipitation_at(state, eye, shafts)
@@ -488,8 +489,7 @@ def build_frame(
     since_s, now_s = flash_times_s
     lit: list[tuple[Flash, float]] = []
     started: list[Flash] = []
-    if found and storms > 0.0:
-        cells = storm_cells(found, drift, state.observer.alt_m)
+    if cells and storms > 0.0:
         lit = lit_flashes(cells, state.seed, storms, now_s)
         # A frame more than a flash's length after the last (a clock set) reports only
         # the last second's.
@@ -631,6 +631,7 @@ def storm_cells(
                 top_m=c.spec.base_m + c.spec.height_m,
                 formed=c.formed,
                 ground_m=ground_m,
+                width_m=c.spec.width_m,
             )
         )
     return tuple(out)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.scene.rain import weather_group
 from wxsky.weather.state import WeatherState
 
 F64 = npt.NDArray[np.float64]
@@ -90,6 +91,7 @@ class StormCell:
     top_m: float
     formed: float
     ground_m: float = 0.0
+    width_m: float = 0.0  # its base's width (the rain shaft under it: `precip_eye.Shaft`)
 
 
 def storm_rate_per_min(state: WeatherState) -> float:
@@ -97,12 +99,10 @@ def storm_rate_per_min(state: WeatherState) -> float:
     (0: none). `VCTS` (in the vicinity) counts as a light one."""
     best = 0.0
     for group in state.present_weather:
-        code = group.strip().upper()
-        prefix = code[0] if code[:1] in ("-", "+") else ""
-        body = code[len(prefix) :]
-        if "TS" not in {body[i : i + 2] for i in range(0, len(body), 2)}:
+        prefix, codes = weather_group(group)
+        if "TS" not in codes:
             continue
-        rate = RATE_PER_MIN["-" if body.startswith("VC") else prefix]
+        rate = RATE_PER_MIN["-" if "VC" in codes else prefix]
         best = max(best, rate)
     return best
 

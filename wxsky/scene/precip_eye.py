@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wxsky.scene.radar import CONVECTIVE_FACTOR, rate_mm_h
-from wxsky.scene.rain import SHAFT_RADIUS_FRAC, rain_of
+from wxsky.scene.rain import rain_of
 from wxsky.weather.state import CloudType, WeatherState
 
 KOSCHMIEDER = 3.912
@@ -66,17 +66,6 @@ class AtEye:
             "intensity": self.intensity,
             "visibility_m": self.visibility_m,
         }
-
-
-def shafts_of(
-    widths_m: Sequence[float], axes_m: Sequence[tuple[float, float]], base_m: float, snow: bool
-) -> tuple[Shaft, ...]:
-    """Shafts under cumulonimbus clouds as wide as `widths_m` standing at `axes_m`."""
-    share = SHAFT_RADIUS_FRAC[snow]
-    return tuple(
-        Shaft(axis, share * 0.5 * width, base_m)
-        for width, axis in zip(widths_m, axes_m, strict=True)
-    )
 
 
 def rain_visibility_m(rate: float, air_m: float) -> float:

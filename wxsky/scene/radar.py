@@ -38,9 +38,9 @@ import numpy.typing as npt
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.cloud_models import CloudModel, CloudModels
 from wxsky.scene.clouds import BLOCK_SIZE_M, BlockLayout, block_layout, layer_keys
-from wxsky.scene.formation import FULL_OKTAS
+from wxsky.scene.formation import progress_of_ranks
 from wxsky.scene.rain import SHAFT_RADIUS_FRAC, SHAFT_TYPES, rain_of
-from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+from wxsky.weather.state import CloudType, WeatherState
 
 F64 = npt.NDArray[np.float64]
 
@@ -49,6 +49,9 @@ RANGE_NM = (10.0, 320.0)
 TILT_DEG = (-15.0, 15.0)
 SIZE_PX = (64, 1024)
 NOISE_DBZ = -30.0  # clear air, and the floor of the picture
+# A picture's bytes: dBZ = byte x DBZ_STEP + DBZ_OFFSET (0: DBZ_OFFSET or less).
+DBZ_OFFSET = -32.0
+DBZ_STEP = 0.5
 # The core's rain at each METAR intensity, mm/h: the middle of the US Federal Meteorological
 # Handbook No. 1's bands for rain (light up to 2.5 mm/h, moderate 2.6-7.6, heavy above),
 # keyed by `rain.INTENSITY`'s 0..1.
@@ -111,8 +114,9 @@ class RadarPicture:
     centre_m: tuple[float, float, float]
 
     def to_bytes(self) -> bytes:
-        """One byte a pixel, (dBZ + 32) x 2 (0: -32 dBZ or less; 0.5 dB steps)."""
-        return bytes(np.clip(np.round((self.dbz + 32.0) * 2.0), 0, 255).astype(np.uint8))
+        """One byte a pixel, (dBZ - DBZ_OFFSET) / DBZ_STEP, clipped to 0..255."""
+        scaled = np.round((self.dbz - DBZ_OFFSET) / DBZ_STEP)
+        return bytes(np.clip(scaled, 0, 255).astype(np.uint8))
 
 
 def layer_cells(
@@ -181,13 +185,10 @@ def _layout(
 
 
 def _formed(lay: BlockLayout, model: CloudModel, cover_oktas: float) -> F64:
-    """How far each cloud of a block has formed at this cover (`formation.cloud_progress`,
-    per cloud)."""
-    spread = model.formation_spread_oktas
-    share = FULL_OKTAS * (lay.rank + lay.rank_offset) / len(lay.rank)
-    start = np.clip(share - 0.5 * spread, 0.0, FULL_OKTAS - spread)
-    out: F64 = np.clip((cover_oktas - start) / spread, 0.0, 1.0)
-    return out
+    """How far each cloud of a block has formed at this cover (formation's rule)."""
+    return progress_of_ranks(
+        lay.rank, lay.rank_offset, len(lay.rank), model.formation_spread_oktas, cover_oktas
+    )
 
 
 def beam_height_m(range_m: F64, antenna_m: float, tilt_deg: float) -> F64:
@@ -321,8 +322,3 @@ def radar_picture(
         is not None
     ]
     return ppi(cells, centre_m, range_m, tilt_deg, size_px, attenuate)
-
-
-def precipitating(layer: CloudLayer) -> bool:
-    """Whether the radar can see this layer's clouds at all."""
-    return layer.type in SHAFT_TYPES

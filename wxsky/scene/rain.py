@@ -49,6 +49,16 @@ class Rain:
     ground_m: float
 
 
+def weather_group(group: str) -> tuple[str, frozenset[str]]:
+    """A METAR present-weather group as its intensity prefix ("-", "" or "+") and its
+    two-letter codes, descriptors first: `+TSGR` is ("+", {"TS", "GR"}), thunderstorm and
+    hail, not "SG"."""
+    code = group.strip().upper()
+    prefix = code[0] if code[:1] in ("-", "+") else ""
+    body = code[len(prefix) :]
+    return prefix, frozenset(body[i : i + 2] for i in range(0, len(body), 2))
+
+
 def rain_of(state: WeatherState) -> Rain | None:
     """The heaviest precipitation the state reports (present weather and CIGI precipitation
     layers), or None when nothing falls that would make a shaft."""
@@ -62,11 +72,7 @@ def _rain_of(
 ) -> Rain | None:
     best: tuple[float, bool] | None = None
     for group in present_weather:
-        code = group.strip().upper()
-        prefix = code[0] if code[:1] in ("-", "+") else ""
-        body = code[len(prefix) :]
-        # Two letters a code, descriptors first: TSGR is thunderstorm + hail, not "SG".
-        codes = {body[i : i + 2] for i in range(0, len(body), 2)}
+        prefix, codes = weather_group(group)
         snow = bool(codes & set(SNOW_CODES)) and "RA" not in codes
         if "VC" in codes or not (snow or codes & set(RAIN_CODES)):
             continue  # in the vicinity (VCSH) is not over the station
