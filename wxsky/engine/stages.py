@@ -90,6 +90,10 @@ DATE_MEMORY_S = 5.0
 # drift thresholds say: the frames after a jump show the sky of the new time, exactly as a
 # one-shot picture of that time does, not a ring built for the old one.
 CLOCK_JUMP_S = 1.0
+# The eye's velocity (the drops' streaks): smoothed over this long; faster than EYE_JUMP_MPS
+# from one frame to the next is a jump of the camera, not flight.
+EYE_VELOCITY_SMOOTHING_S = 0.1
+EYE_JUMP_MPS = 1000.0
 
 
 @dataclass(frozen=True)
@@ -202,6 +206,9 @@ class SkyEngine:
         # then), so setting the clock anywhere puts the clouds where that time has them.
         self._drift: Drift = zero_drift(state)
         self._last_frame_s: float | None = None  # the last frame's simulated time (lightning)
+        # The eye's last position and its velocity from frame to frame (the drops' streaks).
+        self._last_eye: tuple[float, float, float] | None = None
+        self._eye_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._anchor_utc = state.time_utc
         self._anchor_drift: Drift = self._drift
         self._clock_jumps = 0  # bumped by each clock set that moves it more than CLOCK_JUMP_S
@@ -608,6 +615,26 @@ class SkyEngine:
         self._since_step_s = 0.0
         self._set_applied(step)
 
+    def _eye_velocity_of(
+        self, eye_m: tuple[float, float, float], dt_wall_s: float
+    ) -> tuple[float, float, float]:
+        """The eye's velocity, from where it was a frame ago, smoothed over a few frames (a
+        host's positions come with jitter); a jump (a new site, a teleport) is no speed."""
+        last, self._last_eye = self._last_eye, eye_m
+        if last is None or dt_wall_s <= 0.0:
+            return self._eye_velocity
+        step = [(a - b) / dt_wall_s for a, b in zip(eye_m, last, strict=True)]
+        if sum(v * v for v in step) > EYE_JUMP_MPS**2:
+            step = [0.0, 0.0, 0.0]
+        k = min(1.0, dt_wall_s / EYE_VELOCITY_SMOOTHING_S)
+        old = self._eye_velocity
+        self._eye_velocity = (
+            old[0] + k * (step[0] - old[0]),
+            old[1] + k * (step[1] - old[1]),
+            old[2] + k * (step[2] - old[2]),
+        )
+        return self._eye_velocity
+
     def advance(self, dt_wall_s: float, clock: StageClock | None = None) -> FramePlan:
         """Run the stages for a frame dt_wall_s after the previous one (`clock`: times the
         sort for `wxsky bench`)."""
@@ -673,6 +700,7 @@ class SkyEngine:
             tower_fades=self._tower_fades,
             dt_s=dt_wall_s,
             flash_times_s=(self._last_frame_s, now_s),
+            eye_velocity_mps=self._eye_velocity_of(camera.position_m, dt_wall_s),
         )
         self._last_frame_s = now_s
         self._locks = frame.locks

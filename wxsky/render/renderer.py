@@ -31,10 +31,12 @@ from wxsky.render.sprite_sheet import (
     load_sheet,
     support_polygons,
 )
+from wxsky.render.precip_pass import PrecipPass
 from wxsky.render.towers import Drawable, TowerPass
 from wxsky.scene import exposure
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
+from wxsky.scene.precip_view import PrecipView
 from wxsky.scene.ring import RING_SIZE, ring_target_name
 from wxsky.scene.sky import SkyParams
 from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
@@ -251,6 +253,7 @@ class Renderer:
         self._profiler: PassProfiler | None = None
         self._sky_drawn: dict[str, sky_layer.SkyLayerState] = {}  # by layer: what it holds
         self._towers = TowerPass(self.ctx, self.shaders)
+        self._precip = PrecipPass(self.ctx, self.shaders)
         self._check("initialising the renderer")
 
     @property
@@ -322,12 +325,25 @@ class Renderer:
             frame.near_far_count,
             frame.towers,
             frame.sky,
+            precip=frame.precip,
         )
         if frame.near_front is not None:
             # Its sprites were hazed with the frame's sky: their detail fades by it too.
             self._draw_near(
                 "near_front", frame.near_front, cam, (0.0, 0.0, 0.0, 0.0), sky=frame.sky
             )
+        # The drops about the eye and the lightning's channels, in front of every cloud (and
+        # of the host's aircraft, in the layer over it).
+        front = "near_front" if frame.near_front is not None else "near"
+        if frame.sky is not None and (
+            (frame.precip is not None and frame.precip.drops is not None) or frame.flashes
+        ):
+            target = self._targets[front]
+            target.fbo.use()
+            with self._pass(f"streaks {front}", "small_sprites"):
+                self._precip.draw_streaks(
+                    frame.precip, frame.flashes, cam, frame.sky, target.size, self._exposure
+                )
         self._check("rendering a frame")
 
     def _draw_near(
@@ -339,6 +355,7 @@ class Renderer:
         far_count: int = 0,
         towers: tuple[TowerShow, ...] = (),
         sky: SkyParams | None = None,
+        precip: PrecipView | None = None,
     ) -> None:
         """Near sprites into layer `name` at near_scale of the picture (fill rate is what
         near sprites cost; a host stretches the layer over its viewport, bilinearly, as it
@@ -374,6 +391,12 @@ class Renderer:
             target.fbo.clear(*clear_rgba)
             start = 0
         self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
+        if precip is not None and precip.curtains and sky is not None:
+            # The rain curtains over the sprites, below the lowest cloud base (from under it):
+            # the rain stands between the eye and the clouds it falls through.
+            target.fbo.use()
+            with self._pass(f"curtains {name}", "sky"):
+                self._precip.draw_curtains(precip, cam, sky, target.size, self._exposure)
 
     def _legacy_clear(
         self, rgba: tuple[float, float, float, float]
@@ -585,6 +608,7 @@ class Renderer:
             vao.release()
         self._sky.release()
         self._towers.release()
+        self._precip.close()
         self._upsample_vao.release()
         self._meter_vao.release()
         self._instance_buf.release()

@@ -57,6 +57,7 @@ from wxsky.scene.lightning import (
 )
 from wxsky.scene.near_sets import NearInputs, near_scattered_light
 from wxsky.scene.precip_eye import AtEye, Shaft, precipitation_at
+from wxsky.scene.precip_view import PrecipView, precip_view
 from wxsky.scene.rain import SHAFT_RADIUS_FRAC, is_shaft, rain_of
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
 from wxsky.scene.shading import (
@@ -193,6 +194,9 @@ class FrameScene:
     new_flashes: tuple[Flash, ...] = ()
     # What falls at the eye, how hard, how far one sees in it (`precip_eye.py`).
     at_eye: AtEye | None = None
+    # The rain curtains under the near storms and the drops about the eye, as drawn
+    # (`precip_view.py`); None: nothing falls in view.
+    precip: PrecipView | None = None
 
 
 class StageClock(Protocol):
@@ -430,6 +434,7 @@ def build_frame(
     tower_fades: Mapping[int, float] | None = None,
     dt_s: float = 0.0,
     flash_times_s: tuple[float, float] | None = None,
+    eye_velocity_mps: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> FrameScene:
     """The near sprites for the camera, complementing `rings` (see `gather_near`) within
     `near_radius_m` (default: the ring radius; the whole range draws every cloud directly);
@@ -446,7 +451,8 @@ def build_frame(
     first frame, a picture): none is part-way. `flash_times_s`: (the frame before's,
     this frame's) simulated time, seconds since the epoch: the flashes lit now and those
     started since (`FrameScene.flashes`, `new_flashes`); None: `state`'s time, and the flashes
-    of the second before it."""
+    of the second before it. `eye_velocity_mps`: the eye's velocity (ENU), for the streaks
+    of the drops about it."""
     if gathered is None:
         gathered = gather_inputs(state, drift, rings, sky, settings, near_radius_m, towers)
     near, share, blocks, scattered = (
@@ -483,6 +489,15 @@ def build_frame(
         )
     )
     at_eye = precipitation_at(state, eye, shafts)
+    precip = precip_view(
+        state,
+        rain,
+        cells,
+        at_eye,
+        eye,
+        eye_velocity_mps,
+        state.time_utc.timestamp() if flash_times_s is None else flash_times_s[1],
+    )
     if flash_times_s is None:
         now_s = state.time_utc.timestamp()
         flash_times_s = (now_s - 1.0, now_s)
@@ -522,6 +537,9 @@ def build_frame(
         drawn = np.ones(len(near), np.bool_)
         if len(placed.drop_ids):
             drawn &= drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
+        if precip is not None and precip.curtains:
+            # The near storms' shafts are drawn as curtains (precip.glsl), not as sprites.
+            drawn &= ~is_shaft(near)
         collapsing = lod and settings.lod_start_m > 0.0
         if not collapsing:
             drawn &= in_view(near, camera, offsets)
@@ -611,6 +629,7 @@ def build_frame(
         flashes=tuple(lit),
         new_flashes=tuple(started),
         at_eye=at_eye,
+        precip=precip,
     )
 
 
