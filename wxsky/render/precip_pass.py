@@ -183,9 +183,7 @@ def _drop_seeds(count: int) -> F64:
     return np.random.default_rng(0x5EED_D80).random((count, 3))
 
 
-def drop_lines(
-    drops: EyeDrops, time_s: float, eye_m: Sequence[float], sky: SkyParams
-) -> F32:
+def drop_lines(drops: EyeDrops, time_s: float, eye_m: Sequence[float], sky: SkyParams) -> F32:
     """(N, 11) streaks (head, tail eye-relative ENU; RGBA; width px) of the drops about the
     eye: each drop fixed in air that moves with the wind and falls, wrapped into a box of
     DROP_BOX_M about the eye, its streak the way it moved relative to the eye in the
@@ -216,9 +214,7 @@ def drop_lines(
     return out
 
 
-def channel_lines(
-    flash: Flash, glow: float, eye_m: Sequence[float], sky: SkyParams
-) -> F32:
+def channel_lines(flash: Flash, glow: float, eye_m: Sequence[float], sky: SkyParams) -> F32:
     """(N, 11) streaks of a cloud-to-ground flash's channel at its glow: a crooked line from
     where it leaves the cloud to the ground, and a branch, as a glow and a core; the same
     shape for the same flash on every channel (its id seeds it)."""
@@ -227,7 +223,7 @@ def channel_lines(
     height = max(z - flash.ground_m, 1.0)
     zs = np.linspace(z, flash.ground_m, CHANNEL_SEGMENTS + 1)
     steps = rng.normal(0.0, 0.06 * height / math.sqrt(CHANNEL_SEGMENTS), (CHANNEL_SEGMENTS, 2))
-    xy = np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)]) + (x, y)
+    xy = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)]) + np.array([x, y])
     points = np.column_stack([xy, zs]) - np.asarray(eye_m, np.float64)
     heads, tails = [points[:-1]], [points[1:]]
     fork = int(rng.integers(3, CHANNEL_SEGMENTS // 2))

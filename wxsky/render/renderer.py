@@ -22,6 +22,7 @@ import numpy.typing as npt
 from wxsky.errors import RenderError
 from wxsky.render import sky_layer, sky_textures
 from wxsky.render.context import create_context, gil_free_finish, release_framebuffer
+from wxsky.render.precip_pass import PrecipPass
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import (
@@ -31,7 +32,6 @@ from wxsky.render.sprite_sheet import (
     load_sheet,
     support_polygons,
 )
-from wxsky.render.precip_pass import PrecipPass
 from wxsky.render.towers import Drawable, TowerPass
 from wxsky.scene import exposure
 from wxsky.scene.camera import Camera

@@ -25,7 +25,7 @@ curtain whose base stands higher above the ground than that stops short of it, a
 in the air. The thunderstorm preset's moist air (19/17 degC, RH 88 %) lets every drop land.
 
 **At the eye.** Drops (or flakes) in a box about the eye, each a streak the length its
-motion relative to the eye sweeps in a display frame's exposure (`STREAK_S`): the drop's fall
+motion relative to the eye sweeps while the eye holds it (`STREAK_S`): the drop's fall
 and the wind it drifts in, less the aircraft's own velocity. Flakes fall slowly, tumble and
 catch the light as points: their streak is `SNOW_STREAK_SHARE` of a drop's at the same
 relative speed. How many: the rate at the eye (`precip_eye.AtEye`) with a square root, so
@@ -39,6 +39,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from wxsky.scene.lightning import StormCell
 from wxsky.scene.precip_eye import (
@@ -56,14 +57,14 @@ CURTAIN_RANGE_M = 40_000.0  # farther storms are the ring's (their shafts are sp
 VIRGA_REACH_M = 120.0  # the reach formula's scale (module docstring)
 # Drops at the eye.
 DROP_FALL_MPS = {False: 7.0, True: 1.0}  # rain's terminal speed (2 mm drops), snow's
-STREAK_S = 1.0 / 60.0  # exposure a streak sweeps: a display frame
+STREAK_S = 1.0 / 30.0  # what a streak sweeps: the eye's persistence, two display frames
 SNOW_STREAK_SHARE = 0.3
 DROP_BOX_M = 24.0  # the box of drops about the eye, each side
 # Drops in that box at 1 mm/h, and how many drops rise with the rate (a square root). The box
-# holds the drops a pilot picks out, not every drop: at +RA (15 mm/h at the eye) about 5 % of
-# the picture is streak.
-DROPS_AT_1_MM_H = 700.0
-MAX_DROPS = 8000
+# holds the drops a pilot picks out, not every drop: at +RA (15 mm/h at the eye), standing
+# in it, some 3 % of the picture is streak, in flight far more.
+DROPS_AT_1_MM_H = 2500.0
+MAX_DROPS = 20_000
 MAX_SPEED_MPS = 400.0  # faster eye speeds (a jump of the camera) are clamped
 
 
@@ -119,7 +120,7 @@ def reach_m(rate: float, humidity: float) -> float:
     """How far rain at `rate` mm/h falls below its base before it evaporates, in air of
     relative humidity `humidity` (0..1): the module docstring's rule."""
     dry = max(1.0 - humidity, 1e-3)
-    return VIRGA_REACH_M * max(rate, 0.0) ** 0.25 / dry
+    return float(VIRGA_REACH_M * max(rate, 0.0) ** 0.25 / dry)
 
 
 def extinction_per_m(rain: Rain, core_rate: float) -> float:
@@ -129,7 +130,7 @@ def extinction_per_m(rain: Rain, core_rate: float) -> float:
         xs, ys = zip(*SNOW_VISIBILITY_M, strict=True)
         return KOSCHMIEDER / float(np.interp(min(1.0, rain.intensity), xs, ys))
     a, b = RAIN_SIGMA_PER_KM
-    return a * core_rate**b / 1000.0
+    return float(a * core_rate**b / 1000.0)
 
 
 def curtains(
@@ -214,3 +215,45 @@ def precip_view(
     bases = [lay.base_m for lay in state.layers]
     clip = min(bases) if bases else math.inf
     return PrecipView(curtains=shown, drops=drops, time_s=time_s % 3600.0, clip_top_m=clip)
+
+
+def curtain_opacity(
+    view: PrecipView, eye_m: Sequence[float], rays: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """(N,) how much of what lies behind the curtains they hide along each of N unit rays
+    (N, 3 ENU) from the eye: precip.glsl's columns at their mean density (its sheets
+    average 1), without the haze; for tests and tools, where the shaft is in a picture."""
+    ch = np.maximum(np.hypot(rays[:, 0], rays[:, 1]), 1e-4)
+    u = rays[:, :2] / ch[:, None]
+    slope = rays[:, 2] / ch
+    tau = np.zeros(len(rays))
+    for c in view.curtains:
+        a = np.array([c.axis_m[0] - eye_m[0], c.axis_m[1] - eye_m[1]])
+        s0 = u @ a
+        off = a[None, :] - s0[:, None] * u
+        p2 = np.sum(off * off, axis=1) / (c.radius_m * c.radius_m)
+        clip = view.clip_top_m if eye_m[2] < view.clip_top_m else math.inf
+        top = min(c.top_m, clip) - eye_m[2]
+        bottom = c.bottom_m - eye_m[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_top = np.where(np.abs(slope) > 1e-6, top / slope, np.inf)
+            s_bottom = np.where(np.abs(slope) > 1e-6, bottom / slope, -np.inf)
+        level = np.abs(slope) <= 1e-6
+        lo = np.where(level, 0.0, np.maximum(0.0, np.minimum(s_top, s_bottom)))
+        hi = np.where(
+            level, np.where((top >= 0) & (bottom <= 0), 1e7, 0.0), np.maximum(s_top, s_bottom)
+        )
+        lo = np.maximum(lo, s0 - 3.0 * c.radius_m)
+        hi = np.minimum(hi, s0 + 3.0 * c.radius_m)
+        inside = (hi > lo) & (p2 <= 9.0)
+        r = c.radius_m
+        path = 0.886227 * r * np.exp(-p2) * (_erf((hi - s0) / r) - _erf((lo - s0) / r)) / ch
+        tau += np.where(inside, c.extinction_per_m * path, 0.0)
+    out: npt.NDArray[np.float64] = 1.0 - np.exp(-tau)
+    return out
+
+
+def _erf(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """erf as precip.glsl takes it (a tanh form, within 4e-4)."""
+    out: npt.NDArray[np.float64] = np.tanh(1.1283792 * x + 0.1009109 * x**3)
+    return out

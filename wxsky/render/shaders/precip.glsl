@@ -139,7 +139,7 @@ void main() {
             float alpha = 1.0 - exp(-tau);
             float haze = 1.0 - exp(-(s_start / ch) * u_inv_haze_m);
             // Thick sheets are darker (less of the light gets in), thin ones lighter.
-            vec3 body = u_body[i] * (1.2 - 0.3 * sheet);
+            vec3 body = u_body[i] * (1.4 - 0.55 * sheet);
             colour += seen * alpha * mix(body, u_air[i], haze);
             seen *= 1.0 - alpha;
             e0 = e1;
