@@ -22,6 +22,7 @@ import numpy.typing as npt
 from wxsky.errors import RenderError
 from wxsky.render import sky_layer, sky_textures
 from wxsky.render.context import create_context, gil_free_finish, release_framebuffer
+from wxsky.render.fog_pass import FogPass
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.render.sprite_sheet import (
@@ -251,6 +252,7 @@ class Renderer:
         self._profiler: PassProfiler | None = None
         self._sky_drawn: dict[str, sky_layer.SkyLayerState] = {}  # by layer: what it holds
         self._towers = TowerPass(self.ctx, self.shaders)
+        self._fog = FogPass(self.ctx, self.shaders)  # ground fog, drawn as a frame has it
         self._check("initialising the renderer")
 
     @property
@@ -313,6 +315,7 @@ class Renderer:
         """Draw the sky and the near layer for the frame's camera, and the near_front layer
         when the frame is split at the host's aircraft."""
         cam = frame.camera
+        self._fog.fog = frame.fog
         self._draw_sky("sky", cam, frame.sky)
         self._draw_near(
             "near",
@@ -373,6 +376,7 @@ class Renderer:
             target.fbo.use()
             target.fbo.clear(*clear_rgba)
             start = 0
+        self._fog.draw(name, target.fbo, target.size, cam, sky, self._exposure)
         self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
 
     def _legacy_clear(
@@ -585,6 +589,7 @@ class Renderer:
             vao.release()
         self._sky.release()
         self._towers.release()
+        self._fog.release()
         self._upsample_vao.release()
         self._meter_vao.release()
         self._instance_buf.release()

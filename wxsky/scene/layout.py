@@ -25,6 +25,7 @@ from wxsky.scene.camera import Camera, spheres_in_view, view_bounds
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
+from wxsky.scene.fog import FogField, fog_field, fogged_at_eye
 from wxsky.scene.gather import (
     CancelFlag,
     Drift,
@@ -193,6 +194,8 @@ class FrameScene:
     new_flashes: tuple[Flash, ...] = ()
     # What falls at the eye, how hard, how far one sees in it (`precip_eye.py`).
     at_eye: AtEye | None = None
+    # The fog over the ground the renderer draws (`fog.py`); None: no fog, no fog pass.
+    fog: FogField | None = None
 
 
 class StageClock(Protocol):
@@ -483,6 +486,9 @@ def build_frame(
         )
     )
     at_eye = precipitation_at(state, eye, shafts)
+    fog = fog_field(state)
+    if fog is not None:
+        at_eye = fogged_at_eye(at_eye, fog, eye)
     if flash_times_s is None:
         now_s = state.time_utc.timestamp()
         flash_times_s = (now_s - 1.0, now_s)
@@ -611,6 +617,7 @@ def build_frame(
         flashes=tuple(lit),
         new_flashes=tuple(started),
         at_eye=at_eye,
+        fog=fog,
     )
 
 
