@@ -45,6 +45,7 @@ import numpy.typing as npt
 
 from wxsky.scene.precip_eye import AtEye
 from wxsky.scene.sky import KOSCHMIEDER
+from wxsky.weather.metar_fog import BANK_VISIBILITY_M
 from wxsky.weather.state import Fog, RunwayRvr, WeatherState
 
 F64 = npt.NDArray[np.float64]
@@ -219,8 +220,10 @@ def fog_field(state: WeatherState) -> FogField | None:
 def _field(fog: Fog, ground_m: float, visibility_m: float, seed: int) -> FogField:
     air = KOSCHMIEDER / max(visibility_m, 1.0)
     rows: list[tuple[float, float, float, float, float]] = []  # east, north, radius, ext, depth
-    if fog.visibility_m is not None:
-        ext = max(KOSCHMIEDER / fog.visibility_m - air, 0.0)
+    # Banks take BANK_VISIBILITY_M where no visibility is given; a sheet needs one.
+    inside_m = BANK_VISIBILITY_M if fog.patchy and fog.visibility_m is None else fog.visibility_m
+    if inside_m is not None:
+        ext = max(KOSCHMIEDER / inside_m - air, 0.0)
         if fog.patchy:
             rows += [(e, n, r, ext, fog.depth_m) for e, n, r in _patches(seed)]
         elif ext > 0.0:
