@@ -424,6 +424,8 @@ def set_weather(engine: SkyEngine, params: dict[str, Any]) -> list[str]:
         first = problems[0]
         where = ".".join(str(part) for part in first.path)
         raise ControlError(clip(f"set_weather: {where}: {first.message}", ERROR_MAX_CHARS))
+    if "fog" not in weather:  # a preset without [fog] has none; a request says nothing of it
+        patch = dataclasses.replace(patch, fog=None)
     engine.apply(dataclasses.replace(patch, source=Source.CONTROL))
     if now:
         engine.settle()

@@ -45,6 +45,7 @@ from wxsky.weather.state import (
     LAYER_HEIGHT_M,
     LON_DEG,
     MAX_LAYERS,
+    NO_FOG,
     MAX_RVR,
     QNH_HPA,
     RUNWAY_PATTERN,
@@ -334,7 +335,8 @@ def _patch(v: dict[str, Any]) -> WeatherPatch:
         dewpoint_c=v.get("dewpoint_c"),
         qnh_hpa=v.get("qnh_hpa"),
         present_weather=v.get("present_weather"),
-        fog=_fog(v["fog"]) if v.get("fog") is not None else None,
+        # A preset without [fog] has none: switching presets never leaves another's fog.
+        fog=_fog(v["fog"]) if v.get("fog") is not None else NO_FOG,
         seed=v.get("seed"),
     )
 
