@@ -2,7 +2,8 @@
 """Patchy fog along a runway (issue 43, items 3 and 6): a METAR with fog patches and two RVR
 groups (`5000 BCFG R14/0400 R32/1200`) over Zurich's field, at noon and at dusk, seen from a
 cockpit lined up on runway 14's threshold (5 m up, looking down the runway) and from 300 m, 4 km
-out on its extended centre line, looking 7° down at the field, side by side; each tile says the RVR wxsky answers at the touchdown zone.
+out on its extended centre line, looking 7° down at the field, side by side; it prints the RVR
+wxsky answers at the touchdown zones and along the runway.
 
     .venv/bin/python tools/gallery/fog_gallery.py [--out docs/gallery/patchy-fog-runway.png]
 
@@ -66,9 +67,10 @@ def main() -> int:
             rows.append(np.concatenate([tiles[0], gap, tiles[1]], axis=1))
             points = rwy.points_m(10)
             along = field.rvr_m(points[:, 0], points[:, 1])
+            rvr14, rvr32 = field.runway_rvr_m("14"), field.runway_rvr_m("32")
             print(
-                f"{when}: RVR 14 {field.runway_rvr_m('14'):.0f} m, 32 {field.runway_rvr_m('32'):.0f}"
-                f" m; along the runway {along.min():.0f}-{along.max():.0f} m"
+                f"{when}: RVR 14 {rvr14:.0f} m, 32 {rvr32:.0f} m; "
+                f"along the runway {along.min():.0f}-{along.max():.0f} m"
             )
     band = np.full((4, rows[0].shape[1], 4), 255, np.uint8)
     args.out.parent.mkdir(parents=True, exist_ok=True)
