@@ -31,6 +31,7 @@ from wxsky.settings.presets import (
     write_user_preset,
 )
 from wxsky.weather.state import (
+    NO_FOG,
     CloudLayer,
     CloudType,
     Observer,
@@ -612,6 +613,7 @@ def test_writer_edge_cases_round_trip(tmp_path: Path) -> None:
         wind=(WindLayer(10.0, 0.0, 2.5, 7.25, variable=True), WindLayer(1e4, 359.9, 0.1)),
         temperature_c=-0.0,
         present_weather=("+TSRA", "VCSH"),
+        fog=NO_FOG,  # a preset file without [fog] states no fog
         seed=2**63 - 1,
     )
     description = 'Quotes " and \\ backslash, tab\t, newline\n, bell \x07 and DEL \x7f ünïcode'

@@ -459,6 +459,20 @@ METAR_TOKENS = tuple(
         "P",
         "/",
         "G",
+        # Fog and runway visual range (issue 43 item 3): every FM-15 form of an RVR group.
+        " BCFG",
+        " PRFG",
+        " MIFG",
+        " FZFG",
+        " VCFG",
+        " R14/0600N",
+        " R32L/P1500",
+        " R06/0400V0800U",
+        " R14/M0050",
+        " R28L/2400FT",
+        " R28R/1000V1600FT/D",
+        " R88/0600",
+        " R36C/0000",
     )
 )
 
@@ -474,7 +488,24 @@ def _assert_metar(m: Metar, field_elevation_m: float) -> None:
     m.describe()
     with contextlib.suppress(MetarError):
         m.require_usable()
-    assert_patch_in_range(metar_to_patch(m, field_elevation_m=field_elevation_m))
+    state = assert_patch_in_range(metar_to_patch(m, field_elevation_m=field_elevation_m))
+    _assert_fog(state)
+
+
+def _assert_fog(state: WeatherState) -> None:
+    """The fog a report makes: a field whose visibility and RVR are finite and positive at the
+    field, its runways' touchdown zones and beside it."""
+    from wxsky.scene.fog import fog_field
+
+    field = fog_field(state)
+    if field is None:
+        return
+    for name in ("14", "32L", *(r.runway for r in state.fog.rvr if state.fog is not None)):
+        rvr = field.runway_rvr_m(name)
+        assert math.isfinite(rvr) and rvr > 0.0, f"RVR {rvr!r} at runway {name}"
+    for east, north, height in ((0.0, 0.0, 2.5), (3000.0, -2000.0, 30.0)):
+        seen = float(field.visibility_m(east, north, height))
+        assert math.isfinite(seen) and seen > 0.0, f"visibility {seen!r}"
 
 
 @cache
@@ -504,9 +535,19 @@ def sample(items: list[bytes], limit: int = MAX_SEEDS) -> list[bytes]:
     return [unique[int(i * step)] for i in range(limit)]
 
 
+# Fog and RVR reports (issue 43 item 3), whatever the corpora hold of them.
+FOG_SEEDS = (
+    b"LSZH 061020Z 24004KT 0300 R14/0600N R32L/P1500 R06/0400V0800U FG VV001 08/08 Q1020",
+    b"EGLL 061020Z 00000KT 4000 BCFG R09L/0350 R27R/M0050 SCT002 04/04 Q1025",
+    b"LFPG 061030Z 18003KT 2500 PRFG BR R26L/0900U R08R/1200D FEW001 05/05 Q1030",
+    b"KSFO 061056Z 00000KT 1/4SM R28L/2400FT R28R/1000V1600FT/D FG VV002 11/11 A3002",
+    b"EDDF 061020Z VRB01KT 6000 MIFG R25C/P2000 NSC 02/02 Q1031",
+)
+
+
 @cache
 def metar_seeds() -> list[bytes]:
-    return sample([raw.encode() for raw, _, _ in corpus_reports()])
+    return sample([raw.encode() for raw, _, _ in corpus_reports()]) + list(FOG_SEEDS)
 
 
 @target("metar", seeds=metar_seeds, tokens=METAR_TOKENS, max_len=1024, time_limit_s=0.5)
@@ -1289,6 +1330,22 @@ def control_seeds() -> list[bytes]:
             },
         ),
         ("set_weather", {"layers": [], "temperature_c": 3.0, "dewpoint_c": 2.5, "qnh_hpa": 990.0}),
+        ("visibility", {}),
+        ("visibility", {"runway": "14"}),
+        ("visibility", {"east_m": 1500.0, "north_m": -300.0, "height_m": 30.0}),
+        (
+            "set_weather",
+            {
+                "fog": {
+                    "visibility_m": 150.0,
+                    "depth_m": 80.0,
+                    "patchy": True,
+                    "rvr": [{"runway": "32L", "rvr_m": 550.0}],
+                },
+                "now": True,
+            },
+        ),
+        ("set_weather", {"fog": {}}),
         ("radar", {}),
         ("radar", {"range_nm": 10.0, "tilt_deg": -15.0, "size_px": 64}),
         ("radar", {"range_nm": 320.0, "tilt_deg": 15.0, "size_px": 1024}),
@@ -1323,6 +1380,20 @@ def _control_tokens() -> tuple[bytes, ...]:
         "apply_metar",
         "release",
         "export_textures",
+        "set_weather",
+        "radar",
+        "visibility",
+        "fog",
+        "rvr",
+        "runway",
+        "rvr_m",
+        "depth_m",
+        "patchy",
+        "visibility_m",
+        "east_m",
+        "north_m",
+        "height_m",
+        "32L",
         "subscribe",
         "unsubscribe",
         "topics",

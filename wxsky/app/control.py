@@ -18,6 +18,7 @@ from wxsky.engine.stages import SkyEngine, enu_from_geodetic
 from wxsky.errors import ProtocolError, WxskyError
 from wxsky.logs import clip
 from wxsky.scene.camera import FOV_DEG, PITCH_DEG, ROLL_DEG, VIEWPORT_PX, Camera
+from wxsky.scene.fog import RVR_EYE_M, fog_field, runway
 from wxsky.scene.radar import DBZ_OFFSET, DBZ_STEP, RANGE_NM, SIZE_PX, TILT_DEG
 from wxsky.schema import (
     REQUIRED,
@@ -40,7 +41,9 @@ from wxsky.weather.state import (
     LAT_DEG,
     LATEST_UTC,
     LON_DEG,
+    RUNWAY_PATTERN,
     Source,
+    WeatherState,
     parse_time_utc,
 )
 
@@ -168,6 +171,53 @@ def radar_reply(made: Made | None, key: tuple[float, float, int]) -> dict[str, A
         "dbz_offset": DBZ_OFFSET,
         "dbz_step": DBZ_STEP,
         "pixels": pic.to_bytes(),
+    }
+
+
+MAX_POINT_M = 1e6  # as far from the observer as a camera may stand
+# `visibility`: a point of the scene (east, north of the observer; height over the ground) or a
+# runway's touchdown zone (docs/fog.md).
+VISIBILITY = Table(
+    {
+        "east_m": Field(Number(-MAX_POINT_M, MAX_POINT_M, unit="m"), 0.0),
+        "north_m": Field(Number(-MAX_POINT_M, MAX_POINT_M, unit="m"), 0.0),
+        "height_m": Field(Number(0.0, 30_000.0, unit="m"), RVR_EYE_M),
+        "runway": Field(
+            Text(pattern=RUNWAY_PATTERN, pattern_desc="a runway designator like '14' or '32L'")
+        ),
+    }
+)
+
+
+def visibility(state: WeatherState, params: dict[str, Any]) -> dict[str, Any]:
+    """How far one sees at a point (`height_m` over the ground) and the runway visual range
+    there, from the fog the frames draw (`scene.fog`); at a runway's touchdown zone with
+    `runway`. Out of fog both are the weather's visibility."""
+    v = checked_params("visibility", VISIBILITY, params)
+    field = fog_field(state)
+    out: dict[str, Any] = {}
+    if "runway" in v:
+        place = runway(v["runway"])
+        east, north = place.touchdown_m
+        out["runway"] = v["runway"]
+    else:
+        east, north = v["east_m"], v["north_m"]
+    height = v["height_m"]
+    if field is None:
+        seen = rvr = state.visibility_m
+        ext = 0.0
+    else:
+        seen = float(field.visibility_m(east, north, height))
+        rvr = float(field.rvr_m(east, north))
+        ext = float(field.extinction_per_m(east, north, height))
+    return out | {
+        "east_m": float(east),
+        "north_m": float(north),
+        "height_m": float(height),
+        "visibility_m": seen,
+        "rvr_m": rvr,
+        "fog_extinction_per_m": ext,
+        "in_fog": ext > 0.0,
     }
 
 
@@ -346,6 +396,7 @@ SET_WEATHER_KEYS = (
     "dewpoint_c",
     "qnh_hpa",
     "present_weather",
+    "fog",
 )
 
 
@@ -373,6 +424,8 @@ def set_weather(engine: SkyEngine, params: dict[str, Any]) -> list[str]:
         first = problems[0]
         where = ".".join(str(part) for part in first.path)
         raise ControlError(clip(f"set_weather: {where}: {first.message}", ERROR_MAX_CHARS))
+    if "fog" not in weather:  # a preset without [fog] has none; a request says nothing of it
+        patch = dataclasses.replace(patch, fog=None)
     engine.apply(dataclasses.replace(patch, source=Source.CONTROL))
     if now:
         engine.settle()

@@ -40,6 +40,7 @@ from wxsky.app.control import (
     set_aircraft,
     set_time,
     set_weather,
+    visibility,
 )
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.frame_times import FrameTimes
@@ -213,6 +214,7 @@ class Daemon:
             "apply_metar": lambda p: apply_metar(self.engine, p),
             "set_weather": lambda p: set_weather(self.engine, p),
             "radar": self._radar,
+            "visibility": lambda p: visibility(self.engine.state, p),
             "export_textures": self._export_textures,
             "output_format": lambda p: output_format(
                 p, config.output.layer_format, self._segment_version()

@@ -26,10 +26,14 @@ from wxsky.protocols.cigi_session import (
 from wxsky.weather.atmosphere import dewpoint_from_humidity
 from wxsky.weather.geo import enu_from_geodetic
 from wxsky.weather.state import (
+    FOG_DEPTH_M,
+    FOG_VISIBILITY_M,
     MAX_LAYERS,
+    NO_FOG,
     WIND_SPEED_MPS,
     CloudLayer,
     CloudType,
+    Fog,
     PrecipKind,
     PrecipLayer,
     Source,
@@ -141,6 +145,9 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
         if fog is not None:
             codes.append("FG" if fog.visibility_m < FOG_CODE_BELOW_M else "BR")
         fields["present_weather"] = tuple(codes)
+        # Ground fog (layer 0) as the fog wxsky draws and answers from (scene/fog.py): a sheet
+        # of the layer's visibility, its top the layer's thickness over the ground.
+        fields["fog"] = _ground_fog(fog)
     if atm is not None:
         winds.append(_wind(0.0, atm.wind_speed_mps, atm.wind_dir_deg))
         fields["temperature_c"] = atm.temperature_c
@@ -154,6 +161,19 @@ def weather_patch(host: HostState, lat_deg: float, lon_deg: float, alt_m: float)
     if winds:  # a host that gives no wind leaves it to the sources below
         fields["wind"] = tuple(winds)
     return WeatherPatch(source=Source.CIGI, **fields)  # type: ignore[arg-type]
+
+
+def _ground_fog(layer: Layer | None) -> Fog:
+    """CIGI's ground fog layer as the weather's fog: NO_FOG without one, or where it is mist
+    (FOG_CODE_BELOW_M or more) or thinner than the weather's fog can be."""
+    if layer is None or layer.visibility_m >= FOG_CODE_BELOW_M:
+        return NO_FOG
+    vis_lo, vis_hi = FOG_VISIBILITY_M.bounds
+    depth_lo, depth_hi = FOG_DEPTH_M.bounds
+    return Fog(
+        visibility_m=min(max(layer.visibility_m, vis_lo), vis_hi),
+        depth_m=min(max(layer.thickness_m, depth_lo), depth_hi),
+    )
 
 
 def _lightning_code(host: HostState, rid: int | None, ids: Sequence[int]) -> str | None:

@@ -22,6 +22,7 @@ import numpy.typing as npt
 from wxsky.errors import RenderError
 from wxsky.render import sky_layer, sky_textures
 from wxsky.render.context import create_context, gil_free_finish, release_framebuffer
+from wxsky.render.fog_pass import FogPass
 from wxsky.render.precip_pass import PrecipPass
 from wxsky.render.profile import PassProfiler
 from wxsky.render.shaders import ShaderLibrary
@@ -254,6 +255,7 @@ class Renderer:
         self._sky_drawn: dict[str, sky_layer.SkyLayerState] = {}  # by layer: what it holds
         self._towers = TowerPass(self.ctx, self.shaders)
         self._precip = PrecipPass(self.ctx, self.shaders)
+        self._fog = FogPass(self.ctx, self.shaders)  # ground fog, drawn as a frame has it
         self._check("initialising the renderer")
 
     @property
@@ -316,6 +318,7 @@ class Renderer:
         """Draw the sky and the near layer for the frame's camera, and the near_front layer
         when the frame is split at the host's aircraft."""
         cam = frame.camera
+        self._fog.fog = frame.fog
         self._draw_sky("sky", cam, frame.sky)
         self._draw_near(
             "near",
@@ -390,6 +393,7 @@ class Renderer:
             target.fbo.use()
             target.fbo.clear(*clear_rgba)
             start = 0
+        self._fog.draw(name, target.fbo, target.size, cam, sky, self._exposure)
         self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
         if precip is not None and precip.curtains and sky is not None:
             # The rain curtains over the sprites, below the lowest cloud base (from under it):
@@ -609,6 +613,7 @@ class Renderer:
         self._sky.release()
         self._towers.release()
         self._precip.close()
+        self._fog.release()
         self._upsample_vao.release()
         self._meter_vao.release()
         self._instance_buf.release()

@@ -4,7 +4,8 @@ point is inside one of the clouds the sky draws, from the very sprites of that c
 where the wind has drifted them, by the rule the frames use for the camera
 (`in_cloud.sprite_depths`: within a sprite's reach and within its layer's base and top). So
 the wind, the visibility and the cloud water a host's aircraft feels are the ones its pilot
-sees, and a point above or below every layer is never in cloud. Pure.
+sees, and a point above or below every layer is never in cloud; the visibility there takes the
+fog the frames draw (`fog.py`). Pure.
 """
 
 from __future__ import annotations
@@ -17,9 +18,11 @@ from types import MappingProxyType
 import numpy as np
 
 from wxsky.scene.clouds import SpriteBatch, layer_keys
+from wxsky.scene.fog import fog_field
 from wxsky.scene.formation import layer_block
 from wxsky.scene.gather import Drift, blocks_within
 from wxsky.scene.in_cloud import OUTSIDE, in_cloud, layer_spans, sprite_depths
+from wxsky.scene.sky import KOSCHMIEDER
 from wxsky.weather.atmosphere import PointWeather, air_at
 from wxsky.weather.state import CloudLayer, CloudType, WeatherState, dir_from_deg
 
@@ -125,12 +128,18 @@ def conditions_at(
     ve, vn = state.wind_at(alt)
     speed = float(np.hypot(ve, vn))
     direction = dir_from_deg(ve, vn) if speed > 0.0 else 0.0
+    seen = inside.visibility_m if inside.visibility_m is not None else state.visibility_m
+    # The fog the frames draw (scene/fog.py), added to what the air and cloud leave there.
+    fog = fog_field(state)
+    fog_ext = 0.0 if fog is None else float(fog.extinction_per_m(east, north, alt - fog.ground_m))
+    if fog_ext > 0.0:
+        seen = KOSCHMIEDER / (KOSCHMIEDER / max(seen, 1.0) + fog_ext)
     return PointWeather(
         temperature_c=temperature,
         humidity_pct=100.0
-        if inside.inside or state.visibility_m < FOG_VISIBILITY_M
+        if inside.inside or state.visibility_m < FOG_VISIBILITY_M or seen < FOG_VISIBILITY_M
         else min(humidity, CLEAR_AIR_MAX_HUMIDITY_PCT),
-        visibility_m=inside.visibility_m if inside.visibility_m is not None else state.visibility_m,
+        visibility_m=seen,
         wind_speed_mps=speed,
         wind_dir_deg=direction,
         pressure_hpa=pressure,

@@ -25,6 +25,7 @@ from wxsky.scene.camera import Camera, spheres_in_view, view_bounds
 from wxsky.scene.cloud_lod import collapse_far_clouds
 from wxsky.scene.cloud_shadow import SHADOW_MAP_PX, CloudShadow, cloud_shadow
 from wxsky.scene.clouds import BLOCK_CACHE, SpriteBatch
+from wxsky.scene.fog import FogField, fog_field, fogged_at_eye
 from wxsky.scene.gather import (
     CancelFlag,
     Drift,
@@ -197,6 +198,8 @@ class FrameScene:
     # The rain curtains under the near storms and the drops about the eye, as drawn
     # (`precip_view.py`); None: nothing falls in view.
     precip: PrecipView | None = None
+    # The fog over the ground the renderer draws (`fog.py`); None: no fog, no fog pass.
+    fog: FogField | None = None
 
 
 class StageClock(Protocol):
@@ -489,6 +492,9 @@ def build_frame(
         )
     )
     at_eye = precipitation_at(state, eye, shafts)
+    fog = fog_field(state)
+    if fog is not None:
+        at_eye = fogged_at_eye(at_eye, fog, eye)
     precip = precip_view(
         state,
         rain,
@@ -630,6 +636,7 @@ def build_frame(
         new_flashes=tuple(started),
         at_eye=at_eye,
         precip=precip,
+        fog=fog,
     )
 
 

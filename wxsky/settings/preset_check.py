@@ -38,12 +38,18 @@ from wxsky.schema.toml_file import (
 )
 from wxsky.weather.state import (
     ALT_M,
+    FOG_DEPTH_M,
+    FOG_VISIBILITY_M,
     GUST_MPS,
     LAT_DEG,
     LAYER_HEIGHT_M,
     LON_DEG,
     MAX_LAYERS,
+    MAX_RVR,
+    NO_FOG,
     QNH_HPA,
+    RUNWAY_PATTERN,
+    RVR_M,
     SEED,
     TEMPERATURE_C,
     VISIBILITY_M,
@@ -52,7 +58,9 @@ from wxsky.weather.state import (
     WIND_SPEED_MPS,
     CloudLayer,
     CloudType,
+    Fog,
     Observer,
+    RunwayRvr,
     Source,
     WeatherPatch,
     WeatherState,
@@ -172,6 +180,40 @@ WIND_TABLE = Table(
     },
     rules=(Rule(("speed_mps", "gust_mps"), _gust_or_none),),
 )
+
+
+def _distinct_runways(v: dict[str, Any], path: KeyPath, problems: list[Problem]) -> None:
+    seen: dict[str, int] = {}
+    for i, item in enumerate(v.get("rvr") or ()):
+        name = item["runway"]
+        if name in seen:
+            problems.append(
+                Problem((*path, "rvr", i, "runway"), f"{name!r} repeats rvr[{seen[name]}].runway")
+            )
+        seen.setdefault(name, i)
+
+
+RVR_TABLE = Table(
+    {
+        "runway": Field(
+            Text(pattern=RUNWAY_PATTERN, pattern_desc="a runway designator like '14' or '32L'"),
+            REQUIRED,
+        ),
+        "rvr_m": Field(RVR_M, REQUIRED),
+    },
+)
+# Fog over the ground (docs/fog.md): visibility_m inside it (left out: only the RVRs' fog),
+# its top over the ground, banks or a sheet, and the runway visual ranges it gives.
+FOG_TABLE = Table(
+    {
+        "visibility_m": Field(FOG_VISIBILITY_M),
+        "depth_m": Field(FOG_DEPTH_M, 100.0),
+        "patchy": Field(Bool(), False),
+        "rvr": Field(Tables(RVR_TABLE, "fog.rvr", max_items=MAX_RVR, noun="runways"), ()),
+    },
+    rules=(Rule(("rvr",), _distinct_runways),),
+    what="a table ([fog])",
+)
 PRESET_TABLE = Table(
     {
         "description": Field(Text(non_empty=True), REQUIRED),
@@ -193,6 +235,7 @@ PRESET_TABLE = Table(
         "observer": Field(OBSERVER_TABLE),
         "layers": Field(Tables(LAYER_TABLE, "layers", max_items=MAX_LAYERS, noun="cloud layers")),
         "wind": Field(Tables(WIND_TABLE, "wind")),
+        "fog": Field(FOG_TABLE),
     },
     rules=(
         Rule(("temperature_c", "dewpoint_c"), _dewpoint_not_above_temperature),
@@ -292,5 +335,16 @@ def _patch(v: dict[str, Any]) -> WeatherPatch:
         dewpoint_c=v.get("dewpoint_c"),
         qnh_hpa=v.get("qnh_hpa"),
         present_weather=v.get("present_weather"),
+        # A preset without [fog] has none: switching presets never leaves another's fog.
+        fog=_fog(v["fog"]) if v.get("fog") is not None else NO_FOG,
         seed=v.get("seed"),
+    )
+
+
+def _fog(f: dict[str, Any]) -> Fog:
+    return Fog(
+        visibility_m=f.get("visibility_m"),
+        depth_m=f["depth_m"],
+        patchy=f["patchy"],
+        rvr=tuple(RunwayRvr(r["runway"], r["rvr_m"]) for r in f["rvr"]),
     )

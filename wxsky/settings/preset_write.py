@@ -15,7 +15,7 @@ from pathlib import PurePath
 from typing import Any
 
 from wxsky.settings.preset_check import TOP_KEYS, KeyPath, format_key
-from wxsky.weather.state import Provenance, Source, WeatherPatch, WeatherState
+from wxsky.weather.state import NO_FOG, Provenance, Source, WeatherPatch, WeatherState
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,9 @@ def preset_dict(weather: WeatherPatch | WeatherState, *, sort: bool = False) -> 
             out[key] = value
     if patch.present_weather is not None:
         out["present_weather"] = list(patch.present_weather)
+    if patch.fog is not None and patch.fog != NO_FOG:
+        # A preset has no way to say "no fog" but to leave the table out.
+        out["fog"] = {k: v for k, v in patch.fog.to_dict().items() if v is not None}
     if patch.observer is not None:
         obs = patch.observer
         out["observer"] = {"lat_deg": obs.lat_deg, "lon_deg": obs.lon_deg, "alt_m": obs.alt_m}

@@ -155,6 +155,9 @@ def patch_from_weather_dict(weather: Mapping[str, Any]) -> WeatherPatch:
     layers = data.get("layers")
     if isinstance(layers, list):
         data["layers"] = [_whole_oktas(layer) for layer in layers]
+    fog = data.get("fog")
+    if isinstance(fog, dict):  # a fog of only the RVRs' has no visibility_m
+        data["fog"] = {k: v for k, v in fog.items() if v is not None}
     _, patch, problems = parse_preset_data(data)
     if problems:
         first = problems[0]

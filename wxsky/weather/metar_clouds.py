@@ -36,6 +36,7 @@ from typing import Literal
 from wxsky.schema import Number
 from wxsky.units import FT_TO_M
 from wxsky.weather.metar import Metar, MetarSkyGroup
+from wxsky.weather.metar_fog import metar_fog
 from wxsky.weather.state import MAX_LAYERS, CloudLayer, CloudType, Source, WeatherPatch, WindLayer
 
 Band = Literal["low", "middle", "high", "any"]
@@ -240,6 +241,7 @@ def metar_to_patch(metar: Metar, *, field_elevation_m: float) -> WeatherPatch:
         dewpoint_c=_state_temperature(metar.dewpoint_c),
         qnh_hpa=metar.altimeter_hpa,
         present_weather=metar.weather,
+        fog=metar_fog(metar),
     )
 
 

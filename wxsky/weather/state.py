@@ -10,6 +10,7 @@ import dataclasses
 import enum
 import functools
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
@@ -39,6 +40,14 @@ SEED = Number(0, 2**63 - 1, integer=True)
 COVERAGE_PCT = Number(0.0, 100.0, unit="%")
 SEVERITY = Number(0, 5, integer=True)
 MAX_PRECIPITATION = 4  # one of each kind
+# Fog (issue 43 item 3, docs/fog.md): how far one sees inside it, how high its top stands over
+# the ground, and the runway visual range by runway. A METAR gives at most four RVR groups.
+FOG_VISIBILITY_M = Number(10.0, 10_000.0, unit="m")
+FOG_DEPTH_M = Number(1.0, 1_000.0, unit="m")
+RVR_M = Number(10.0, 10_000.0, unit="m")
+MAX_RVR = 4
+# A runway designator: its heading in tens of degrees (01-36), L, C or R for parallel ones.
+RUNWAY_PATTERN = r"(?:0[1-9]|[12][0-9]|3[0-6])[LCR]?"
 
 
 class CloudType(enum.IntEnum):
@@ -162,6 +171,63 @@ class PrecipLayer:
 
 
 @dataclass(frozen=True)
+class RunwayRvr:
+    """A runway visual range: the runway's designator (`14`, `32L`) and the range at its
+    touchdown zone, metres (`scene.fog` places the runway and its touchdown zone)."""
+
+    runway: str
+    rvr_m: float
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.runway, str) or re.fullmatch(RUNWAY_PATTERN, self.runway) is None:
+            raise ValueError(
+                f"fog rvr runway must be a designator like 14 or 32L, got {self.runway!r}"
+            )
+        RVR_M.validate("fog rvr rvr_m", self.rvr_m)
+
+
+@dataclass(frozen=True)
+class Fog:
+    """Fog over the ground (docs/fog.md): `visibility_m` inside it where it is densest (None:
+    no fog but what the RVRs ask for), its top `depth_m` over the ground, `patchy` for banks
+    with clear air between (METAR BCFG, PRFG) instead of one sheet, and runway visual ranges
+    the fog is shaped to give at their touchdown zones."""
+
+    visibility_m: float | None = None
+    depth_m: float = 100.0
+    patchy: bool = False
+    rvr: tuple[RunwayRvr, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.visibility_m is not None:
+            FOG_VISIBILITY_M.validate("fog visibility_m", self.visibility_m)
+        FOG_DEPTH_M.validate("fog depth_m", self.depth_m)
+        if len(self.rvr) > MAX_RVR:
+            raise ValueError(f"at most {MAX_RVR} fog rvr runways, got {len(self.rvr)}")
+        names = [r.runway for r in self.rvr]
+        if len(set(names)) < len(names):
+            raise ValueError(f"fog rvr names a runway twice: {', '.join(names)}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "visibility_m": self.visibility_m,
+            "depth_m": self.depth_m,
+            "patchy": self.patchy,
+            "rvr": [{"runway": r.runway, "rvr_m": r.rvr_m} for r in self.rvr],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Fog:
+        vis = data.get("visibility_m")
+        return cls(
+            visibility_m=None if vis is None else float(vis),
+            depth_m=float(data["depth_m"]),
+            patchy=bool(data["patchy"]),
+            rvr=tuple(RunwayRvr(str(r["runway"]), float(r["rvr_m"])) for r in data["rvr"]),
+        )
+
+
+@dataclass(frozen=True)
 class WindLayer:
     alt_m: float  # MSL
     dir_from_deg: float  # direction the wind blows from, true
@@ -202,6 +268,7 @@ class Provenance:
     qnh_hpa: Source = Source.DEFAULT
     present_weather: Source = Source.DEFAULT
     precipitation: Source = Source.DEFAULT
+    fog: Source = Source.DEFAULT
     seed: Source = Source.DEFAULT
 
 
@@ -220,7 +287,13 @@ class WeatherPatch:
     qnh_hpa: float | None = None
     present_weather: tuple[str, ...] | None = None
     precipitation: tuple[PrecipLayer, ...] | None = None
+    # A source that says "no fog" gives NO_FOG, not None (which says nothing).
+    fog: Fog | None = None
     seed: int | None = None
+
+
+# A patch's word for "no fog" (the state holds None): a report without fog clears the fog.
+NO_FOG = Fog(visibility_m=None, depth_m=1.0)
 
 
 # The clock's valid range, for every input that sets time (issue 40): wide enough for any
@@ -287,6 +360,7 @@ class WeatherState:
     qnh_hpa: float = 1013.25
     present_weather: tuple[str, ...] = ()  # METAR weather groups, e.g. ("-RA", "BR")
     precipitation: tuple[PrecipLayer, ...] = ()  # sorted by base_m; shafts (scene.rain)
+    fog: Fog | None = None  # None: no fog (scene.fog)
     seed: int = 1
     sources: Provenance = field(default_factory=Provenance)
 
@@ -318,7 +392,7 @@ class WeatherState:
         for f in dataclasses.fields(Provenance):
             value = getattr(patch, f.name)
             if value is not None:
-                changes[f.name] = value
+                changes[f.name] = None if value == NO_FOG else value
                 sources[f.name] = patch.source
         if not changes:
             return self
@@ -422,6 +496,7 @@ def weather_to_dict(state: WeatherState) -> dict[str, Any]:
             }
             for p in state.precipitation
         ],
+        "fog": None if state.fog is None else state.fog.to_dict(),
         "seed": state.seed,
         "sources": {
             f.name: getattr(state.sources, f.name).value for f in dataclasses.fields(Provenance)
@@ -472,6 +547,7 @@ def weather_from_dict(data: Mapping[str, Any]) -> WeatherState:
             )
             for p in data["precipitation"]
         ),
+        fog=None if data.get("fog") is None else Fog.from_dict(data["fog"]),
         seed=int(data["seed"]),
         sources=Provenance(
             **{name: Source(value) for name, value in dict(data.get("sources") or {}).items()}

@@ -6,8 +6,8 @@ in base); a target layer without a partner forms from zero cover at its own base
 layer without one dissipates to zero cover and is then removed. A type change is therefore a
 dissipation plus a formation, never a switch of every cloud at once. Wind moves as a velocity
 vector at each target level, so a direction change turns through the shorter way and a calm
-never flips the direction. Observer, seed, present weather and precipitation change at once:
-they are not physical quantities that drift. Everything here is pure:
+never flips the direction. Observer, seed, present weather, precipitation and fog change at
+once: they are not physical quantities that drift. Everything here is pure:
 (applied, target, dt) -> applied.
 """
 
@@ -57,6 +57,7 @@ def step_toward(
         seed=t.seed,
         present_weather=t.present_weather,
         precipitation=t.precipitation,
+        fog=t.fog,
         sources=t.sources,
         layers=_step_layers(applied.layers, t.layers, dt_s, rates),
         wind=_step_wind(applied, t.wind, dt_s, rates.wind_mps_per_s),
