@@ -4,8 +4,9 @@
     .venv/bin/python tools/gallery/precip_gallery.py [--out-dir docs/gallery]
 
 - `thunderstorm-curtains.png`: the thunderstorm preset from the ground at noon and at dusk
-  (in its rain: the curtains all round), and its cumulonimbus alone at 2/8 in 20 km
-  visibility from 8 and 20 km (a shaft hanging from its base), at noon;
+  (in its rain: the curtains all round); its cumulonimbus alone at 2/8 in 20 km visibility
+  from 5 and 20 km, and in 80 km visibility from 50 km, out of the rain (the shafts hanging
+  from their bases), at noon (middle row) and at dusk (bottom row);
 - `precip-at-eye.png`: rain (top) and snow (bottom) about the eye at -, moderate and +, flying
   north at 60 m/s under a nimbostratus (the streaks run from the motion through the air).
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +45,9 @@ def sheet(tiles: list[list[npt.NDArray[np.uint8]]]) -> npt.NDArray[np.uint8]:
 
 
 def storm_tiles(renderer: Renderer) -> list[list[npt.NDArray[np.uint8]]]:
-    tiles = []
+    """Under the storm (the preset itself) at noon and dusk, then its cumulonimbus alone at
+    2/8 in 20 km visibility from 5, 20 and 50 km, at noon and at dusk."""
+    under = []
     for when in ("noon", "dusk"):
         state = storm_look.storm_state(when)
         cam = Camera(
@@ -52,21 +56,39 @@ def storm_tiles(renderer: Renderer) -> list[list[npt.NDArray[np.uint8]]]:
             width_px=TILE[0],
             height_px=TILE[1],
         )
-        tiles.append(take_snapshot(state, cam, SceneSettings(), renderer=renderer).image)
-    found = storm_look.shaft_camera(storm_look.storm_state("noon"))
-    assert found is not None
-    cam, state = found
-    for back_m in (0.0, 12_000.0):
-        x, y, z = cam.position_m
-        far = dataclasses.replace(
-            cam,
-            position_m=(x, y - back_m, z),
-            width_px=TILE[0],
-            height_px=TILE[1],
-            pitch_deg=4.0 if back_m else 5.0,
-        )
-        tiles.append(take_snapshot(state, far, SceneSettings(), renderer=renderer).image)
-    return [tiles[:2], tiles[2:]]
+        under.append(take_snapshot(state, cam, SceneSettings(), renderer=renderer).image)
+    rows = [[*under, _blank()]]
+    for when in ("noon", "dusk"):
+        found = storm_look.shaft_camera(storm_look.storm_state(when))
+        assert found is not None
+        state = found[1]
+        centre = storm_look.storm_centre(state)
+        assert centre is not None
+        row = []
+        for distance_m in FAR_M:
+            if distance_m > 30_000.0:  # in 20 km a storm 50 km off is gone
+                state = dataclasses.replace(state, visibility_m=80_000.0)
+            eye = storm_look.dry_eye(state, centre, distance_m, state.observer.alt_m + 2.0)
+            x, y, z = eye
+            heading = math.degrees(math.atan2(centre[0] - x, centre[1] - y))
+            view = Camera(
+                (x, y, z),
+                heading_deg=heading,
+                pitch_deg=8.0 if distance_m > 10_000.0 else 12.0,
+                fov_deg=60.0,
+                width_px=TILE[0],
+                height_px=TILE[1],
+            )
+            row.append(take_snapshot(state, view, SceneSettings(), renderer=renderer).image)
+        rows.append(row)
+    return rows
+
+
+FAR_M = (5000.0, 20_000.0, 50_000.0)
+
+
+def _blank() -> npt.NDArray[np.uint8]:
+    return np.full((TILE[1], TILE[0], 4), 255, np.uint8)
 
 
 def eye_tiles(renderer: Renderer) -> list[list[npt.NDArray[np.uint8]]]:

@@ -27,8 +27,9 @@ F64 = npt.NDArray[np.float64]
 
 # The rain's colour under a storm: the air's grey, darkened (the light under the base is
 # what the storm lets through); snow is whiter than the air around it.
-RAIN_SHADE = 0.62
+RAIN_SHADE = 0.8
 SNOW_SHADE = 1.08
+VEIL_SHADE = 0.85
 # Streaks: drops catch the bright sky (lighter than what is behind them), flakes are white.
 DROP_LIGHT = 1.25
 DROP_ALPHA = {False: 0.42, True: 0.8}
@@ -80,21 +81,27 @@ class PrecipPass:
         """The curtains over the bound framebuffer (`size` pixels); False when there are
         none to draw."""
         shown = view.curtains[:MAX_CURTAINS]
-        if not shown:
+        if not view.drawn:
             return False
         eye = cam.position_m
         prog = self._curtains
         right, up, fwd = cam.basis()
         axis = np.zeros((MAX_CURTAINS, 4), np.float32)
         span = np.zeros((MAX_CURTAINS, 4), np.float32)
+        base = np.zeros((MAX_CURTAINS, 4), np.float32)
         offsets = np.zeros((3, len(shown)))
         for i, c in enumerate(shown):
             axis[i] = (c.axis_m[0] - eye[0], c.axis_m[1] - eye[1], c.radius_m, c.extinction_per_m)
             virga = c.bottom_m > _ground_of(sky) + 1.0
             span[i] = (c.top_m, c.bottom_m, 1.0 if virga else 0.0, (c.axis_m[0] * 0.013) % 97.0)
             offsets[:, i] = (axis[i, 0], axis[i, 1], 0.5 * (c.top_m + c.bottom_m) - eye[2])
+            base[i, 0] = c.base_radius_m
         air = np.zeros((MAX_CURTAINS, 3), np.float32)
-        air[: len(shown)] = sky.haze_toward(offsets, eye[2]).T
+        if shown:
+            air[: len(shown)] = sky.haze_toward(offsets, eye[2]).T
+        # Rain seen through kilometres of itself is its own grey: the air's, a little dimmed.
+        haze = np.asarray(sky.haze_rgb, np.float64)
+        veil_rgb = VEIL_SHADE * (0.6 * float(haze @ [0.2126, 0.7152, 0.0722]) + 0.4 * haze)
         body = np.zeros((MAX_CURTAINS, 3), np.float32)
         for i, c in enumerate(shown):
             luma = float(air[i] @ np.array([0.2126, 0.7152, 0.0722], np.float32))
@@ -110,7 +117,10 @@ class PrecipPass:
             "u_tan_half_fov": (cam.tan_half_fov_x, cam.tan_half_fov_y),
             "u_target_size": (float(size[0]), float(size[1])),
             "u_eye_z": float(eye[2]),
+            "u_pixel_rad": 2.0 * cam.tan_half_fov_x / max(size[0], 1),
             "u_clip_top_m": float(min(view.clip_top_m, 1e6)),
+            "u_veil": (view.veil_per_m, view.veil_top_m, view.ground_m),
+            "u_veil_rgb": tuple(float(v) for v in veil_rgb),
             "u_count": len(shown),
             "u_inv_haze_m": 0.0 if not math.isfinite(sky.haze_m) else 1.0 / sky.haze_m,
             "u_fall_m": float(view.time_s * DROP_FALL_MPS[False] % 14_000.0),
@@ -120,6 +130,7 @@ class PrecipPass:
             _set(prog, name, value)
         _write(prog, "u_axis", axis.tobytes())
         _write(prog, "u_span", span.tobytes())
+        _write(prog, "u_base", base.tobytes())
         _write(prog, "u_body", body.tobytes())
         _write(prog, "u_air", air.tobytes())
         self.ctx.enable(moderngl.BLEND)

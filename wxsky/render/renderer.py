@@ -395,7 +395,7 @@ class Renderer:
             start = 0
         self._fog.draw(name, target.fbo, target.size, cam, sky, self._exposure)
         self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
-        if precip is not None and precip.curtains and sky is not None:
+        if precip is not None and precip.drawn and sky is not None:
             # The rain curtains over the sprites, below the lowest cloud base (from under it):
             # the rain stands between the eye and the clouds it falls through.
             target.fbo.use()

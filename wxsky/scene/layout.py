@@ -543,7 +543,7 @@ def build_frame(
         drawn = np.ones(len(near), np.bool_)
         if len(placed.drop_ids):
             drawn &= drop_mask(near.cloud_id, is_shaft(near), placed.drop_ids)
-        if precip is not None and precip.curtains:
+        if precip is not None and precip.curtains:  # (the veil has no sprites to replace)
             # The near storms' shafts are drawn as curtains (precip.glsl), not as sprites.
             drawn &= ~is_shaft(near)
         collapsing = lod and settings.lod_start_m > 0.0

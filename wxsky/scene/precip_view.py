@@ -50,7 +50,7 @@ from wxsky.scene.precip_eye import (
 )
 from wxsky.scene.radar import CONVECTIVE_FACTOR, rate_mm_h
 from wxsky.scene.rain import SHAFT_RADIUS_FRAC, Rain
-from wxsky.weather.state import WeatherState
+from wxsky.weather.state import CloudType, WeatherState
 
 MAX_CURTAINS = 12  # the nearest curtains drawn; the shader's array size
 CURTAIN_RANGE_M = 40_000.0  # farther storms are the ring's (their shafts are sprites there)
@@ -79,6 +79,7 @@ class Curtain:
     bottom_m: float
     extinction_per_m: float
     snow: bool
+    base_radius_m: float = 0.0  # the cloud's base: its underside is drawn dark this wide
 
 
 @dataclass(frozen=True)
@@ -103,6 +104,16 @@ class PrecipView:
     # The lowest cloud base MSL (at most the storms'): seen from under it, the curtains are
     # drawn over the clouds up to there, and those clouds cover them above it.
     clip_top_m: float = math.inf
+    # Rain from a raining nimbostratus, everywhere under its base: its extinction per metre
+    # (0: none) and the base MSL; the ground MSL it falls to.
+    veil_per_m: float = 0.0
+    veil_top_m: float = 0.0
+    ground_m: float = 0.0
+
+    @property
+    def drawn(self) -> bool:
+        """Whether the curtains' pass has anything to draw (curtains or the veil)."""
+        return bool(self.curtains) or self.veil_per_m > 0.0
 
 
 def relative_humidity(temperature_c: float | None, dewpoint_c: float | None) -> float:
@@ -160,6 +171,7 @@ def curtains(
                     bottom_m=max(cell.ground_m, cell.base_m - falls_m),
                     extinction_per_m=sigma * min(1.0, cell.formed),
                     snow=rain.snow,
+                    base_radius_m=0.5 * cell.width_m,
                 ),
             )
         )
@@ -210,11 +222,38 @@ def precip_view(
     """What the frame draws of the precipitation, or None when there is nothing to draw."""
     shown = curtains(state, rain, cells, eye_m)
     drops = eye_drops(at_eye, eye_velocity_mps, state.wind_at(float(eye_m[2])))
-    if not shown and drops is None:
+    veil_per_m, veil_top_m = veil(state, rain)
+    if not shown and drops is None and veil_per_m <= 0.0:
         return None
     bases = [lay.base_m for lay in state.layers]
     clip = min(bases) if bases else math.inf
-    return PrecipView(curtains=shown, drops=drops, time_s=time_s % 3600.0, clip_top_m=clip)
+    return PrecipView(
+        curtains=shown,
+        drops=drops,
+        time_s=time_s % 3600.0,
+        clip_top_m=clip,
+        veil_per_m=veil_per_m,
+        veil_top_m=veil_top_m,
+        ground_m=state.observer.alt_m,
+    )
+
+
+def veil(state: WeatherState, rain: Rain | None) -> tuple[float, float]:
+    """The rain under a raining nimbostratus as the eye sees it, everywhere under the layer's
+    base: (extinction per metre, base MSL), at the rate `precip_eye` gives the eye there (the
+    reported rate, as much of it as the layer covers); (0, 0) when none rains."""
+    if rain is None:
+        return 0.0, 0.0
+    best = (0.0, 0.0)
+    for layer in state.layers:
+        if layer.type is CloudType.NIMBOSTRATUS:
+            share = min(1.0, layer.cover_oktas / 8.0)
+            sigma = extinction_per_m(rain, rate_mm_h(rain.intensity) * share)
+            if rain.snow:  # snow's goes by its intensity: as much of it as the layer covers
+                sigma *= share
+            if sigma > best[0]:
+                best = (sigma, layer.base_m)
+    return best
 
 
 def curtain_opacity(

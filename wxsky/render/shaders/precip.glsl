@@ -6,6 +6,9 @@
 
 #if defined CURTAINS
 #define MAX_CURTAINS 12
+#define VEIL_RANGE_M 30000.0
+#define BASE_ALPHA 0.95
+#define BASE_SHADE 0.15
 
 #if defined VERTEX_SHADER
 uniform vec4 u_rect;
@@ -24,12 +27,16 @@ uniform vec2 u_tan_half_fov;
 uniform vec2 u_target_size;
 uniform float u_eye_z;           // MSL
 uniform float u_clip_top_m;      // the lowest cloud base under the storms, MSL
+uniform vec3 u_veil;             // a nimbostratus's rain: extinction /m, its base, the ground (MSL)
+uniform vec3 u_veil_rgb;
 uniform int u_count;
 uniform vec4 u_axis[MAX_CURTAINS];   // axis east, north less the eye's; e-folding radius; extinction /m
 uniform vec4 u_span[MAX_CURTAINS];   // top, bottom MSL; 1 where it ends in the air (virga); seed
+uniform vec4 u_base[MAX_CURTAINS];   // the cloud's base radius (0: none drawn)
 uniform vec3 u_body[MAX_CURTAINS];   // the rain's colour, lit under the storm
 uniform vec3 u_air[MAX_CURTAINS];    // the air's colour toward it (the haze it fades into)
 uniform float u_inv_haze_m;
+uniform float u_pixel_rad;       // the angle one pixel of the layer spans
 uniform float u_fall_m;          // how far the streaks have fallen (the clock times their speed)
 out vec4 f_colour;
 
@@ -55,11 +62,17 @@ float erf_approx(float x) {
 // The curtain's density across its breadth and down its fall: sheets of rain 60-250 m
 // across, drawn out ten times as long, falling; the core's extinction scaled 0.2..1.8 by them
 // (their mean 1: the radar and the eye see the mean).
-float sheets(float across_m, float z_m, float seed) {
+// Sheets narrower than a few pixels where they are seen give way to their mean (0.5), or far
+// curtains would alias into pin stripes.
+float sheets(float across_m, float z_m, float seed, float pixel_m) {
     float fall = (z_m + u_fall_m) / 1400.0;
-    float fine = 0.7 * value_noise(vec2(across_m / 70.0 + seed, fall * 1.3))
-                 + 0.3 * value_noise(vec2(across_m / 19.0 - seed, fall * 2.1));
-    float coarse = value_noise(vec2(across_m / 260.0 - seed, fall * 0.5 + 7.0));
+    float finest = mix(value_noise(vec2(across_m / 19.0 - seed, fall * 2.1)), 0.5,
+                       smoothstep(2.5, 6.0, pixel_m));
+    float fine = 0.7 * mix(value_noise(vec2(across_m / 70.0 + seed, fall * 1.3)), 0.5,
+                           smoothstep(9.0, 22.0, pixel_m))
+                 + 0.3 * finest;
+    float coarse = mix(value_noise(vec2(across_m / 260.0 - seed, fall * 0.5 + 7.0)), 0.5,
+                       smoothstep(35.0, 80.0, pixel_m));
     return 0.2 + 1.6 * clamp(0.45 * fine + 0.55 * coarse + (fine - 0.5) * 0.4, 0.0, 1.0);
 }
 
@@ -124,7 +137,8 @@ void main() {
             float e1 = erf_approx((s_end - s0) / radius);
             float z = u_eye_z + s_at * slope;
             float across = dot((s0 + (float(k) - 1.0) * radius) * u - a, side);
-            float sheet = sheets(across, z, u_span[i].w + 31.0 * float(k));
+            float sheet = sheets(across, z, u_span[i].w + 31.0 * float(k),
+                                 s_at / ch * u_pixel_rad);
             // Up into the cloud it falls from, the rain fades into it (no edge at its base).
             float ragged_top = value_noise(vec2(across / 110.0, 3.0 + u_span[i].w));
             float tau = u_axis[i].w * across_gauss * (e1 - e0) * sheet
@@ -139,11 +153,46 @@ void main() {
             float alpha = 1.0 - exp(-tau);
             float haze = 1.0 - exp(-(s_start / ch) * u_inv_haze_m);
             // Thick sheets are darker (less of the light gets in), thin ones lighter.
-            vec3 body = u_body[i] * (1.4 - 0.55 * sheet);
+            vec3 body = u_body[i] * (1.3 - 0.4 * sheet);
             colour += seen * alpha * mix(body, u_air[i], haze);
             seen *= 1.0 - alpha;
             e0 = e1;
         }
+        // The storm's underside, dark (in the shadow of ten kilometres of cloud) and lumpy,
+        // where the ray meets its base: seen from below it when nothing lower hides it.
+        if (u_base[i].x > 0.0 && slope > 1e-4 && u_span[i].x <= u_clip_top_m + 1.0) {
+            float s_base = (u_span[i].x - u_eye_z) / slope;
+            vec2 at = s_base * u - a;
+            float d = length(at) / u_base[i].x;
+            if (s_base > 0.0 && d < 1.2) {
+                float lumps = 0.6 * value_noise(at / 650.0 + u_span[i].w)
+                              + 0.4 * value_noise(at / 230.0 - u_span[i].w);
+                float alpha = BASE_ALPHA * (1.0 - smoothstep(0.75, 1.15, d + 0.2 * lumps));
+                float haze = 1.0 - exp(-(s_base / ch) * u_inv_haze_m);
+                vec3 under = u_air[i] * (BASE_SHADE + 0.3 * lumps);
+                colour += seen * alpha * mix(under, u_air[i], haze);
+                seen *= 1.0 - alpha;
+            }
+        }
+    }
+    if (u_veil.x > 0.0) {
+        // A nimbostratus's rain, even under its base out to VEIL_RANGE_M (behind the
+        // curtains: where both fall, the storm's is the nearer and the heavier).
+        float top = u_veil.y - u_eye_z;
+        float bottom = u_veil.z - u_eye_z;
+        float s_lo = 0.0;
+        float s_hi = VEIL_RANGE_M;
+        if (abs(slope) > 1e-6) {
+            float s_top = top / slope;
+            float s_bottom = bottom / slope;
+            s_lo = max(0.0, min(s_top, s_bottom));
+            s_hi = min(s_hi, max(s_top, s_bottom));
+        } else if (top < 0.0 || bottom > 0.0) {
+            s_hi = 0.0;
+        }
+        float alpha = 1.0 - exp(-u_veil.x * max(s_hi - s_lo, 0.0) / ch);
+        colour += seen * alpha * u_veil_rgb;
+        seen *= 1.0 - alpha;
     }
     float a = 1.0 - seen;
     if (a < 1.0 / 512.0) {
@@ -179,8 +228,9 @@ void main() {
     float len = length(d);
     vec2 dir = len > 1e-3 ? d / len : vec2(0.0, 1.0);
     vec2 n = vec2(-dir.y, dir.x) * (0.5 * in_width_px);
-    // A round cap of half the width at each end keeps a short streak (a flake) a dot.
-    vec2 cap = dir * (0.5 * in_width_px);
+    // A cap of half the width at each end keeps a short streak (a flake) a dot; long ones
+    // (a channel's segments, end to end) have none, or their joints would bead.
+    vec2 cap = dir * (0.5 * in_width_px * clamp(1.5 - len / in_width_px, 0.0, 1.0));
     int k = gl_VertexID;  // two triangles: 0 1 2, 2 1 3 as a strip of 4 corners
     int corner = k < 3 ? k : (k == 3 ? 2 : (k == 4 ? 1 : 3));
     bool at_head = (corner & 1) == 1;
