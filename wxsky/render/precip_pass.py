@@ -49,7 +49,9 @@ class PrecipPass:
 
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self.ctx = ctx
-        self._curtains = shaders.program("precip.glsl", {"CURTAINS": "1"})
+        self._curtains = shaders.program(
+            "precip.glsl", {"CURTAINS": "1", "MAX_CURTAINS": str(MAX_CURTAINS)}
+        )
         self._lines = shaders.program("precip.glsl", {"LINES": "1"})
         self._curtain_vao = ctx.vertex_array(self._curtains, [])
         self._buffer = ctx.buffer(reserve=4096 * _LINE_FLOATS * 4, dynamic=True)

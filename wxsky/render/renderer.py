@@ -91,6 +91,9 @@ BASE_FEATHER_TO_M = 8000.0
 # A flat-based sprite's texels are dimmed to BASE_DIM at the base, back to their own colour
 # BASE_SHADE_DEPTH of the sprite's size above it: the base lies in the whole cloud's shadow.
 BASE_DIM = 0.55
+# The rain curtains are drawn at this share of the near layer's width and height
+# (precip.glsl): their sheets run down them, fine across and long, so a few rows do.
+CURTAIN_SCALE = (0.5, 0.125)
 BASE_SHADE_DEPTH = 0.5
 # ... at full strength where the sine of the angle the sprite is seen at from below is at
 # least BASE_DIM_TO (the underside shows), none under BASE_DIM_FROM (the lower side does).
@@ -397,10 +400,20 @@ class Renderer:
         self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
         if precip is not None and precip.drawn and sky is not None:
             # The rain curtains over the sprites, below the lowest cloud base (from under it):
-            # the rain stands between the eye and the clouds it falls through.
-            target.fbo.use()
+            # the rain stands between the eye and the clouds it falls through. Drawn at
+            # CURTAIN_SCALE of the layer and stretched over it: every pixel of them walks
+            # every curtain in view.
+            small = self._target(
+                f"{name}_curtains",
+                max(1, math.ceil(w * CURTAIN_SCALE[0])),
+                max(1, math.ceil(h * CURTAIN_SCALE[1])),
+            )
+            small.fbo.use()
+            small.fbo.clear(0.0, 0.0, 0.0, 0.0)
             with self._pass(f"curtains {name}", "sky"):
-                self._precip.draw_curtains(precip, cam, sky, target.size, self._exposure)
+                drawn = self._precip.draw_curtains(precip, cam, sky, small.size, self._exposure)
+            if drawn:
+                self._upsample(small, target, over=True)
 
     def _legacy_clear(
         self, rgba: tuple[float, float, float, float]
@@ -765,9 +778,15 @@ class Renderer:
         if self._finish_each_draw:
             self._finish()
 
-    def _upsample(self, source: _Target, dest: _Target) -> None:
+    def _upsample(self, source: _Target, dest: _Target, over: bool = False) -> None:
+        """`source` stretched over `dest` (bilinear): in its place, or with `over`, composited
+        over what `dest` holds (premultiplied)."""
         dest.fbo.use()
-        self.ctx.disable(moderngl.BLEND)
+        if over:
+            self.ctx.enable(moderngl.BLEND)
+            self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+        else:
+            self.ctx.disable(moderngl.BLEND)
         source.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         source.texture.repeat_x = source.texture.repeat_y = False
         source.texture.use(0)
@@ -775,6 +794,7 @@ class Renderer:
         _set(self._upsample_prog, "u_target_size", (float(dest.size[0]), float(dest.size[1])))
         with self._pass(f"upsample {_sprite_pass_name(source.name)}", "upsample"):
             self._upsample_vao.render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.disable(moderngl.BLEND)
 
     def _draw_sprites(
         self,

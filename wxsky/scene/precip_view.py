@@ -52,7 +52,7 @@ from wxsky.scene.radar import CONVECTIVE_FACTOR, rate_mm_h
 from wxsky.scene.rain import SHAFT_RADIUS_FRAC, Rain
 from wxsky.weather.state import CloudType, WeatherState
 
-MAX_CURTAINS = 12  # the nearest curtains drawn; the shader's array size
+MAX_CURTAINS = 8  # the nearest curtains drawn; the shader's array size
 CURTAIN_RANGE_M = 40_000.0  # farther storms are the ring's (their shafts are sprites there)
 VIRGA_REACH_M = 120.0  # the reach formula's scale (module docstring)
 # Drops at the eye.

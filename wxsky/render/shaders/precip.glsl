@@ -2,10 +2,10 @@
 // near storms over the picture (a full-screen quad, u_rect); with LINES, screen-space streaks
 // (the drops and flakes about the eye, lightning's channels), a quad per instance.
 // Premultiplied alpha, display-referred legacy colours as the sprites' (display.glsl).
+// Needs MAX_CURTAINS (precip_view.py's, defined by render/precip_pass.py).
 #include "display.glsl"
 
 #if defined CURTAINS
-#define MAX_CURTAINS 12
 #define VEIL_RANGE_M 30000.0
 #define BASE_ALPHA 0.95
 #define BASE_SHADE 0.15
@@ -153,7 +153,7 @@ void main() {
             float alpha = 1.0 - exp(-tau);
             float haze = 1.0 - exp(-(s_start / ch) * u_inv_haze_m);
             // Thick sheets are darker (less of the light gets in), thin ones lighter.
-            vec3 body = u_body[i] * (1.3 - 0.4 * sheet);
+            vec3 body = u_body[i] * (1.45 - 0.55 * sheet);
             colour += seen * alpha * mix(body, u_air[i], haze);
             seen *= 1.0 - alpha;
             e0 = e1;
