@@ -151,7 +151,7 @@ class Daemon:
             width_px=cam.width,
             height_px=cam.height,
         )
-        settings = config.scene.settings()
+        settings = config.scene_settings()
         self.engine = SkyEngine(
             state,
             camera,
