@@ -1212,6 +1212,10 @@ shadow_map_px = 64
 shm_name = "{shm_name}"
 max_width = 320
 max_height = 180
+[radar]
+layer = true
+range_nm = 10.0
+size_px = 64
 """
 
 
