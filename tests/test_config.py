@@ -333,3 +333,52 @@ def test_bad_serial_spec(spec: str, fragment: str) -> None:
 def test_bad_can_spec(spec: str) -> None:
     with pytest.raises(ValueError, match="INTERFACE:CHANNEL"):
         CanInputSection.from_spec(spec)
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (
+            "[lightning]\nflashes_per_min = 61\n",
+            "x.toml:2: lightning.flashes_per_min: must be in 0..60",
+        ),
+        (
+            "[lightning]\nflashes_per_min = -1\n",
+            "x.toml:2: lightning.flashes_per_min: must be in 0..60",
+        ),
+        (
+            '[lightning]\nflashes_per_min = "lots"\n',
+            'lightning.flashes_per_min: must be "weather" or',
+        ),
+        (
+            "[lightning]\nflashes_per_min = true\n",
+            'lightning.flashes_per_min: must be "weather" or',
+        ),
+        ("[lightning]\nrate = 3\n", "x.toml:2: lightning.rate: unknown key"),
+        ("[radar]\nrange_nm = 400\n", "x.toml:2: radar.range_nm: must be a number in 10..320"),
+        ("[radar]\nrange_nm = 5\n", "x.toml:2: radar.range_nm: must be a number in 10..320"),
+        ("[radar]\ntilt_deg = -20\n", "x.toml:2: radar.tilt_deg: must be a number in -15..15"),
+        ("[radar]\nsize_px = 2048\n", "x.toml:2: radar.size_px: must be an integer in 64..1024"),
+        ("[radar]\nevery_s = 0\n", "x.toml:2: radar.every_s: must be a number in 0.1..3600"),
+        ("[radar]\nlayer = 1\n", "x.toml:2: radar.layer: must be"),
+    ],
+)
+def test_lightning_and_radar_keys_are_checked(tmp_path: Path, text: str, expected: str) -> None:
+    message = load_error(tmp_path, text)
+    assert expected in message, message
+    assert "\n" not in message.strip()
+
+
+def test_lightning_and_radar_keys_reach_their_users(tmp_path: Path) -> None:
+    cfg = load_config(None)
+    assert cfg.lightning.flashes_per_min == "weather"
+    assert cfg.scene_settings().flashes_per_min is None  # by the storm's strength
+    assert cfg.scene_settings() == cfg.scene.settings()
+    assert not cfg.radar.layer
+    text = (
+        "[lightning]\nflashes_per_min = 12\n[radar]\nlayer = true\nrange_nm = 80\ntilt_deg = -2.5\n"
+    )
+    cfg = load_config(write(tmp_path, text))
+    assert cfg.scene_settings().flashes_per_min == 12.0
+    assert (cfg.radar.layer, cfg.radar.range_nm, cfg.radar.tilt_deg) == (True, 80.0, -2.5)
+    assert load_config(write(tmp_path, to_toml(config_to_toml_dict(cfg)), "y.toml")) == cfg

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from wxsky.errors import ProtocolError
-from wxsky.output.frame_meta import RECORD_SIZE, RECORD_SIZE_V2, FrameMeta, ShadowPlacement
+from wxsky.output.frame_meta import (
+    RECORD_SIZE,
+    RECORD_SIZE_V2,
+    FrameMeta,
+    RadarPlacement,
+    ShadowPlacement,
+)
 from wxsky.scene.camera import Camera
 
 
@@ -152,3 +158,19 @@ def test_an_impossible_shadow_placement_is_a_protocol_error(offset: int, value: 
     struct.pack_into("<d", data, offset, value)
     with pytest.raises(ProtocolError, match="shadow placement"):
         FrameMeta.unpack(bytes(data))
+
+
+def test_a_radar_placement_follows_the_version_3_record() -> None:
+    """A slot with a radar picture (`[radar] layer`) has a longer version 3 record, whose
+    bytes past 1800 readers of before ignore; one without has the record of before."""
+    placed = RadarPlacement(7, (1.0, -2.0, 1500.0), 40.0, -2.5, 1_781_000_000.0)
+    plain = _meta().pack()
+    data = dataclasses.replace(_meta(), radar=placed).pack()
+    assert len(data) == RECORD_SIZE + 56 and data[:RECORD_SIZE] == plain
+    assert struct.unpack_from("<Q3dddd", data, 1800) == (7, 1.0, -2.0, 1500.0, 40.0, -2.5, 1.781e9)
+    assert FrameMeta.unpack(data).radar == placed
+    assert FrameMeta.unpack(plain).radar is None
+    assert FrameMeta.unpack(data[:RECORD_SIZE]).radar is None
+    bad = data[:1832] + struct.pack("<d", float("nan")) + data[1840:]
+    with pytest.raises(ProtocolError, match="radar placement"):
+        FrameMeta.unpack(bad)

@@ -142,3 +142,52 @@ def test_a_flash_lights_the_storm() -> None:
     centre = (slice(60, 120), slice(110, 210))
     gain = float((lit[centre][..., :3] @ luma).mean() - (dark[centre][..., :3] @ luma).mean())
     assert gain > 8.0, gain
+
+
+def _flashes_in_a_minute(
+    monkeypatch: pytest.MonkeyPatch, settings: SceneSettings
+) -> tuple[int, float]:
+    """Flashes announced over 60 s of +TSRA stepped frame by frame, and how many the cells
+    the frames flashed in should make at the rate asked for: the sum of their formation
+    (in twentieths, as `flashes_between` takes it) over the minute."""
+    import wxsky.scene.layout as layout
+
+    cells: dict[int, float] = {}
+    real = layout.flashes_between
+
+    def spying(found, seed, rate, t0, t1):  # type: ignore[no-untyped-def]
+        found = tuple(found)
+        for c in found:
+            cells[c.cloud_id] = round(c.formed * 20.0) / 20.0
+        return real(found, seed, rate, t0, t1)
+
+    monkeypatch.setattr(layout, "flashes_between", spying)
+    state = _storm()
+    cam = Camera((0.0, 0.0, state.observer.alt_m + 2.0), 0.0, 10.0)
+    count = 0
+    with SkyEngine(state, cam, settings, clock_rate=1.0) as engine:
+        for _ in range(150):
+            count += len(engine.advance(0.4).frame.new_flashes)
+    return count, sum(cells.values())
+
+
+def test_the_config_sets_the_rate(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`[lightning] flashes_per_min`: 60 s of +TSRA at 30 a minute a cell flash about 30
+    times each storm cell's formation (a Poisson count, within 4 sigma), not +TS's 8; at 0
+    not at all; and without a storm the key makes none."""
+    from wxsky.settings.config import DaemonConfig, LightningSection
+
+    config = DaemonConfig(lightning=LightningSection(flashes_per_min=30))
+    settings = dataclasses.replace(config.scene_settings(), max_towers=2)
+    assert settings.flashes_per_min == 30.0
+    count, formed = _flashes_in_a_minute(monkeypatch, settings)
+    assert formed > 0.0, "the thunderstorm preset has no storm cell near the eye"
+    expected = 30.0 * formed
+    assert abs(count - expected) <= 4.0 * math.sqrt(expected) + 1.0, (count, expected)
+    assert count > 2.0 * 8.0 * formed  # well above what +TS alone flashes
+    off = dataclasses.replace(settings, flashes_per_min=0.0)
+    assert _flashes_in_a_minute(monkeypatch, off)[0] == 0
+    calm = dataclasses.replace(_storm(), present_weather=("RA",))
+    assert storm_rate_per_min(calm, 30.0) == 0.0
+    assert storm_rate_per_min(_storm(), 30.0) == 30.0
+    assert storm_rate_per_min(_storm(), None) == 8.0

@@ -79,6 +79,7 @@ from wxsky.protocols.nmea import NmeaDecoder, NmeaSettings  # noqa: E402
 from wxsky.protocols.result import Decoded  # noqa: E402
 from wxsky.scene.cloud_model_files import MODEL_TABLE, model_from_values  # noqa: E402
 from wxsky.scene.clouds import UNDER_BASE_MAX_M, generate_block_clouds  # noqa: E402
+from wxsky.scene.lightning import RATE_PER_MIN, storm_rate_per_min  # noqa: E402
 from wxsky.schema import Kind, Number, Table, Tables  # noqa: E402
 from wxsky.schema.toml_file import check_toml_bytes  # noqa: E402
 from wxsky.settings.config import (  # noqa: E402
@@ -871,7 +872,52 @@ def cigi_seeds() -> list[bytes]:
     repeats) in both byte orders, and two datagrams run together (what a receive buffer read
     twice looks like)."""
     seeds = [encode_cigi(m, order) for m in cigi_messages() for order in ("big", "little")]
+    seeds += [encode_cigi(m, order) for m in _storm_messages() for order in ("big", "little")]
     return [*seeds, seeds[0] + seeds[-1], seeds[1] + seeds[2]]
+
+
+def _storm_messages() -> list[list[CigiPacket]]:
+    """A host's storm (issue 43): a cumulonimbus layer with random lightning at each severity,
+    and the precipitation layers (4 rain .. 7 hail), global and in a region, so that the
+    mutations start from the fields the lightning and the shafts read."""
+    host = make_cigi("ig_control", ig_mode=1)
+    storm = [
+        make_cigi(
+            "weather_control",
+            layer_id=layer,
+            weather_enable=1,
+            random_lightning_enable=lightning,
+            cloud_type=1 if layer <= 3 else 0,  # cumulonimbus
+            scope=scope,
+            entity_or_region_id=7 if scope == 1 else 0,
+            severity=severity,
+            visibility_m=2500.0,
+            coverage_pct=40.0 + 10.0 * severity,
+            base_elevation_m=900.0,
+            thickness_m=9000.0 if layer <= 3 else 800.0,
+        )
+        for layer, lightning, scope, severity in (
+            (1, 1, 0, 0),
+            (2, 1, 0, 3),
+            (3, 1, 1, 5),
+            (1, 0, 0, 2),
+            (4, 0, 0, 4),
+            (5, 0, 1, 1),
+            (6, 0, 0, 3),
+            (7, 0, 0, 5),
+        )
+    ]
+    region = make_cigi(
+        "environmental_region_control",
+        region_id=7,
+        region_state=1,
+        merge_weather=1,
+        lat_deg=47.5,
+        lon_deg=8.5,
+        size_x_m=20_000.0,
+        size_y_m=20_000.0,
+    )
+    return [[host, *storm[:4]], [host, region, *storm[4:]], [host, region, *storm]]
 
 
 def _cigi_tokens() -> tuple[bytes, ...]:
@@ -938,7 +984,10 @@ def _assert_cigi_session(d: CigiDatagram) -> None:
         eye = cigi_eye(state)
         own = state.ownship
         place = (own.lat_deg, own.lon_deg, own.alt_m) if own else (47.0, 8.0, 500.0)
-        assert_patch_in_range(cigi_weather_patch(state, *place))
+        weather = assert_patch_in_range(cigi_weather_patch(state, *place))
+        # Random lightning's storm, as the frames flash it (scene/lightning.py).
+        rate = storm_rate_per_min(weather)
+        assert rate in (0.0, *RATE_PER_MIN.values()), f"lightning at {rate} a minute"
         if eye is not None:
             values = (eye.lat_deg, eye.lon_deg, eye.alt_m, eye.heading_deg, eye.pitch_deg)
             assert all(math.isfinite(v) for v in values), f"eye {eye}"
@@ -1059,6 +1108,8 @@ def config_seeds() -> list[bytes]:
     full["can"] = [{"interface": "socketcan", "channel": "can0", "node_ids": [10, 11]}]
     seeds.append(toml_text(full).encode())
     seeds.append(b'[output]\nshm_name = "wxsky-a"\nmax_width = 960\nmax_height = 540\n')
+    seeds.append(b"[lightning]\nflashes_per_min = 30\n[radar]\nlayer = true\nrange_nm = 320\n")
+    seeds.append(b"[radar]\nlayer = true\ntilt_deg = -15.0\nsize_px = 1024\nevery_s = 0.1\n")
     return seeds
 
 
@@ -1202,6 +1253,10 @@ shadow_map_px = 64
 shm_name = "{shm_name}"
 max_width = 320
 max_height = 180
+[radar]
+layer = true
+range_nm = 10.0
+size_px = 64
 """
 
 
@@ -1420,6 +1475,28 @@ def _control_tokens() -> tuple[bytes, ...]:
         "weather",
         "target",
         "frame",
+        "lightning",
+        "radar",
+        "range_nm",
+        "tilt_deg",
+        "size_px",
+        "set_weather",
+        "visibility_m",
+        "layers",
+        "wind",
+        "present_weather",
+        "now",
+        "type",
+        "cover_oktas",
+        "base_m",
+        "top_m",
+        "cumulonimbus",
+        "+TSRA",
+        "-TS",
+        "VCTS",
+        320.0,
+        -15.0,
+        1024,
         float("nan"),
         float("inf"),
         -1e308,

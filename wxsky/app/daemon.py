@@ -48,6 +48,7 @@ from wxsky.app.memory import TRIM_EVERY_S, TraceReport, memory_status
 from wxsky.app.memory import trim as trim_heap
 from wxsky.app.part_factory import parts_from_config
 from wxsky.app.parts import Part, PartContext, PublishedFrame
+from wxsky.app.radar_layer import RadarLayer
 from wxsky.app.trace import TraceWriter
 from wxsky.engine.radar_work import RadarWork
 from wxsky.engine.stages import FramePlan, SkyEngine
@@ -97,7 +98,12 @@ def layer_specs(config: DaemonConfig) -> list[LayerSpec]:
     out = config.output
     scene = config.scene
     return frame_layer_specs(
-        out.max_width, out.max_height, scene.ring_texture_px, scene.shadow_map_px, out.layer_format
+        out.max_width,
+        out.max_height,
+        scene.ring_texture_px,
+        scene.shadow_map_px,
+        out.layer_format,
+        radar_px=config.radar.size_px if config.radar.layer else 0,
     )
 
 
@@ -152,7 +158,7 @@ class Daemon:
             width_px=cam.width,
             height_px=cam.height,
         )
-        settings = config.scene.settings()
+        settings = config.scene_settings()
         self.engine = SkyEngine(
             state,
             camera,
@@ -200,6 +206,9 @@ class Daemon:
         self._trimmed_kib = 0
         self._control_log = RateLimitedLog(log)
         self._radar_work: RadarWork | None = None  # made at the first `radar` request
+        # The radar's segment layer (`[radar] layer`), its own thread made at start-up.
+        self._radar_layer: RadarLayer | None = None
+        self._radar_announced = 0  # the last picture's version sent in a `radar` notification
         self._at_eye: dict[str, Any] | None = None  # the last published frame's
         self._commands: dict[str, Callable[[dict[str, Any]], Any]] = {
             "status": lambda p: no_params("status", p) or self.status(),
@@ -247,6 +256,8 @@ class Daemon:
             self._trace = TraceWriter(self._trace_path)
             log.info("trace: %s", self._trace_path)
         self._writer = FrameWriter.create(self.config.output.shm_name, layer_specs(self.config))
+        if self.config.radar.layer:
+            self._radar_layer = RadarLayer(self.config.radar)
         out = self.config.output
         self._server = ControlServer(
             self.address,
@@ -288,6 +299,10 @@ class Daemon:
             now = loop.time()
             for part in self.parts:
                 part.before_frame()
+            if self._radar_layer is not None:
+                # Never waits: asks every [radar] every_s, takes the newest picture made.
+                engine = self.engine
+                self._radar_layer.step(now, engine.state, engine.drift, engine.camera.position_m)
             # The scene is built on the render thread too: a ring build takes long enough on a
             # CPU to hold up cockpit input if it ran here.
             plan, meta, published_s = await loop.run_in_executor(
@@ -331,6 +346,8 @@ class Daemon:
         if self._radar_work is not None:
             self._radar_work.close(wait_s=max(0.05, timeout / 4))
             self._radar_work = None
+        if self._radar_layer is not None:
+            self._radar_layer.close(wait_s=max(0.05, timeout / 4))
         # Then the parts, together: a master's channels see the bus go at once and keep the
         # last sky; readers and feeds stop.
         await self._close_parts(time.monotonic() + max(0.05, timeout / 4))
@@ -473,8 +490,9 @@ class Daemon:
             from wxsky.render.texture_export import SlotExport
 
             export = SlotExport(self._slot_textures, r, writer.target_slot)
+        radar = self._radar_layer.shown if self._radar_layer is not None else None
         meta = publish_plan(
-            r, writer, plan, frame_number, self.config.scene.ring_texture_px, export
+            r, writer, plan, frame_number, self.config.scene.ring_texture_px, export, radar
         )
         if self._trace is not None:
             self._trace.write_events(frame_number, plan.frame.camera.position_m, plan.events)
@@ -663,6 +681,16 @@ class Daemon:
             self._server_broadcast(
                 "lightning", {"frame_number": meta.frame_number, **flash.to_dict()}
             )
+        radar = self._radar_layer.shown if self._radar_layer is not None else None
+        if (
+            radar is not None
+            and meta.radar is not None
+            and meta.radar.version > self._radar_announced
+        ):
+            # With the first frame whose slot holds the picture (the record says which).
+            self._radar_announced = meta.radar.version
+            if radar.version == meta.radar.version:
+                self._server_broadcast("radar", radar.notification(meta.frame_number))
 
     def _server_broadcast(self, topic: str, params: dict[str, Any]) -> None:
         if self._server is not None:

@@ -16,6 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
+from wxsky.app.radar_layer import RadarShow
 from wxsky.engine.stages import FramePlan
 from wxsky.output.frame_meta import FrameMeta, ShadowPlacement
 from wxsky.output.shm import RGBA8, LayerSpec
@@ -79,13 +80,16 @@ def frame_layer_specs(
     ring_px: int,
     shadow_px: int = SHADOW_MAP_PX,
     layer_format: str = RGBA8,
+    radar_px: int = 0,
 ) -> list[LayerSpec]:
     """The segment's layers: sky and near at most width x height, the current ring's 8
     images, the incoming ring's 8 while it fades in (absent otherwise), and the cloud-shadow
     map of the ring on show (`shadow_px` square; none with 0). The pictures are in
     `layer_format` (the renderer's: "rgba8" display values or "rgba16f" scene-linear); the
-    shadow map, a map of transmittance rather than a picture, is RGBA8 in either."""
+    shadow map, a map of transmittance rather than a picture, is RGBA8 in either; so is the
+    weather radar's picture (`radar_px` square; none with 0: `[radar] layer` off)."""
     shadow = [LayerSpec("shadow", shadow_px, shadow_px)] if shadow_px > 0 else []
+    radar = [LayerSpec("radar", radar_px, radar_px)] if radar_px > 0 else []
     fmt = layer_format
     return [
         LayerSpec("sky", width, height, fmt),
@@ -95,6 +99,7 @@ def frame_layer_specs(
         *(LayerSpec(f"ring_{i}", ring_px, ring_px, fmt) for i in range(RING_SIZE)),
         *(LayerSpec(f"ring_in_{i}", ring_px, ring_px, fmt) for i in range(RING_SIZE)),
         *shadow,
+        *radar,
     ]
 
 
@@ -121,9 +126,11 @@ def publish_plan(
     frame_number: int,
     ring_px: int,
     export: LayerExport | None = None,
+    radar: RadarShow | None = None,
 ) -> FrameMeta:
     """Copy the drawn layers into the slot being filled (the current ring as ring_i, the
-    incoming one as ring_in_i while it fades in), write the frame record and publish. With
+    incoming one as ring_in_i while it fades in; `radar`, the radar picture on show, as the
+    `radar` layer), write the frame record and publish. With
     `export` (a host takes zero-copy textures), each layer also goes to the slot's texture,
     finished before the publish so the seqlock covers it too."""
     rings = plan.rings
@@ -154,12 +161,20 @@ def publish_plan(
             size_m=shadow.size_m,
             sun_direction_enu=shadow.sun_direction_enu,
         )
+    # The radar's newest picture, made on its own thread: into each slot once per picture.
+    if radar is not None:
+        picture_name = ("radar", radar.version)
+        if not sink.keep_layer("radar", radar.px, radar.px, picture_name):
+            buffer = sink.layer_buffer("radar", radar.px, radar.px, picture_name)
+            np.frombuffer(buffer, np.uint8)[:] = radar.rgba.reshape(-1)
     if export is not None:
         # After the first layer_buffer (the slot's seq is odd) and before the publish.
         for layer, source in copies:
             export.copy(layer, source)
         if shadow is not None:  # made on the CPU: uploaded, once per map and slot
             export.write("shadow", shadow.rgba.tobytes(), shadow.px, shadow.px, shadow.serial)
+        if radar is not None:
+            export.write("radar", radar.rgba.tobytes(), radar.px, radar.px, radar.version)
         export.finish()
     geo = plan.ring.geometry
     meta = FrameMeta(
@@ -177,6 +192,7 @@ def publish_plan(
         incoming_radius_m=incoming.geometry.radius_m if incoming else 0.0,
         incoming_quads_m=incoming.geometry.corners_m() if incoming else None,
         shadow=placement,
+        radar=radar.placement if radar is not None else None,
     )
     sink.publish(frame_number, meta.pack())
     return meta

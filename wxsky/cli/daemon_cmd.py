@@ -538,7 +538,7 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
         width_px=width,
         height_px=height,
     )
-    settings = config.scene.settings()
+    settings = config.scene_settings()
     transition = None
     if args.transition_to:
         from wxsky.app.snapshot import Transition

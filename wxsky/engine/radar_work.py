@@ -77,6 +77,12 @@ class RadarWork:
                 self._made.move_to_end(key)
             return made
 
+    def latest(self, key: RadarKey) -> Made | None:
+        """The last picture made for `key`, asking for nothing (the radar layer looks every
+        frame for a new one and asks only every `[radar] every_s`)."""
+        with self._lock:
+            return self._made.get(key)
+
     def close(self, wait_s: float = 2.0) -> None:
         with self._lock:
             if self._closed:

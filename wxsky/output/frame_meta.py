@@ -24,6 +24,13 @@ Layout (little-endian, 1800 bytes), documented in docs/protocol.md:
     f64 shadow size_m         (edge of the square map)
     f64 shadow sun_direction_enu[3]  (the sun the map was made for: project along it)
 
+    -- from 1800, only while the slot holds a `radar` layer (a longer version 3 record, whose
+       extra bytes readers of before ignore) --
+    u64 radar_version         (changes with the picture; never 0)
+    f64 radar centre_m[3]     (where the picture was taken from: its middle pixel)
+    f64 radar range_nm, tilt_deg
+    f64 radar time_utc_unix_s (the simulated moment the picture shows)
+
 Readers take version 2 records too (1736 bytes, no shadow map) and refuse other versions.
 """
 
@@ -50,6 +57,9 @@ _HEAD = struct.Struct("<IIQQd3d4dII3d3dd")
 _MIDDLE = struct.Struct("<IId3dd")
 assert _HEAD.size + _MIDDLE.size + _SHADOW.size + 2 * 96 * 8 == _FORMAT.size
 RECORD_SIZE = _FORMAT.size
+# The radar picture's placement, after a version 3 record while the slot holds one.
+_RADAR = struct.Struct("<Q3dddd")
+RECORD_SIZE_RADAR = RECORD_SIZE + _RADAR.size
 RECORD_SIZE_V2 = _FORMAT_V2.size
 READ_VERSIONS = (2, 3)
 
@@ -65,6 +75,19 @@ class ShadowPlacement:
     centre_m: tuple[float, float, float]
     size_m: float
     sun_direction_enu: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class RadarPlacement:
+    """The slot's weather radar picture (docs/protocol.md §1.5, docs/radar.md): north-up,
+    the middle pixel at centre_m, the layer's width across twice range_nm; made for the
+    simulated moment time_utc_unix_s with the antenna tilted tilt_deg."""
+
+    version: int  # > 0; changes whenever the picture does
+    centre_m: tuple[float, float, float]
+    range_nm: float
+    tilt_deg: float
+    time_utc_unix_s: float
 
 
 @dataclass(frozen=True)
@@ -86,6 +109,8 @@ class FrameMeta:
     incoming_quads_m: npt.NDArray[np.float64] | None = None
     # The slot's cloud-shadow map, or None when it has none (or the record is version 2).
     shadow: ShadowPlacement | None = None
+    # The slot's radar picture (`[radar] layer`), or None when it holds none.
+    radar: RadarPlacement | None = None
 
     @property
     def fading(self) -> bool:
@@ -130,6 +155,7 @@ class FrameMeta:
                 middle,
                 incoming.astype("<f8", copy=False).tobytes(),
                 _SHADOW.pack(*_pack_shadow(self.shadow)),
+                _pack_radar(self.radar),
             )
         )
 
@@ -171,6 +197,7 @@ class FrameMeta:
             incoming_radius_m=v[123] if v[118] else 0.0,
             incoming_quads_m=np.array(v[124:220]).reshape(8, 4, 3) if v[118] else None,
             shadow=_unpack_shadow(data, v[2]) if version == 3 else None,
+            radar=_unpack_radar(data, v[2]) if version == 3 else None,
         )
 
 
@@ -195,4 +222,33 @@ def _unpack_shadow(data: bytes, frame_number: int) -> ShadowPlacement | None:
         centre_m=(f[0], f[1], f[2]),
         size_m=f[3],
         sun_direction_enu=(f[4], f[5], f[6]),
+    )
+
+
+def _pack_radar(radar: RadarPlacement | None) -> bytes:
+    if radar is None:
+        return b""  # the record of before: a slot without a radar picture
+    if radar.version <= 0:
+        raise ValueError(f"radar version must be positive, got {radar.version}")
+    return _RADAR.pack(
+        radar.version, *radar.centre_m, radar.range_nm, radar.tilt_deg, radar.time_utc_unix_s
+    )
+
+
+def _unpack_radar(data: bytes, frame_number: int) -> RadarPlacement | None:
+    if len(data) < RECORD_SIZE_RADAR:
+        return None
+    version, *f = _RADAR.unpack_from(data, RECORD_SIZE)
+    if version == 0:
+        return None
+    if not all(math.isfinite(x) for x in f) or not f[3] > 0.0:
+        raise ProtocolError(
+            f"frame record {frame_number}: radar placement {f} is not finite or has no range"
+        )
+    return RadarPlacement(
+        version=version,
+        centre_m=(f[0], f[1], f[2]),
+        range_nm=f[3],
+        tilt_deg=f[4],
+        time_utc_unix_s=f[5],
     )

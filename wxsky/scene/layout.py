@@ -113,6 +113,9 @@ class SceneSettings:
     shadow_map_px: int = SHADOW_MAP_PX
     # At most this many convective cells of the near layer grow as volumes (tower_field).
     max_towers: int = 6
+    # Lightning flashes a minute in each storm cell while a thunderstorm is reported
+    # (`[lightning] flashes_per_min`); None: by the storm's strength (lightning.RATE_PER_MIN).
+    flashes_per_min: float | None = None
 
 
 @dataclass(frozen=True)
@@ -467,7 +470,7 @@ def build_frame(
     eye = camera.position_m
     placed = NO_TOWERS
     found = None
-    storms = storm_rate_per_min(state)
+    storms = storm_rate_per_min(state, settings.flashes_per_min)
     rain = rain_of(state)
     if (
         towers is not None

@@ -31,6 +31,9 @@ F64 = npt.NDArray[np.float64]
 SLOT_S = 10.0  # simulated seconds a stream of flashes covers
 # Flashes a minute in each storm cell: a thunderstorm reported light, moderate, heavy.
 RATE_PER_MIN = {"-": 1.0, "": 3.0, "+": 8.0}
+# The most flashes a minute a cell a config may ask for (`[lightning] flashes_per_min`): a
+# severe storm's tens (Williams 2001), with room; past it a cell is a strobe, not a storm.
+MAX_RATE_PER_MIN = 60.0
 IC_SHARE = 0.7  # most flashes stay in the cloud (Williams 2001: 3-4 IC to 1 CG)
 LONGEST_S = 1.0  # no flash lights the sky longer (its glow is 0 past its last stroke)
 RETURN_STROKES = (1, 4)
@@ -94,9 +97,11 @@ class StormCell:
     width_m: float = 0.0  # its base's width (the rain shaft under it: `precip_eye.Shaft`)
 
 
-def storm_rate_per_min(state: WeatherState) -> float:
+def storm_rate_per_min(state: WeatherState, override_per_min: float | None = None) -> float:
     """Flashes a minute per storm cell from the strongest thunderstorm the weather reports
-    (0: none). `VCTS` (in the vicinity) counts as a light one."""
+    (0: none). `VCTS` (in the vicinity) counts as a light one. `override_per_min` (the
+    config's `[lightning] flashes_per_min`; None: by the storm's strength) is every storm
+    cell's rate while the weather reports a thunderstorm: it sets how often, never whether."""
     best = 0.0
     for group in state.present_weather:
         prefix, codes = weather_group(group)
@@ -104,6 +109,8 @@ def storm_rate_per_min(state: WeatherState) -> float:
             continue
         rate = RATE_PER_MIN["-" if "VC" in codes else prefix]
         best = max(best, rate)
+    if best > 0.0 and override_per_min is not None:
+        return override_per_min
     return best
 
 

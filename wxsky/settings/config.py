@@ -27,6 +27,8 @@ from wxsky.scene.clouds import BLOCK_SIZE_M
 from wxsky.scene.exposure import AUTO, EXPOSURE
 from wxsky.scene.gather import MAX_NEAR_BLOCKS, MAX_RING_BLOCKS, largest_range, scene_blocks
 from wxsky.scene.layout import SKY_MODELS, SceneSettings
+from wxsky.scene.lightning import MAX_RATE_PER_MIN
+from wxsky.scene.radar import RANGE_NM, SIZE_PX, TILT_DEG
 from wxsky.scene.shading import DEFAULT_SHADING, SHADING_MODELS
 from wxsky.schema import (
     OMIT,
@@ -236,6 +238,61 @@ class SceneSection(_Section):
             shadow_map_px=self.shadow_map_px,
             max_towers=self.max_towers,
         )
+
+
+# [lightning] flashes_per_min: "weather" (by the storm's strength) or flashes a minute a cell.
+WEATHER_RATE = "weather"
+
+
+def _flash_rate(value: Any) -> float | str:
+    if value == WEATHER_RATE:
+        return WEATHER_RATE
+    top = fmt_number(MAX_RATE_PER_MIN)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(
+            f'must be "weather" or a number of flashes a minute in 0..{top}, got {value!r}'
+        )
+    if not 0.0 <= value <= MAX_RATE_PER_MIN:  # NaN too
+        raise ValueError(f"must be in 0..{top} flashes a minute a storm cell, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class LightningSection(_Section):
+    """`[lightning]`: how often the storms flash (docs/lightning.md)."""
+
+    SECTION: ClassVar[str] = "lightning"
+
+    # "weather": each storm cell at the rate of the storm's strength (METAR -TS, TS, +TS or a
+    # CIGI host's random lightning: 1, 3, 8 a minute); a number: every storm cell's rate
+    # instead, while a thunderstorm is reported (0: no lightning). Every display channel of
+    # a site must be given the same value, or their flashes differ.
+    flashes_per_min: float | str = _opt(
+        WEATHER_RATE, Custom(_flash_rate, f'"weather" or 0..{fmt_number(MAX_RATE_PER_MIN)}')
+    )
+
+    def rate_per_min(self) -> float | None:
+        """The scene's `SceneSettings.flashes_per_min`: None for the weather's rate."""
+        rate = self.flashes_per_min
+        return None if isinstance(rate, str) else rate
+
+
+@dataclass(frozen=True)
+class RadarSection(_Section):
+    """`[radar]`: the weather radar's picture as a segment layer (docs/radar.md); the
+    `radar` control command works either way."""
+
+    SECTION: ClassVar[str] = "radar"
+
+    # Publish the radar layer (`radar`, one picture every `every_s`) and the `radar`
+    # notification; false: the segment has no such layer.
+    layer: bool = _opt(False)
+    range_nm: float = _opt(40.0, _num(*RANGE_NM, "NM"))
+    tilt_deg: float = _opt(0.0, _num(*TILT_DEG, "deg"))  # the antenna's elevation
+    size_px: int = _opt(256, _int(*SIZE_PX, "px"))
+    # A new picture is asked for this often (wall-clock); one not made by then is waited
+    # for off the frame path, the layer keeping the last.
+    every_s: float = _opt(1.0, _num(0.1, 3600.0, "s"))
 
 
 @dataclass(frozen=True)
@@ -521,6 +578,14 @@ class DaemonConfig:
     flightgear: FlightGearSection = field(default_factory=FlightGearSection)
     share: ShareSection = field(default_factory=ShareSection)
     channel: ChannelSection = field(default_factory=ChannelSection)
+    lightning: LightningSection = field(default_factory=LightningSection)
+    radar: RadarSection = field(default_factory=RadarSection)
+
+    def scene_settings(self) -> SceneSettings:
+        """The scene stage's settings: `[scene]`'s, with `[lightning]`'s rate."""
+        return dataclasses.replace(
+            self.scene.settings(), flashes_per_min=self.lightning.rate_per_min()
+        )
 
     def __post_init__(self) -> None:
         cam, out, scene = self.camera, self.output, self.scene
