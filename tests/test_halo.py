@@ -56,7 +56,7 @@ def _picture(
         width_px=SIZE[0],
         height_px=SIZE[1],
     )
-    image = take_snapshot(state, camera, load_config(None).scene).image
+    image = take_snapshot(state, camera, load_config(None).scene_settings()).image
     tan_x = math.tan(math.radians(FOV_DEG) / 2.0)
     tan_y = tan_x * SIZE[1] / SIZE[0]
     x = ((np.arange(SIZE[0]) + 0.5) / SIZE[0] * 2.0 - 1.0)[None, :] * tan_x

@@ -16,19 +16,24 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
-from tools.bench import storm_look
-from wxsky.app.snapshot import picture, take_snapshot
-from wxsky.engine.stages import SkyEngine
-from wxsky.png import write_png
-from wxsky.render.renderer import Renderer
-from wxsky.scene.camera import Camera
-from wxsky.scene.layout import SceneSettings
-from wxsky.weather.state import CloudLayer, CloudType, WeatherState
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from tools.bench import storm_look  # noqa: E402
+from wxsky.app.snapshot import picture, take_snapshot  # noqa: E402
+from wxsky.engine.stages import SkyEngine  # noqa: E402
+from wxsky.png import write_png  # noqa: E402
+from wxsky.render.renderer import Renderer  # noqa: E402
+from wxsky.scene.camera import Camera  # noqa: E402
+from wxsky.scene.layout import SceneSettings  # noqa: E402
+from wxsky.weather.state import CloudLayer, CloudType, WeatherState  # noqa: E402
 
 TILE = (480, 270)
 GAP = 4
