@@ -19,7 +19,14 @@ import numpy.typing as npt
 from wxsky.render.shaders import ShaderLibrary
 from wxsky.scene.camera import Camera
 from wxsky.scene.lightning import FLASH_RGB, Flash
-from wxsky.scene.precip_view import DROP_BOX_M, DROP_FALL_MPS, MAX_CURTAINS, EyeDrops, PrecipView
+from wxsky.scene.precip_view import (
+    DROP_BOX_M,
+    DROP_FALL_MPS,
+    MAX_CURTAINS,
+    MAX_DROPS,
+    EyeDrops,
+    PrecipView,
+)
 from wxsky.scene.sky import SkyParams
 
 F32 = npt.NDArray[np.float32]
@@ -190,10 +197,15 @@ def _ground_of(sky: SkyParams) -> float:
     return float(sky.ground_m)
 
 
-@functools.lru_cache(maxsize=4)
+@functools.cache
+def _all_drop_seeds() -> F64:
+    """(MAX_DROPS, 3) where each drop sits in its box, 0..1 (the same every frame and
+    channel; a frame takes as many as its rate asks, the first ones)."""
+    return np.random.default_rng(0x5EED_D80).random((MAX_DROPS, 3))
+
+
 def _drop_seeds(count: int) -> F64:
-    """(count, 3) where each drop sits in its box, 0..1 (the same every frame and channel)."""
-    return np.random.default_rng(0x5EED_D80).random((count, 3))
+    return _all_drop_seeds()[:count]
 
 
 def drop_lines(drops: EyeDrops, time_s: float, eye_m: Sequence[float], sky: SkyParams) -> F32:
