@@ -1,6 +1,7 @@
 """The fog pass (issue 43 item 3, docs/fog.md): the frame's fog field (`scene/fog.py`) marched
-along each pixel's view ray by `shaders/fog.glsl` and drawn, premultiplied, over what the near
-layer holds before its sprites (`Renderer._draw_near`). A frame without fog draws nothing."""
+along each pixel's view ray by `shaders/fog.glsl` and drawn, premultiplied, over the near layer
+after its sprites and curtains (`Renderer._draw_near`): the fog is the lowest thing in the sky.
+A frame without fog draws nothing."""
 
 from __future__ import annotations
 
@@ -15,8 +16,8 @@ from wxsky.scene.sky import SkyParams
 
 # Steps along each ray; FogField.optical_depth takes the same by default.
 FOG_STEPS = 40
-# The layer the fog goes into: behind the near sprites of the main view, never the layer the
-# host draws over its own aircraft.
+# The layer the fog goes into: the main view's near layer, never the layer the host draws over
+# its own aircraft.
 LAYER = "near"
 
 
@@ -74,7 +75,7 @@ class FogPass:
             "u_forward": _vec(fwd),
             "u_tan_half_fov": (cam.tan_half_fov_x, cam.tan_half_fov_y),
             "u_target_size": (float(size[0]), float(size[1])),
-            "u_fog_rgb": _vec(sky.haze_rgb),
+            "u_fog_rgb": fog_rgb(sky),
         }
         for name, value in values.items():
             _uniform(prog, name).value = value
@@ -104,3 +105,16 @@ def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
 
 def _vec(v: object) -> tuple[float, ...]:
     return tuple(float(c) for c in np.asarray(v, np.float64))
+
+
+# Fog is a cloud on the ground: by day its light is the sun's and the sky's scattered many
+# times, brighter than the haze over the horizon, which is as much the dark ground's light
+# as the sky's. FOG_LIFT of the way from the haze's colour toward white, by the day's light.
+FOG_LIFT = 0.45
+
+
+def fog_rgb(sky: SkyParams) -> tuple[float, float, float]:
+    """The fog's colour (display units): the haze's, lifted toward white by day."""
+    lift = FOG_LIFT * max(0.0, min(1.0, sky.ambient))
+    r, g, b = sky.haze_rgb
+    return (r + (1.0 - r) * lift * r, g + (1.0 - g) * lift * g, b + (1.0 - b) * lift * b)

@@ -396,7 +396,6 @@ class Renderer:
             target.fbo.use()
             target.fbo.clear(*clear_rgba)
             start = 0
-        self._fog.draw(name, target.fbo, target.size, cam, sky, self._exposure)
         self._draw_run(target, draw, start, len(draw), rest, cam, sky, "polygon")
         if precip is not None and precip.drawn and sky is not None:
             # The rain curtains over the sprites, below the lowest cloud base (from under it):
@@ -414,6 +413,9 @@ class Renderer:
                 drawn = self._precip.draw_curtains(precip, cam, sky, small.size, self._exposure)
             if drawn:
                 self._upsample(small, target, over=True)
+        # Fog over the ground last: it is the lowest thing in the sky, so what of it a ray
+        # crosses lies before any cloud the ray reaches (from in it or above it alike).
+        self._fog.draw(name, target.fbo, target.size, cam, sky, self._exposure)
 
     def _legacy_clear(
         self, rgba: tuple[float, float, float, float]

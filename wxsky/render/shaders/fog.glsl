@@ -1,9 +1,9 @@
 // Fog over the ground (issue 43 item 3, docs/fog.md): the view ray marched through the fog
 // field of wxsky/scene/fog.py (FogField, its numpy twin: the same banks, the same sum, the
 // same steps as FogField.optical_depth), drawn as premultiplied airlight over what the near
-// layer holds before its sprites. The fog takes the colour of the air at the horizon
-// (SkyParams.haze_rgb), the sky's own light on it, so that it is white-grey by day, warm at
-// dusk and dark at night.
+// layer holds after its sprites (the fog is the lowest thing in the sky). The fog takes the
+// colour of the air at the horizon (SkyParams.haze_rgb), the sky's own light on it, lifted
+// toward white by day (fog_pass.fog_rgb): white-grey by day, warm at dusk, dark at night.
 
 #if defined VERTEX_SHADER
 void main() {
