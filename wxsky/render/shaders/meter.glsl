@@ -4,10 +4,7 @@
 // sky hold most of what an eye adapts to.
 
 #if defined VERTEX_SHADER
-void main() {
-    vec2 p = vec2(float((gl_VertexID & 1) << 2) - 1.0, float((gl_VertexID & 2) << 1) - 1.0);
-    gl_Position = vec4(p, 0.0, 1.0);
-}
+#include "screen_triangle.glsl"
 #endif
 
 #if defined FRAGMENT_SHADER

@@ -11,12 +11,7 @@
 #define BASE_SHADE 0.15
 
 #if defined VERTEX_SHADER
-uniform vec4 u_rect;
-void main() {
-    vec2 p = vec2((gl_VertexID & 1) == 0 ? u_rect.x : u_rect.z,
-                  (gl_VertexID & 2) == 0 ? u_rect.y : u_rect.w);
-    gl_Position = vec4(p, 0.0, 1.0);
-}
+#include "rect_quad.glsl"
 #endif
 
 #if defined FRAGMENT_SHADER

@@ -13,12 +13,7 @@
 #include "display.glsl"
 
 #if defined VERTEX_SHADER
-uniform vec4 u_rect;  // NDC x0, y0, x1, y1 of the quad drawn (4 vertices, a strip)
-void main() {
-    vec2 p = vec2((gl_VertexID & 1) == 0 ? u_rect.x : u_rect.z,
-                  (gl_VertexID & 2) == 0 ? u_rect.y : u_rect.w);
-    gl_Position = vec4(p, 0.0, 1.0);
-}
+#include "rect_quad.glsl"
 #endif
 
 #if defined FRAGMENT_SHADER
