@@ -539,3 +539,25 @@ def test_the_kept_sky_is_the_sky_worked_out_afresh() -> None:
         reused += kept.zenith_rgb is not fresh.zenith_rgb
     # Most frames found the sky of the frame before: this was the reuse, not fresh skies.
     assert reused > len(frames) // 2
+
+
+def test_haze_thins_above_the_hazy_layers_top() -> None:
+    """Aerial perspective (issue 43: a storm's tower over the haze): the boundary layer's haze
+    distance on the part of the path under the hazy layer's top, the clear air's above it."""
+    from wxsky.scene.sky import CLEAR_AIR_HAZE_M, haze_share
+
+    haze_m, eye_m, top_m = 3000.0, 400.0, 1400.0  # the top 1000 m over the eye
+    d = np.array([20_000.0])
+    # Wholly in the layer: Koschmieder's, as before.
+    low = haze_share(d, np.array([500.0]), eye_m, haze_m, top_m)
+    assert low[0] == pytest.approx(1.0 - math.exp(-20_000.0 / haze_m))
+    # A point 3000 m up: a third of the way is under the top.
+    high = haze_share(d, np.array([3000.0]), eye_m, haze_m, top_m)
+    tau = 20_000.0 * (1.0 / 3.0 / haze_m + 2.0 / 3.0 / CLEAR_AIR_HAZE_M)
+    assert high[0] == pytest.approx(1.0 - math.exp(-tau))
+    assert high[0] < low[0]
+    # From above the top, looking down at a point under it: the same split.
+    down = haze_share(d, np.array([-3000.0]), 3400.0, haze_m, top_m)
+    assert down[0] == pytest.approx(1.0 - math.exp(-tau))
+    # No top (no layer capping it): everything in the haze.
+    assert haze_share(d, np.array([3000.0]), eye_m, haze_m, math.inf)[0] == pytest.approx(low[0])

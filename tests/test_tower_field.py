@@ -101,7 +101,13 @@ def test_the_nearest_cells_within_the_budget_are_towers_aged_by_their_epoch() ->
     for t in placed.shows:
         assert t.age_s == pytest.approx(2400.0 - t.spec.born_s)
         assert 0.0 < t.haze < 1.0
-        assert t.haze == pytest.approx(1.0 - math.exp(-t.distance_m / sky.haze_m))
+        # Hazed as a sprite at its middle is (`sky.haze_share`): by the boundary layer's haze
+        # for the part of the way under its top, the clear air's above; never more than the
+        # boundary layer's haze all the way, nor less than the clear air's.
+        up = t.centre_m[2] - eye[2]
+        assert t.haze == pytest.approx(float(sky.haze_of(t.distance_m, up, eye[2])))
+        assert 1.0 - math.exp(-t.distance_m / 60_000.0) <= t.haze
+        assert t.haze <= 1.0 - math.exp(-t.distance_m / sky.haze_m) + 1e-12
     # Just set: cells not born yet are clear air (their clouds' sprites still go) and are
     # not drawn.
     now = place_towers(found, drift, share, eye, _set_at(tc, 0.0), sky, 4, 40_000.0)

@@ -39,7 +39,7 @@ from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
 from wxsky.scene.precip_view import PrecipView
 from wxsky.scene.ring import RING_SIZE, ring_target_name
-from wxsky.scene.sky import SkyParams
+from wxsky.scene.sky import CLEAR_AIR_HAZE_M, SkyParams
 from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
 from wxsky.scene.tower_field import TowerShow
 
@@ -449,16 +449,17 @@ class Renderer:
         view, proj = cam.view_matrix(), cam.projection_matrix()
         eye = cam.position_m
         haze_m = math.inf if sky is None else sky.haze_m
+        haze_top_m = math.inf if sky is None else sky.haze_top_m
         if not towers or sky is None:
             part = draw if (start, stop) == (0, len(draw)) else draw.slice(start, stop)
-            self._draw_sprites(target, part, eye, view, proj, None, shape=shape, haze_m=haze_m)
+            self._draw_sprites(target, part, eye, view, proj, None, shape, haze_m, haze_top_m)
             return
         view_rot = np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes()
         projection = np.ascontiguousarray(proj.T, dtype=np.float32).tobytes()
         for item in towers:
             cut = max(start, min(item.tower.insert_at, stop))
             self._draw_sprites(
-                target, draw.slice(start, cut), eye, view, proj, None, shape=shape, haze_m=haze_m
+                target, draw.slice(start, cut), eye, view, proj, None, shape, haze_m, haze_top_m
             )
             target.fbo.use()
             _set(self.shaders.program("tower_quad.glsl"), "u_exposure", self._exposure)
@@ -466,7 +467,7 @@ class Renderer:
                 self._towers.draw(item, cam, view_rot, projection, sky)
             start = cut
         self._draw_sprites(
-            target, draw.slice(start, stop), eye, view, proj, None, shape=shape, haze_m=haze_m
+            target, draw.slice(start, stop), eye, view, proj, None, shape, haze_m, haze_top_m
         )
 
     def render_ring(
@@ -519,6 +520,7 @@ class Renderer:
             clear_rgba=(0.0, 0.0, 0.0, 0.0) if start == 0 else None,
             shape=IMPOSTOR_SHAPE,
             haze_m=ring.haze_m,
+            haze_top_m=ring.haze_top_m,
         )
         if work is not target and stop >= len(draw):
             self._upsample(work, target)
@@ -808,11 +810,13 @@ class Renderer:
         clear_rgba: tuple[float, float, float, float] | None = (0.0, 0.0, 0.0, 0.0),
         shape: str = "polygon",
         haze_m: float = math.inf,
+        haze_top_m: float = math.inf,
     ) -> None:
         """`clear_rgba`: premultiplied colour under the sprites (the in-cloud fog veil); None
         draws over what the target holds. `shape`: "polygon" (fewest fragments) or "quad"
-        (fewest triangles, for sprites a few pixels wide). `haze_m`: the haze distance the
-        sprites' colours were faded with (SkyParams.haze_m), by which their flat bases' shade
+        (fewest triangles, for sprites a few pixels wide). `haze_m`, `haze_top_m`: the haze
+        distance the sprites' colours were faded with and the top of its layer, MSL
+        (SkyParams.haze_m, haze_top_m; `sky.haze_share`), by which their flat bases' shade
         fades too."""
         target.fbo.use()
         if clear_rgba is not None:
@@ -863,6 +867,10 @@ class Renderer:
             _set(prog, "u_exposure", self._exposure)
             # The shader takes 1/haze (0: no haze) so an endless one needs no infinity.
             _set(prog, "u_inv_haze_m", 0.0 if not math.isfinite(haze_m) else 1.0 / haze_m)
+            clear_m = max(haze_m, CLEAR_AIR_HAZE_M)
+            _set(prog, "u_inv_clear_haze_m", 0.0 if not math.isfinite(clear_m) else 1.0 / clear_m)
+            top_up = haze_top_m - float(eye_m[2])
+            _set(prog, "u_haze_top_up_m", top_up if math.isfinite(top_up) else 1e9)
         self._sheet.filter = (_SHAPES[shape][2], moderngl.LINEAR)
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)

@@ -156,9 +156,11 @@ class RingScene:
     # The clouds' shadow on the ground over the ring's area (2 ring radii square), made with
     # the ring's drift and sun; None for an empty ring or with `shadow_map_px` 0.
     shadow: CloudShadow | None = None
-    # The sky's haze distance the impostors were hazed with (SkyParams.haze_m): the renderer
-    # fades the flat bases' shade into the air by it as the shading faded the colours.
+    # The sky's haze distance the impostors were hazed with (SkyParams.haze_m) and the top of
+    # its hazy layer (MSL): the renderer fades the flat bases' shade into the air by them as
+    # the shading faded the colours.
     haze_m: float = math.inf
+    haze_top_m: float = math.inf
     # Unique to this ring in the process: what a publisher names its images by, so a slot
     # that already holds them keeps them (`FrameWriter.keep_layer`).
     serial: int = field(init=False, compare=False)
@@ -280,7 +282,8 @@ def hazed(
     straight-alpha RGBA, rounded to float32 once; with `rim` ((3, N) the sprites' rim
     colours, hazed alike), (N, 7) (see SpriteDraw.rgba)."""
     dist = np.linalg.norm(batch.centre_m - np.asarray(eye_m), axis=1) if dist_m is None else dist_m
-    haze = 1.0 - np.exp(-dist / sky.haze_m)
+    # Thinner above the hazy layer's top (`sky.haze_share`): a tower's upper part stands out.
+    haze = sky.haze_of(dist, batch.centre_m[:, 2] - eye_m[2], eye_m[2])
     if sky.atmosphere is None:
         air = np.asarray(sky.haze_rgb, np.float64)[:, None] * haze
     else:
@@ -410,7 +413,12 @@ def build_ring(
             cancel,
         )
     return RingScene(
-        geometry=geometry, impostors=impostors, drift=drift, shadow=shadow, haze_m=sky.haze_m
+        geometry=geometry,
+        impostors=impostors,
+        drift=drift,
+        shadow=shadow,
+        haze_m=sky.haze_m,
+        haze_top_m=sky.haze_top_m,
     )
 
 

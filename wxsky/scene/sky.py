@@ -191,6 +191,11 @@ class SkyParams:
         out.__dict__["sky_time_s"] = sky_time_s
         return out
 
+    def haze_of(self, dist_m: F64 | float, up_m: F64 | float, eye_alt_m: float) -> F64:
+        """The share of a cloud's colour that is air (`haze_share`) for clouds `dist_m` away
+        and `up_m` above the eye (MSL `eye_alt_m`), in this sky's haze."""
+        return haze_share(dist_m, up_m, eye_alt_m, self.haze_m, self.haze_top_m)
+
     @property
     def haze_rgb(self) -> RGB:
         """The colour distant clouds fade into (the airlight): the horizon's, greyed as far as
@@ -475,6 +480,33 @@ def _haze_m(state: WeatherState, eye_m: float, mixed_top_m: float) -> float:
     surface_m = max(MIN_HAZE_M, state.visibility_m / KOSCHMIEDER)
     aloft = smoothstep(mixed_top_m, mixed_top_m + 500.0, eye_m)
     return surface_m + (max(surface_m, CLEAR_AIR_HAZE_M) - surface_m) * aloft
+
+
+def haze_share(
+    dist_m: F64 | float,
+    up_m: F64 | float,
+    eye_alt_m: float,
+    haze_m: float,
+    haze_top_m: float,
+) -> F64:
+    """Aerial perspective along a straight path `dist_m` long to a point `up_m` above the eye
+    (MSL `eye_alt_m`): 1 - exp(-optical depth), the haze distance `haze_m` on the part of the
+    path under the top of the hazy layer (`haze_top_m`) and the clear air's above it, as the
+    sky pass's dome has it. A cumulonimbus's tower and anvil over a hazy boundary layer stand
+    out from 20 km in 20 km visibility; a cloud in the layer fades as before."""
+    dist = np.asarray(dist_m, np.float64)
+    up = np.asarray(up_m, np.float64)
+    clear_m = max(haze_m, CLEAR_AIR_HAZE_M)
+    if not math.isfinite(haze_m):
+        return np.zeros(np.broadcast(dist, up).shape)
+    if not math.isfinite(haze_top_m):
+        below: F64 | float = 1.0
+    else:
+        lo = np.minimum(up, 0.0)
+        hi = np.maximum(up, 0.0)
+        below = np.clip((haze_top_m - eye_alt_m - lo) / np.maximum(hi - lo, 1e-3), 0.0, 1.0)
+    out: F64 = 1.0 - np.exp(-dist * (below / haze_m + (1.0 - below) / clear_m))
+    return out
 
 
 def _haze_top_m(state: WeatherState) -> float:

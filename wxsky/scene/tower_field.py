@@ -320,7 +320,7 @@ def place_towers(
                     * _edge(dist, max_range_m)
                     * turned
                 ),
-                haze=float(1.0 - math.exp(-dist / sky.haze_m)),
+                haze=float(sky.haze_of(dist, centre[2] - float(eye[2]), float(eye[2]))),
             )
         )
     return PlacedTowers(

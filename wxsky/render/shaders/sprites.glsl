@@ -42,6 +42,8 @@ uniform vec4 u_polygon[POLYGONS * 8];  // fine set, then coarse
 uniform vec4 u_box[POLYGONS * 2];  // each set's bounding boxes: fine, then coarse
 uniform float u_viewport_px;  // the target's width
 uniform float u_inv_haze_m;  // 1 / the haze distance the sprites' colours were faded with
+uniform float u_inv_clear_haze_m;  // 1 / the clear air's, over the hazy layer's top
+uniform float u_haze_top_up_m;  // the hazy layer's top over the eye (sky.haze_share)
 // Per sheet slot, its mean shade (sprite_sheet.cell_shades): texels are divided by it, so a
 // sprite's mean colour is the one its cloud was shaded and hazed to.
 uniform float u_cell_shade[SHEET_CELLS * SHEET_CELLS];
@@ -142,7 +144,11 @@ void main() {
     // A sprite's colour is cloud x (1 - haze) + air x haze (layout.hazed): its texels' shade
     // and its base's darken the cloud's light, not the air's before it, so both fade by the
     // haze (aerial perspective takes a far cloud's detail, not only its colour).
-    v_haze = 1.0 - exp(-length(in_centre) * u_inv_haze_m);
+    float lo = min(in_centre.z, 0.0);
+    float hi = max(in_centre.z, 0.0);
+    float below = clamp((u_haze_top_up_m - lo) / max(hi - lo, 1e-3), 0.0, 1.0);
+    v_haze = 1.0 - exp(-length(in_centre)
+                       * (below * u_inv_haze_m + (1.0 - below) * u_inv_clear_haze_m));
 #if FLAT_BASE
     // Seen edge-on, every sprite's cut lies on one line: the cloud's flat base. Seen more
     // steeply, each cut is its own straight edge across the base's outline, so it softens
