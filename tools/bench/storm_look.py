@@ -29,7 +29,7 @@ from wxsky.engine.stages import SkyEngine
 from wxsky.png import write_png
 from wxsky.render.renderer import Renderer
 from wxsky.scene.camera import Camera
-from wxsky.scene.layout import SceneSettings
+from wxsky.scene.layout import FrameScene, SceneSettings
 from wxsky.scene.precip_view import curtain_opacity
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import CloudType, WeatherState
@@ -81,14 +81,17 @@ def structure(lum: npt.NDArray[np.float64]) -> float:
     return float(band.std())
 
 
-def render(
-    renderer: Renderer, state: WeatherState, cam: Camera
-) -> tuple[npt.NDArray[np.uint8], SkyEngine]:
+def render(renderer: Renderer, state: WeatherState, cam: Camera) -> npt.NDArray[np.uint8]:
+    """The picture `wxsky snapshot` takes of `state` from `cam`."""
     from wxsky.app.snapshot import take_snapshot
 
-    shot = take_snapshot(state, cam, SceneSettings(), renderer=renderer)
-    engine = SkyEngine(state, cam, SceneSettings(), clock_rate=0.0)
-    return shot.image, engine
+    return take_snapshot(state, cam, SceneSettings(), renderer=renderer).image
+
+
+def frame_of(state: WeatherState, cam: Camera) -> FrameScene:
+    """The frame the engine makes of `state` from `cam` (its curtains, what falls at the eye)."""
+    with SkyEngine(state, cam, SceneSettings(), clock_rate=0.0) as engine:
+        return engine.advance(0.0).frame
 
 
 def shaft_camera(state: WeatherState) -> tuple[Camera, WeatherState] | None:
@@ -113,8 +116,7 @@ def shaft_camera(state: WeatherState) -> tuple[Camera, WeatherState] | None:
 
 def storm_centre(state: WeatherState) -> tuple[float, float] | None:
     """The axis of the storm whose rain curtain is nearest the field."""
-    probe = SkyEngine(state, Camera((0.0, 0.0, state.observer.alt_m + 2.0)), SceneSettings())
-    frame = probe.advance(0.0).frame
+    frame = frame_of(state, Camera((0.0, 0.0, state.observer.alt_m + 2.0)))
     if frame.precip is None or not frame.precip.curtains:
         return None
     return frame.precip.curtains[0].axis_m
@@ -132,8 +134,7 @@ def dry_eye(
             centre[1] + distance_m * math.cos(bearing),
             alt_m,
         )
-        with SkyEngine(state, Camera(eye), SceneSettings(), clock_rate=0.0) as engine:
-            at = engine.advance(0.0).frame.at_eye
+        at = frame_of(state, Camera(eye)).at_eye
         if at is None or at.kind is None:
             return eye
     return (centre[0], centre[1] - distance_m, alt_m)
@@ -170,15 +171,15 @@ def measure(renderer: Renderer, when: str, png_dir: Path | None = None) -> dict[
         width_px=SIZE[0],
         height_px=SIZE[1],
     )
-    image, _ = render(renderer, state, ground)
+    image = render(renderer, state, ground)
     out["ground"] = Look(structure(luminance(image)), None, 0)
     if png_dir is not None:
         write_png(png_dir / f"storm-ground-{when}.png", image)
     found = shaft_camera(state)
     if found is not None:
         cam, st = found
-        image, engine = render(renderer, st, cam)
-        frame = engine.advance(0.0).frame
+        image = render(renderer, st, cam)
+        frame = frame_of(st, cam)
         assert frame.precip is not None
         opacity = curtain_opacity(frame.precip, cam.position_m, cam.pixel_rays().reshape(-1, 3))
         diff, n = shaft_minus_base(luminance(image), opacity.reshape(SIZE[1], SIZE[0]))

@@ -161,16 +161,22 @@ def radar_reply(made: Made | None, key: tuple[float, float, int]) -> dict[str, A
     out: dict[str, Any] = {"range_nm": range_nm, "tilt_deg": tilt_deg, "size_px": size_px}
     if made is None:
         return out | {"pending": True}
+    return out | {"pending": False} | radar_fields(made)
+
+
+def radar_fields(made: Made, pixels: bytes | None = None) -> dict[str, Any]:
+    """What the `radar` answer and the `radar` notification say of a made picture: where and
+    when it was taken, how old, how long it took, the byte scale and the bytes (`pixels`: the
+    picture's, when the caller has them already)."""
     pic = made.picture
-    return out | {
-        "pending": False,
+    return {
         "centre_m": list(pic.centre_m),
         "time_utc": made.time_utc,
         "age_s": max(0.0, time.monotonic() - made.made_s),
         "took_s": made.took_s,
         "dbz_offset": DBZ_OFFSET,
         "dbz_step": DBZ_STEP,
-        "pixels": pic.to_bytes(),
+        "pixels": pic.to_bytes() if pixels is None else pixels,
     }
 
 

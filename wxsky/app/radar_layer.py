@@ -13,7 +13,6 @@ for the newest made, so the frames never wait on the radar and a picture slower 
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
@@ -22,9 +21,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from wxsky.app.control import radar_fields
 from wxsky.engine.radar_work import Made, RadarKey, RadarWork
 from wxsky.output.frame_meta import RadarPlacement
-from wxsky.scene.radar import DBZ_OFFSET, DBZ_STEP
 from wxsky.settings.config import RadarSection
 from wxsky.weather.state import WeatherState
 
@@ -57,14 +56,7 @@ class RadarShow:
             "range_nm": p.range_nm,
             "tilt_deg": p.tilt_deg,
             "size_px": self.px,
-            "centre_m": list(p.centre_m),
-            "time_utc": self.made.time_utc,
-            "age_s": max(0.0, time.monotonic() - self.made.made_s),
-            "took_s": self.made.took_s,
-            "dbz_offset": DBZ_OFFSET,
-            "dbz_step": DBZ_STEP,
-            "pixels": self.codes,
-        }
+        } | radar_fields(self.made, self.codes)
 
 
 def shown(version: int, made: Made, key: RadarKey) -> RadarShow:

@@ -8,8 +8,8 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from wxsky.errors import RenderError
 from wxsky.render.shaders import ShaderLibrary
+from wxsky.render.uniforms import set_uniform, write_uniform
 from wxsky.scene.camera import Camera
 from wxsky.scene.fog import MAX_BANKS, MAX_RANGE_M, TOP_FADE, FogField
 from wxsky.scene.sky import SkyParams
@@ -63,9 +63,9 @@ class FogPass:
         prog, vao = self._program()
         for name, value in fog.uniforms().items():
             if isinstance(value, bytes):
-                _uniform(prog, name).write(value)
+                write_uniform(prog, name, value)
             else:
-                _uniform(prog, name).value = value
+                set_uniform(prog, name, value)
         right, up, fwd = cam.basis()
         e, n, z = cam.position_m
         values: dict[str, object] = {
@@ -78,10 +78,8 @@ class FogPass:
             "u_fog_rgb": fog_rgb(sky),
         }
         for name, value in values.items():
-            _uniform(prog, name).value = value
-        member = prog.get("u_exposure", None)  # a linear program never reads it
-        if isinstance(member, moderngl.Uniform):
-            member.value = exposure
+            set_uniform(prog, name, value)
+        set_uniform(prog, "u_exposure", exposure)  # (a linear program never reads it)
         fbo.use()
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
@@ -93,14 +91,6 @@ class FogPass:
         if self._vao is not None:
             self._vao.release()
             self._vao = None
-
-
-def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
-    # Strict, as the renderer's own `_set`: a uniform the program lacks is a bug here.
-    member = prog.get(name, None)
-    if not isinstance(member, moderngl.Uniform):
-        raise RenderError(f"fog.glsl: uniform {name!r} is missing (optimised away?)")
-    return member
 
 
 def _vec(v: object) -> tuple[float, ...]:

@@ -17,6 +17,8 @@ import numpy as np
 import numpy.typing as npt
 
 from wxsky.render.shaders import ShaderLibrary
+from wxsky.render.uniforms import set_uniform as _set
+from wxsky.render.uniforms import write_uniform as _write
 from wxsky.scene.camera import Camera
 from wxsky.scene.lightning import FLASH_RGB, Flash
 from wxsky.scene.precip_view import (
@@ -86,12 +88,10 @@ class PrecipPass:
 
     def draw_curtains(
         self, view: PrecipView, cam: Camera, sky: SkyParams, size: tuple[int, int], exposure: float
-    ) -> bool:
-        """The curtains over the bound framebuffer (`size` pixels); False when there are
-        none to draw."""
+    ) -> None:
+        """The curtains (and a nimbostratus's rain) over the bound framebuffer (`size`
+        pixels); the caller draws only a view that has some (`PrecipView.drawn`)."""
         shown = view.curtains[:MAX_CURTAINS]
-        if not view.drawn:
-            return False
         eye = cam.position_m
         prog = self._curtains
         right, up, fwd = cam.basis()
@@ -101,7 +101,7 @@ class PrecipPass:
         offsets = np.zeros((3, len(shown)))
         for i, c in enumerate(shown):
             axis[i] = (c.axis_m[0] - eye[0], c.axis_m[1] - eye[1], c.radius_m, c.extinction_per_m)
-            virga = c.bottom_m > _ground_of(sky) + 1.0
+            virga = c.bottom_m > sky.ground_m + 1.0
             span[i] = (c.top_m, c.bottom_m, 1.0 if virga else 0.0, (c.axis_m[0] * 0.013) % 97.0)
             offsets[:, i] = (axis[i, 0], axis[i, 1], 0.5 * (c.top_m + c.bottom_m) - eye[2])
             base[i, 0] = c.base_radius_m
@@ -146,7 +146,6 @@ class PrecipPass:
         self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         self._curtain_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
         self.ctx.disable(moderngl.BLEND)
-        return True
 
     def draw_streaks(
         self,
@@ -191,10 +190,6 @@ def _view_rotation(cam: Camera) -> F64:
     view = np.array(cam.view_matrix(), np.float64)
     view[:3, 3] = 0.0
     return view
-
-
-def _ground_of(sky: SkyParams) -> float:
-    return float(sky.ground_m)
 
 
 @functools.cache
@@ -278,17 +273,3 @@ def channel_lines(flash: Flash, glow: float, eye_m: Sequence[float], sky: SkyPar
         part[:, 10] = width
         rows.append(part)
     return np.concatenate([rows[1], rows[0]])  # the glow first, the core over it
-
-
-def _set(prog: moderngl.Program, name: str, value: object) -> None:
-    if name == "u_exposure" and name not in prog:
-        return  # compiled out where legacy colours are drawn at EV 0 (display.glsl)
-    member = prog[name]
-    assert isinstance(member, moderngl.Uniform)
-    member.value = value
-
-
-def _write(prog: moderngl.Program, name: str, data: bytes) -> None:
-    member = prog[name]
-    assert isinstance(member, moderngl.Uniform)
-    member.write(data)

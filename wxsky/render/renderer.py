@@ -34,6 +34,8 @@ from wxsky.render.sprite_sheet import (
     support_polygons,
 )
 from wxsky.render.towers import Drawable, TowerPass
+from wxsky.render.uniforms import set_uniform as _set
+from wxsky.render.uniforms import write_uniform as _write
 from wxsky.scene import exposure
 from wxsky.scene.camera import Camera
 from wxsky.scene.layout import FrameScene, RingScene, SpriteDraw
@@ -341,9 +343,7 @@ class Renderer:
         # The drops about the eye and the lightning's channels, in front of every cloud (and
         # of the host's aircraft, in the layer over it).
         front = "near_front" if frame.near_front is not None else "near"
-        if frame.sky is not None and (
-            (frame.precip is not None and frame.precip.drops is not None) or frame.flashes
-        ):
+        if (frame.precip is not None and frame.precip.drops is not None) or frame.flashes:
             target = self._targets[front]
             target.fbo.use()
             with self._pass(f"streaks {front}", "small_sprites"):
@@ -410,9 +410,8 @@ class Renderer:
             small.fbo.use()
             small.fbo.clear(0.0, 0.0, 0.0, 0.0)
             with self._pass(f"curtains {name}", "sky"):
-                drawn = self._precip.draw_curtains(precip, cam, sky, small.size, self._exposure)
-            if drawn:
-                self._upsample(small, target, over=True)
+                self._precip.draw_curtains(precip, cam, sky, small.size, self._exposure)
+            self._upsample(small, target, over=True)
         # Fog over the ground last: it is the lowest thing in the sky, so what of it a ray
         # crosses lies before any cloud the ray reaches (from in it or above it alike).
         self._fog.draw(name, target.fbo, target.size, cam, sky, self._exposure)
@@ -1057,24 +1056,3 @@ _SHAPES = {
     "polygon": (0, 8, moderngl.LINEAR_MIPMAP_LINEAR),
     "quad": (8, 4, moderngl.LINEAR_MIPMAP_NEAREST),
 }
-
-
-def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
-    member = prog[name]
-    if not isinstance(member, moderngl.Uniform):
-        raise RenderError(f"shader uniform {name!r} is missing (optimised away?)")
-    return member
-
-
-# Uniforms a program may not have: a linear program never reads the exposure (display.glsl).
-_OPTIONAL_UNIFORMS = frozenset({"u_exposure"})
-
-
-def _set(prog: moderngl.Program, name: str, value: object) -> None:
-    if name in _OPTIONAL_UNIFORMS and not isinstance(prog.get(name, None), moderngl.Uniform):
-        return
-    _uniform(prog, name).value = value
-
-
-def _write(prog: moderngl.Program, name: str, data: bytes) -> None:
-    _uniform(prog, name).write(data)

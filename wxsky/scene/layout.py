@@ -59,7 +59,7 @@ from wxsky.scene.lightning import (
 from wxsky.scene.near_sets import NearInputs, near_scattered_light
 from wxsky.scene.precip_eye import AtEye, Shaft, precipitation_at
 from wxsky.scene.precip_view import PrecipView, precip_view
-from wxsky.scene.rain import SHAFT_RADIUS_FRAC, is_shaft, rain_of
+from wxsky.scene.rain import is_shaft, rain_of
 from wxsky.scene.ring import RingGeometry, bin_far_sprites, bin_indices
 from wxsky.scene.shading import (
     DEFAULT_SHADING,
@@ -498,27 +498,17 @@ def build_frame(
     shafts = (
         ()
         if rain is None
-        else tuple(
-            Shaft(c.axis_m, SHAFT_RADIUS_FRAC[rain.snow] * 0.5 * c.width_m, c.base_m) for c in cells
-        )
+        else tuple(Shaft(c.axis_m, c.shaft_radius_m(rain.snow), c.base_m) for c in cells)
     )
     at_eye = precipitation_at(state, eye, shafts)
     fog = fog_field(state)
     if fog is not None:
         at_eye = fogged_at_eye(at_eye, fog, eye)
-    precip = precip_view(
-        state,
-        rain,
-        cells,
-        at_eye,
-        eye,
-        eye_velocity_mps,
-        state.time_utc.timestamp() if flash_times_s is None else flash_times_s[1],
-    )
     if flash_times_s is None:
         now_s = state.time_utc.timestamp()
         flash_times_s = (now_s - 1.0, now_s)
     since_s, now_s = flash_times_s
+    precip = precip_view(state, rain, cells, at_eye, eye, eye_velocity_mps, now_s)
     lit: list[tuple[Flash, float]] = []
     started: list[Flash] = []
     if cells and storms > 0.0:

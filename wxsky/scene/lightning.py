@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from wxsky.scene.rain import weather_group
+from wxsky.scene.rain import SHAFT_RADIUS_FRAC, weather_group
 from wxsky.weather.state import WeatherState
 
 F64 = npt.NDArray[np.float64]
@@ -95,6 +95,11 @@ class StormCell:
     formed: float
     ground_m: float = 0.0
     width_m: float = 0.0  # its base's width (the rain shaft under it: `precip_eye.Shaft`)
+
+    def shaft_radius_m(self, snow: bool) -> float:
+        """The e-folding radius of the rain (or snow) shaft under its base: the one the rate
+        at the eye, the radar and the drawn curtain share."""
+        return SHAFT_RADIUS_FRAC[snow] * 0.5 * self.width_m
 
 
 def storm_rate_per_min(state: WeatherState, override_per_min: float | None = None) -> float:

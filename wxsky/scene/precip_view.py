@@ -49,7 +49,7 @@ from wxsky.scene.precip_eye import (
     AtEye,
 )
 from wxsky.scene.radar import CONVECTIVE_FACTOR, rate_mm_h
-from wxsky.scene.rain import SHAFT_RADIUS_FRAC, Rain
+from wxsky.scene.rain import Rain
 from wxsky.weather.state import CloudType, WeatherState
 
 MAX_CURTAINS = 8  # the nearest curtains drawn; the shader's array size
@@ -160,7 +160,7 @@ def curtains(
         d = math.hypot(cell.axis_m[0] - eye_m[0], cell.axis_m[1] - eye_m[1])
         if d > CURTAIN_RANGE_M or cell.formed <= 0.0 or cell.base_m <= cell.ground_m + 1.0:
             continue
-        radius = SHAFT_RADIUS_FRAC[rain.snow] * 0.5 * cell.width_m
+        radius = cell.shaft_radius_m(rain.snow)
         out.append(
             (
                 d,

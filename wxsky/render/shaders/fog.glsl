@@ -17,11 +17,7 @@ uniform int u_fog_count;
 uniform float u_fog_top_m;    // the highest top
 uniform float u_fog_reach_m;  // how far from the field's middle any bank reaches
 uniform vec3 u_eye;           // east, north, height over the ground
-uniform vec3 u_right;
-uniform vec3 u_up;
-uniform vec3 u_forward;
-uniform vec2 u_tan_half_fov;
-uniform vec2 u_target_size;
+#include "view_ray.glsl"
 uniform vec3 u_fog_rgb;
 out vec4 f_colour;
 
@@ -42,9 +38,7 @@ float fog_extinction(vec2 p, float h) {
 }
 
 void main() {
-    vec2 ndc = gl_FragCoord.xy / u_target_size * 2.0 - 1.0;
-    vec3 ray = normalize(u_forward + ndc.x * u_tan_half_fov.x * u_right
-                         - ndc.y * u_tan_half_fov.y * u_up);
+    vec3 ray = view_ray();
     float h0 = u_eye.z;
     float t0 = 0.0;
     float t1 = MAX_RANGE_M;

@@ -15,11 +15,7 @@
 #endif
 
 #if defined FRAGMENT_SHADER
-uniform vec3 u_right;
-uniform vec3 u_up;
-uniform vec3 u_forward;
-uniform vec2 u_tan_half_fov;
-uniform vec2 u_target_size;
+#include "view_ray.glsl"
 uniform float u_eye_z;           // MSL
 uniform float u_clip_top_m;      // the lowest cloud base under the storms, MSL
 uniform vec3 u_veil;             // a nimbostratus's rain: extinction /m, its base, the ground (MSL)
@@ -72,10 +68,7 @@ float sheets(float across_m, float z_m, float seed, float pixel_m) {
 }
 
 void main() {
-    // NDC y is flipped with respect to the image (row 0 is the top), as in every projection.
-    vec2 ndc = gl_FragCoord.xy / u_target_size * 2.0 - 1.0;
-    vec3 ray = normalize(u_forward + ndc.x * u_tan_half_fov.x * u_right
-                         - ndc.y * u_tan_half_fov.y * u_up);
+    vec3 ray = view_ray();
     float ch = max(length(ray.xy), 1e-4);  // cos of the ray's elevation
     vec2 u = ray.xy / ch;
     float slope = ray.z / ch;  // height gained per horizontal metre

@@ -18,11 +18,7 @@
 
 #if defined FRAGMENT_SHADER
 out vec4 f_colour;
-uniform vec3 u_right;
-uniform vec3 u_up;
-uniform vec3 u_forward;
-uniform vec2 u_tan_half_fov;
-uniform vec2 u_target_size;       // pixels
+#include "view_ray.glsl"
 uniform float u_pixel_rad;
 uniform vec3 u_sun_dir;
 uniform vec3 u_zenith;
@@ -418,12 +414,7 @@ vec3 ground_band(vec3 ray, vec3 sky, vec3 air) {
 }
 
 void main() {
-    // From the pixel's own position, not a varying, so that every quad the pixel is drawn
-    // by gives it the same ray to the last bit. NDC y is flipped with respect to the image
-    // (row 0 is the top), as in every projection.
-    vec2 ndc = gl_FragCoord.xy / u_target_size * 2.0 - 1.0;
-    vec3 ray = normalize(u_forward + ndc.x * u_tan_half_fov.x * u_right
-                         - ndc.y * u_tan_half_fov.y * u_up);
+    vec3 ray = view_ray();
 #if SKY_PHYSICAL && SKY_SCENE_LINEAR
     vec3 col = physical_sky(ray);  // into a float target: radiance, kcd/m^2
 #elif SKY_PHYSICAL
