@@ -61,6 +61,7 @@ from wxsky.output.transport import Address, ControlServer, WithFds, default_addr
 from wxsky.scene.camera import Camera
 from wxsky.scene.cloud_model_files import default_models
 from wxsky.scene.clouds import BLOCK_CACHE, BLOCK_SIZE_M
+from wxsky.scene.near_depth import near_distance_m
 from wxsky.scene.precip_eye import AtEye
 from wxsky.settings.config import DaemonConfig
 from wxsky.weather.state import Source, WeatherPatch, WeatherState, weather_to_dict
@@ -104,6 +105,7 @@ def layer_specs(config: DaemonConfig) -> list[LayerSpec]:
         scene.shadow_map_px,
         out.layer_format,
         radar_px=config.radar.size_px if config.radar.layer else 0,
+        near_depth=out.near_depth,
     )
 
 
@@ -433,6 +435,7 @@ class Daemon:
             self.config.scene.ring_texture_px,
             variable_exposure=needs_variable(setting),
             output="linear" if linear else "display",
+            near_depth=self.config.output.near_depth,
         )
         # [render] exposure: a number of EV fixes it; "auto" holds the legacy exposure while
         # the passes' colours are display-referred (scene/exposure.py).
@@ -492,7 +495,14 @@ class Daemon:
             export = SlotExport(self._slot_textures, r, writer.target_slot)
         radar = self._radar_layer.shown if self._radar_layer is not None else None
         meta = publish_plan(
-            r, writer, plan, frame_number, self.config.scene.ring_texture_px, export, radar
+            r,
+            writer,
+            plan,
+            frame_number,
+            self.config.scene.ring_texture_px,
+            export,
+            radar,
+            near_depth=self.config.output.near_depth,
         )
         if self._trace is not None:
             self._trace.write_events(frame_number, plan.frame.camera.position_m, plan.events)
@@ -668,6 +678,8 @@ class Daemon:
                 "ring_set": meta.ring_set,
                 "ring_fade": meta.ring_fade,
                 "split_distance_m": plan.frame.split_distance_m,
+                # Where a host with its own geometry composites `near` (scene/near_depth.py).
+                "near_distance_m": near_distance_m(plan.frame),
                 "camera": camera_to_dict(meta.camera),
                 "sun_direction_enu": list(meta.sun_direction_enu),
                 **plan.frame.in_cloud.to_dict(),

@@ -81,15 +81,19 @@ def frame_layer_specs(
     shadow_px: int = SHADOW_MAP_PX,
     layer_format: str = RGBA8,
     radar_px: int = 0,
+    near_depth: bool = False,
 ) -> list[LayerSpec]:
     """The segment's layers: sky and near at most width x height, the current ring's 8
     images, the incoming ring's 8 while it fades in (absent otherwise), and the cloud-shadow
     map of the ring on show (`shadow_px` square; none with 0). The pictures are in
     `layer_format` (the renderer's: "rgba8" display values or "rgba16f" scene-linear); the
     shadow map, a map of transmittance rather than a picture, is RGBA8 in either; so is the
-    weather radar's picture (`radar_px` square; none with 0: `[radar] layer` off)."""
+    weather radar's picture (`radar_px` square; none with 0: `[radar] layer` off), and the
+    near layer's depth (`near_depth`: `[output] near_depth`; render/renderer.py
+    near_depth_size, at most half the picture each way)."""
     shadow = [LayerSpec("shadow", shadow_px, shadow_px)] if shadow_px > 0 else []
     radar = [LayerSpec("radar", radar_px, radar_px)] if radar_px > 0 else []
+    depth = [LayerSpec("near_depth", (width + 1) // 2, (height + 1) // 2)] if near_depth else []
     fmt = layer_format
     return [
         LayerSpec("sky", width, height, fmt),
@@ -99,6 +103,7 @@ def frame_layer_specs(
         *(LayerSpec(f"ring_{i}", ring_px, ring_px, fmt) for i in range(RING_SIZE)),
         *(LayerSpec(f"ring_in_{i}", ring_px, ring_px, fmt) for i in range(RING_SIZE)),
         *shadow,
+        *depth,
         *radar,
     ]
 
@@ -127,6 +132,7 @@ def publish_plan(
     ring_px: int,
     export: LayerExport | None = None,
     radar: RadarShow | None = None,
+    near_depth: bool = False,
 ) -> FrameMeta:
     """Copy the drawn layers into the slot being filled (the current ring as ring_i, the
     incoming one as ring_in_i while it fades in; `radar`, the radar picture on show, as the
@@ -135,7 +141,11 @@ def publish_plan(
     finished before the publish so the seqlock covers it too."""
     rings = plan.rings
     cam = plan.frame.camera
-    names = ("sky", "near", "near_front") if plan.frame.near_front is not None else ("sky", "near")
+    names: tuple[str, ...] = ("sky", "near")
+    if plan.frame.near_front is not None:
+        names += ("near_front",)
+    if near_depth:  # the renderer draws it with `near` ([output] near_depth)
+        names += ("near_depth",)
     copies: list[tuple[str, str]] = [(name, name) for name in names]
     for name in names:
         publish_layer(renderer, sink, name)

@@ -45,6 +45,18 @@ from wxsky.scene.sky import CLEAR_AIR_HAZE_M, SkyParams
 from wxsky.scene.texture_slots import SHEET_CELLS, TEX_FLAT_BOTTOM, TEX_FOG
 from wxsky.scene.tower_field import TowerShow
 
+
+def _set_if_read(prog: moderngl.Program, name: str, value: object) -> None:
+    """A uniform the program may lack (the sprite depth variants: their compiler drops what
+    only the colour reads)."""
+    if isinstance(prog.get(name, None), moderngl.Uniform):
+        _set(prog, name, value)
+
+
+def _write_if_read(prog: moderngl.Program, name: str, data: bytes) -> None:
+    if isinstance(prog.get(name, None), moderngl.Uniform):
+        _write(prog, name, data)
+
 log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.27
@@ -134,6 +146,13 @@ _MIXING = 1
 _DECK = 2
 _FLAT_BASE = 4
 _SPRITE_VARIANTS = 8
+_NEAR_DEPTH = 8  # the depth pass's variant of each of the above (sprites.glsl NEAR_DEPTH)
+# The `near_depth` layer (near_depth.glsl): a sprite counts at a pixel where it shows at 8 bits;
+# distances as log2(1 + d) over this range (2^18 m, 262 km: past the far plane), in 24 bits.
+NEAR_DEPTH_ALPHA = 1.0 / 255.0
+NEAR_DEPTH_LOG2_RANGE = 18.0
+NEAR_DEPTH_NONE = 1e9  # the float target's clear: no sprite here
+NEAR_DEPTH_DIVISOR = 2  # the layer is this much smaller than `near` each way
 # A draw whose sprites change variant more often than this (layers of decks, sheets and
 # heaped clouds interleaved back to front: the thunderstorm's far band made 410 draws of 950
 # sprites, a third of its frame) draws them all with the variant holding every feature any
@@ -171,14 +190,18 @@ class Renderer:
         split_sky: bool = True,
         output: str = "display",
         variable_exposure: bool = False,
+        near_depth: bool = False,
     ) -> None:
         """`split_sky=False` draws every sky feature a frame shows over the whole picture in
         one pass: the slow reference the split passes are tested against. `output`: "display"
         (RGBA8 layers, the default) or "linear" (RGBA16F scene-linear layers; `exposure` has no
         effect on them). `variable_exposure`: a display renderer that may draw at exposures
         other than EV 0 (display.glsl: the legacy colours' round trip costs fragment work, so
-        a renderer that never needs it compiles it out and keeps EV 0)."""
+        a renderer that never needs it compiles it out and keeps EV 0). `near_depth`: draw
+        the `near_depth` layer too (the distance of the nearest cloud at each pixel of `near`,
+        for hosts that composite it against their own geometry: `_draw_near_depth`)."""
         self._own_ctx = ctx is None
+        self.near_depth = near_depth
         self.ctx = ctx if ctx is not None else create_context()
         self._closed = False
         self.ring_px = ring_texture_px
@@ -207,6 +230,7 @@ class Renderer:
             "FINE_MIN_PX": repr(FINE_MIN_PX),
             "DECK_SCALES_M": _glsl_floats(DECK_SCALES_M),
             "DECK_RELIEF": _glsl_floats(DECK_RELIEF),
+            "NEAR_DEPTH_ALPHA": repr(NEAR_DEPTH_ALPHA),
         }
         self._sky = sky_textures.SkyPass(self.ctx, self.shaders)
         # One read of the sheet per fragment, and two for the sprites turning round; the
@@ -246,6 +270,14 @@ class Renderer:
         )
         self._instance_buf = self.ctx.buffer(reserve=_INSTANCE_FLOATS * 4 * 1024, dynamic=True)
         self._upsample_vao = self.ctx.vertex_array(self._upsample_prog, [])
+        self._near_depth_prog = self.shaders.program(
+            "near_depth.glsl",
+            {
+                "NEAR_DEPTH_NONE": repr(NEAR_DEPTH_NONE),
+                "NEAR_DEPTH_LOG2_RANGE": repr(NEAR_DEPTH_LOG2_RANGE),
+            },
+        )
+        self._near_depth_vao = self.ctx.vertex_array(self._near_depth_prog, [])
         self._meter_prog = self.shaders.program("meter.glsl")
         self._meter_vao = self.ctx.vertex_array(self._meter_prog, [])
         self._targets: dict[str, _Target] = {}
@@ -299,6 +331,8 @@ class Renderer:
         self._warm_sky_variants(frame.camera, frame.sky)
         for code in range(_SPRITE_VARIANTS):  # a deck or a flat base may come later
             self._sprite_variant(code)
+            if self.near_depth:
+                self._sprite_variant(code | _NEAR_DEPTH)
         self.finish()
 
     def _warm_sky_variants(self, cam: Camera, sky: SkyParams) -> None:
@@ -335,6 +369,8 @@ class Renderer:
             frame.sky,
             precip=frame.precip,
         )
+        if self.near_depth:
+            self._draw_near_depth(frame)
         if frame.near_front is not None:
             # Its sprites were hazed with the frame's sky: their detail fades by it too.
             self._draw_near(
@@ -415,6 +451,30 @@ class Renderer:
         # Fog over the ground last: it is the lowest thing in the sky, so what of it a ray
         # crosses lies before any cloud the ray reaches (from in it or above it alike).
         self._fog.draw(name, target.fbo, target.size, cam, sky, self._exposure)
+
+    def _draw_near_depth(self, frame: FrameScene) -> None:
+        """The `near_depth` layer, at `near`'s size: at each pixel the distance to the nearest
+        of the frame's near sprites that shows there, as near_depth.glsl encodes it. The
+        towers, curtains and fog the layer also holds have none (their pixels read as no
+        sprite): a host places those at the frame's near_distance_m (scene/near_depth.py)."""
+        cam = frame.camera
+        w, h = near_depth_size(self._targets["near"].size)
+        metres = self._target("near_depth_m", w, h, components=1, dtype="f4")
+        metres.fbo.use()
+        metres.fbo.clear(NEAR_DEPTH_NONE, 0.0, 0.0, 0.0)
+        if len(frame.near) > 0:
+            view, proj = cam.view_matrix(), cam.projection_matrix()
+            self._draw_sprites(
+                metres, frame.near, cam.position_m, view, proj, None, "polygon", depth=True
+            )
+        out = self._target("near_depth", w, h, dtype="f1")
+        out.fbo.use()
+        self.ctx.disable(moderngl.BLEND)
+        metres.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        metres.texture.use(0)
+        _set(self._near_depth_prog, "u_depth", 0)
+        with self._pass("near depth encode", "upsample"):
+            self._near_depth_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def _legacy_clear(
         self, rgba: tuple[float, float, float, float]
@@ -555,7 +615,7 @@ class Renderer:
         those rows, into their place in the buffer."""
         self._finish()  # wait for the drawing GIL-free, so the read itself only copies
         fbo = self._targets[name].fbo
-        if self.output == "linear":
+        if self.output == "linear" and name != "near_depth":  # (that one is RGBA8 in both)
             dtype, pixel_bytes = "f2", 8
         else:
             dtype, pixel_bytes = "f1", 4
@@ -631,6 +691,7 @@ class Renderer:
         self._precip.close()
         self._fog.release()
         self._upsample_vao.release()
+        self._near_depth_vao.release()
         self._meter_vao.release()
         self._instance_buf.release()
         self._corner_buf.release()
@@ -810,13 +871,15 @@ class Renderer:
         shape: str = "polygon",
         haze_m: float = math.inf,
         haze_top_m: float = math.inf,
+        depth: bool = False,
     ) -> None:
         """`clear_rgba`: premultiplied colour under the sprites (the in-cloud fog veil); None
         draws over what the target holds. `shape`: "polygon" (fewest fragments) or "quad"
         (fewest triangles, for sprites a few pixels wide). `haze_m`, `haze_top_m`: the haze
         distance the sprites' colours were faded with and the top of its layer, MSL
         (SkyParams.haze_m, haze_top_m; `sky.haze_share`), by which their flat bases' shade
-        fades too."""
+        fades too. `depth`: each fragment's distance instead of its colour, MIN-blended
+        (the NEAR_DEPTH variants, `_draw_near_depth`)."""
         target.fbo.use()
         if clear_rgba is not None:
             target.fbo.clear(*clear_rgba)
@@ -857,25 +920,33 @@ class Renderer:
         view_rot = np.ascontiguousarray(view[:3, :3].T, dtype=np.float32).tobytes()
         projection = np.ascontiguousarray(proj.T, dtype=np.float32).tobytes()
         runs = _variant_runs(_variants(draw, eye_m, under_deck, based))
+        if depth:
+            runs = [(start, stop, code | _NEAR_DEPTH) for start, stop, code in runs]
+        # The depth variants read none of the colour's uniforms, which their compiler drops.
+        put, put_bytes = (_set_if_read, _write_if_read) if depth else (_set, _write)
         for code in {code for _, _, code in runs}:
             prog = self._sprite_variant(code)[0]
-            _write(prog, "u_view_rot", view_rot)
-            _write(prog, "u_proj", projection)
-            _set(prog, "u_sheet", 0)
-            _set(prog, "u_viewport_px", float(target.size[0]))
-            _set(prog, "u_exposure", self._exposure)
+            put_bytes(prog, "u_view_rot", view_rot)
+            put_bytes(prog, "u_proj", projection)
+            put(prog, "u_sheet", 0)
+            put(prog, "u_viewport_px", float(target.size[0]))
+            put(prog, "u_exposure", self._exposure)
             # The shader takes 1/haze (0: no haze) so an endless one needs no infinity.
-            _set(prog, "u_inv_haze_m", 0.0 if not math.isfinite(haze_m) else 1.0 / haze_m)
+            put(prog, "u_inv_haze_m", 0.0 if not math.isfinite(haze_m) else 1.0 / haze_m)
             clear_m = max(haze_m, CLEAR_AIR_HAZE_M)
-            _set(prog, "u_inv_clear_haze_m", 0.0 if not math.isfinite(clear_m) else 1.0 / clear_m)
+            put(prog, "u_inv_clear_haze_m", 0.0 if not math.isfinite(clear_m) else 1.0 / clear_m)
             top_up = haze_top_m - float(eye_m[2])
-            _set(prog, "u_haze_top_up_m", top_up if math.isfinite(top_up) else 1e9)
+            put(prog, "u_haze_top_up_m", top_up if math.isfinite(top_up) else 1e9)
         self._sheet.filter = (_SHAPES[shape][2], moderngl.LINEAR)
         self._sheet.use(0)
         self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+        if depth:
+            self.ctx.blend_equation = (moderngl.MIN, moderngl.MIN)
+            self.ctx.blend_func = (moderngl.ONE, moderngl.ONE)
+        else:
+            self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         kind = "sprites" if shape == "polygon" else "small_sprites"
-        with self._pass(_sprite_pass_name(target.name), kind):
+        with self._pass("near depth" if depth else _sprite_pass_name(target.name), kind):
             # In order, each run of sprites with the variant it needs (back to front holds).
             for start, stop, code in runs:
                 prog, vao = self._sprite_variant(code)
@@ -887,6 +958,8 @@ class Renderer:
                     instances=stop - start,
                 )
         self.ctx.disable(moderngl.BLEND)
+        if depth:
+            self.ctx.blend_equation = (moderngl.FUNC_ADD, moderngl.FUNC_ADD)
         # Wait for this draw here, GIL-free, rather than inside the next GL call with the GIL
         # held (see gil_free_finish).
         if self._finish_each_draw:
@@ -906,12 +979,14 @@ class Renderer:
                     "ROUND_MIX": str(int(bool(code & _MIXING))),
                     "DECK": str(int(bool(code & _DECK))),
                     "FLAT_BASE": str(int(bool(code & _FLAT_BASE))),
+                    "NEAR_DEPTH": str(int(bool(code & _NEAR_DEPTH))),
                 },
             )
             polygons, boxes, shades = self._sprite_constants
-            _write(prog, "u_polygon", polygons)
-            _write(prog, "u_box", boxes)
-            _write(prog, "u_cell_shade", shades)
+            put = _write_if_read if code & _NEAR_DEPTH else _write
+            put(prog, "u_polygon", polygons)
+            put(prog, "u_box", boxes)
+            put(prog, "u_cell_shade", shades)
             self._sprite_progs[code] = prog
             self._sprite_vaos[code] = self._make_sprite_vao(prog)
         return prog, self._sprite_vaos[code]
@@ -942,14 +1017,19 @@ class Renderer:
                 divisor=1,
             )
 
-    def _target(self, name: str, width: int, height: int) -> _Target:
+    def _target(
+        self, name: str, width: int, height: int, components: int = 4, dtype: str | None = None
+    ) -> _Target:
+        """A drawing target; `dtype` None: the picture layers' (the renderer's output)."""
         target = self._targets.get(name)
         if target is not None and target.size == (width, height):
             return target
         if target is not None:
             target.release()
         # Float layers hold scene-linear colour, beyond 1 (half floats: to 65504).
-        tex = self.ctx.texture((width, height), 4, dtype="f2" if self.output == "linear" else "f1")
+        if dtype is None:
+            dtype = "f2" if self.output == "linear" else "f1"
+        tex = self.ctx.texture((width, height), components, dtype=dtype)
         target = _Target(name, tex, self.ctx.framebuffer(color_attachments=[tex]))
         self._targets[name] = target
         return target
@@ -963,6 +1043,14 @@ class Renderer:
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"GL error while {what}: {err}")
+
+
+def near_depth_size(near_px: tuple[int, int]) -> tuple[int, int]:
+    """The `near_depth` layer's size: half the near layer's each way (rounded up). The depth
+    of soft clouds changes slowly across the picture; its fill would cost as much as the
+    near layer's own at full size."""
+    w, h = near_px
+    return max(1, (w + 1) // NEAR_DEPTH_DIVISOR), max(1, (h + 1) // NEAR_DEPTH_DIVISOR)
 
 
 def near_layer_size(cam: Camera, near_scale: float = NEAR_SCALE) -> tuple[int, int]:

@@ -335,6 +335,11 @@ class OutputSection(_Section):
     # "rgba16f" scene-linear half floats for hosts with HDR pipelines (docs/linear-output.md;
     # the segment is then protocol version 2, which older readers refuse).
     layer_format: str = _opt("rgba8", LAYER_FORMAT)
+    # The `near_depth` layer: the distance of the nearest cloud at each pixel of `near`, for
+    # hosts that composite the clouds against their own terrain and models (plugins/osg,
+    # FlightGear; docs/protocol.md §1.5). A second pass over the near sprites: off unless such
+    # a host is served.
+    near_depth: bool = _opt(False, Bool())
     # Control clients served at once (output/transport.py DEFAULT_MAX_CLIENTS); one more is
     # served and the longest-idle one closed to make room. Each holds a file descriptor.
     max_clients: int = _opt(64, _int(1, 1000))

@@ -61,8 +61,9 @@ extern "C" {
 #define WXSKY_HOST_GL_VERSION_MAJOR 0
 /* 2: the cloud-shadow map (wxsky_gl_shadow*); 3: HDR layers (RGBA16F textures,
  * wxsky_gl_layer_format, wxsky_gl_tone_map, WXSKY_GL_DISPLAY_GLSL); 4: the tone curve's toe
- * of slope 1 (the daemon's since issue 41's last change) */
-#define WXSKY_HOST_GL_VERSION_MINOR 4
+ * of slope 1 (the daemon's since issue 41's last change); 5: wxsky_gl_draw_near_at and the
+ * `near_depth` layer */
+#define WXSKY_HOST_GL_VERSION_MINOR 5
 
 /* Runtime version of the GL library, (MAJOR << 16) | MINOR, to compare with the header's. */
 uint32_t wxsky_gl_version(void);
@@ -134,6 +135,17 @@ int wxsky_gl_draw_background(wxsky_gl_compositor *comp, const double view[16],
                              const double proj[16]);
 /* `near` full-screen, oriented as the last wxsky_gl_draw_background said. */
 int wxsky_gl_draw_near(wxsky_gl_compositor *comp);
+/* `near` full-screen at its clouds' depth, with the depth test (LEQUAL, no depth write), so
+ * the host's geometry (drawn first, writing depth) stays in front of the clouds behind it and
+ * the clouds in front of it cover it. Where the segment has the `near_depth` layer (the
+ * daemon's [output] near_depth, protocol §1.5), each pixel goes at the distance of the nearest
+ * cloud that layer holds about it, along the pixel's ray under the last
+ * wxsky_gl_draw_background's projection; elsewhere (no such layer, or a pixel it holds none
+ * for: a tower, rain, fog) at the plane `distance_m` in front of the eye. Give the `frame`
+ * notification's `near_distance_m` (protocol §4: nothing the layer holds is nearer; 0 in
+ * cloud, fog or rain at the eye). Nearer than the near plane: in front of everything. WXSKY_OK;
+ * WXSKY_EINVAL (as wxsky_gl_draw_near, or a distance not >= 0); WXSKY_ESYS (a GL error). */
+int wxsky_gl_draw_near_at(wxsky_gl_compositor *comp, double distance_m);
 /* `near_front` full-screen, when the last upload had it (else nothing is drawn, WXSKY_OK). */
 int wxsky_gl_draw_near_front(wxsky_gl_compositor *comp);
 

@@ -9,6 +9,9 @@
 // others with ROUND_MIX 0: one read, of the round texture where the turn is complete.
 // DECK 1 draws a stratiform deck's sprites seen from under its base, with the base's relief;
 // FLAT_BASE 1 heaped clouds' sprites, cut at and shaded toward their layer's flat base.
+// NEAR_DEPTH 1 draws, instead of the colour, each fragment's distance from the eye (metres,
+// in red) where the sprite shows at 8 bits (its alpha at least NEAR_DEPTH_ALPHA), for a MIN
+// blend: the `near_depth` layer, the depth of the nearest cloud at each pixel of `near`.
 
 #if defined VERTEX_SHADER
 in vec2 in_corner;        // per vertex: 8 unused (the polygon's), then a quad's corners
@@ -66,6 +69,9 @@ flat out float v_haze;  // the share of the sprite's colour that is air (layout.
 #if DECK
 out vec3 v_ray;  // the quad's point, eye-relative (ENU): the ray the fragment is seen along
 flat out vec3 v_deck;  // in_deck
+#endif
+#if NEAR_DEPTH
+out float v_dist_m;  // the quad's point's distance from the eye
 #endif
 
 vec2 cell_uv(float cell, vec2 local) {
@@ -138,6 +144,9 @@ void main() {
 #endif
 #if DECK
     v_ray = world;
+#endif
+#if NEAR_DEPTH
+    v_dist_m = length(world);
 #endif
     vec3 c = u_view_rot * world;
     gl_Position = u_proj * vec4(c, 1.0);
@@ -213,6 +222,9 @@ flat in float v_haze;
 in vec3 v_ray;
 flat in vec3 v_deck;
 #endif
+#if NEAR_DEPTH
+in float v_dist_m;
+#endif
 uniform sampler2D u_sheet;
 out vec4 f_colour;
 #if DECK
@@ -266,6 +278,13 @@ void main() {
     if (a < 1.0 / 512.0) {
         discard;
     }
+#if NEAR_DEPTH
+    if (a < NEAR_DEPTH_ALPHA) {
+        discard;
+    }
+    f_colour = vec4(v_dist_m, 0.0, 0.0, 1.0);
+    return;
+#endif
     // A texel's opacity is how thick the cloud is there: the thinner, the more it shows the
     // light its sprite's centre is shaded without (the rim: the forward peak that the cloud
     // before the centre hides, which a silhouette's thin edge lets through).

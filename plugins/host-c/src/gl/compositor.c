@@ -89,7 +89,15 @@ struct wxsky_gl_compositor {
     GLuint tm_prog; /* wxsky_gl_tone_map's, made at its first call */
     GLint u_tm_tex, u_tm_exposure, u_tm_viewport;
     /* full-screen program uniforms */
-    GLint u_fs_tex, u_fs_size, u_fs_cap, u_fs_viewport, u_fs_flip;
+    GLint u_fs_tex, u_fs_size, u_fs_cap, u_fs_viewport, u_fs_flip, u_fs_z;
+    /* the near layer's depth (`near_depth`, optional): segment index (-1: absent), capacity,
+     * size as uploaded (0: none this frame), texture, and the program drawing `near` by it */
+    int depth_index;
+    uint32_t depth_cap_w, depth_cap_h, depth_w, depth_h;
+    GLuint depth_tex, depth_prog;
+    GLint u_d_tex, u_d_size, u_d_cap, u_d_viewport, u_d_flip, u_d_depth, u_d_depth_size,
+        u_d_inv_proj, u_d_proj, u_d_fallback;
+    double proj[16]; /* the last background draw's projection (wxsky_gl_draw_near_at) */
     /* ring program uniforms */
     GLint u_ring_tex, u_ring_size, u_ring_tl, u_ring_u, u_ring_v, u_ring_inv, u_ring_vp,
         u_ring_viewport, u_ring_count, u_ring_fade;
@@ -149,10 +157,11 @@ uint32_t wxsky_gl_version(void) {
 /* A full-screen triangle from gl_VertexID (no vertex buffer), at the far plane. */
 static const char VS_FULLSCREEN[] =
     "out vec2 ndc;\n"
+    "uniform float far_z;\n" /* 0: the far plane; else the NDC depth (wxsky_gl_draw_near_at) */
     "void main() {\n"
     "    vec2 p = vec2(float((gl_VertexID & 1) * 4 - 1), float((gl_VertexID & 2) * 2 - 1));\n"
     "    ndc = p;\n"
-    "    gl_Position = vec4(p, 1.0, 1.0);\n"
+    "    gl_Position = vec4(p, far_z == 0.0 ? 1.0 : far_z, 1.0);\n"
     "}\n";
 
 /* A full-screen layer stretched over the viewport: texelFetch when the sizes agree (exact),
@@ -174,6 +183,59 @@ static const char FS_LAYER[] =
     "        px = clamp(px, vec2(0.5), vec2(size) - 0.5);\n"
     "        colour = texture(tex, px / cap);\n"
     "    }\n"
+    "}\n";
+
+/* `near` at the depth of its clouds: FS_LAYER's colour, and for depth the nearest cloud's
+ * distance the `near_depth` layer holds at the pixel (protocol §1.5; where its own texel holds
+ * none, the nearest of the 8 around it, so a cloud's soft edge takes its cloud's), placed along
+ * the pixel's ray through the host's projection; where none is near, `fallback` (the NDC depth
+ * of the frame's near_distance_m). */
+static const char FS_NEAR_DEPTH[] =
+    "uniform sampler2D tex;\n"
+    "uniform ivec2 size;\n"
+    "uniform vec2 cap;\n"
+    "uniform vec4 viewport;\n"
+    "uniform int flip;\n"
+    "uniform sampler2D depth;\n"
+    "uniform ivec2 depth_size;\n"
+    "uniform mat4 inv_proj;\n"
+    "uniform mat4 proj;\n"
+    "uniform float fallback;\n"
+    "out vec4 colour;\n"
+    "void main() {\n"
+    "    vec2 v = (gl_FragCoord.xy - viewport.xy) / viewport.zw;\n"
+    "    vec2 f = v;\n"
+    "    if (flip == 0) f.y = 1.0 - f.y;\n"
+    "    vec2 px = f * vec2(size);\n"
+    "    if (ivec2(viewport.zw) == size) {\n"
+    "        colour = texelFetch(tex, clamp(ivec2(px), ivec2(0), size - 1), 0);\n"
+    "    } else {\n"
+    "        px = clamp(px, vec2(0.5), vec2(size) - 0.5);\n"
+    "        colour = texture(tex, px / cap);\n"
+    "    }\n"
+    "    if (!(colour.a > 0.0)) discard;\n"
+    "    ivec2 at = clamp(ivec2(f * vec2(depth_size)), ivec2(0), depth_size - 1);\n"
+    "    vec4 t = texelFetch(depth, at, 0);\n"
+    "    float q = 2.0;\n"
+    "    if (t.a > 0.5) {\n"
+    "        q = dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / 16777215.0;\n"
+    "    } else {\n"
+    "        for (int dy = -1; dy <= 1; ++dy)\n"
+    "            for (int dx = -1; dx <= 1; ++dx) {\n"
+    "                t = texelFetch(depth, clamp(at + ivec2(dx, dy), ivec2(0), depth_size - 1), 0);\n"
+    "                if (t.a > 0.5)\n"
+    "                    q = min(q, dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / "
+    "16777215.0);\n"
+    "            }\n"
+    "    }\n"
+    "    float z = fallback;\n"
+    "    if (q <= 1.0) {\n"
+    "        float d = exp2(q * 18.0) - 1.0;\n"
+    "        vec4 e = inv_proj * vec4(v * 2.0 - 1.0, 1.0, 1.0);\n"
+    "        vec4 clip = proj * vec4(normalize(e.xyz / e.w) * d, 1.0);\n"
+    "        z = clip.w > 0.0 ? clamp(clip.z / clip.w, -1.0, 1.0) : -1.0;\n"
+    "    }\n"
+    "    gl_FragDepth = z * 0.5 + 0.5;\n"
     "}\n";
 
 /* The ring: the reference compositor's sample_ring and bilinear, per pixel. */
@@ -314,6 +376,7 @@ static void reset_indices(wxsky_gl_compositor *c) {
     for (int i = 0; i < RING_LAYERS; ++i)
         c->ring_index[i] = -1;
     c->shadow_index = -1;
+    c->depth_index = -1;
 }
 
 wxsky_gl_compositor *wxsky_gl_new(void) {
@@ -364,6 +427,12 @@ static void release(wxsky_gl_compositor *c) {
     if (c->shadow_tex)
         glDeleteTextures(1, &c->shadow_tex);
     c->shadow_tex = 0;
+    if (c->depth_tex)
+        glDeleteTextures(1, &c->depth_tex);
+    if (c->depth_prog)
+        glDeleteProgram(c->depth_prog);
+    c->depth_tex = c->depth_prog = 0;
+    c->depth_w = c->depth_h = 0;
     c->shadow_valid = 0;
     c->shadow_w = c->shadow_h = 0;
     delete_pbos(c);
@@ -490,6 +559,26 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
         }
     }
 
+    {
+        /* the near layer's depth: optional ([output] near_depth), RGBA8 (protocol §1.5) */
+        int k = wxsky_segment_find_layer(seg, "near_depth");
+        if (k >= 0) {
+            wxsky_segment_layer(seg, (uint32_t)k, &info);
+            if (info.format != WXSKY_FORMAT_RGBA8 || info.max_width == 0 ||
+                info.max_height == 0 || info.max_width > (uint32_t)max_size ||
+                info.max_height > (uint32_t)max_size) {
+                reset_indices(c);
+                return fail(c, WXSKY_EFORMAT,
+                            "layer 'near_depth' has format %u and capacity %ux%u: it is RGBA8 "
+                            "(protocol section 1.5), 1..%d each way",
+                            info.format, info.max_width, info.max_height, (int)max_size);
+            }
+            c->depth_index = k;
+            c->depth_cap_w = info.max_width;
+            c->depth_cap_h = info.max_height;
+        }
+    }
+
     c->fs_prog = link_program(c, FS_LAYER, "full-screen layer");
     c->ring_prog = c->fs_prog ? link_program(c, FS_RING, "ring") : 0;
     if (!c->ring_prog) {
@@ -501,6 +590,24 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
     c->u_fs_cap = glGetUniformLocation(c->fs_prog, "cap");
     c->u_fs_viewport = glGetUniformLocation(c->fs_prog, "viewport");
     c->u_fs_flip = glGetUniformLocation(c->fs_prog, "flip");
+    c->u_fs_z = glGetUniformLocation(c->fs_prog, "far_z");
+    if (c->depth_index >= 0) {
+        c->depth_prog = link_program(c, FS_NEAR_DEPTH, "near by its depth");
+        if (!c->depth_prog) {
+            release(c);
+            return WXSKY_ESYS;
+        }
+        c->u_d_tex = glGetUniformLocation(c->depth_prog, "tex");
+        c->u_d_size = glGetUniformLocation(c->depth_prog, "size");
+        c->u_d_cap = glGetUniformLocation(c->depth_prog, "cap");
+        c->u_d_viewport = glGetUniformLocation(c->depth_prog, "viewport");
+        c->u_d_flip = glGetUniformLocation(c->depth_prog, "flip");
+        c->u_d_depth = glGetUniformLocation(c->depth_prog, "depth");
+        c->u_d_depth_size = glGetUniformLocation(c->depth_prog, "depth_size");
+        c->u_d_inv_proj = glGetUniformLocation(c->depth_prog, "inv_proj");
+        c->u_d_proj = glGetUniformLocation(c->depth_prog, "proj");
+        c->u_d_fallback = glGetUniformLocation(c->depth_prog, "fallback");
+    }
     c->u_ring_tex = glGetUniformLocation(c->ring_prog, "tex");
     c->u_ring_size = glGetUniformLocation(c->ring_prog, "size");
     c->u_ring_tl = glGetUniformLocation(c->ring_prog, "tl");
@@ -530,6 +637,13 @@ int wxsky_gl_init(wxsky_gl_compositor *c, const wxsky_segment *seg) {
     tex_params(GL_TEXTURE_2D_ARRAY, GL_NEAREST);
     glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, c->tex_internal, (GLsizei)c->ring_cap_w,
                  (GLsizei)c->ring_cap_h, RING_LAYERS, 0, GL_RGBA, c->tex_type, NULL);
+    if (c->depth_index >= 0) {
+        glGenTextures(1, &c->depth_tex);
+        glBindTexture(GL_TEXTURE_2D, c->depth_tex);
+        tex_params(GL_TEXTURE_2D, GL_NEAREST);
+        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, (GLsizei)c->depth_cap_w, (GLsizei)c->depth_cap_h,
+                     0, GL_RGBA, GL_UNSIGNED_BYTE, NULL);
+    }
     if (c->shadow_index >= 0) {
         /* LINEAR + CLAMP_TO_EDGE: the bilinear sampling protocol §3.3 asks for */
         glGenTextures(1, &c->shadow_tex);
@@ -679,6 +793,24 @@ static int upload(wxsky_gl_compositor *c, const uint8_t *const *pixels, const ui
         int st = upload_shadow(c, pixels, width, height, count, rec);
         if (st != WXSKY_OK)
             return st;
+    }
+    if (c->depth_index >= 0) {
+        /* every frame, as `near` (a layer not given keeps what the texture had) */
+        int k = c->depth_index;
+        if ((uint32_t)k >= count) {
+            c->depth_w = c->depth_h = 0;
+        } else if (width[k] > c->depth_cap_w || height[k] > c->depth_cap_h) {
+            return fail(c, WXSKY_EINVAL, "layer %d is %ux%u, beyond its capacity %ux%u", k,
+                        width[k], height[k], c->depth_cap_w, c->depth_cap_h);
+        } else if (pixels[k]) {
+            c->depth_w = width[k];
+            c->depth_h = height[k];
+            if (c->depth_w && c->depth_h) {
+                glBindTexture(GL_TEXTURE_2D, c->depth_tex);
+                glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, (GLsizei)c->depth_w, (GLsizei)c->depth_h,
+                                GL_RGBA, GL_UNSIGNED_BYTE, pixels[k]);
+            }
+        }
     }
     c->rec = *rec;
     {
@@ -922,8 +1054,10 @@ static void blend_state(int depth_test) {
     }
 }
 
-static void draw_fullscreen(wxsky_gl_compositor *c, int which, const GLint *vp) {
+/* z_ndc 0: at the far plane (the vertex shader's default), else that NDC depth. */
+static void draw_fullscreen(wxsky_gl_compositor *c, int which, const GLint *vp, float z_ndc) {
     glUseProgram(c->fs_prog);
+    glUniform1f(c->u_fs_z, z_ndc);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D, c->fs_tex[which]);
     glUniform1i(c->u_fs_tex, 0);
@@ -977,6 +1111,7 @@ int wxsky_gl_draw_background(wxsky_gl_compositor *c, const double view[16],
         invf[i] = (GLfloat)inv[i];
     }
     c->flip = proj[5] < 0.0;
+    memcpy(c->proj, proj, sizeof c->proj);
     count = c->rec.fading && c->rec.ring_fade > 0.0 ? RING_LAYERS : RING_QUADS;
     for (int i = 0; i < RING_LAYERS; ++i) {
         const double(*q)[3] = i < RING_QUADS ? c->rec.ring_quads_m[i]
@@ -991,7 +1126,7 @@ int wxsky_gl_draw_background(wxsky_gl_compositor *c, const double view[16],
     glGetIntegerv(GL_VIEWPORT, viewport);
     blend_state(1);
     if (c->fs_w[FS_SKY] && c->fs_h[FS_SKY])
-        draw_fullscreen(c, FS_SKY, viewport);
+        draw_fullscreen(c, FS_SKY, viewport, 0.0f);
 
     glUseProgram(c->ring_prog);
     glActiveTexture(GL_TEXTURE1);
@@ -1015,7 +1150,7 @@ int wxsky_gl_draw_background(wxsky_gl_compositor *c, const double view[16],
     return ok(c);
 }
 
-static int draw_layer(wxsky_gl_compositor *c, int which, const char *what) {
+static int draw_layer(wxsky_gl_compositor *c, int which, const char *what, float z_ndc) {
     GLint viewport[4];
     int st;
     if (!c)
@@ -1025,19 +1160,86 @@ static int draw_layer(wxsky_gl_compositor *c, int which, const char *what) {
     if (!c->fs_w[which] || !c->fs_h[which])
         return ok(c);
     glGetIntegerv(GL_VIEWPORT, viewport);
-    blend_state(0);
-    draw_fullscreen(c, which, viewport);
+    blend_state(z_ndc != 0.0f);
+    draw_fullscreen(c, which, viewport, z_ndc);
     if ((st = gl_check(c, what)) != WXSKY_OK)
         return st;
     return ok(c);
 }
 
 int wxsky_gl_draw_near(wxsky_gl_compositor *c) {
-    return draw_layer(c, FS_NEAR, "wxsky_gl_draw_near");
+    return draw_layer(c, FS_NEAR, "wxsky_gl_draw_near", 0.0f);
+}
+
+/* `near` by the `near_depth` layer, fallback_z the NDC depth where it holds none. */
+static int draw_near_by_depth(wxsky_gl_compositor *c, float fallback_z) {
+    GLint viewport[4];
+    double inv[16];
+    GLfloat invf[16], projf[16];
+    int st;
+    if (!mat_inverse(c->proj, inv))
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_draw_near_at: the projection is singular");
+    for (int i = 0; i < 16; ++i) {
+        invf[i] = (GLfloat)inv[i];
+        projf[i] = (GLfloat)c->proj[i];
+    }
+    glGetIntegerv(GL_VIEWPORT, viewport);
+    blend_state(1);
+    glUseProgram(c->depth_prog);
+    glActiveTexture(GL_TEXTURE1);
+    glBindTexture(GL_TEXTURE_2D, c->depth_tex);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, c->fs_tex[FS_NEAR]);
+    glUniform1i(c->u_d_tex, 0);
+    glUniform1i(c->u_d_depth, 1);
+    glUniform2i(c->u_d_size, (GLint)c->fs_w[FS_NEAR], (GLint)c->fs_h[FS_NEAR]);
+    glUniform2f(c->u_d_cap, (GLfloat)c->fs_cap_w[FS_NEAR], (GLfloat)c->fs_cap_h[FS_NEAR]);
+    glUniform2i(c->u_d_depth_size, (GLint)c->depth_w, (GLint)c->depth_h);
+    glUniform4f(c->u_d_viewport, (GLfloat)viewport[0], (GLfloat)viewport[1],
+                (GLfloat)viewport[2], (GLfloat)viewport[3]);
+    glUniform1i(c->u_d_flip, c->flip);
+    glUniformMatrix4fv(c->u_d_inv_proj, 1, GL_FALSE, invf);
+    glUniformMatrix4fv(c->u_d_proj, 1, GL_FALSE, projf);
+    glUniform1f(c->u_d_fallback, fallback_z);
+    glBindVertexArray(c->vao);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    if ((st = gl_check(c, "wxsky_gl_draw_near_at")) != WXSKY_OK)
+        return st;
+    return ok(c);
+}
+
+int wxsky_gl_draw_near_at(wxsky_gl_compositor *c, double distance_m) {
+    const double *p;
+    double z, w, z_ndc;
+    int st;
+    if (!c)
+        return WXSKY_EINVAL;
+    if ((st = check_drawable(c, "wxsky_gl_draw_near_at")) != WXSKY_OK)
+        return st;
+    if (!(distance_m >= 0.0) || !isfinite(distance_m))
+        return fail(c, WXSKY_EINVAL, "wxsky_gl_draw_near_at: distance_m %g is not >= 0",
+                    distance_m);
+    p = c->proj;
+    /* the eye-space point (0, 0, -d) through the last background's projection; nearer than
+     * the near plane: -1, in front of everything (and never 0, the far plane's marker) */
+    z = -p[10] * distance_m + p[14];
+    w = -p[11] * distance_m + p[15];
+    z_ndc = w > 0.0 ? z / w : -1.0;
+    if (!(z_ndc > -1.0))
+        z_ndc = -1.0;
+    if (z_ndc > 1.0)
+        z_ndc = 1.0;
+    if (z_ndc == 0.0)
+        z_ndc = 1e-7;
+    if (!c->fs_w[FS_NEAR] || !c->fs_h[FS_NEAR])
+        return ok(c);
+    if (c->depth_prog && c->depth_w && c->depth_h)
+        return draw_near_by_depth(c, (float)z_ndc);
+    return draw_layer(c, FS_NEAR, "wxsky_gl_draw_near_at", (float)z_ndc);
 }
 
 int wxsky_gl_draw_near_front(wxsky_gl_compositor *c) {
-    return draw_layer(c, FS_FRONT, "wxsky_gl_draw_near_front");
+    return draw_layer(c, FS_FRONT, "wxsky_gl_draw_near_front", 0.0f);
 }
 
 int wxsky_gl_layer_format(const wxsky_gl_compositor *c) {
