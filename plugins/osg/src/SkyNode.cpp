@@ -185,6 +185,9 @@ bool SkyNode::Impl::take_camera(osg::State &state) {
         problem("the camera is not a perspective one with a viewport: nothing drawn");
         return false;
     }
+    if (std::fabs(p[8]) > 1e-6 || std::fabs(p[9]) > 1e-6)
+        problem("off-axis projection (centre at " + std::to_string(-p[8]) + ", " +
+                std::to_string(-p[9]) + " of the viewport's half-size)");
     osg::Matrixd inv;
     if (!inv.invert(V))
         return false;
@@ -440,6 +443,9 @@ SkyNode::SkyNode(const Settings &settings) : SkyNode() {
     _impl->status.enabled = true;
     _impl->link.reset(new Link(settings));
     setCullingActive(false);
+    // on this Group, not the Geode: FlightGear replaces a loaded Geode that has a StateSet,
+    // and its mask with it (so the drawables' bins are on the drawables)
+    setNodeMask(settings.node_mask);
     osg::ref_ptr<osg::Geode> geode = new osg::Geode;
     geode->setCullingActive(false);
     osg::ref_ptr<Layer> bg = new Layer(_impl, Layer::Background);

@@ -10,7 +10,8 @@ namespace osgwxsky {
 
 namespace {
 
-const char *const KNOWN = "control, shm, frame, up_m, camera, background_bin, near_bin, near_depth";
+const char *const KNOWN =
+    "control, shm, frame, up_m, camera, background_bin, near_bin, near_depth, node_mask";
 
 std::string trim(const std::string &s) {
     size_t a = s.find_first_not_of(" \t\r");
@@ -112,6 +113,14 @@ bool parseSettings(const std::string &text, const std::string &file, Settings &o
             if (!number(v, -1000, 1000, d) || d != std::floor(d))
                 return bad(key + " '" + v.substr(0, 60) + "' is not an integer -1000..1000");
             (key == "near_bin" ? s.near_bin : s.background_bin) = static_cast<int>(d);
+        } else if (key == "node_mask") {
+            char *end = nullptr;
+            errno = 0;
+            unsigned long m = v.empty() ? 0 : std::strtoul(v.c_str(), &end, 0);
+            if (v.empty() || errno || *end || m > 0xffffffffUL || v[0] == '-')
+                return bad("node_mask '" + v.substr(0, 60) +
+                           "' is not a 32-bit mask (decimal, or hex as 0x800)");
+            s.node_mask = static_cast<unsigned>(m);
         } else if (key == "near_depth") {
             if (v == "true" || v == "on" || v == "1")
                 s.near_depth = true;
