@@ -10,6 +10,8 @@ the terrain as the scene drew it (within 1/255), and the camera the node sends m
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import signal
 import subprocess
 import time
@@ -23,8 +25,9 @@ from daemon_harness import RunningDaemon, running_daemon
 from host_kit import gl_program, gl_sanitizer_env, host_kit  # noqa: F401
 from osg_kit import KIT, TOOL, osg_kit, osg_kit_sanitized  # noqa: F401
 
+from tools.gallery.flightgear_sky import read_xwd as fgsky_read_xwd
 from tools.generate.osg_terrain import write_osg
-from wxsky.png import read_png
+from wxsky.png import read_png, write_png
 from wxsky.settings.presets import load_preset
 from wxsky.weather.state import WeatherState
 
@@ -175,12 +178,12 @@ def test_the_plugins_picture_is_the_host_kits_and_leaves_the_terrain(
     sky_mean = float(_diff(osg, ref)[sky].mean())
     assert sky_mean <= 2.0, f"{preset} {view}: the sky differs by {sky_mean:.2f}/255"
     if terrain.any():
-        # Along a ridge's skyline the near layer's depth (a quarter of the picture each way)
-        # puts a texel's nearer cloud over the crest: a band a texel or two high, under 2 %.
+        # The near layer's depth is a quarter of the picture each way: along a ridge's skyline
+        # a few pixels of cloud may still cross the crest (0.13 % of the terrain here).
         changed = _diff(osg, bare)[terrain].max(axis=-1)
         kept = float((changed <= 1).mean())
         assert float(changed.mean()) <= 1.0, f"{preset} {view}: terrain changed {changed.mean()}"
-        assert kept >= 0.98, f"{preset} {view}: {1 - kept:.1%} of the terrain changed"
+        assert kept >= 0.995, f"{preset} {view}: {1 - kept:.2%} of the terrain changed"
         # and the plugin drew: the host's own picture there is its sky's ground, not terrain
         assert float(_diff(ref, bare)[terrain].mean()) > 4.0
 
@@ -438,3 +441,124 @@ def test_the_example_terrain_is_the_generators(tmp_path: Path) -> None:
     out = tmp_path / "terrain.osg"
     write_osg(out)
     assert out.read_text() == TERRAIN.read_text()
+
+
+def _view_path(heading_deg: float, pitch_deg: float, position_m: tuple[float, float, float]) -> str:
+    """An osgviewer camera path (osg::AnimationPath's text: time, position, quaternion) that
+    holds one camera: the rotation takes OSG's camera axes (x right, y up, looking down -z)
+    to the view's right, up and back in the scene's east-north-up."""
+    h, p = np.radians(heading_deg), np.radians(pitch_deg)
+    fwd = np.array([np.sin(h) * np.cos(p), np.cos(h) * np.cos(p), np.sin(p)])
+    right = np.array([np.cos(h), -np.sin(h), 0.0])
+    r = np.stack([right, np.cross(right, fwd), -fwd], axis=1)
+    w = np.sqrt(max(0.0, 1.0 + np.trace(r))) / 2.0
+    x = np.copysign(np.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2.0, r[2, 1] - r[1, 2])
+    y = np.copysign(np.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2.0, r[0, 2] - r[2, 0])
+    z = np.copysign(np.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2.0, r[1, 0] - r[0, 1])
+    e, n, u = position_m
+    return "".join(f"{t} {e} {n} {u} {x} {y} {z} {w}\n" for t in (0.0, 1e6))
+
+
+def test_osgviewer_shows_the_clouds_over_the_terrain(
+    daemon: tuple[str, RunningDaemon],
+    osg_kit: Path,  # noqa: F811
+    host_kit: Path,  # noqa: F811
+    tmp_path: Path,
+) -> None:
+    """`osgviewer terrain.osg sky.wxsky` in a window (Xvfb, its screen kept in a file): the
+    clouds where the host kit has them for the camera osgviewer sent, the terrain as the scene
+    alone draws it."""
+    viewer, xvfb = shutil.which("osgviewer"), shutil.which("Xvfb")
+    if viewer is None or xvfb is None:
+        pytest.skip("no osgviewer or Xvfb (apt-get install openscenegraph xvfb)")
+    preset, d = daemon
+    noon, _, _ = _noon(preset)
+    when = noon.strftime("%Y-%m-%dT%H:%M:%SZ")
+    with d.client() as c:
+        c.call("set_time", {"time_utc": when, "rate": 0.0})
+    w, h = 320, 180
+    heading, pitch, eye = 0.0, 6.0, (0.0, 0.0, 300.0)
+    (tmp_path / "view.path").write_text(_view_path(heading, pitch, eye))
+    (tmp_path / "sky.wxsky").write_text(f"control = {d.address}\nframe = enu\n")
+    fb = tmp_path / "fb"
+    fb.mkdir()
+    display = f":{100 + os.getpid() % 800}"
+    server = subprocess.Popen(
+        [xvfb, display, "-screen", "0", f"{w}x{h}x24", "-fbdir", str(fb), "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    env = {**os.environ, "DISPLAY": display, "OSG_LIBRARY_PATH": str(osg_kit)}
+    args = [viewer, "--window", "0", "0", str(w), str(h), "-p", str(tmp_path / "view.path")]
+    app = None
+    try:
+        deadline = time.monotonic() + HANG_S
+        while not (fb / "Xvfb_screen0").exists():
+            assert time.monotonic() < deadline and server.poll() is None, "Xvfb did not start"
+            time.sleep(0.1)
+        app = subprocess.Popen(
+            [*args, str(TERRAIN), str(tmp_path / "sky.wxsky")],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        # osgviewer's camera reaches the daemon, and its ring settles
+        with d.client() as c:
+            while True:
+                assert time.monotonic() < deadline, "osgviewer's camera never reached the daemon"
+                assert app.poll() is None, app.communicate()[1]
+                cam = c.call("status")["camera"]
+                if (
+                    abs(cam["heading_deg"] - heading) < 0.01
+                    and abs(cam["pitch_deg"] - pitch) < 0.01
+                    and np.allclose(cam["position_m"], eye, atol=0.1)
+                    and not c.call("scene")["ring_busy"]
+                ):
+                    break
+                time.sleep(0.2)
+        time.sleep(1.5)  # a few of osgviewer's frames with the settled layers
+        seen = fgsky_read_xwd(fb / "Xvfb_screen0")[:h, :w]
+        alpha = np.full((h, w, 1), 255, np.uint8)
+        write_png(tmp_path / "osgviewer.png", np.concatenate([seen, alpha], axis=-1))
+    finally:
+        for proc in (app, server):
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                proc.wait(30)
+    tool = gl_program(host_kit, "wxsky-host-snapshot")
+    host = _run(
+        [str(tool), "--control", d.address, "--time", when, "--out", str(tmp_path / "h.png")]
+    )
+    assert host.returncode == 0, host.stderr
+    fov = f"{cam['fov_deg']:.9f}"
+    bare = _run(
+        [
+            str(osg_kit / TOOL),
+            "--no-sky",
+            "--scene",
+            str(TERRAIN),
+            "--size",
+            f"{w}x{h}",
+            "--alt-m",
+            "300",
+            "--heading-deg",
+            "0",
+            "--pitch-deg",
+            "6",
+            "--fov-deg",
+            fov,
+            "--out",
+            str(tmp_path / "bare.png"),
+        ]
+    )
+    assert bare.returncode == 0, bare.stderr
+    ref, scene = read_png(tmp_path / "h.png"), read_png(tmp_path / "bare.png")
+    terrain = scene[..., 3] > 0
+    assert 0.05 < terrain.mean() < 0.8
+    sky_mean = float(_diff(seen, ref)[~terrain].mean())
+    assert sky_mean <= 2.0, f"{preset}: osgviewer's sky differs by {sky_mean:.2f}/255"
+    # (under the overcast, whose base is 100 m over the ridge's crest, the cloud that hangs in
+    # front of the crest is drawn over it in blocks of the depth layer's texels: 1.1 % here)
+    changed = _diff(seen, scene)[terrain].max(axis=-1)
+    kept = float((changed <= 1).mean())
+    assert kept >= 0.98, f"{preset}: {1 - kept:.2%} of the terrain changed"

@@ -58,8 +58,21 @@ void Link::stop() {
     client_ = nullptr;
 }
 
+namespace {
+bool same(const Camera &a, const Camera &b) {
+    return a.geodetic == b.geodetic && a.width == b.width && a.height == b.height &&
+           a.heading_deg == b.heading_deg && a.pitch_deg == b.pitch_deg &&
+           a.roll_deg == b.roll_deg && a.fov_deg == b.fov_deg &&
+           (a.geodetic ? a.lat_deg == b.lat_deg && a.lon_deg == b.lon_deg && a.alt_m == b.alt_m
+                       : a.position_m[0] == b.position_m[0] && a.position_m[1] == b.position_m[1] &&
+                             a.position_m[2] == b.position_m[2]);
+}
+} // namespace
+
 void Link::post(const Camera &camera) {
     std::lock_guard<std::mutex> g(lock_);
+    if (has_pending_ && same(camera, pending_))
+        return; // a camera standing still is sent once (and again each RESEND_S)
     pending_ = camera;
     has_pending_ = true;
     ++pending_serial_;

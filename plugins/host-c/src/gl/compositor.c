@@ -185,9 +185,11 @@ static const char FS_LAYER[] =
     "    }\n"
     "}\n";
 
-/* `near` at the depth of its clouds: FS_LAYER's colour, and for depth the nearest cloud's
- * distance the `near_depth` layer holds at the pixel (protocol §1.5; where its own texel holds
- * none, the nearest of the 8 around it, so a cloud's soft edge takes its cloud's), placed along
+/* `near` at the depth of its clouds: FS_LAYER's colour, and for depth the distance the
+ * `near_depth` layer holds at the pixel (protocol §1.5): the farthest of the 4 texels a
+ * bilinear read would take (along a ridge's skyline a texel straddles the crest: the nearer
+ * cloud above it must not pull the farther one below over the terrain), or where none of them
+ * holds one, the nearest of the 16 around (a cloud's soft edge takes its cloud's), placed along
  * the pixel's ray through the host's projection; where none is near, `fallback` (the NDC depth
  * of the frame's near_distance_m). */
 static const char FS_NEAR_DEPTH[] =
@@ -214,15 +216,20 @@ static const char FS_NEAR_DEPTH[] =
     "        colour = texture(tex, px / cap);\n"
     "    }\n"
     "    if (!(colour.a > 0.0)) discard;\n"
-    "    ivec2 at = clamp(ivec2(f * vec2(depth_size)), ivec2(0), depth_size - 1);\n"
-    "    vec4 t = texelFetch(depth, at, 0);\n"
-    "    float q = 2.0;\n"
-    "    if (t.a > 0.5) {\n"
-    "        q = dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / 16777215.0;\n"
-    "    } else {\n"
-    "        for (int dy = -1; dy <= 1; ++dy)\n"
-    "            for (int dx = -1; dx <= 1; ++dx) {\n"
-    "                t = texelFetch(depth, clamp(at + ivec2(dx, dy), ivec2(0), depth_size - 1), 0);\n"
+    "    vec2 c = f * vec2(depth_size) - 0.5;\n"
+    "    ivec2 at = ivec2(floor(c));\n"
+    "    float q = -1.0;\n"
+    "    for (int k = 0; k < 4; ++k) {\n"
+    "        ivec2 o = clamp(at + ivec2(k & 1, k >> 1), ivec2(0), depth_size - 1);\n"
+    "        vec4 t = texelFetch(depth, o, 0);\n"
+    "        if (t.a > 0.5)\n"
+    "            q = max(q, dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / 16777215.0);\n"
+    "    }\n"
+    "    if (q < 0.0) {\n"
+    "        q = 2.0;\n"
+    "        for (int dy = -1; dy <= 2; ++dy)\n"
+    "            for (int dx = -1; dx <= 2; ++dx) {\n"
+    "                vec4 t = texelFetch(depth, clamp(at + ivec2(dx, dy), ivec2(0), depth_size - 1), 0);\n"
     "                if (t.a > 0.5)\n"
     "                    q = min(q, dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / "
     "16777215.0);\n"
