@@ -26,6 +26,7 @@ from host_kit import gl_program, gl_sanitizer_env, host_kit  # noqa: F401
 from osg_kit import KIT, TOOL, osg_kit, osg_kit_sanitized  # noqa: F401
 
 from tools.gallery.flightgear_sky import read_xwd as fgsky_read_xwd
+from tools.gallery.osgviewer_sky import view_path
 from tools.generate.osg_terrain import write_osg
 from wxsky.png import read_png, write_png
 from wxsky.settings.presets import load_preset
@@ -443,22 +444,6 @@ def test_the_example_terrain_is_the_generators(tmp_path: Path) -> None:
     assert out.read_text() == TERRAIN.read_text()
 
 
-def _view_path(heading_deg: float, pitch_deg: float, position_m: tuple[float, float, float]) -> str:
-    """An osgviewer camera path (osg::AnimationPath's text: time, position, quaternion) that
-    holds one camera: the rotation takes OSG's camera axes (x right, y up, looking down -z)
-    to the view's right, up and back in the scene's east-north-up."""
-    h, p = np.radians(heading_deg), np.radians(pitch_deg)
-    fwd = np.array([np.sin(h) * np.cos(p), np.cos(h) * np.cos(p), np.sin(p)])
-    right = np.array([np.cos(h), -np.sin(h), 0.0])
-    r = np.stack([right, np.cross(right, fwd), -fwd], axis=1)
-    w = np.sqrt(max(0.0, 1.0 + np.trace(r))) / 2.0
-    x = np.copysign(np.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2.0, r[2, 1] - r[1, 2])
-    y = np.copysign(np.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2.0, r[0, 2] - r[2, 0])
-    z = np.copysign(np.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2.0, r[1, 0] - r[0, 1])
-    e, n, u = position_m
-    return "".join(f"{t} {e} {n} {u} {x} {y} {z} {w}\n" for t in (0.0, 1e6))
-
-
 def test_osgviewer_shows_the_clouds_over_the_terrain(
     daemon: tuple[str, RunningDaemon],
     osg_kit: Path,  # noqa: F811
@@ -478,7 +463,7 @@ def test_osgviewer_shows_the_clouds_over_the_terrain(
         c.call("set_time", {"time_utc": when, "rate": 0.0})
     w, h = 320, 180
     heading, pitch, eye = 0.0, 6.0, (0.0, 0.0, 300.0)
-    (tmp_path / "view.path").write_text(_view_path(heading, pitch, eye))
+    (tmp_path / "view.path").write_text(view_path(heading, pitch, eye))
     (tmp_path / "sky.wxsky").write_text(f"control = {d.address}\nframe = enu\n")
     fb = tmp_path / "fb"
     fb.mkdir()

@@ -71,7 +71,9 @@ def build_kit() -> Path:
     return BENCH
 
 
-def write_config(path: Path, shm_name: str, width: int, height: int, preset: str) -> None:
+def write_config(
+    path: Path, shm_name: str, width: int, height: int, preset: str, near_depth: bool = False
+) -> None:
     path.write_text(
         f"""
 [daemon]
@@ -84,18 +86,25 @@ height = {height}
 shm_name = "{shm_name}"
 max_width = {width}
 max_height = {height}
+near_depth = {str(near_depth).lower()}
 """
     )
 
 
 @contextlib.contextmanager
 def daemon(
-    folder: Path, width: int, height: int, preset: str, timeout_s: float = 120.0
+    folder: Path,
+    width: int,
+    height: int,
+    preset: str,
+    timeout_s: float = 120.0,
+    near_depth: bool = False,
 ) -> Iterator[tuple[subprocess.Popen[bytes], str, str]]:
-    """A running `wxsky run` at width x height: (process, shm name, control address)."""
+    """A running `wxsky run` at width x height: (process, shm name, control address);
+    `near_depth`: with the near layer's depth ([output] near_depth)."""
     shm_name = f"wxsky-benchc-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     config = folder / f"wxsky-{width}x{height}.toml"
-    write_config(config, shm_name, width, height, preset)
+    write_config(config, shm_name, width, height, preset, near_depth)
     sock = folder / f"wx-{width}x{height}.sock"
     address = f"unix:{sock}"
     log_path = folder / f"daemon-{width}x{height}.log"

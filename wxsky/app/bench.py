@@ -267,6 +267,7 @@ def run_bench(
     lead_in: bool = True,
     progress: Callable[[str], None] | None = None,
     exposure_setting: float | str = AUTO,
+    near_depth: bool = False,
 ) -> BenchResult:
     """Render `frames` frames along `path`; `started_s`: the perf_counter reading the process's
     startup is counted from (default: now). `check_order`: also measure what each change in the
@@ -278,7 +279,8 @@ def run_bench(
     untimed frames, the camera at the path's start, until the first ring has been built,
     drawn and faded in, so the timed frames are the daemon's steady state and not its first
     seconds (which draw no far clouds); False times the frames from the daemon's start.
-    `progress` is told what is being done as it starts (the command line shows it)."""
+    `progress` is told what is being done as it starts (the command line shows it).
+    `near_depth`: draw and publish the near layer's depth too ([output] near_depth)."""
     from wxsky.render.context import describe
     from wxsky.render.renderer import Renderer
     from wxsky.render.towers import SLICE_TEXELS
@@ -304,10 +306,14 @@ def run_bench(
     build_s: list[float] = []
     times = _StageTimes()
     shm_name = f"wxsky-bench-{os.getpid()}"
-    specs = frame_layer_specs(width, height, settings.ring_texture_px, settings.shadow_map_px)
+    specs = frame_layer_specs(
+        width, height, settings.ring_texture_px, settings.shadow_map_px, near_depth=near_depth
+    )
     with (
         Renderer(
-            settings.ring_texture_px, variable_exposure=needs_variable(exposure_setting)
+            settings.ring_texture_px,
+            variable_exposure=needs_variable(exposure_setting),
+            near_depth=near_depth,
         ) as renderer,
         FrameWriter.create(shm_name, specs) as writer,
         SkyEngine(
@@ -363,7 +369,14 @@ def run_bench(
                 renderer.finish()
             cpu0 = time.thread_time()
             with times.stage("publish"):
-                publish_plan(renderer, writer, plan, drawn + 1, settings.ring_texture_px)
+                publish_plan(
+                    renderer,
+                    writer,
+                    plan,
+                    drawn + 1,
+                    settings.ring_texture_px,
+                    near_depth=near_depth,
+                )
             times.frame["cpu"] = cpu_s + time.thread_time() - cpu0
             times.frame["frame"] = time.perf_counter() - t0
             drawn += 1

@@ -28,7 +28,10 @@ def add_commands(sub: Subparsers) -> None:
         "--config",
         type=Path,
         metavar="FILE",
-        help="daemon config: its [presets] dirs, [scene] and [render] exposure (default: built-in)",
+        help=(
+            "daemon config: its [presets] dirs, [scene], [render] exposure and [output] "
+            "near_depth (default: built-in)"
+        ),
     )
     bench.add_argument(
         "--frames",
@@ -144,6 +147,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             lead_in=not args.from_start,
             progress=args.progress,
             exposure_setting=config.render.exposure,
+            near_depth=config.output.near_depth,
         )
     finally:
         if trace is not None:

@@ -57,6 +57,7 @@ def _write_if_read(prog: moderngl.Program, name: str, data: bytes) -> None:
     if isinstance(prog.get(name, None), moderngl.Uniform):
         _write(prog, name, data)
 
+
 log = logging.getLogger(__name__)
 
 SUN_RADIUS_DEG = 0.27
@@ -458,14 +459,41 @@ class Renderer:
         towers, curtains and fog the layer also holds have none (their pixels read as no
         sprite): a host places those at the frame's near_distance_m (scene/near_depth.py)."""
         cam = frame.camera
+        near_w = self._targets["near"].size[0]
         w, h = near_depth_size(self._targets["near"].size)
         metres = self._target("near_depth_m", w, h, components=1, dtype="f4")
+        draw = frame.near
+        view, proj = cam.view_matrix(), cam.projection_matrix()
+        # The far band (most of the sprites, the farthest) at its own coarse resolution, as
+        # `_draw_near` draws its colour: the depth of its clouds, stretched (nearest) under the
+        # rest's. Drawn at the depth layer's size it cost as much as the whole near pass.
+        far_count = min(frame.near_far_count, len(draw))
+        far_scale = FAR_BAND_PX_PER_DEG / (near_w / cam.fov_deg)
+        fw = max(1, round(near_w * far_scale))
+        fh = max(1, round(self._targets["near"].size[1] * far_scale))
         metres.fbo.use()
         metres.fbo.clear(NEAR_DEPTH_NONE, 0.0, 0.0, 0.0)
-        if len(frame.near) > 0:
-            view, proj = cam.view_matrix(), cam.projection_matrix()
+        start = 0
+        if far_count > 0 and far_scale <= FAR_BAND_MAX_SCALE:
+            if fw < w and fh < h:
+                far = self._target("near_depth_far_m", fw, fh, components=1, dtype="f4")
+                far.fbo.use()
+                far.fbo.clear(NEAR_DEPTH_NONE, 0.0, 0.0, 0.0)
+                band = draw.slice(0, far_count)
+                self._draw_sprites(
+                    far, band, cam.position_m, view, proj, None, FAR_BAND_SHAPE, depth=True
+                )
+                self._upsample(far, metres, nearest=True)
+            else:  # the band's resolution is finer than the layer's: straight into it
+                band = draw.slice(0, far_count)
+                self._draw_sprites(
+                    metres, band, cam.position_m, view, proj, None, FAR_BAND_SHAPE, depth=True
+                )
+            start = far_count
+        if start < len(draw):
+            part = draw if start == 0 else draw.slice(start, len(draw))
             self._draw_sprites(
-                metres, frame.near, cam.position_m, view, proj, None, "polygon", depth=True
+                metres, part, cam.position_m, view, proj, None, "polygon", depth=True
             )
         out = self._target("near_depth", w, h, dtype="f1")
         out.fbo.use()
@@ -842,16 +870,20 @@ class Renderer:
         if self._finish_each_draw:
             self._finish()
 
-    def _upsample(self, source: _Target, dest: _Target, over: bool = False) -> None:
-        """`source` stretched over `dest` (bilinear): in its place, or with `over`, composited
-        over what `dest` holds (premultiplied)."""
+    def _upsample(
+        self, source: _Target, dest: _Target, over: bool = False, nearest: bool = False
+    ) -> None:
+        """`source` stretched over `dest` (bilinear, or with `nearest` each pixel its source
+        texel's: distances do not blend): in its place, or with `over`, composited over what
+        `dest` holds (premultiplied)."""
         dest.fbo.use()
         if over:
             self.ctx.enable(moderngl.BLEND)
             self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         else:
             self.ctx.disable(moderngl.BLEND)
-        source.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        filt = moderngl.NEAREST if nearest else moderngl.LINEAR
+        source.texture.filter = (filt, filt)
         source.texture.repeat_x = source.texture.repeat_y = False
         source.texture.use(0)
         _set(self._upsample_prog, "u_source", 0)

@@ -100,6 +100,7 @@ struct SkyNode::Impl {
     unsigned osg_frame = UINT_MAX;
     const osg::Camera *camera = nullptr;
     bool drawing = false; // this frame's camera has a frame to draw
+    bool upload_every_frame = false; // setUploadEveryFrame
     double view[16]{}, proj[16]{};
     std::map<std::string, double> logged; // message -> when it was last logged
 
@@ -313,7 +314,7 @@ void SkyNode::Impl::take_frame() {
     if (!open)
         return;
     uint64_t latest = wxsky_segment_latest_frame(seg);
-    if (have_frame && latest <= rec.frame_number)
+    if (have_frame && latest <= rec.frame_number && !upload_every_frame)
         return;
     for (int attempt = 0; attempt < 2; ++attempt) {
         wxsky_frame_view fv;
@@ -479,6 +480,8 @@ Status SkyNode::status() const {
 }
 
 const Settings &SkyNode::settings() const { return _impl->settings; }
+
+void SkyNode::setUploadEveryFrame(bool on) { _impl->upload_every_frame = on; }
 
 void SkyNode::close() {
     if (_impl->link)
