@@ -25,7 +25,7 @@ from daemon_harness import RunningDaemon, running_daemon
 from host_kit import gl_program, gl_sanitizer_env, host_kit  # noqa: F401
 from osg_kit import KIT, TOOL, osg_kit, osg_kit_sanitized  # noqa: F401
 
-from tools.gallery.flightgear_sky import read_xwd as fgsky_read_xwd
+from tools.gallery.flightgear_sky import stable_screen
 from tools.gallery.osgviewer_sky import view_path
 from tools.generate.osg_terrain import write_osg
 from wxsky.png import read_png, write_png
@@ -497,12 +497,13 @@ def test_osgviewer_shows_the_clouds_over_the_terrain(
                     abs(cam["heading_deg"] - heading) < 0.01
                     and abs(cam["pitch_deg"] - pitch) < 0.01
                     and np.allclose(cam["position_m"], eye, atol=0.1)
+                    and (cam["width"], cam["height"]) == (w, h)
                     and not c.call("scene")["ring_busy"]
                 ):
                     break
                 time.sleep(0.2)
-        time.sleep(1.5)  # a few of osgviewer's frames with the settled layers
-        seen = fgsky_read_xwd(fb / "Xvfb_screen0")[:h, :w]
+        # osgviewer's frames with the settled layers: the screen once it stands still
+        seen = stable_screen(fb / "Xvfb_screen0", deadline)[:h, :w]
         alpha = np.full((h, w, 1), 255, np.uint8)
         write_png(tmp_path / "osgviewer.png", np.concatenate([seen, alpha], axis=-1))
     finally:
@@ -547,3 +548,36 @@ def test_osgviewer_shows_the_clouds_over_the_terrain(
     changed = _diff(seen, scene)[terrain].max(axis=-1)
     kept = float((changed <= 1).mean())
     assert kept >= 0.98, f"{preset}: {1 - kept:.2%} of the terrain changed"
+
+
+def test_the_scenes_terrain_is_shaded_through_the_nodes_shadow_map(
+    daemon: tuple[str, RunningDaemon],
+    osg_kit: Path,  # noqa: F811
+    tmp_path: Path,
+) -> None:
+    """SkyNode::shadowStateSet gives a host's terrain shader the cloud-shadow map: the
+    example terrain drawn with `--shadows` (colour x (0.35 + 0.65 T)) against the same camera
+    without: broken sun and shade under scattered cumulus, shade nearly everywhere under an
+    overcast, and never brighter than the terrain's own colour."""
+    preset, d = daemon
+    noon, lat, lon = _noon(preset)
+    args = ["--control", d.address, "--time", noon.strftime("%Y-%m-%dT%H:%M:%SZ")]
+    args += ["--lat", f"{lat:.6f}", "--lon", f"{lon:.6f}", "--alt-m", "900"]
+    args += ["--heading-deg", "0", "--pitch-deg", "-30", "--fov-deg", "70", "--size", SIZE]
+    args += ["--scene", str(TERRAIN)]
+    lit, plain = tmp_path / "lit.png", tmp_path / "plain.png"
+    for extra, out in ((["--shadows"], lit), ([], plain)):
+        sky = str(tmp_path / "sky.png")
+        proc = _run([str(osg_kit / TOOL), *args, *extra, "--bare-out", str(out), "--out", sky])
+        assert proc.returncode == 0, proc.stderr + d.log()[-2000:]
+    a, b = read_png(lit), read_png(plain)
+    terrain = (a[..., 3] > 0) & (b[..., 3] > 0)
+    assert terrain.mean() > 0.5
+    ratio = (a[..., :3].astype(float) + 0.5) / (b[..., :3].astype(float) + 0.5)
+    share = ratio[terrain].mean(axis=-1)
+    assert float(share.max()) <= 1.05  # T <= 1: the map never brightens
+    shaded = float((share < 0.9).mean())
+    if preset == "scattered-cumulus":
+        assert 0.02 < shaded < 0.9, f"{shaded:.0%} of the terrain in cloud shadow"
+    else:
+        assert shaded > 0.5, f"{shaded:.0%} of the terrain under the overcast's shadow"

@@ -110,6 +110,22 @@ def read_xwd(path: Path) -> np.ndarray:
     return np.ascontiguousarray(px[..., [2, 1, 0]])
 
 
+def stable_screen(path: Path, deadline: float, still_s: float = 1.0) -> np.ndarray:
+    """The screen an Xvfb keeps in `path` once it has not changed for `still_s` (a frozen view
+    whose layers have settled: on a busy machine a viewer draws a frame every second or so,
+    and one taken earlier may still hold the layers before)."""
+    last = read_xwd(path)
+    since = time.monotonic()
+    while time.monotonic() - since < still_s:
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the screen in {path} never stood still for {still_s} s")
+        time.sleep(0.2)
+        now = read_xwd(path)
+        if not np.array_equal(now, last):
+            last, since = now, time.monotonic()
+    return last
+
+
 @dataclass
 class FlightGear:
     proc: subprocess.Popen[bytes]
@@ -117,9 +133,13 @@ class FlightGear:
     fbdir: Path
     log: Path
 
-    def screen(self, size: tuple[int, int] = SIZE) -> np.ndarray:
-        """What FlightGear last drew (its window fills the screen's top-left corner)."""
-        return read_xwd(self.fbdir / "Xvfb_screen0")[: size[1], : size[0]]
+    def screen(self, size: tuple[int, int] = SIZE, timeout_s: float = 120.0) -> np.ndarray:
+        """What FlightGear draws (its window fills the screen's top-left corner), once its
+        picture has stood still for 2 s: the simulation is frozen, so it changes only while
+        the layers it draws change."""
+        deadline = time.monotonic() + timeout_s
+        screen = stable_screen(self.fbdir / "Xvfb_screen0", deadline, still_s=2.0)
+        return screen[: size[1], : size[0]]
 
     def view(self, number: int, heading_offset_deg: float, pitch_offset_deg: float) -> None:
         self.props.set("/sim/current-view/view-number", number)
@@ -277,7 +297,6 @@ def main() -> int:
         for name, (number, heading, pitch) in VIEWS.items():
             fg.view(number, heading, pitch)
             camera = settle(client)
-            time.sleep(1.0)  # a few of FlightGear's frames with the settled layers
             seen = fg.screen()
             host = host_snapshot(control, work / f"host-{name}.png")
             print(f"{name}: camera {camera}")

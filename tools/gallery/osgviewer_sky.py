@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT))
 
-from tools.gallery.flightgear_sky import daemon, host_snapshot, read_xwd  # noqa: E402
+from tools.gallery.flightgear_sky import daemon, host_snapshot, stable_screen  # noqa: E402
 from wxsky.host.client import ControlClient  # noqa: E402
 from wxsky.png import write_png  # noqa: E402
 from wxsky.settings.presets import load_preset  # noqa: E402
@@ -133,8 +133,7 @@ def shoot(client: ControlClient, control: str, work: Path, camera: tuple[float, 
                 if time.monotonic() > deadline or app.poll() is not None:
                     raise RuntimeError("osgviewer's camera did not reach the daemon")
                 time.sleep(0.2)
-            time.sleep(1.5)  # a few of osgviewer's frames with the settled layers
-            seen = read_xwd(fbdir / "Xvfb_screen0")[:h, :w]
+            seen = stable_screen(fbdir / "Xvfb_screen0", deadline)[:h, :w]
         finally:
             app.terminate()
             app.wait(30)

@@ -16,7 +16,8 @@
  * and draws. The PNG is taken from the frame drawn once the node's layers are for that camera
  * and the ring has settled. --no-sky renders the scene alone (cleared to transparent black,
  * so the PNG's alpha marks the scene's pixels); --bare-out FILE.png also writes that picture
- * for the very camera of the PNG. --bench N then times N frames with the node
+ * for the very camera of the PNG. --shadows draws the scene with a terrain shader lit
+ * through the node's cloud-shadow map (SkyNode::shadowStateSet). --bench N then times N frames with the node
  * and N without (one JSON line each: the host's frame, the draw finished with glFinish).
  * --watch-s S is a host's loop instead: the daemon is not driven (no clock, no camera from
  * this program: the node sends the OSG camera the arguments give, in the scene's frame), the
@@ -33,6 +34,8 @@
 
 #include <osg/CoordinateSystemNode>
 #include <osg/GL>
+#include <osg/Program>
+#include <osg/Shader>
 #include <osgDB/ReadFile>
 #include <osgDB/Registry>
 #include <osgViewer/Viewer>
@@ -63,6 +66,7 @@ extern "C" {
     "[--alt-m M] [--heading-deg D] [--pitch-deg D] [--roll-deg D] [--fov-deg D] [--size WxH] "  \
     "--out FILE.png [--frame enu|geocentric] " \
     "[--scene FILE] [--sky FILE.wxsky] [--up-m M] [--no-sky] [--bare-out FILE.png] "           \
+    "[--shadows] "                                                                              \
     "[--timeout-s S] [--bench N] "                                                              \
     "[--watch-s S]"
 
@@ -74,7 +78,7 @@ struct Args {
     double timeout_s = 60;
     bool has_lat = false, has_alt = false, has_heading = false, has_pitch = false, has_fov = false;
     bool has_roll = false, geocentric = false;
-    bool no_sky = false;
+    bool no_sky = false, shadows = false;
     int bench = 0;
     double watch_s = 0.0;
     uint32_t width = 0, height = 0;
@@ -106,6 +110,10 @@ Args parse(int argc, char **argv) {
         std::string f = argv[i];
         if (f == "--no-sky") {
             a.no_sky = true;
+            continue;
+        }
+        if (f == "--shadows") {
+            a.shadows = true;
             continue;
         }
         if (i + 1 >= argc)
@@ -152,6 +160,8 @@ Args parse(int argc, char **argv) {
         throw Failure{64, "--out FILE.png is required\n" USAGE};
     if (a.has_lat != lon_given)
         throw Failure{64, "--lat and --lon go together"};
+    if (a.shadows && (a.scene.empty() || a.no_sky))
+        throw Failure{64, "--shadows needs --scene and the sky"};
     if (a.geocentric && (!a.has_lat || !a.scene.empty()))
         throw Failure{64, "--frame geocentric needs --lat and --lon, and no --scene (the scene's "
                           "frame is the daemon's flat one)"};
@@ -345,6 +355,35 @@ osg::Matrixd geocentric_view_of(const osgwxsky::Camera &c, double lat_deg, doubl
     return osg::Matrixd(out);
 }
 
+// --shadows: the scene drawn by a terrain shader lit through the node's cloud-shadow map
+// (SkyNode::shadowStateSet, shadowGlsl): its vertex colour x (0.35 + 0.65 T), T the sun's share
+// through the clouds at the fragment, the scene's coordinates plus up_m being the daemon's.
+void shade_scene(osg::Node &scene, osgwxsky::SkyNode &sky, double up_m) {
+    osg::ref_ptr<osg::Program> prog = new osg::Program;
+    prog->addShader(new osg::Shader(osg::Shader::VERTEX,
+                                    "#version 130\n"
+                                    "uniform float up_m;\n"
+                                    "out vec3 world;\n"
+                                    "out vec4 colour;\n"
+                                    "void main() {\n"
+                                    "    world = gl_Vertex.xyz + vec3(0.0, 0.0, up_m);\n"
+                                    "    colour = gl_Color;\n"
+                                    "    gl_Position = ftransform();\n"
+                                    "}\n"));
+    prog->addShader(new osg::Shader(osg::Shader::FRAGMENT,
+                                    std::string("#version 130\n") + osgwxsky::SkyNode::shadowGlsl() +
+                                        "in vec3 world;\n"
+                                        "in vec4 colour;\n"
+                                        "void main() {\n"
+                                        "    float t = wxsky_shadow(world);\n"
+                                        "    gl_FragColor = vec4(colour.rgb * (0.35 + 0.65 * t), colour.a);\n"
+                                        "}\n"));
+    osg::StateSet *ss = scene.getOrCreateStateSet();
+    ss->merge(*sky.shadowStateSet());
+    ss->setAttributeAndModes(prog.get());
+    ss->addUniform(new osg::Uniform("up_m", static_cast<float>(up_m)));
+}
+
 void stats(const char *what, std::vector<double> v) {
     std::sort(v.begin(), v.end());
     size_t n = v.size();
@@ -469,6 +508,8 @@ int run(const Args &a) {
         if (!sky->status().enabled)
             throw Failure{1, sky->status().last_error};
         root->addChild(sky);
+        if (a.shadows)
+            shade_scene(*root->getChild(0), *sky, a.up_m);
     }
 
     osgViewer::Viewer viewer;

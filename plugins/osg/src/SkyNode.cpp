@@ -11,6 +11,8 @@
 #include <osg/Notify>
 #include <osg/RenderInfo>
 #include <osg/State>
+#include <osg/Texture2D>
+#include <osg/Uniform>
 #include <GL/glext.h>
 
 #include <time.h>
@@ -106,6 +108,13 @@ struct SkyNode::Impl {
 
     mutable std::mutex lock; // status
     Status status;
+
+    // the cloud-shadow map's StateSet (shadowStateSet): made once, its uniforms set from
+    // each uploaded frame, its texture the compositor's
+    osg::ref_ptr<osg::StateSet> shadow_set;
+    osg::ref_ptr<osg::Uniform> u_rect, u_sun, u_texels;
+    unsigned shadow_texture = 0; // the compositor's GL name (0: none)
+    void update_shadow();
 
     Impl() { std::memset(&rec, 0, sizeof rec); }
     ~Impl() {
@@ -243,6 +252,12 @@ bool SkyNode::Impl::take_camera(osg::State &state) {
     double w = vp->width(), h = vp->height(), scale = 1.0;
     wxsky_layer_info sky;
     int sky_index = seg ? wxsky_segment_find_layer(seg, "sky") : -1;
+    // the height from the projection's own shape (tan_y / tan_x = p[0] / p[5]): a viewport
+    // whose pixels the projection does not keep square (a window resized under a fixed
+    // projection) still gets the camera it is drawn with
+    double shape = std::fabs(p[5]) > 0.0 ? p[0] / std::fabs(p[5]) : h / w;
+    if (std::fabs(shape - h / w) > 1e-3 * (h / w))
+        h = w * shape;
     if (sky_index >= 0 && wxsky_segment_layer(seg, (uint32_t)sky_index, &sky) == WXSKY_OK)
         scale = std::min(1.0, std::min(sky.max_width / w, sky.max_height / h));
     c.width = (uint32_t)std::max(1.0, std::floor(w * scale));
@@ -343,6 +358,7 @@ void SkyNode::Impl::take_frame() {
         }
         rec = r;
         have_frame = true;
+        update_shadow();
         std::lock_guard<std::mutex> g(lock);
         ++status.frames_uploaded;
         status.last_frame_number = r.frame_number;
@@ -358,6 +374,18 @@ void SkyNode::Impl::take_frame() {
                               std::fabs(r.position_m[2] - c.position_m[2]) < 1e-6);
         return;
     }
+}
+
+void SkyNode::Impl::update_shadow() {
+    if (!shadow_set)
+        return;
+    wxsky_gl_shadow_params sp;
+    if (wxsky_gl_shadow(gl, &sp) != WXSKY_OK)
+        return;
+    shadow_texture = sp.texture;
+    u_rect->set(osg::Vec4f(sp.rect[0], sp.rect[1], sp.rect[2], sp.rect[3]));
+    u_sun->set(osg::Vec4f(sp.sun[0], sp.sun[1], sp.sun[2], sp.sun[3]));
+    u_texels->set(osg::Vec4f(sp.texels[0], sp.texels[1], sp.texels[2], sp.texels[3]));
 }
 
 void SkyNode::Impl::draw_background(osg::State &state) {
@@ -390,6 +418,29 @@ void SkyNode::Impl::draw_near(osg::State &state) {
 }
 
 namespace {
+
+// The compositor's shadow-map texture as an OSG texture attribute: binding it binds the
+// compositor's GL texture (0 before the first map; the uniforms then say `present` 0).
+class ShadowTexture : public osg::Texture2D {
+  public:
+    ShadowTexture() = default;
+    explicit ShadowTexture(std::shared_ptr<SkyNode::Impl> impl) : impl_(std::move(impl)) {
+        setDataVariance(osg::Object::DYNAMIC);
+    }
+    ShadowTexture(const ShadowTexture &o, const osg::CopyOp &op = osg::CopyOp::SHALLOW_COPY)
+        : osg::Texture2D(o, op), impl_(o.impl_) {}
+    META_StateAttribute(osgwxsky, ShadowTexture, TEXTURE)
+    int compare(const osg::StateAttribute &sa) const override {
+        COMPARE_StateAttribute_Types(ShadowTexture, sa)
+        return impl_ == rhs.impl_ ? 0 : (impl_.get() < rhs.impl_.get() ? -1 : 1);
+    }
+    void apply(osg::State &) const override {
+        glBindTexture(GL_TEXTURE_2D, impl_ ? impl_->shadow_texture : 0);
+    }
+
+  private:
+    std::shared_ptr<SkyNode::Impl> impl_;
+};
 
 class Layer : public osg::Drawable {
   public:
@@ -482,6 +533,26 @@ Status SkyNode::status() const {
 const Settings &SkyNode::settings() const { return _impl->settings; }
 
 void SkyNode::setUploadEveryFrame(bool on) { _impl->upload_every_frame = on; }
+
+osg::StateSet *SkyNode::shadowStateSet(unsigned unit) {
+    Impl &m = *_impl;
+    if (!m.shadow_set) {
+        m.shadow_set = new osg::StateSet;
+        m.shadow_set->setDataVariance(osg::Object::DYNAMIC);
+        m.u_rect = new osg::Uniform("wxsky_shadow_rect", osg::Vec4f(0, 0, 0, 0));
+        m.u_sun = new osg::Uniform("wxsky_shadow_sun", osg::Vec4f(0, 0, 0, 0));
+        m.u_texels = new osg::Uniform("wxsky_shadow_texels", osg::Vec4f(1, 1, 1, 1));
+        for (osg::Uniform *u : {m.u_rect.get(), m.u_sun.get(), m.u_texels.get()}) {
+            u->setDataVariance(osg::Object::DYNAMIC);
+            m.shadow_set->addUniform(u);
+        }
+        m.shadow_set->setTextureAttribute(unit, new ShadowTexture(_impl));
+        m.shadow_set->addUniform(new osg::Uniform("wxsky_shadow_map", static_cast<int>(unit)));
+    }
+    return m.shadow_set.get();
+}
+
+const char *SkyNode::shadowGlsl() { return WXSKY_GL_SHADOW_GLSL; }
 
 void SkyNode::close() {
     if (_impl->link)
