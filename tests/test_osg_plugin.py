@@ -18,6 +18,7 @@ import time
 from collections.abc import Iterator
 from datetime import datetime, timedelta
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -444,6 +445,35 @@ def test_the_example_terrain_is_the_generators(tmp_path: Path) -> None:
     assert out.read_text() == TERRAIN.read_text()
 
 
+def _inside(mask: np.ndarray, px: int) -> np.ndarray:
+    """The pixels of `mask` at least `px` pixels from its edge (either way of a skyline
+    rasterised by two programs, a pixel's doubt)."""
+    out = mask.copy()
+    for dy in range(-px, px + 1):
+        for dx in range(-px, px + 1):
+            out &= np.roll(np.roll(mask, dy, axis=0), dx, axis=1)
+    return out
+
+
+def _osgviewer_screen(
+    viewer: str, env: dict[str, str], args: list[str], fb: Path, ready: Any, deadline: float
+) -> np.ndarray:
+    """One osgviewer run in the Xvfb whose screen is kept in `fb`: its screen once `ready()`
+    and it has stood still."""
+    app = subprocess.Popen(
+        [viewer, *args], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
+    try:
+        while not ready():
+            assert time.monotonic() < deadline, "osgviewer never got ready"
+            assert app.poll() is None, app.communicate()[1]
+            time.sleep(0.2)
+        return stable_screen(fb / "Xvfb_screen0", deadline, still_s=2.0)
+    finally:
+        app.terminate()
+        app.wait(30)
+
+
 def test_osgviewer_shows_the_clouds_over_the_terrain(
     daemon: tuple[str, RunningDaemon],
     osg_kit: Path,  # noqa: F811
@@ -451,8 +481,8 @@ def test_osgviewer_shows_the_clouds_over_the_terrain(
     tmp_path: Path,
 ) -> None:
     """`osgviewer terrain.osg sky.wxsky` in a window (Xvfb, its screen kept in a file): the
-    clouds where the host kit has them for the camera osgviewer sent, the terrain as the scene
-    alone draws it."""
+    clouds where the host kit has them for the camera osgviewer sent; the terrain as
+    `osgviewer terrain.osg` alone draws it."""
     viewer, xvfb = shutil.which("osgviewer"), shutil.which("Xvfb")
     if viewer is None or xvfb is None:
         pytest.skip("no osgviewer or Xvfb (apt-get install openscenegraph xvfb)")
@@ -474,48 +504,43 @@ def test_osgviewer_shows_the_clouds_over_the_terrain(
         stderr=subprocess.DEVNULL,
     )
     env = {**os.environ, "DISPLAY": display, "OSG_LIBRARY_PATH": str(osg_kit)}
-    args = [viewer, "--window", "0", "0", str(w), str(h), "-p", str(tmp_path / "view.path")]
-    app = None
+    args = ["--window", "0", "0", str(w), str(h), "-p", str(tmp_path / "view.path")]
+    deadline = time.monotonic() + HANG_S
+    cam: dict[str, Any] = {}
+
+    def settled() -> bool:  # osgviewer's camera reached the daemon, and its ring settled
+        with d.client() as c:
+            cam.update(c.call("status")["camera"])
+            return (
+                abs(cam["heading_deg"] - heading) < 0.01
+                and abs(cam["pitch_deg"] - pitch) < 0.01
+                and bool(np.allclose(cam["position_m"], eye, atol=0.1))
+                and (cam["width"], cam["height"]) == (w, h)
+                and not c.call("scene")["ring_busy"]
+            )
+
     try:
-        deadline = time.monotonic() + HANG_S
         while not (fb / "Xvfb_screen0").exists():
             assert time.monotonic() < deadline and server.poll() is None, "Xvfb did not start"
             time.sleep(0.1)
-        app = subprocess.Popen(
-            [*args, str(TERRAIN), str(tmp_path / "sky.wxsky")],
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-        )
-        # osgviewer's camera reaches the daemon, and its ring settles
-        with d.client() as c:
-            while True:
-                assert time.monotonic() < deadline, "osgviewer's camera never reached the daemon"
-                assert app.poll() is None, app.communicate()[1]
-                cam = c.call("status")["camera"]
-                if (
-                    abs(cam["heading_deg"] - heading) < 0.01
-                    and abs(cam["pitch_deg"] - pitch) < 0.01
-                    and np.allclose(cam["position_m"], eye, atol=0.1)
-                    and (cam["width"], cam["height"]) == (w, h)
-                    and not c.call("scene")["ring_busy"]
-                ):
-                    break
-                time.sleep(0.2)
-        # osgviewer's frames with the settled layers: the screen once it stands still
-        seen = stable_screen(fb / "Xvfb_screen0", deadline)[:h, :w]
-        alpha = np.full((h, w, 1), 255, np.uint8)
-        write_png(tmp_path / "osgviewer.png", np.concatenate([seen, alpha], axis=-1))
+        alone = _osgviewer_screen(viewer, env, [*args, str(TERRAIN)], fb, lambda: True, deadline)[
+            :h, :w
+        ]
+        seen = _osgviewer_screen(
+            viewer, env, [*args, str(TERRAIN), str(tmp_path / "sky.wxsky")], fb, settled, deadline
+        )[:h, :w]
     finally:
-        for proc in (app, server):
-            if proc is not None and proc.poll() is None:
-                proc.terminate()
-                proc.wait(30)
+        server.terminate()
+        server.wait(30)
+    opaque = np.full((h, w, 1), 255, np.uint8)
+    write_png(tmp_path / "osgviewer.png", np.concatenate([seen, opaque], axis=-1))
+    write_png(tmp_path / "terrain-alone.png", np.concatenate([alone, opaque], axis=-1))
     tool = gl_program(host_kit, "wxsky-host-snapshot")
     host = _run(
         [str(tool), "--control", d.address, "--time", when, "--out", str(tmp_path / "h.png")]
     )
     assert host.returncode == 0, host.stderr
+    # where the terrain is: the scene alone, drawn by wxsky-osg-snapshot for that camera
     fov = f"{cam['fov_deg']:.9f}"
     bare = _run(
         [
@@ -541,11 +566,12 @@ def test_osgviewer_shows_the_clouds_over_the_terrain(
     ref, scene = read_png(tmp_path / "h.png"), read_png(tmp_path / "bare.png")
     terrain = scene[..., 3] > 0
     assert 0.05 < terrain.mean() < 0.8
-    sky_mean = float(_diff(seen, ref)[~terrain].mean())
+    sky = _inside(~terrain, 2)
+    sky_mean = float(_diff(seen, ref)[sky].mean())
     assert sky_mean <= 2.0, f"{preset}: osgviewer's sky differs by {sky_mean:.2f}/255"
     # (under the overcast, whose base is 100 m over the ridge's crest, the cloud that hangs in
     # front of the crest is drawn over it in blocks of the depth layer's texels: 1.1 % here)
-    changed = _diff(seen, scene)[terrain].max(axis=-1)
+    changed = _diff(seen, alone)[_inside(terrain, 2)].max(axis=-1)
     kept = float((changed <= 1).mean())
     assert kept >= 0.98, f"{preset}: {1 - kept:.2%} of the terrain changed"
 

@@ -7,7 +7,8 @@
 
 The targets are in `tools/fuzz/fuzz_targets.py` (METAR, each feed format and detection, NMEA,
 CANaerospace, CIGI 3.3 datagrams, the control channel against a real daemon, config, preset
-and cloud-model TOML).
+and cloud-model TOML, and where OpenSceneGraph is installed the OSG plugin's `.wxsky` file,
+parsed by its sanitizer build in a process of its own: `wxsky-file`).
 Each runs for `--runs` inputs (default 1,000,000) or `--minutes`, whichever ends first when
 both are given.
 

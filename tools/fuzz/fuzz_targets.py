@@ -1720,3 +1720,145 @@ def check_share(data: bytes) -> None:
             assert_state_in_range(message.applied, "shared applied weather")
             assert_state_in_range(message.target, "shared target weather")
             assert len(sky_id(message)) == 16
+
+
+# --- the OSG plugin's .wxsky file (plugins/osg/src/settings.cpp), in its own process ---------
+
+OSG_KIT = ROOT / "plugins" / "osg"
+# The parser's keys and values, for the mutators.
+_WXSKY_TOKENS = tuple(
+    t.encode()
+    for t in (
+        "control = ",
+        "shm = ",
+        "frame = ",
+        "up_m = ",
+        "camera = ",
+        "background_bin = ",
+        "near_bin = ",
+        "near_depth = ",
+        "node_mask = ",
+        "unix:/tmp/x.sock",
+        "tcp:127.0.0.1:4000",
+        "geocentric",
+        "enu",
+        "0x800",
+        "true",
+        "false",
+        "#",
+        "\n",
+        "=",
+        "-1e308",
+        "nan",
+    )
+)
+
+
+def wxsky_file_seeds() -> list[bytes]:
+    """The files plugins/osg/README.md and fgfs-with-wxsky write, and some bad ones."""
+    return [
+        b"# wxsky over the example terrain\ncontrol = unix:/run/wx.sock\nframe = enu\n",
+        b"frame = geocentric\nnode_mask = 0x800\nbackground_bin = 6\nnear_bin = 7\n"
+        b"control = tcp:127.0.0.1:7777\nshm = wxsky\n",
+        b"up_m = 120.5\ncamera = main\nnear_depth = false\n",
+        b"frame = enu\ncolour = blue\n",
+        b"control = http://127.0.0.1/\n",
+        b"node_mask = -1\n",
+        b"",
+    ]
+
+
+class _WxskyFileChecker:
+    """plugins/osg's wxsky_osg_settings_check (its sanitizer build where there is one), fed
+    the inputs one after another: one answer line each."""
+
+    def __init__(self) -> None:
+        build = subprocess.run(
+            ["make", "-s", "-C", str(OSG_KIT), "SANITIZE=1"], capture_output=True, text=True
+        )
+        program = OSG_KIT / "build" / "sanitize" / "wxsky_osg_settings_check"
+        if build.returncode != 0 or not program.exists():
+            raise FatalFailure(
+                f"wxsky-file: the check program did not build: {build.stderr[-500:]}",
+                "wxsky-file: no build",
+            )
+        env = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0:exitcode=99"}
+        self.proc = subprocess.Popen(
+            [str(program)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env
+        )
+
+    def ask(self, data: bytes) -> str:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        try:
+            self.proc.stdin.write(len(data).to_bytes(4, "little") + data)
+            self.proc.stdin.flush()
+        except BrokenPipeError:
+            pass
+        line = self.proc.stdout.readline()
+        if not line:
+            code = self.proc.wait()
+            raise FatalFailure(
+                f"wxsky-file: the parser's process ended (exit {code}) on this input",
+                f"wxsky-file: exit {code}",
+            )
+        return line.decode("ascii", errors="replace").rstrip("\n")
+
+    def close(self) -> None:
+        if self.proc.stdin is not None:
+            with contextlib.suppress(BrokenPipeError):
+                self.proc.stdin.close()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+_WXSKY_CHECKER: list[_WxskyFileChecker] = []
+
+
+@contextlib.contextmanager
+def wxsky_file_session() -> Iterator[None]:
+    checker = _WxskyFileChecker()
+    _WXSKY_CHECKER.append(checker)
+    try:
+        yield None
+    finally:
+        _WXSKY_CHECKER.remove(checker)
+        checker.close()
+
+
+_WXSKY_ERROR = re.compile(r"err (\d+) fuzz\.wxsky:(\d+): [ -~]*")
+
+
+def _osg_available() -> bool:
+    probe = subprocess.run(["pkg-config", "--exists", "openscenegraph"], capture_output=True)
+    return probe.returncode == 0
+
+
+if _osg_available():  # the kit builds only where OpenSceneGraph is installed
+
+    @target(
+        "wxsky-file",
+        seeds=wxsky_file_seeds,
+        tokens=_WXSKY_TOKENS,
+        max_len=4096,
+        session=wxsky_file_session,
+        coverage=False,
+    )
+    def check_wxsky_file(data: bytes) -> None:
+        """osgwxsky::parseSettings: settings in range, or one printable line naming the file
+        and a line of it that exists; never a crash (under ASan and UBSan)."""
+        assert _WXSKY_CHECKER, "the wxsky-file target runs only inside its session"
+        answer = _WXSKY_CHECKER[-1].ask(data)
+        if answer.startswith("ok "):
+            fields = dict(kv.split("=", 1) for kv in answer[3:].split(" "))
+            assert fields["frame"] in ("enu", "geocentric"), answer
+            assert -1000.0 <= float(fields["up_m"]) <= 100000.0, answer
+            bins = [int(b) for b in fields["bins"].split(",")]
+            assert all(-1000 <= b <= 1000 for b in bins), answer
+            return
+        m = _WXSKY_ERROR.fullmatch(answer)
+        assert m is not None, f"not one printable error line: {answer[:200]!r}"
+        lines = data.count(b"\n") + 1
+        assert 1 <= int(m.group(2)) <= lines, f"the error names line {m.group(2)} of {lines}"

@@ -21,6 +21,17 @@ std::string trim(const std::string &s) {
     return s.substr(a, b - a + 1);
 }
 
+// A piece of the input quoted in a message: printable ASCII only, at most `max` bytes (a
+// message goes to the application's log, and must not carry a terminal's escapes or a newline).
+std::string quote(const std::string &v, size_t max) {
+    std::string out;
+    for (size_t i = 0; i < v.size() && out.size() < max; ++i) {
+        unsigned char ch = static_cast<unsigned char>(v[i]);
+        out += (ch >= 0x20 && ch < 0x7f) ? static_cast<char>(ch) : '?';
+    }
+    return out;
+}
+
 bool number(const std::string &v, double lo, double hi, double &out) {
     if (v.empty())
         return false;
@@ -80,20 +91,20 @@ bool parseSettings(const std::string &text, const std::string &file, Settings &o
             continue;
         size_t eq = line.find('=');
         if (eq == std::string::npos)
-            return bad("'" + line.substr(0, 60) + "' is not 'key = value'");
+            return bad("'" + quote(line, 60) + "' is not 'key = value'");
         std::string key = trim(line.substr(0, eq)), v = trim(line.substr(eq + 1));
         if (seen.find("," + key + ",") != std::string::npos)
-            return bad("key '" + key + "' is given twice");
+            return bad("key '" + quote(key, 60) + "' is given twice");
         seen += key + ",";
         double d;
         if (key == "control") {
             if (!address(v))
-                return bad("control '" + v.substr(0, 120) +
+                return bad("control '" + quote(v, 120) +
                            "' is not an address: unix:PATH or tcp:HOST:PORT (protocol §2.1)");
             s.control = v;
         } else if (key == "shm") {
             if (v.empty() || !shm_name(v))
-                return bad("shm '" + v.substr(0, 120) +
+                return bad("shm '" + quote(v, 120) +
                            "' is not a segment name (letters, digits, - _ .)");
             s.shm = v;
         } else if (key == "frame") {
@@ -102,23 +113,23 @@ bool parseSettings(const std::string &text, const std::string &file, Settings &o
             else if (v == "geocentric")
                 s.frame = Frame::Geocentric;
             else
-                return bad("frame '" + v.substr(0, 60) + "' is not enu or geocentric");
+                return bad("frame '" + quote(v, 60) + "' is not enu or geocentric");
         } else if (key == "up_m") {
             if (!number(v, -1000.0, 100000.0, d))
-                return bad("up_m '" + v.substr(0, 60) + "' is not a number -1000..100000");
+                return bad("up_m '" + quote(v, 60) + "' is not a number -1000..100000");
             s.up_m = d;
         } else if (key == "camera") {
             s.camera = v;
         } else if (key == "background_bin" || key == "near_bin") {
             if (!number(v, -1000, 1000, d) || d != std::floor(d))
-                return bad(key + " '" + v.substr(0, 60) + "' is not an integer -1000..1000");
+                return bad(quote(key, 60) + " '" + quote(v, 60) + "' is not an integer -1000..1000");
             (key == "near_bin" ? s.near_bin : s.background_bin) = static_cast<int>(d);
         } else if (key == "node_mask") {
             char *end = nullptr;
             errno = 0;
             unsigned long m = v.empty() ? 0 : std::strtoul(v.c_str(), &end, 0);
             if (v.empty() || errno || *end || m > 0xffffffffUL || v[0] == '-')
-                return bad("node_mask '" + v.substr(0, 60) +
+                return bad("node_mask '" + quote(v, 60) +
                            "' is not a 32-bit mask (decimal, or hex as 0x800)");
             s.node_mask = static_cast<unsigned>(m);
         } else if (key == "near_depth") {
@@ -127,9 +138,9 @@ bool parseSettings(const std::string &text, const std::string &file, Settings &o
             else if (v == "false" || v == "off" || v == "0")
                 s.near_depth = false;
             else
-                return bad("near_depth '" + v.substr(0, 60) + "' is not true or false");
+                return bad("near_depth '" + quote(v, 60) + "' is not true or false");
         } else {
-            return bad("unknown key '" + key.substr(0, 60) + "' (known: " + KNOWN + ")");
+            return bad("unknown key '" + quote(key, 60) + "' (known: " + KNOWN + ")");
         }
     }
     out = s;
