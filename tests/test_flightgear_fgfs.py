@@ -31,10 +31,15 @@ LAUNCHER = ROOT / "plugins" / "flightgear" / "fgfs-with-wxsky"
 FGFS = shutil.which("fgfs") or ("/usr/games/fgfs" if Path("/usr/games/fgfs").exists() else None)
 FPS_PER_KT = KT_TO_MPS / FT_TO_M
 
-pytestmark = pytest.mark.skipif(
-    FGFS is None or shutil.which("xvfb-run") is None or shutil.which("dbus-run-session") is None,
-    reason="FlightGear is not installed (apt-get install flightgear xvfb dbus)",
-)
+pytestmark = [
+    pytest.mark.xdist_group("flightgear"),
+    pytest.mark.skipif(
+        FGFS is None
+        or shutil.which("xvfb-run") is None
+        or shutil.which("dbus-run-session") is None,
+        reason="FlightGear is not installed (apt-get install flightgear xvfb dbus)",
+    ),
+]
 
 LAYER0 = "/environment/clouds/layer[0]"
 LAYER1 = "/environment/clouds/layer[1]"

@@ -17,7 +17,8 @@ from osg_kit import osg_kit  # noqa: F401
 from tools.gallery import flightgear_sky as fgsky
 from wxsky.host.client import ControlClient
 
-pytestmark = pytest.mark.gl
+# One FlightGear at a time: the two FlightGear tests share a worker (--dist loadgroup).
+pytestmark = [pytest.mark.gl, pytest.mark.xdist_group("flightgear")]
 
 
 def test_flightgears_view_shows_wxskys_clouds_behind_its_aircraft_and_terrain(

@@ -274,6 +274,14 @@ def daemon(work: Path, preset: str) -> Iterator[str]:
             proc.wait()
 
 
+def write_sheet(rows: list[np.ndarray], out: Path) -> None:
+    """Rows of RGB pictures, one under the other, as an opaque PNG."""
+    sheet = np.concatenate(rows, axis=0)
+    rgba = np.concatenate([sheet, np.full((*sheet.shape[:2], 1), 255, np.uint8)], axis=2)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_png(out, np.ascontiguousarray(rgba))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     out = ROOT / "docs" / "gallery" / "flightgear-sky.png"
@@ -301,10 +309,7 @@ def main() -> int:
             host = host_snapshot(control, work / f"host-{name}.png")
             print(f"{name}: camera {camera}")
             rows.append(np.concatenate([seen, host], axis=1))
-    sheet = np.concatenate(rows, axis=0)
-    rgba = np.concatenate([sheet, np.full((*sheet.shape[:2], 1), 255, np.uint8)], axis=2)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_png(args.out, np.ascontiguousarray(rgba))
+    write_sheet(rows, args.out)
     print(f"wrote {args.out} ({len(rows)} views: FlightGear left, wxsky-host-snapshot right)")
     shutil.rmtree(work, ignore_errors=True)
     return 0

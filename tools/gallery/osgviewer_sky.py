@@ -29,9 +29,13 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT))
 
-from tools.gallery.flightgear_sky import daemon, host_snapshot, stable_screen  # noqa: E402
+from tools.gallery.flightgear_sky import (  # noqa: E402
+    daemon,
+    host_snapshot,
+    stable_screen,
+    write_sheet,
+)
 from wxsky.host.client import ControlClient  # noqa: E402
-from wxsky.png import write_png  # noqa: E402
 from wxsky.settings.presets import load_preset  # noqa: E402
 from wxsky.weather.state import WeatherState  # noqa: E402
 
@@ -164,10 +168,7 @@ def main() -> int:
         for camera in CAMERAS:
             rows.append(shoot(client, control, work, camera))
             print(f"camera {camera}: done")
-    sheet = np.concatenate(rows, axis=0)
-    rgba = np.concatenate([sheet, np.full((*sheet.shape[:2], 1), 255, np.uint8)], axis=2)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_png(args.out, np.ascontiguousarray(rgba))
+    write_sheet(rows, args.out)
     print(f"wrote {args.out} ({len(rows)} cameras: osgviewer left, wxsky-host-snapshot right)")
     shutil.rmtree(work, ignore_errors=True)
     return 0

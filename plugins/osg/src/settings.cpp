@@ -100,7 +100,7 @@ bool parseSettings(const std::string &text, const std::string &file, Settings &o
         if (key == "control") {
             if (!address(v))
                 return bad("control '" + quote(v, 120) +
-                           "' is not an address: unix:PATH or tcp:HOST:PORT (protocol §2.1)");
+                           "' is not an address: unix:PATH or tcp:HOST:PORT (protocol section 2.1)");
             s.control = v;
         } else if (key == "shm") {
             if (v.empty() || !shm_name(v))

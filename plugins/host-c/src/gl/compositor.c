@@ -165,24 +165,31 @@ static const char VS_FULLSCREEN[] =
     "}\n";
 
 /* A full-screen layer stretched over the viewport: texelFetch when the sizes agree (exact),
- * bilinear with clamped edges otherwise. */
+ * bilinear with clamped edges otherwise. layer_colour(v): v the fragment's place in the
+ * viewport, 0..1 from its lower left corner. */
+#define LAYER_COLOUR_GLSL                                                                   \
+    "uniform sampler2D tex;\n"                                                              \
+    "uniform ivec2 size;\n"   /* the layer's pixels this frame */                            \
+    "uniform vec2 cap;\n"     /* the texture's size */                                       \
+    "uniform vec4 viewport;\n"                                                              \
+    "uniform int flip;\n"                                                                   \
+    "vec2 layer_place(vec2 v) {\n" /* the layer's row order: its top row first */           \
+    "    if (flip == 0) v.y = 1.0 - v.y;\n"                                                 \
+    "    return v;\n"                                                                       \
+    "}\n"                                                                                   \
+    "vec4 layer_colour(vec2 v) {\n"                                                         \
+    "    vec2 px = layer_place(v) * vec2(size);\n"                                          \
+    "    if (ivec2(viewport.zw) == size)\n"                                                 \
+    "        return texelFetch(tex, clamp(ivec2(px), ivec2(0), size - 1), 0);\n"            \
+    "    px = clamp(px, vec2(0.5), vec2(size) - 0.5);\n"                                    \
+    "    return texture(tex, px / cap);\n"                                                  \
+    "}\n"
+
 static const char FS_LAYER[] =
-    "uniform sampler2D tex;\n"
-    "uniform ivec2 size;\n"   /* the layer's pixels this frame */
-    "uniform vec2 cap;\n"     /* the texture's size */
-    "uniform vec4 viewport;\n"
-    "uniform int flip;\n"
+    LAYER_COLOUR_GLSL
     "out vec4 colour;\n"
     "void main() {\n"
-    "    vec2 f = (gl_FragCoord.xy - viewport.xy) / viewport.zw;\n"
-    "    if (flip == 0) f.y = 1.0 - f.y;\n"
-    "    vec2 px = f * vec2(size);\n"
-    "    if (ivec2(viewport.zw) == size) {\n"
-    "        colour = texelFetch(tex, clamp(ivec2(px), ivec2(0), size - 1), 0);\n"
-    "    } else {\n"
-    "        px = clamp(px, vec2(0.5), vec2(size) - 0.5);\n"
-    "        colour = texture(tex, px / cap);\n"
-    "    }\n"
+    "    colour = layer_colour((gl_FragCoord.xy - viewport.xy) / viewport.zw);\n"
     "}\n";
 
 /* `near` at the depth of its clouds: FS_LAYER's colour, and for depth the distance the
@@ -193,46 +200,32 @@ static const char FS_LAYER[] =
  * the pixel's ray through the host's projection; where none is near, `fallback` (the NDC depth
  * of the frame's near_distance_m). */
 static const char FS_NEAR_DEPTH[] =
-    "uniform sampler2D tex;\n"
-    "uniform ivec2 size;\n"
-    "uniform vec2 cap;\n"
-    "uniform vec4 viewport;\n"
-    "uniform int flip;\n"
+    LAYER_COLOUR_GLSL
     "uniform sampler2D depth;\n"
     "uniform ivec2 depth_size;\n"
     "uniform mat4 inv_proj;\n"
     "uniform mat4 proj;\n"
     "uniform float fallback;\n"
     "out vec4 colour;\n"
+    "float depth_q(ivec2 at) {\n" /* the texel's q (0..1), or -1 where it holds none */
+    "    vec4 t = texelFetch(depth, clamp(at, ivec2(0), depth_size - 1), 0);\n"
+    "    return t.a > 0.5 ? dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / "
+    "16777215.0 : -1.0;\n"
+    "}\n"
     "void main() {\n"
     "    vec2 v = (gl_FragCoord.xy - viewport.xy) / viewport.zw;\n"
-    "    vec2 f = v;\n"
-    "    if (flip == 0) f.y = 1.0 - f.y;\n"
-    "    vec2 px = f * vec2(size);\n"
-    "    if (ivec2(viewport.zw) == size) {\n"
-    "        colour = texelFetch(tex, clamp(ivec2(px), ivec2(0), size - 1), 0);\n"
-    "    } else {\n"
-    "        px = clamp(px, vec2(0.5), vec2(size) - 0.5);\n"
-    "        colour = texture(tex, px / cap);\n"
-    "    }\n"
+    "    colour = layer_colour(v);\n"
     "    if (!(colour.a > 0.0)) discard;\n"
-    "    vec2 c = f * vec2(depth_size) - 0.5;\n"
-    "    ivec2 at = ivec2(floor(c));\n"
+    "    ivec2 at = ivec2(floor(layer_place(v) * vec2(depth_size) - 0.5));\n"
     "    float q = -1.0;\n"
-    "    for (int k = 0; k < 4; ++k) {\n"
-    "        ivec2 o = clamp(at + ivec2(k & 1, k >> 1), ivec2(0), depth_size - 1);\n"
-    "        vec4 t = texelFetch(depth, o, 0);\n"
-    "        if (t.a > 0.5)\n"
-    "            q = max(q, dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / 16777215.0);\n"
-    "    }\n"
+    "    for (int k = 0; k < 4; ++k)\n"
+    "        q = max(q, depth_q(at + ivec2(k & 1, k >> 1)));\n"
     "    if (q < 0.0) {\n"
     "        q = 2.0;\n"
     "        for (int dy = -1; dy <= 2; ++dy)\n"
     "            for (int dx = -1; dx <= 2; ++dx) {\n"
-    "                vec4 t = texelFetch(depth, clamp(at + ivec2(dx, dy), ivec2(0), depth_size - 1), 0);\n"
-    "                if (t.a > 0.5)\n"
-    "                    q = min(q, dot(floor(t.rgb * 255.0 + 0.5), vec3(65536.0, 256.0, 1.0)) / "
-    "16777215.0);\n"
+    "                float e = depth_q(at + ivec2(dx, dy));\n"
+    "                if (e >= 0.0) q = min(q, e);\n"
     "            }\n"
     "    }\n"
     "    float z = fallback;\n"
