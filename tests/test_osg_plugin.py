@@ -370,8 +370,11 @@ def test_the_node_rides_out_a_stalled_and_a_restarted_daemon(
                     "frames from the restarted daemon",
                     seen,
                 )
-                # the new daemon's frames, numbered from its own start
-                assert back["last_frame_number"] < later["last_frame_number"]  # type: ignore[operator]
+                # frames uploaded after the first daemon died are the second one's: numbered
+                # by its own count (which, on a busy machine, may pass the first's)
+                with b.client() as c:
+                    published = c.call("status")["frames_published"]
+                assert back["last_frame_number"] <= published  # type: ignore[operator]
         finally:
             proc.send_signal(signal.SIGKILL)
             proc.communicate()
