@@ -190,6 +190,8 @@ def test_the_plugins_picture_is_the_host_kits_and_leaves_the_terrain(
         assert float(_diff(ref, bare)[terrain].mean()) > 4.0
 
 
+# One preset is enough here (the suite's time): what is tested is the camera's conversion.
+@pytest.mark.parametrize("daemon", ["overcast-stratus"], indirect=True)
 def test_a_whole_earth_scene_sends_and_draws_the_same_camera(
     daemon: tuple[str, RunningDaemon],
     osg_kit: Path,  # noqa: F811
@@ -477,6 +479,9 @@ def _osgviewer_screen(
         app.wait(30)
 
 
+# One preset is enough here (the suite's time): the overcast, whose base over the ridge is the
+# harder case for the terrain.
+@pytest.mark.parametrize("daemon", ["overcast-stratus"], indirect=True)
 def test_osgviewer_shows_the_clouds_over_the_terrain(
     daemon: tuple[str, RunningDaemon],
     osg_kit: Path,  # noqa: F811
