@@ -428,7 +428,7 @@ def test_the_plugin_is_clean_under_the_sanitizers(
         sky = tmp_path / "sky.wxsky"
         sky.write_text(f"control = {d.address}\n")
         # a host's loop that sees the daemon go: it ends by itself, and cleanly
-        watch = _watch(osg_kit_sanitized, sky, 10.0, env=env)
+        watch = _watch(osg_kit_sanitized, sky, 6.0, env=env)
         seen: list[dict[str, object]] = []
         try:
             _status_until(watch, lambda s: s["frames_uploaded"] > 3, "frames", seen)
