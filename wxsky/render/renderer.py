@@ -415,12 +415,10 @@ class Renderer:
         target = self._target(name, *size)
         far_count = min(far_count, len(draw))
         w, h = target.size
-        far_scale = FAR_BAND_PX_PER_DEG / (w / cam.fov_deg)
+        far_size = far_band_size(target.size, cam)
         rest = shown
-        if far_count > 0 and far_scale <= FAR_BAND_MAX_SCALE:
-            far = self._target(
-                f"{name}_far", max(1, round(w * far_scale)), max(1, round(h * far_scale))
-            )
+        if far_count > 0 and far_size is not None:
+            far = self._target(f"{name}_far", *far_size)
             far.fbo.use()
             far.fbo.clear(*clear_rgba)
             # Towers as far as the far band go into it, at its resolution, as its sprites do.
@@ -459,7 +457,6 @@ class Renderer:
         towers, curtains and fog the layer also holds have none (their pixels read as no
         sprite): a host places those at the frame's near_distance_m (scene/near_depth.py)."""
         cam = frame.camera
-        near_w = self._targets["near"].size[0]
         w, h = near_depth_size(self._targets["near"].size)
         metres = self._target("near_depth_m", w, h, components=1, dtype="f4")
         draw = frame.near
@@ -468,13 +465,12 @@ class Renderer:
         # `_draw_near` draws its colour: the depth of its clouds, stretched (nearest) under the
         # rest's. Drawn at the depth layer's size it cost as much as the whole near pass.
         far_count = min(frame.near_far_count, len(draw))
-        far_scale = FAR_BAND_PX_PER_DEG / (near_w / cam.fov_deg)
-        fw = max(1, round(near_w * far_scale))
-        fh = max(1, round(self._targets["near"].size[1] * far_scale))
+        far_size = far_band_size(self._targets["near"].size, cam)
         metres.fbo.use()
         metres.fbo.clear(NEAR_DEPTH_NONE, 0.0, 0.0, 0.0)
         start = 0
-        if far_count > 0 and far_scale <= FAR_BAND_MAX_SCALE:
+        if far_count > 0 and far_size is not None:
+            fw, fh = far_size
             if fw < w and fh < h:
                 far = self._target("near_depth_far_m", fw, fh, components=1, dtype="f4")
                 far.fbo.use()
@@ -1075,6 +1071,16 @@ class Renderer:
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"GL error while {what}: {err}")
+
+
+def far_band_size(near_px: tuple[int, int], cam: Camera) -> tuple[int, int] | None:
+    """The far band's target for a near layer of `near_px` (FAR_BAND_PX_PER_DEG), or None
+    where it would save less than FAR_BAND_MAX_SCALE (the band is then drawn at full size)."""
+    w, h = near_px
+    scale = FAR_BAND_PX_PER_DEG / (w / cam.fov_deg)
+    if scale > FAR_BAND_MAX_SCALE:
+        return None
+    return max(1, round(w * scale)), max(1, round(h * scale))
 
 
 def near_depth_size(near_px: tuple[int, int]) -> tuple[int, int]:

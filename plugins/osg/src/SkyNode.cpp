@@ -95,6 +95,7 @@ struct SkyNode::Impl {
     wxsky_segment *seg = nullptr;
     wxsky_gl_compositor *gl = nullptr;
     bool gl_ready = false;
+    bool has_near_depth = false; // the open segment has the `near_depth` layer
     uint64_t seg_serial = 0;
     double next_open_s = 0.0, next_check_s = 0.0;
     bool have_frame = false;
@@ -309,6 +310,7 @@ void SkyNode::Impl::take_frame() {
                 gl = wxsky_gl_new();
             if (gl && (st = wxsky_gl_init(gl, seg)) == WXSKY_OK) {
                 gl_ready = true;
+                has_near_depth = wxsky_segment_find_layer(seg, "near_depth") >= 0;
                 std::lock_guard<std::mutex> g(lock);
                 status.last_error.clear(); // back: what went wrong before is over
             } else {
@@ -399,7 +401,7 @@ void SkyNode::Impl::draw_near(osg::State &state) {
     double d = -1.0;
     Link::NearKind kind = link->nearDistance(rec.frame_number, d);
     int st = WXSKY_OK;
-    bool layer = seg && wxsky_segment_find_layer(seg, "near_depth") >= 0;
+    bool layer = has_near_depth;
     if (!settings.near_depth || (kind == Link::NEAR_UNKNOWN && !layer))
         st = wxsky_gl_draw_near(gl); // over everything, as protocol §0 draws it
     else if (kind == Link::NEAR_AT || layer)
