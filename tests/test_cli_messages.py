@@ -94,6 +94,7 @@ REQUIRED: dict[tuple[str, ...], tuple[str, ...]] = {
     ("metar", "decode"): ("REPORT",),
     ("cigi", "send"): ("--to", "udp:127.0.0.1:8001"),
     ("preset", "save"): ("name", "--from-metar", "LSZH 211250Z 24012KT 9999 FEW030 18/09 Q1012"),
+    ("grib", "show"): ("gfs.grib2",),
 }
 # Options that come in pairs.
 PARTNER = {"--lat": ("--lon", "0"), "--lon": ("--lat", "0")}

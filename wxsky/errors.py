@@ -53,3 +53,8 @@ class FeedChanging(FeedUnavailable):
     def __init__(self, message: str, retry_in_s: float) -> None:
         super().__init__(message)
         self.retry_in_s = retry_in_s
+
+
+class GribError(WxskyError):
+    """GRIB2 model data that cannot be used: not GRIB2, truncated, corrupt, or on a grid wxsky
+    does not read (the message names the file or URL and the message)."""

@@ -1722,6 +1722,105 @@ def check_share(data: bytes) -> None:
             assert len(sky_id(message)) == 16
 
 
+# --- GRIB2 inventories (wxsky/weather/grib_idx.py): the .idx a server publishes ------------
+
+# With the module, not in the check: atheris instruments what is imported while this module is.
+from wxsky.errors import GribError  # noqa: E402
+from wxsky.weather.grib_idx import MAX_OFFSET_B, parse_idx, wanted_ranges  # noqa: E402
+
+GRIB_FIXTURE = SHARED_DATA / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
+GRIB_IDX_LINES = 24  # lines per seed: a window of the real inventory
+GRIB_IDX_TOKENS = tuple(
+    t.encode()
+    for t in (
+        ":",
+        "\n",
+        "\r\n",
+        ".1:",
+        ".2:",
+        ":d=2011011012:",
+        "UGRD",
+        "VGRD",
+        "TMP",
+        "HGT",
+        "PRES",
+        "TCDC",
+        ":10 mb:",
+        ":1000 mb:",
+        " mb",
+        ":surface:",
+        ":2 m above ground:",
+        ":low cloud layer:",
+        ":120 hour fcst:",
+        ":anl:",
+        "9007199254740992",
+        "99999999999999999",
+        "-1",
+    )
+)
+
+
+def grib_idx_seeds() -> list[bytes]:
+    """Windows of an inventory of the real GFS file (`grib_decode.inventory`, as a server's
+    .idx), and a few hand-written lines where the file is absent (a fresh clone)."""
+    seeds = [
+        b"1:0:d=2011011012:HGT:10 mb:120 hour fcst:\n"
+        b"2.1:16299:d=2011011012:UGRD:10 mb:120 hour fcst:\n"
+        b"2.2:16299:d=2011011012:VGRD:10 mb:120 hour fcst:\n"
+        b"3:30000:d=2011011012:ABSV:10 mb:120 hour fcst:\n",
+        b"1:0:d=2024010100:PRES:surface:anl:ENS=hi res ctl\r\n2:9:d=2024010100:TMP:2 m above "
+        b"ground:anl:\r\n",
+    ]
+    if not GRIB_FIXTURE.exists():
+        return seeds
+    from wxsky.inputs.grib_decode import inventory
+
+    lines = inventory(GRIB_FIXTURE.read_bytes()).encode().splitlines(keepends=True)
+    step = max(1, (len(lines) - GRIB_IDX_LINES) // 16)
+    seeds += [b"".join(lines[i : i + GRIB_IDX_LINES]) for i in range(0, len(lines), step)]
+    return sample(seeds)
+
+
+@target("grib-idx", seeds=grib_idx_seeds, tokens=GRIB_IDX_TOKENS, max_len=4096)
+def check_grib_idx(data: bytes) -> None:
+    """parse_idx: GribError, one line naming the inventory and a line it has; or entries in
+    file order, whose wanted_ranges are sorted, apart (neighbours merged), each from a
+    message's start, and hold exactly the messages with a wanted field."""
+    from wxsky.inputs.grib_decode import IDX_WANTED  # eccodes: only where this target runs
+
+    text = data.decode("utf-8", "replace")
+    try:
+        entries = parse_idx(text, "fuzz.idx")
+    except GribError as exc:
+        message = str(exc)
+        assert len(message.splitlines()) == 1, f"not one line: {message[:200]!r}"
+        m = re.match(r"fuzz\.idx: line (\d+): ", message)
+        assert m is not None, f"names no line: {message[:200]!r}"
+        assert 1 <= int(m.group(1)) <= text.count("\n") + 1, f"no such line: {message[:200]!r}"
+        return
+    offsets = [e.offset_b for e in entries]
+    assert offsets == sorted(offsets), "entries out of file order"
+    assert all(0 <= o <= MAX_OFFSET_B for o in offsets), "an offset out of range"
+    ranges = wanted_ranges(entries, IDX_WANTED)
+    for k, (first, last) in enumerate(ranges):
+        assert last is not None or k == len(ranges) - 1, f"an open range before the last: {ranges}"
+        assert last is None or first <= last, f"an empty range {first}-{last}"
+        if k > 0:
+            before = ranges[k - 1][1]
+            assert before is not None and before + 1 < first, f"ranges not apart: {ranges}"
+    pairs = set(IDX_WANTED)
+    wanted_at = {
+        e.offset_b
+        for e in entries
+        if (e.var, e.level) in pairs or (e.level.endswith(" mb") and (e.var, "mb") in pairs)
+    }
+    starts = {first for first, _ in ranges}
+    assert starts <= set(offsets), "a range that starts inside a message"
+    for offset in set(offsets):
+        inside = any(a <= offset and (b is None or offset <= b) for a, b in ranges)
+        assert inside == (offset in wanted_at), f"message at {offset}: fetched {inside}"
+
+
 # --- the OSG plugin's .wxsky file (plugins/osg/src/settings.cpp), in its own process ---------
 
 OSG_KIT = ROOT / "plugins" / "osg"

@@ -42,6 +42,7 @@ from wxsky.app.control import (
     set_weather,
     visibility,
 )
+from wxsky.app.flight_air import FlightAir
 from wxsky.app.frame_publish import draw_ring, frame_layer_specs, publish_plan
 from wxsky.app.frame_times import FrameTimes
 from wxsky.app.memory import TRIM_EVERY_S, TraceReport, memory_status
@@ -208,6 +209,7 @@ class Daemon:
         self._trimmed_kib = 0
         self._control_log = RateLimitedLog(log)
         self._radar_work: RadarWork | None = None  # made at the first `radar` request
+        self._flight_air = FlightAir()  # the air at the aircraft, in each frame's notification
         # The radar's segment layer (`[radar] layer`), its own thread made at start-up.
         self._radar_layer: RadarLayer | None = None
         self._radar_announced = 0  # the last picture's version sent in a `radar` notification
@@ -283,6 +285,7 @@ class Daemon:
             publish_target=self._publish_target,
             fps=self.fps,
             stop=self._stop,
+            broadcast=self._server_broadcast,
         )
         for part in self.parts:
             await part.start(context)
@@ -348,6 +351,7 @@ class Daemon:
         if self._radar_work is not None:
             self._radar_work.close(wait_s=max(0.05, timeout / 4))
             self._radar_work = None
+        self._flight_air.close()
         if self._radar_layer is not None:
             self._radar_layer.close(wait_s=max(0.05, timeout / 4))
         # Then the parts, together: a master's channels see the bus go at once and keep the
@@ -687,6 +691,8 @@ class Daemon:
                 "flashes": [{"id": f.id, "glow": g} for f, g in plan.frame.flashes],
                 # What falls at the eye and how far one sees in it (scene/precip_eye.py).
                 "at_eye": self._at_eye,
+                # The air at the host's aircraft for its flight model (app/flight_air.py).
+                "air": self._flight_air.for_frame(plan, self.engine, published_s),
             },
         )
         for flash in plan.frame.new_flashes:

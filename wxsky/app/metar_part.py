@@ -10,6 +10,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Sequence
+from datetime import datetime
 
 from wxsky.app.parts import Part, PartContext
 from wxsky.engine.stages import SkyEngine, geodetic_from_enu
@@ -29,8 +30,11 @@ class MetarFeedsPart(Part):
     # Given at start (`PartContext`): no feed is read before.
     _engine: SkyEngine
 
-    def __init__(self, section: MetarSection, specs: Sequence[str]) -> None:
-        """`specs`: each feed's source (a file, `-`, a URL); one named twice is read once."""
+    def __init__(
+        self, section: MetarSection, specs: Sequence[str], *, replay: bool = False
+    ) -> None:
+        """`specs`: each feed's source (a file, a directory, `-`, a URL); one named twice is
+        read once. `replay`: the feeds are an archive, replayed by the sim clock."""
         settings = MetarSettings.from_section(section)
         self.feeds = [
             MetarFeedInput(
@@ -39,6 +43,7 @@ class MetarFeedsPart(Part):
                 InputStats(f"metar:{spec}", "metar"),
                 apply=self._apply,
                 position=self._camera_lat_lon,
+                replay_clock=self._sim_time if replay else None,
             )
             for spec in dict.fromkeys(specs)
         ]
@@ -51,6 +56,11 @@ class MetarFeedsPart(Part):
     def blended(self) -> tuple[StationWeather, ...]:
         """The METAR stations blended into the weather now (the first feed that blends)."""
         return next((feed.blended for feed in self.feeds if feed.blended), ())
+
+    def nearest(self) -> tuple[StationWeather, float] | None:
+        """The nearest station the METAR weather uses now, with its distance (the first feed
+        that gives weather here)."""
+        return next((feed.nearest for feed in self.feeds if feed.nearest), None)
 
     async def start(self, ctx: PartContext) -> None:
         self._engine = ctx.engine
@@ -82,6 +92,9 @@ class MetarFeedsPart(Part):
             self._had_weather = True
             self._engine.settle()
             log.info("first METAR feed weather applied: %s", self._engine.state.summary())
+
+    def _sim_time(self) -> datetime:
+        return self._engine.state.time_utc
 
     def _camera_lat_lon(self) -> tuple[float, float]:
         obs = self._engine.state.observer

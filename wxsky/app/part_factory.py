@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from wxsky.app.cigi_part import CigiPart
 from wxsky.app.cockpit_part import CockpitPart
 from wxsky.app.flightgear_part import FlightGearPart
+from wxsky.app.grib_part import GribPart
 from wxsky.app.metar_part import MetarFeedsPart
 from wxsky.app.parts import Part
 from wxsky.app.share_part import SharePart
@@ -28,6 +29,8 @@ class PartOptions:
     config's own, each address replaces it."""
 
     metar_feeds: Sequence[str] = ()
+    grib: Sequence[str] = ()
+    replay: bool = False  # the METAR feeds are an archive, replayed by the sim clock
     serial: Sequence[SerialInputSection] = ()
     can: Sequence[CanInputSection] = ()
     cigi: Sequence[str] = ()
@@ -37,10 +40,12 @@ class PartOptions:
 
 
 def parts_from_config(config: DaemonConfig, options: PartOptions | None = None) -> list[Part]:
-    """The daemon's parts in the order it walks them: the METAR feeds, the cockpit links,
-    CIGI, FlightGear, the channel bus. ConfigError (one line) for a combination refused."""
+    """The daemon's parts in the order it walks them: the METAR feeds, the model data, the
+    cockpit links, CIGI, FlightGear, the channel bus. ConfigError (one line) for a
+    combination refused."""
     opt = options or PartOptions()
-    feeds = MetarFeedsPart(config.metar, (*config.metar.feeds, *opt.metar_feeds))
+    feeds = MetarFeedsPart(config.metar, (*config.metar.feeds, *opt.metar_feeds), replay=opt.replay)
+    grib = GribPart(config.grib, (*config.grib.sources, *opt.grib), nearest=feeds.nearest)
     cockpit = CockpitPart(
         [
             *(open_link("serial", section) for section in (*config.serial, *opt.serial)),
@@ -64,6 +69,7 @@ def parts_from_config(config: DaemonConfig, options: PartOptions | None = None) 
             name
             for name, present in (
                 ("METAR feeds", bool(feeds.feeds)),
+                ("model data", grib.enabled),
                 ("cockpit links", bool(cockpit.links)),
                 ("CIGI", cigi.listens),
             )
@@ -77,6 +83,8 @@ def parts_from_config(config: DaemonConfig, options: PartOptions | None = None) 
     used: list[Part] = []
     if feeds.feeds:
         used.append(feeds)
+    if grib.enabled:
+        used.append(grib)
     if cockpit.links:
         used.append(cockpit)
     if cigi.inputs():  # a listener or a sender

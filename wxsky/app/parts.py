@@ -48,6 +48,10 @@ def _no_fps() -> float:
     return 0.0
 
 
+def _no_broadcast(topic: str, params: dict[str, Any]) -> None:
+    return None
+
+
 @dataclass(frozen=True)
 class PartContext:
     """What a part is given at start."""
@@ -60,6 +64,8 @@ class PartContext:
     # a part that changes the engine's inputs between frames calls it.
     publish_target: Callable[[], None] = _nothing
     fps: Callable[[], float] = _no_fps  # frames published a second, lately
+    # Sends a notification to every stream client (docs/protocol.md): topic, params.
+    broadcast: Callable[[str, dict[str, Any]], None] = _no_broadcast
     # Set when the daemon begins to stop: a part's tasks wait on it. A part may set it to
     # stop the daemon.
     stop: asyncio.Event = field(default_factory=asyncio.Event)

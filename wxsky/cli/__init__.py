@@ -13,7 +13,7 @@ line of stderr when stderr is a terminal (`common.Progress`), and nothing otherw
 
 Each command group lives in its own module and adds its subparsers through `add_commands`:
 `daemon_cmd` (run, status, snapshot), `metar_cmd` (metar ...), `preset_cmd` (preset ...),
-`sun_cmd` (sun), `bench_cmd` (bench), `cigi_cmd` (cigi ...).
+`sun_cmd` (sun), `bench_cmd` (bench), `cigi_cmd` (cigi ...), `grib_cmd` (grib ...).
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from wxsky.cli import (
     bench_cmd,
     cigi_cmd,
     daemon_cmd,
+    grib_cmd,
     metar_cmd,
     preset_cmd,
     sun_cmd,
@@ -113,7 +114,13 @@ def _run(args: argparse.Namespace) -> int:
 
 def _command_name(args: argparse.Namespace) -> str:
     words = [args.command] if getattr(args, "command", None) else []
-    for group in ("metar_command", "preset_command", "cigi_command", "weather_command"):
+    for group in (
+        "metar_command",
+        "preset_command",
+        "cigi_command",
+        "weather_command",
+        "grib_command",
+    ):
         word = getattr(args, group, None)
         if word:
             words.append(word)
@@ -161,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     daemon_cmd.add_commands(sub)
     preset_cmd.add_commands(sub)
     metar_cmd.add_commands(sub)
+    grib_cmd.add_commands(sub)
     sun_cmd.add_commands(sub)
     bench_cmd.add_commands(sub)
     cigi_cmd.add_commands(sub)

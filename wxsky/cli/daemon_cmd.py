@@ -59,6 +59,22 @@ def add_commands(sub: Subparsers) -> None:
         "adds to [metar] feeds in the config)",
     )
     run.add_argument(
+        "--grib",
+        action="append",
+        default=[],
+        metavar="SOURCE",
+        help="read model data (GRIB2): a file, a directory of forecast steps, or an http(s) "
+        "URL (repeatable; adds to [grib] sources in the config; docs/grib.md)",
+    )
+    run.add_argument(
+        "--replay",
+        type=time_arg(),
+        metavar="TIME",
+        help="replay a past day: start the clock at TIME (ISO 8601, UTC unless it says) and "
+        "take the METAR feeds as an archive, each station's latest report not after the "
+        "clock (docs/grib.md says where to get archives); [clock] rate runs it faster",
+    )
+    run.add_argument(
         "--serial",
         action="append",
         default=[],
@@ -392,6 +408,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from wxsky.app.part_factory import PartOptions, parts_from_config
     from wxsky.output.transport import parse_address
     from wxsky.settings.config import load_config
+    from wxsky.weather.state import Source, WeatherPatch
 
     elevation_m = check_field_elevation(args, args.metar, "--metar")
     config = _shared_config(load_config(args.config), args)
@@ -399,9 +416,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     patches = initial_patches(
         config, preset=args.preset, metar=args.metar, field_elevation_m=elevation_m
     )
+    if args.replay is not None:
+        patches.append(WeatherPatch(source=Source.PRESET, time_utc=args.replay))
     address = parse_address(args.control) if args.control else None
     options = PartOptions(
         metar_feeds=args.metar_feed,
+        grib=args.grib,
+        replay=args.replay is not None,
         serial=args.serial,
         can=args.can,
         cigi=args.cigi,

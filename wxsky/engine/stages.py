@@ -185,6 +185,7 @@ class SkyEngine:
         self._settled = True
         self._camera = camera
         self._aircraft_m: tuple[float, float, float] | None = None
+        self._aloft_temperatures: tuple[tuple[float, float], ...] = ()
         self.settings = settings
         self.clock_rate = clock_rate
         self.rates = rates
@@ -440,6 +441,32 @@ class SkyEngine:
             self._stack = self._stack.with_patch(patch, self._now_s())
             self._retarget()
             return self._target
+
+    @property
+    def aircraft_m(self) -> tuple[float, float, float] | None:
+        return self._aircraft_m
+
+    def set_aloft_temperatures(self, levels: tuple[tuple[float, float], ...]) -> None:
+        """The model's temperatures by height, ((height_m MSL, degC), ...) from the ground
+        up, for the air at the aircraft (the weather state keeps only the surface's)."""
+        self._aloft_temperatures = levels
+
+    @property
+    def aloft_temperatures(self) -> tuple[tuple[float, float], ...]:
+        return self._aloft_temperatures
+
+    def set_metar_weight(self, weight: float) -> None:
+        """How much the METAR counts against the model's layers and wind (0..1,
+        `weather.model_blend`): the model data's part sets it as stations and ages change."""
+        with self._lock:
+            stack = self._stack.with_metar_weight(weight)
+            if stack is not self._stack:
+                self._stack = stack
+                self._retarget()
+
+    @property
+    def metar_weight(self) -> float:
+        return self._stack.metar_weight
 
     def heard_cigi(self) -> None:
         """A CIGI host sent a message: the weather it gave stands on (see `SourceStack`)."""

@@ -15,6 +15,7 @@ import asyncio
 import contextlib
 import email.utils
 import os
+import stat
 import threading
 import time
 import urllib.error
@@ -32,6 +33,7 @@ from wxsky.weather.feeds import GZIP_MAGIC, MAX_FEED_BYTES, gunzip, unfinished_l
 __all__ = [
     "GZIP_MAGIC",
     "MAX_FEED_BYTES",
+    "DirSource",
     "FeedSource",
     "Fetched",
     "FileSource",
@@ -56,6 +58,9 @@ class Fetched:
     # Why a last line was left out (cut off mid-group and never finished), for the input to
     # warn about; None when the data is whole.
     dropped: str | None = None
+    # A directory's files, each (name, bytes), parsed one by one (formats with a header, as
+    # AWC's CSV, cannot be run together); `data` is then empty.
+    files: tuple[tuple[str, bytes], ...] = ()
 
 
 class FeedSource(Protocol):
@@ -92,7 +97,11 @@ def open_source(spec: str, *, timeout_s: float = 10.0, settle_s: float = SETTLE_
     if spec.startswith(("http://", "https://")):
         return HttpSource(spec, timeout_s=timeout_s)
     if "://" in spec:
-        raise FeedError(f"feed {spec!r}: only files, '-' (stdin) and http(s) URLs are supported")
+        raise FeedError(
+            f"feed {spec!r}: only files, directories, '-' (stdin) and http(s) URLs are supported"
+        )
+    if Path(spec).is_dir():
+        return DirSource(Path(spec))
     return FileSource(Path(spec), settle_s=settle_s)
 
 
@@ -224,6 +233,69 @@ class FileSource:
 
     def forget(self) -> None:
         self._seen = self._held = self._held_since = None
+
+    def close(self) -> None:
+        pass
+
+
+class DirSource:
+    """A directory of feed files, an archive to replay (NOAA's hourly cycle files `00Z.TXT`
+    .. `23Z.TXT`, a day of AWC caches): every regular, non-hidden file in it, read again when
+    any is added, changed or removed, each parsed on its own. Files ending `.part` or `.tmp`
+    are being written and left out. The whole is bounded by `MAX_FEED_BYTES`, as one file."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.name = str(path)
+        self._seen: tuple[tuple[str, int, int], ...] | None = None
+
+    async def fetch(self) -> Fetched | None:
+        return await asyncio.to_thread(self.fetch_now)
+
+    def _listing(self) -> list[tuple[Path, os.stat_result]]:
+        try:
+            names = sorted(os.listdir(self.path))
+        except OSError as exc:
+            self._seen = None
+            raise FeedUnavailable(f"{self.name}: cannot list: {exc.strerror or exc}") from None
+        out = []
+        for name in names:
+            if name.startswith(".") or name.endswith((".part", ".tmp")):
+                continue
+            with contextlib.suppress(OSError):
+                st = os.stat(self.path / name)
+                if stat.S_ISREG(st.st_mode):
+                    out.append((self.path / name, st))
+        return out
+
+    def fetch_now(self) -> Fetched | None:
+        listing = self._listing()
+        key = tuple((p.name, st.st_mtime_ns, st.st_size) for p, st in listing)
+        if key == self._seen:
+            return None
+        if not listing:
+            self._seen = key
+            raise FeedError(f"{self.name}: no feed files in the directory")
+        total = sum(st.st_size for _, st in listing)
+        if total > MAX_FEED_BYTES:
+            self._seen = key
+            raise FeedTooLarge(
+                f"{self.name}: {total} bytes in {len(listing)} files, over the "
+                f"{MAX_FEED_BYTES}-byte limit for a METAR feed"
+            )
+        files = []
+        for path, _ in listing:
+            try:
+                data = path.read_bytes()
+            except OSError as exc:
+                raise FeedUnavailable(f"{path}: cannot read: {exc.strerror or exc}") from None
+            files.append((str(path), gunzip_if_needed(data, str(path))))
+        self._seen = key
+        newest = max(st.st_mtime for _, st in listing)
+        return Fetched(b"", datetime.fromtimestamp(newest, tz=UTC), files=tuple(files))
+
+    def forget(self) -> None:
+        self._seen = None
 
     def close(self) -> None:
         pass

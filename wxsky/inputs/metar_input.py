@@ -124,8 +124,10 @@ def ingest(
     feed: Feed,
     known: Mapping[str, StationWeather] | None = None,
     positions: Mapping[str, StationPosition] | None = None,
+    history: History | None = None,
 ) -> Ingested:
-    """Decode every report of a feed and keep the newest usable one per station."""
+    """Decode every report of a feed and keep the newest usable one per station; with
+    `history` (a replay), every usable report of known time is kept there too, by station."""
     positions = station_table() if positions is None else positions
     stations: dict[str, StationWeather] = dict(known or {})
     problems = [f"{p.where}: {p.reason}" for p in feed.problems]
@@ -185,7 +187,7 @@ def ingest(
         old = stations.get(station)
         # Same time is a correction (COR, or a feed file rewritten): the later read wins. A
         # report of unknown time never replaces one of known time.
-        if _superseded(old, observed):
+        if _superseded(old, observed) and history is None:
             accepted += 1  # a good report, only superseded
             continue
         # The field every other path reads this station's reports at (the table's, before
@@ -197,9 +199,11 @@ def ingest(
             problems.append(f"{where}: {exc}")
             continue
         accepted += 1
-        stations[station] = StationWeather(
-            station, pos.lat_deg, pos.lon_deg, elevation_m, observed, patch
-        )
+        weather = StationWeather(station, pos.lat_deg, pos.lon_deg, elevation_m, observed, patch)
+        if history is not None and observed is not None:
+            history.add(weather)
+        if not _superseded(old, observed):
+            stations[station] = weather
     return Ingested(
         stations=stations,
         reports=len(feed.reports),
@@ -210,6 +214,52 @@ def ingest(
         problems=tuple(problems),
         internal_errors=tuple(internal),
     )
+
+
+def _summed(results: list[Ingested]) -> Ingested:
+    """One ingest's figures for a directory's files, read one after another."""
+    if len(results) == 1:
+        return results[0]
+    return Ingested(
+        stations=results[-1].stations,
+        reports=sum(r.reports for r in results),
+        accepted=sum(r.accepted for r in results),
+        partial=sum(r.partial for r in results),
+        nil=sum(r.nil for r in results),
+        duplicates=sum(r.duplicates for r in results),
+        problems=tuple(p for r in results for p in r.problems),
+        internal_errors=tuple(e for r in results for e in r.internal_errors),
+    )
+
+
+class History:
+    """Every report of each station, in time order, for replaying an archive: the weather at
+    a moment is each station's latest report not after it. Bounded: a station keeps its
+    newest `per_station` reports."""
+
+    def __init__(self, per_station: int = 24 * 12) -> None:
+        self.per_station = per_station
+        self._by_station: dict[str, list[StationWeather]] = {}
+
+    def add(self, weather: StationWeather) -> None:
+        assert weather.observed_utc is not None
+        reports = self._by_station.setdefault(weather.station, [])
+        reports[:] = [r for r in reports if r.observed_utc != weather.observed_utc]
+        reports.append(weather)
+        reports.sort(key=lambda r: r.observed_utc or datetime.min.replace(tzinfo=UTC))
+        del reports[: max(0, len(reports) - self.per_station)]
+
+    def at(self, when: datetime) -> dict[str, StationWeather]:
+        """Each station's latest report observed at or before `when`."""
+        out = {}
+        for station, reports in self._by_station.items():
+            before = [r for r in reports if r.observed_utc is not None and r.observed_utc <= when]
+            if before:
+                out[station] = before[-1]
+        return out
+
+    def __len__(self) -> int:
+        return sum(len(r) for r in self._by_station.values())
 
 
 def _disagree(report_utc: datetime, feed_utc: datetime) -> bool:
@@ -295,8 +345,14 @@ class MetarFeedInput:
         apply: Callable[[WeatherPatch], object],
         position: Callable[[], tuple[float, float]],
         positions: Mapping[str, StationPosition] | None = None,
+        replay_clock: Callable[[], datetime] | None = None,
     ) -> None:
+        """`replay_clock` (a replay of archived reports, `wxsky run --replay`): the sim
+        clock, against which reports are aged and chosen (each station's latest not after
+        it), instead of the wall clock and each station's newest."""
         self.source = source
+        self._replay_clock = replay_clock
+        self._history = History() if replay_clock is not None else None
         self.settings = settings
         self.stats = stats
         self._apply = apply
@@ -307,6 +363,9 @@ class MetarFeedInput:
         # The stations blended into the weather (more than one), each with its own report:
         # a CIGI source sends them as regions.
         self.blended: tuple[StationWeather, ...] = ()
+        # The nearest station in use and its distance: how much the METAR counts against
+        # model data (weather.model_blend); None while the feed gives no weather here.
+        self.nearest: tuple[StationWeather, float] | None = None
         self._warn = RateLimitedLog(log)
         self._failures = 0
         self._content_ok = True  # what the source's current content gave (module docstring)
@@ -416,11 +475,15 @@ class MetarFeedInput:
             self.stats.error(fetched.dropped)
             self._warn.warning("cut", f"METAR feed {fetched.dropped}")
         fmt = self.settings.format if fetched.format == "auto" else fetched.format
-        feed = parse_feed(
-            fetched.data, format=fmt, name=self.source.name, reference_utc=fetched.reference_utc
-        )
-        result = ingest(feed, self._stations, self._positions)
-        self._stations = result.stations
+        # An archive's reports name only their day: in a replay, the month is the sim clock's.
+        reference = fetched.reference_utc if self._replay_clock is None else self._replay_clock()
+        parts = fetched.files or ((self.source.name, fetched.data),)
+        results = []
+        for name, data in parts:
+            feed = parse_feed(data, format=fmt, name=name, reference_utc=reference)
+            results.append(ingest(feed, self._stations, self._positions, self._history))
+            self._stations = results[-1].stations
+        result = _summed(results)
         self.stats.message(result.accepted)
         if result.problems:
             self.stats.error(result.problems[-1], len(result.problems))
@@ -439,6 +502,8 @@ class MetarFeedInput:
         d = self.stats.detail
         d["format"] = feed.format
         d["stations"] = len(result.stations)
+        if self._history is not None:
+            d["replay_reports"] = len(self._history)
         d["partial"] = d.get("partial", 0) + result.partial
         d["duplicates"] = d.get("duplicates", 0) + result.duplicates
         if result.internal_errors:
@@ -454,16 +519,24 @@ class MetarFeedInput:
 
     def reselect(self) -> None:
         lat, lon = self._position()
-        choice = select(self._stations, lat, lon, self.settings)
+        if self._replay_clock is not None and self._history is not None:
+            now = self._replay_clock()
+            choice = select(self._history.at(now), lat, lon, self.settings, now_utc=now)
+        else:
+            choice = select(self._stations, lat, lon, self.settings)
         d = self.stats.detail
         d["stale"] = choice.stale
         if choice.patch is None:
+            self.nearest = None
             if choice.stale:
                 self._warn.warning("stale", f"METAR {self.source.name}: {choice.reason}")
             d["reason"] = choice.reason
             return
         d.pop("reason", None)
         self.blended = choice.blended
+        name, distance = choice.used[0]
+        at = self._stations.get(name)
+        self.nearest = (at, distance) if at is not None else None
         d["using"] = [{"station": s, "distance_km": round(m / 1000.0, 1)} for s, m in choice.used]
         if choice.patch != self._last_patch:
             # Remembered only once applied: after a failure here the restarted task applies it.

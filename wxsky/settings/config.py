@@ -381,6 +381,23 @@ class MetarSection(_Section):
 
 
 @dataclass(frozen=True)
+class GribSection(_Section):
+    """Model data (issue 45, docs/grib.md): GRIB2 files, directories of forecast steps, or
+    URLs, read into winds, temperatures and clouds aloft."""
+
+    SECTION: ClassVar[str] = "grib"
+
+    sources: tuple[str, ...] = _opt(())  # files, directories (one file a step), http(s) URLs
+    poll_interval_s: float = _opt(300.0, _num(0.1, 86_400.0, "s"))
+    http_timeout_s: float = _opt(30.0, _num(0.1, 600.0, "s"))
+    byte_ranges: bool = _opt(True)  # fetch only the messages used, by the .idx inventory
+    cache_dir: str = _opt("")  # "": $XDG_CACHE_HOME/wxsky/grib (~/.cache/wxsky/grib)
+    cache_max_mb: float = _opt(2048.0, _num(1.0, 1_000_000.0, "MiB"))
+    window_deg: float = _opt(6.0, _num(1.0, 90.0, "deg"))  # fields kept around the site
+    update_s: float = _opt(10.0, _num(0.1, 3600.0, "s"))  # the column worked out again
+
+
+@dataclass(frozen=True)
 class TransitionSection(_Section):
     SECTION: ClassVar[str] = "transition"
 
@@ -576,6 +593,7 @@ class DaemonConfig:
     preview: PreviewSection = field(default_factory=PreviewSection)
     presets: PresetsSection = field(default_factory=PresetsSection)
     metar: MetarSection = field(default_factory=MetarSection)
+    grib: GribSection = field(default_factory=GribSection)
     transition: TransitionSection = field(default_factory=TransitionSection)
     serial: tuple[SerialInputSection, ...] = ()  # [[serial]] tables
     can: tuple[CanInputSection, ...] = ()  # [[can]] tables

@@ -1,7 +1,7 @@
 """Which source each weather field is taken from, highest first:
 
     cockpit (while held) > control channel / preset applied at run time
-        > CIGI host (while it keeps sending) > METAR feed > base
+        > CIGI host (while it keeps sending) > METAR feed > model (GRIB) > base
 
 The base is the config's defaults with the preset the daemon started on. Every slot keeps the
 fields its source last gave; a field falls through to the next slot down when a slot has no
@@ -16,6 +16,10 @@ clock is not a weather field here: `time_utc` in a patch sets the clock directly
 The cockpit slot also holds finely keyed values (`wind.speed_mps`, `layer2.base_m`; see
 `wxsky.weather.cockpit`): hardware sets one knob at a time, and each knob expires on its own.
 They are laid over the weather of the sources below by `cockpit.overlay`.
+
+The METAR does not simply hide the model's layers and wind: a report speaks for the surface
+and the sky it sees near its station, the model for the rest, and `model_blend` lays one over
+the other by `metar_weight` (the nearest station's distance and its report's age).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from types import MappingProxyType
 from typing import Any
 
 from wxsky.weather.cockpit import overlay
+from wxsky.weather.model_blend import blend
 from wxsky.weather.state import Provenance, Source, WeatherPatch, WeatherState
 
 # Fields that can be overridden; time_utc belongs to the clock.
@@ -51,6 +56,7 @@ class Held:
 @dataclass(frozen=True)
 class SourceStack:
     base: WeatherState
+    grib: Slot = field(default_factory=lambda: _EMPTY)
     metar: Slot = field(default_factory=lambda: _EMPTY)
     cigi: Slot = field(default_factory=lambda: _EMPTY)
     control: Slot = field(default_factory=lambda: _EMPTY)
@@ -58,6 +64,8 @@ class SourceStack:
     cockpit_hold_s: float = DEFAULT_COCKPIT_HOLD_S
     cigi_hold_s: float = DEFAULT_CIGI_HOLD_S
     cigi_heard_s: float = 0.0  # when the CIGI host was last heard from
+    # How much the METAR counts against the model's layers and wind (model_blend)
+    metar_weight: float = 1.0
 
     def with_patch(self, patch: WeatherPatch, now_s: float) -> SourceStack:
         """The stack with a source's new values. METAR and CIGI replace the whole slot (the
@@ -73,6 +81,8 @@ class SourceStack:
                 return dataclasses.replace(self, base=self.base.apply(_without_time(patch)))
             case Source.METAR:
                 return dataclasses.replace(self, metar=MappingProxyType(values))
+            case Source.GRIB:
+                return dataclasses.replace(self, grib=MappingProxyType(values))
             case Source.CIGI:
                 return dataclasses.replace(self, cigi=MappingProxyType(values), cigi_heard_s=now_s)
             case Source.CONTROL:
@@ -103,9 +113,15 @@ class SourceStack:
             return dataclasses.replace(self, metar=_EMPTY), tuple(sorted(self.metar))
         if source is Source.CIGI:
             return dataclasses.replace(self, cigi=_EMPTY), tuple(sorted(self.cigi))
+        if source is Source.GRIB:
+            return dataclasses.replace(self, grib=_EMPTY), tuple(sorted(self.grib))
         raise ValueError(
-            f"only control, cockpit, cigi and metar values can be released, not {source}"
+            f"only control, cockpit, cigi, metar and grib values can be released, not {source}"
         )
+
+    def with_metar_weight(self, weight: float) -> SourceStack:
+        w = min(1.0, max(0.0, weight))
+        return self if w == self.metar_weight else dataclasses.replace(self, metar_weight=w)
 
     def expired(self, now_s: float) -> tuple[SourceStack, tuple[str, ...]]:
         """Drop cockpit fields not updated within the hold time, and the CIGI host's weather
@@ -128,8 +144,14 @@ class SourceStack:
     def target(self) -> WeatherState:
         """The weather every field's highest-ranked source asks for, with its provenance."""
         state = self.base
+        if self.grib:
+            state = state.apply(WeatherPatch(source=Source.GRIB, **_whole(self.grib)))
+        if self.metar:
+            metar = _whole(self.metar)
+            if self.grib:
+                metar = self._over_model(metar, state)
+            state = state.apply(WeatherPatch(source=Source.METAR, **metar))
         for source, slot in (
-            (Source.METAR, self.metar),
             (Source.CIGI, self.cigi),
             (Source.CONTROL, self.control),
             (Source.COCKPIT, self.cockpit),
@@ -139,6 +161,28 @@ class SourceStack:
                 state = state.apply(WeatherPatch(source=source, **whole))
         fine = {n: h.value for n, h in self.cockpit.items() if n not in FIELDS}
         return overlay(state, fine)
+
+    def _over_model(self, metar: dict[str, Any], model: WeatherState) -> dict[str, Any]:
+        """The METAR's values with its layers and wind laid over the model's by weight; at
+        weight 0 the model's stand (and are shown as the model's)."""
+        out = dict(metar)
+        w = self.metar_weight
+        if w <= 0.0:
+            out.pop("layers", None)
+            out.pop("wind", None)
+            return out
+        got = blend(
+            metar.get("layers"),
+            metar.get("wind"),
+            model.layers if "layers" in self.grib else None,
+            model.wind if "wind" in self.grib else None,
+            w,
+            model.observer.alt_m,
+        )
+        for name, value in (("layers", got.layers), ("wind", got.wind)):
+            if value is not None:
+                out[name] = value
+        return out
 
     def holds(self, now_s: float) -> dict[str, dict[str, Any]]:
         """CIGI, control and cockpit overrides for status: field -> source and age (the
@@ -157,6 +201,10 @@ class SourceStack:
                     entry["expires_in_s"] = self.cigi_heard_s + self.cigi_hold_s - now_s
                 out[name] = entry
         return out
+
+
+def _whole(slot: Slot) -> dict[str, Any]:
+    return {n: h.value for n, h in slot.items() if n in FIELDS}
 
 
 def _merged(slot: Slot, values: dict[str, Held]) -> Slot:

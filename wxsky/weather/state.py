@@ -84,6 +84,7 @@ class Source(enum.StrEnum):
     DEFAULT = "default"
     PRESET = "preset"
     METAR = "metar"
+    GRIB = "grib"  # numerical model data (issue 45), below METAR
     COCKPIT = "cockpit"
     CONTROL = "control"
     CIGI = "cigi"

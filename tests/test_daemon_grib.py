@@ -1,0 +1,195 @@
+"""A real daemon reading real GFS data (issue 45): the column at its site in `status` and the
+stream, each cloud layer drifting with the wind at its own height, the model's clouds where no
+METAR speaks, and a broken file that costs nothing but its own error."""
+
+from __future__ import annotations
+
+import shutil
+import time
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import pytest
+from daemon_harness import HANG_S, RunningDaemon, running_daemon
+
+from wxsky.inputs.grib_decode import Window, decode
+from wxsky.weather.model_clouds import model_layers
+from wxsky.weather.model_fields import merge_steps
+from wxsky.weather.model_profile import profile_at
+
+pytestmark = pytest.mark.gl
+
+GFS = (
+    Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "grib"
+    / "gfs.t12z.pgrbf120.2p5deg.grib2"
+)
+
+VALID = datetime(2011, 1, 15, 12, tzinfo=UTC)  # the file's one step: the clock is held to it
+CONFIG = """
+[camera]
+width = 160
+height = 90
+[scene]
+ring_texture_px = 64
+[grib]
+update_s = 0.2
+poll_interval_s = 0.5
+[transition]
+step_s = 0.2
+"""
+
+
+def _wait(daemon: RunningDaemon, check: Callable[[dict[str, Any]], bool], what: str) -> dict:
+    deadline = time.monotonic() + HANG_S
+    with daemon.client() as c:
+        while time.monotonic() < deadline:
+            status = c.call("status")
+            if check(status):
+                return status  # type: ignore[no-any-return]
+            time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what}:\n{daemon.log()[-3000:]}")
+
+
+def _air(daemon: RunningDaemon) -> dict[str, Any]:
+    """The `air` of a frame once the lookup behind it has answered."""
+    deadline = time.monotonic() + HANG_S
+    with daemon.client() as c:
+        c.subscribe(["frame"])
+        while time.monotonic() < deadline:
+            note = c.next_notification(timeout_s=HANG_S)
+            assert note is not None
+            air = note.params["air"]
+            if note.method == "frame" and air["temperature_c"] is not None:
+                return air  # type: ignore[no-any-return]
+    raise AssertionError("no frame with the air's temperature")
+
+
+def _grib_input(status: dict[str, Any], name: str) -> dict[str, Any]:
+    return next(i for i in status["inputs"] if i["name"] == f"grib:{name}")
+
+
+@pytest.mark.skipif(not GFS.exists(), reason=f"the GFS fixture is absent: {GFS}")
+def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> None:
+    steps = tmp_path / "steps"
+    steps.mkdir()
+    shutil.copy(GFS, steps / "gfs-a")
+    broken = tmp_path / "broken.grib2"
+    broken.write_bytes(GFS.read_bytes()[:1_000_000])
+    with running_daemon(
+        tmp_path,
+        CONFIG,
+        args=("--grib", str(steps), "--grib", str(broken), "--preset", "clear"),
+    ) as daemon:
+        with daemon.client() as watcher:
+            watcher.subscribe(["aloft"])
+            status = _wait(
+                daemon,
+                lambda s: (
+                    s["grib"]["profile"] is not None and s["target"]["sources"]["wind"] == "grib"
+                ),
+                "the model's column",
+            )
+            note = watcher.next_notification(timeout_s=HANG_S)
+            assert note is not None and note.method == "aloft"
+        profile = status["grib"]["profile"]
+        levels = profile["levels"]
+        assert len(levels) >= 20
+        heights = [lev["height_m"] for lev in levels]
+        assert heights == sorted(heights)
+        for lev in levels:
+            assert {"pressure_hpa", "height_m", "speed_mps", "dir_deg", "t_c"} <= set(lev)
+        assert profile["freezing_level_m"] is not None and profile["tropopause_m"] is not None
+        assert note.params["levels"][0]["height_m"] == pytest.approx(heights[0])
+        # the target's wind is the model's, level by level
+        target_wind = status["target"]["wind"]
+        assert len(target_wind) == len(levels)
+        for w, lev in zip(target_wind, levels, strict=True):
+            assert w["alt_m"] == pytest.approx(lev["height_m"], abs=0.2)
+            assert w["speed_mps"] == pytest.approx(min(lev["speed_mps"], 150.0), abs=0.05)
+        # the good directory decoded; the cut file said why, once, and is left out
+        good = _grib_input(status, str(steps))
+        assert good["ok"] and good["decoded"] == 1
+        bad = _grib_input(status, str(broken))
+        assert not bad["ok"] and str(broken) in bad["last_error"]
+        assert "\n" not in bad["last_error"]
+        assert status["grib"]["steps_utc"] == ["2011-01-15T12:00:00Z"]
+        # frames kept coming through it all, each with the air at the aircraft (here the
+        # camera) for a flight model: the model's temperature at its height
+        first = status["frames_published"]
+        _wait(daemon, lambda s: s["frames_published"] > first + 5, "more frames")
+        air = _air(daemon)
+        alt = air["at_m"][2]
+        if alt < levels[0]["height_m"]:  # under the model's smoothed ground: the lapse rate
+            want_c = levels[0]["t_c"] + 0.0065 * (levels[0]["height_m"] - alt)
+        else:
+            below = max((v for v in levels if v["height_m"] <= alt), key=lambda v: v["height_m"])
+            above = min((v for v in levels if v["height_m"] > alt), key=lambda v: v["height_m"])
+            f = (alt - below["height_m"]) / (above["height_m"] - below["height_m"])
+            want_c = below["t_c"] + f * (above["t_c"] - below["t_c"])
+        assert air["temperature_c"] == pytest.approx(want_c, abs=0.05)
+        assert len(air["gust_mps"]) == 3 and air["turbulence"]["sigma_w_mps"] > 0.0
+        assert air["icing"] is False or air["in_cloud"] is True
+        # the model's clouds, where no METAR speaks, are the target's: those the same column
+        # makes here
+        fields = decode(GFS.read_bytes(), "gfs", Window(profile["lat_deg"], profile["lon_deg"]))
+        column = profile_at(
+            merge_steps(fields, ("gfs",)), profile["lat_deg"], profile["lon_deg"], VALID
+        )
+        assert column is not None
+        want = [(lay.type.wire_name, lay.cover_oktas, lay.base_m) for lay in model_layers(column)]
+        assert want, "the fixture has cloud over the preset's site"
+        got = [
+            (lay["type"], lay["cover_oktas"], lay["base_m"]) for lay in status["target"]["layers"]
+        ]
+        assert [g[0] for g in got] == [w[0] for w in want]
+        for g, w in zip(got, want, strict=True):
+            assert g[1:] == pytest.approx(w[1:], abs=0.01)
+        assert status["target"]["sources"]["layers"] == "grib"
+
+
+CYCLE = GFS.parents[1] / "metar" / "noaa_cycle_2025-07-26_okay_weather_HEAD1500.txt"
+
+
+@pytest.mark.skipif(not CYCLE.exists(), reason=f"the METAR archive is absent: {CYCLE}")
+def test_a_past_day_replays_each_stations_reports_in_their_order(tmp_path: Path) -> None:
+    """NOAA's cycle file split in two, as an archive directory; KVCT reported BKN120 at
+    15:46Z and BKN033 at 15:51Z. Replayed from 15:48Z at a minute a second, the first
+    stands, then the second: never the later report before its time."""
+    archive = tmp_path / "archive"
+    archive.mkdir()
+    records = CYCLE.read_text().split("\n\n")
+    half = len(records) // 2
+    (archive / "15Z.TXT").write_text("\n\n".join(records[:half]) + "\n")
+    (archive / "16Z.TXT").write_text("\n\n".join(records[half:]))
+    config = CONFIG + '[clock]\nrate = 60.0\n[metar]\nstation = "KVCT"\npoll_interval_s = 0.2\n'
+    with running_daemon(
+        tmp_path,
+        config,
+        args=(
+            "--replay",
+            "2025-07-26T15:48:00Z",
+            "--metar-feed",
+            str(archive),
+            "--preset",
+            "clear",
+        ),
+    ) as daemon:
+
+        def bases(s: dict[str, Any]) -> list[float]:
+            return [
+                round(lay["base_m"] - s["target"]["observer"]["alt_m"])
+                for lay in s["target"]["layers"]
+            ]
+
+        first = _wait(daemon, lambda s: s["target"]["sources"]["layers"] == "metar", "the replay")
+        assert first["weather"]["time_utc"] < "2025-07-26T15:51"
+        metar = next(i for i in first["inputs"] if i["kind"] == "metar")
+        assert metar["using"][0]["station"] == "KVCT" and metar["replay_reports"] > 500
+        assert max(bases(first)) > 3000  # BKN120, 15:46Z
+        later = _wait(daemon, lambda s: max(bases(s), default=0) < 3000, "the 15:51Z report")
+        assert later["weather"]["time_utc"] >= "2025-07-26T15:51"

@@ -1,0 +1,133 @@
+"""wgrib2-style `.idx` inventories (issue 45): which byte ranges of a GRIB2 file hold the
+messages wxsky reads, so a model file of hundreds of megabytes costs only those messages.
+
+An inventory has one line per field, `N:OFFSET:d=YYYYMMDDHH:VAR:LEVEL:FORECAST:` (NOAA's
+servers publish one beside each file, `wxsky.inputs.grib_decode.inventory` writes them):
+
+    4.1:25975:d=2011011012:UGRD:10 mb:120 hour fcst:
+    4.2:25975:d=2011011012:VGRD:10 mb:120 hour fcst:
+
+Fields that share one message (NCEP packs each u/v pair in one) are numbered N.1, N.2 and
+share its offset. A message runs from its offset to the byte before the next distinct
+offset; the last one to the end of the file, which the inventory does not say.
+
+Pure: text in, entries and ranges out; the caller fetches.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+from wxsky.errors import GribError
+
+__all__ = ["MAX_OFFSET_B", "IdxEntry", "parse_idx", "wanted_ranges"]
+
+# Past any real file, and small enough for any server's Range header to take.
+MAX_OFFSET_B = 2**53
+_MIN_FIELDS = 6  # N, OFFSET, d=DATE, VAR, LEVEL, FORECAST (wgrib2 may add more after)
+_NUMBER = re.compile(r"[0-9]+(?:\.[0-9]+)*")
+_QUOTE_CHARS = 40  # how much of a bad field an error quotes
+
+ByteRange = tuple[int, int | None]  # (first byte, last byte inclusive; None: to the end)
+
+
+@dataclass(frozen=True)
+class IdxEntry:
+    number: str  # "4" or "4.1": fields of one message share the part before the dot
+    offset_b: int  # where the field's message starts in the file
+    date: str  # the run's date as written, "d=2011011012"
+    var: str  # wgrib2's name: "UGRD"
+    level: str  # "10 mb", "surface", "2 m above ground"
+    forecast: str  # "120 hour fcst", "anl"
+
+
+def parse_idx(text: str, name: str) -> list[IdxEntry]:
+    """The entries of an inventory, blank lines skipped. Raises GribError, one line naming
+    `name` and the line, for a line with too few fields, a bad number or offset, or an
+    offset before the one above it (an inventory of some other file, or two run together)."""
+    entries: list[IdxEntry] = []
+    last_offset_b = 0
+    # Split on newlines only: the line numbers are the ones an editor or `sed -n` shows.
+    for line_no, raw in enumerate(text.split("\n"), start=1):
+        line = raw.removesuffix("\r")
+        if not line.strip():
+            continue
+        where = f"{name}: line {line_no}"
+        fields = line.split(":")
+        if len(fields) < _MIN_FIELDS:
+            raise GribError(
+                f"{where}: {len(fields)} ':'-separated fields, an inventory line has at least "
+                f"{_MIN_FIELDS} (N:OFFSET:d=DATE:VAR:LEVEL:FORECAST:): {_quote(line)}"
+            )
+        number, offset_text, date, var, level, forecast = fields[:_MIN_FIELDS]
+        if not _NUMBER.fullmatch(number):
+            raise GribError(f"{where}: message number {_quote(number)} is not N or N.M")
+        # ASCII digits only: int() would take "1_000", " 7" and other scripts' digits.
+        if not (offset_text.isascii() and offset_text.isdigit()):
+            raise GribError(f"{where}: offset {_quote(offset_text)} is not a byte count")
+        if len(offset_text) > 16 or int(offset_text) > MAX_OFFSET_B:
+            raise GribError(f"{where}: offset {_quote(offset_text)} is past any GRIB file")
+        offset_b = int(offset_text)
+        if offset_b < last_offset_b:
+            raise GribError(
+                f"{where}: offset {offset_b} is before the line above's ({last_offset_b}); "
+                "an inventory lists its messages in file order"
+            )
+        last_offset_b = offset_b
+        entries.append(IdxEntry(number, offset_b, date, var, level, forecast))
+    return entries
+
+
+def wanted_ranges(
+    entries: Sequence[IdxEntry], wanted: Iterable[tuple[str, str]]
+) -> list[ByteRange]:
+    """The byte ranges of the messages holding a wanted (VAR, LEVEL) field, in file order,
+    each message once (a u/v pair is one message) and neighbouring messages merged into one
+    range, so each range is one request. LEVEL "mb" stands for every pressure level (a level
+    ending in " mb"). `entries` as `parse_idx` returns them (offsets never go backwards)."""
+    pairs = set(wanted)
+    any_mb = {var for var, level in pairs if level == "mb"}
+    # Each distinct offset is one message; it is wanted when any of its fields is.
+    messages: list[tuple[int, bool]] = []
+    for e in entries:
+        hit = (e.var, e.level) in pairs or (e.var in any_mb and e.level.endswith(" mb"))
+        if messages and messages[-1][0] == e.offset_b:
+            messages[-1] = (e.offset_b, messages[-1][1] or hit)
+        else:
+            messages.append((e.offset_b, hit))
+    ranges: list[ByteRange] = []
+    run_start_b: int | None = None  # the first byte of the range being gathered
+    for offset_b, hit in messages:
+        if hit and run_start_b is None:
+            run_start_b = offset_b
+        elif not hit and run_start_b is not None:
+            ranges.append((run_start_b, offset_b - 1))
+            run_start_b = None
+    if run_start_b is not None:
+        ranges.append((run_start_b, None))
+    return ranges
+
+
+def fewer_ranges(ranges: Sequence[ByteRange], most: int) -> list[ByteRange]:
+    """`ranges` joined across their smallest gaps until at most `most` are left: servers that
+    count requests (NOAA's NOMADS blocks a client after some 120 a minute) get a few large
+    ones, at the cost of the unwanted messages in the gaps, which the decoder skips."""
+    out = list(ranges)
+    while len(out) > max(1, most):
+        gaps = [
+            (b[0] - a[1] if a[1] is not None else 0, i)
+            for i, (a, b) in enumerate(itertools.pairwise(out))
+        ]
+        _, i = min(gaps)
+        out[i : i + 2] = [(out[i][0], out[i + 1][1])]
+    return out
+
+
+def _quote(text: str) -> str:
+    """A piece of a bad line for an error: one line (repr escapes every line break) and
+    bounded."""
+    cut = text if len(text) <= _QUOTE_CHARS else text[:_QUOTE_CHARS] + "…"
+    return repr(cut)
