@@ -83,7 +83,11 @@ def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> No
     with running_daemon(
         tmp_path,
         CONFIG,
-        args=("--grib", str(steps), "--grib", str(broken), "--preset", "clear"),
+        # the file's one step is 2011-01-15 12Z: the clock goes there
+        args=(
+            *("--grib", str(steps), "--grib", str(broken), "--preset", "clear"),
+            *("--replay", "2011-01-15T11:00:00Z"),
+        ),
     ) as daemon:
         with daemon.client() as watcher:
             watcher.subscribe(["aloft"])
@@ -98,7 +102,7 @@ def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> No
             assert note is not None and note.method == "aloft"
         profile = status["grib"]["profile"]
         levels = profile["levels"]
-        assert len(levels) >= 20
+        assert len(levels) >= 15  # Zurich stands at 950 hPa: 1000 and 975 are underground
         heights = [lev["height_m"] for lev in levels]
         assert heights == sorted(heights)
         for lev in levels:
@@ -114,9 +118,10 @@ def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> No
         # the good directory decoded; the cut file said why, once, and is left out
         good = _grib_input(status, str(steps))
         assert good["ok"] and good["decoded"] == 1
+        # the cut file: what came before the cut is used, the cut said in one line
         bad = _grib_input(status, str(broken))
-        assert not bad["ok"] and str(broken) in bad["last_error"]
-        assert "\n" not in bad["last_error"]
+        assert bad["errors"] >= 1 and str(broken) in bad["last_error"]
+        assert "left out" in bad["last_error"] and "\n" not in bad["last_error"]
         assert status["grib"]["steps_utc"] == ["2011-01-15T12:00:00Z"]
         # frames kept coming through it all, each with the air at the aircraft (here the
         # camera) for a flight model: the model's temperature at its height
@@ -150,6 +155,13 @@ def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> No
         for g, w in zip(got, want, strict=True):
             assert g[1:] == pytest.approx(w[1:], abs=0.01)
         assert status["target"]["sources"]["layers"] == "grib"
+
+        # a clock far from the forecast: the model is no weather for it, and status says so
+        with daemon.client() as c:
+            c.call("set_time", {"time_utc": "2011-01-20T12:00:00Z"})
+        far = _wait(daemon, lambda s: s["grib"]["profile"] is None, "the model let go")
+        assert "more than 6 h from the clock" in far["grib"]["reason"]
+        assert far["target"]["sources"]["wind"] != "grib"
 
 
 CYCLE = GFS.parents[1] / "metar" / "noaa_cycle_2025-07-26_okay_weather_HEAD1500.txt"

@@ -8,6 +8,7 @@ checked on fields made here from the real one."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -58,7 +59,7 @@ def test_every_pressure_level_has_both_winds_and_the_peak_jet_is_the_files(
     levels = {
         n: {f.level for f in whole if f.name == n and f.level_type == "isobaric"} for n in "uv"
     }
-    assert len(levels["u"]) == 26 and levels["u"] == levels["v"]
+    assert len(levels["u"]) == 21 and levels["u"] == levels["v"]  # 1000..100 of its 26
     u = _field(whole, ("u", "isobaric", 250.0))
     v = _field(whole, ("v", "isobaric", 250.0))
     assert u.values.shape == (73, 144)  # 2.5 degrees, pole to pole
@@ -301,3 +302,150 @@ def test_far_from_stations_the_model_stands() -> None:
     assert low.cover_oktas == pytest.approx(5.5) and low.base_m == pytest.approx(1050.0)
     e, n = half.wind[0].velocity_mps()
     assert (e, n) == (pytest.approx(2.5), pytest.approx(5.0))  # half of each, as vectors
+
+
+# -- the issue's checks by hand -------------------------------------------------------------
+
+# Near a grid corner (47.5 N 7.5 E is one), across the date line (between 177.5 E and
+# 177.5 W, the grid's 180 between), near the north pole (between 87.5 N and the pole row).
+POINTS = ((47.49, 7.52), (-16.3, -178.9), (88.9, 33.3))
+
+
+def _by_hand(data: bytes) -> dict[tuple[str, float], np.ndarray]:
+    """eccodes' own values of u, v and t at 850, 500 and 250 hPa, as (lat, lon) grids from the
+    north pole row down, 0 E first: read here, not through wxsky's decoder."""
+    import os
+
+    import eccodes
+
+    out: dict[tuple[str, float], np.ndarray] = {}
+    eccodes.codes_grib_multi_support_on()
+    fd = os.memfd_create("fixture")
+    with os.fdopen(fd, "w+b") as f:
+        f.write(data)
+        f.seek(0)
+        while (h := eccodes.codes_grib_new_from_file(f)) is not None:
+            try:
+                name = eccodes.codes_get(h, "shortName")
+                level = float(eccodes.codes_get(h, "level"))
+                iso = eccodes.codes_get(h, "typeOfLevel") == "isobaricInhPa"
+                if iso and name in ("u", "v", "t") and level in (850.0, 500.0, 250.0):
+                    nj, ni = eccodes.codes_get(h, "Nj"), eccodes.codes_get(h, "Ni")
+                    out[(name, level)] = eccodes.codes_get_values(h).reshape(nj, ni)
+            finally:
+                eccodes.codes_release(h)
+    return out
+
+
+def _bilinear_by_hand(grid: np.ndarray, lat: float, lon: float) -> float:
+    """The fixture's grid: rows from 90 N down by 2.5 degrees, columns from 0 E east."""
+    y = (90.0 - lat) / 2.5
+    x = (lon % 360.0) / 2.5
+    j0, i0 = math.floor(y), math.floor(x)
+    fy, fx = y - j0, x - i0
+    j1, i1 = min(j0 + 1, grid.shape[0] - 1), (i0 + 1) % grid.shape[1]
+    i0 %= grid.shape[1]
+    top = (1 - fx) * grid[j0, i0] + fx * grid[j0, i1]
+    bottom = (1 - fx) * grid[j1, i0] + fx * grid[j1, i1]
+    return float((1 - fy) * top + fy * bottom)
+
+
+@pytest.mark.parametrize("point", POINTS, ids=["grid-corner", "date-line", "pole"])
+def test_the_profile_is_eccodes_values_interpolated(
+    data: bytes, whole: list[ModelField], point: tuple[float, float]
+) -> None:
+    lat, lon = point
+    raw = _by_hand(data)
+    p = profile_at(merge_steps(decode(data, "gfs", Window(lat, lon)), ("gfs",)), lat, lon, VALID)
+    assert p is not None
+    for hpa in (850.0, 500.0, 250.0):
+        lev = next(lev for lev in p.levels if lev.pressure_hpa == hpa)
+        assert lev.u_mps == pytest.approx(_bilinear_by_hand(raw[("u", hpa)], lat, lon), abs=0.1)
+        assert lev.v_mps == pytest.approx(_bilinear_by_hand(raw[("v", hpa)], lat, lon), abs=0.1)
+        assert lev.t_k == pytest.approx(_bilinear_by_hand(raw[("t", hpa)], lat, lon), abs=0.1)
+    # between levels: pressure falls with height, and winds and temperatures lie between
+    # the levels' own, as the log-pressure interpolation keeps them
+    for a, b in itertools.pairwise(p.levels):
+        heights = np.linspace(a.height_m, b.height_m, 7)
+        pressures = [p.at_height(float(h)).pressure_hpa for h in heights]  # type: ignore[union-attr]
+        assert all(x > y for x, y in itertools.pairwise(pressures))
+        for h in heights[1:-1]:
+            at = p.at_height(float(h))
+            assert at is not None
+            for name in ("u_mps", "v_mps", "t_k"):
+                lo, hi = sorted((getattr(a, name), getattr(b, name)))
+                assert lo - 1e-9 <= getattr(at, name) <= hi + 1e-9
+
+
+def test_each_layer_drifts_with_the_wind_at_its_middle() -> None:
+    """Two layers, the model's wind from the west at one's middle and from the south at the
+    other's: after ten minutes each has gone its own way, 90 degrees apart."""
+    from wxsky.scene.gather import advance_drift, zero_drift
+
+    wind = (
+        WindLayer(100.0, 270.0, 4.0),
+        WindLayer(1500.0, 270.0, 12.0),  # the low layer's middle
+        WindLayer(6000.0, 180.0, 20.0),  # the high layer's middle
+        WindLayer(9000.0, 180.0, 30.0),
+    )
+    layers = (
+        CloudLayer(4.0, 1000.0, 2000.0, CloudType.CUMULUS),
+        CloudLayer(5.0, 5500.0, 6500.0, CloudType.ALTOCUMULUS),
+    )
+    state = dataclasses.replace(WeatherState(), wind=wind, layers=layers)
+    drift = advance_drift(state, zero_drift(state), 600.0)
+    (le, ln), (he, hn) = drift
+    assert (le, ln) == (pytest.approx(12.0 * 600.0), pytest.approx(0.0, abs=1e-6))
+    assert (he, hn) == (pytest.approx(0.0, abs=1e-6), pytest.approx(20.0 * 600.0))
+
+
+def test_at_the_station_the_metar_and_200_km_away_the_model() -> None:
+    at_station = _stack(model_blend.metar_weight(0.0, 300.0)).target()
+    assert at_station.wind[0].speed_mps == pytest.approx(10.0)
+    assert at_station.wind[0].dir_from_deg == pytest.approx(180.0)
+    assert next((lay.type, lay.cover_oktas, lay.base_m) for lay in at_station.layers) == (
+        CloudType.STRATOCUMULUS,
+        7.0,
+        1200.0,
+    )
+    far = _stack(model_blend.metar_weight(200_000.0, 300.0)).target()
+    assert far.wind == MODEL_WIND and far.layers == MODEL_LAYERS
+
+
+def test_absurd_values_leave_out_their_field_and_the_rest_is_used(data: bytes) -> None:
+    """A copy of the real file whose 250 hPa u field is shifted by 10,000 m/s (its packing's
+    reference value changed): that field is named and left out, v beside it in the same
+    message and every other field stay."""
+    import struct
+
+    offset = next(
+        int(line.split(":")[1]) for line in inventory(data).splitlines() if ":UGRD:250 mb:" in line
+    )
+    absurd = bytearray(data)
+    at = offset + 16
+    while absurd[at + 4] != 5:  # to the u field's data representation section
+        at += int.from_bytes(absurd[at : at + 4], "big")
+    absurd[at + 11 : at + 15] = struct.pack(">f", 10_000.0)  # its reference value
+    problems: list[str] = []
+    fields = decode(bytes(absurd), "absurd.grib2", Window(*LONDON), problems)
+    keys = {f.key for f in fields}
+    assert ("u", "isobaric", 250.0) not in keys and ("v", "isobaric", 250.0) in keys
+    assert ("u", "isobaric", 300.0) in keys
+    (problem,) = problems
+    assert problem.startswith("absurd.grib2: message ") and "u at 250 hPa" in problem
+    assert "outside -150..150 m/s" in problem and "\n" not in problem
+    with pytest.raises(GribError, match="u at 250 hPa"):
+        decode(bytes(absurd), "absurd.grib2", Window(*LONDON))
+    # the level without its u is said, and left out of the column
+    steps = merge_steps(fields, ("absurd",))
+    (gap,) = next(iter(steps.values())).gaps()
+    assert "250 hPa: v, t but no u" in gap
+    p = profile_at(steps, *LONDON, VALID)
+    assert p is not None and 250.0 not in {lev.pressure_hpa for lev in p.levels}
+
+
+def test_a_truncated_file_gives_what_came_before_the_cut(data: bytes) -> None:
+    problems: list[str] = []
+    fields = decode(data[: len(data) // 2 + 17], "half.grib2", Window(*LONDON), problems)
+    assert fields and len(problems) == 1
+    assert problems[0].startswith("half.grib2: message ") and "left out" in problems[0]

@@ -1821,6 +1821,54 @@ def check_grib_idx(data: bytes) -> None:
         assert inside == (offset in wanted_at), f"message at {offset}: fetched {inside}"
 
 
+# --- GRIB2 messages (wxsky/inputs/grib_decode.py): what eccodes makes of a file -----------
+
+
+def grib_seeds() -> list[bytes]:
+    """The real GFS file's messages one by one (each GRIB2 message says its length in octets
+    9-16), as many kinds as it has; nothing where the file is absent (a fresh clone)."""
+    if not GRIB_FIXTURE.exists():
+        return [b"GRIB\x00\x00\x00\x02" + (16).to_bytes(8, "big")]
+    data = GRIB_FIXTURE.read_bytes()
+    seeds, at = [], 0
+    while at + 16 <= len(data) and data[at : at + 4] == b"GRIB":
+        length = int.from_bytes(data[at + 8 : at + 16], "big")
+        seeds.append(data[at : at + length])
+        at += length
+    return sample(seeds)
+
+
+@target(
+    "grib",
+    seeds=grib_seeds,
+    tokens=(b"GRIB", b"7777", b"\x00\x00\x00\x15\x01", b"\x00\x00\x00\x48\x03"),
+    max_len=40_000,
+    time_limit_s=2.0,
+)
+def check_grib(data: bytes) -> None:
+    """decode: GribError in one line naming the file; or fields whose grids are ascending,
+    finite and the size of their values, at valid times in the clock's range."""
+    import numpy as np
+
+    from wxsky.inputs.grib_decode import Window, decode
+    from wxsky.weather.state import time_in_range
+
+    for window in (None, Window(21.3, -157.9, 6.0)):
+        try:
+            fields = decode(data, "fuzz.grib2", window)
+        except GribError as exc:
+            message = str(exc)
+            assert len(message.splitlines()) == 1, f"not one line: {message[:200]!r}"
+            assert message.startswith("fuzz.grib2: "), f"names no file: {message[:200]!r}"
+            return
+        for f in fields:
+            g = f.grid
+            assert f.values.shape == (len(g.lats_deg), len(g.lons_deg)), "values not the grid"
+            for axis in (g.lats_deg, g.lons_deg):
+                assert np.all(np.isfinite(axis)) and np.all(np.diff(axis) > 0), "bad axis"
+            assert time_in_range(f.valid_utc), f"valid time {f.valid_utc}"
+
+
 # --- the OSG plugin's .wxsky file (plugins/osg/src/settings.cpp), in its own process ---------
 
 OSG_KIT = ROOT / "plugins" / "osg"

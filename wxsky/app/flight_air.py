@@ -1,5 +1,5 @@
 """The air at the host's aircraft, in every frame's notification (`air`; issue 45,
-docs/grib.md): the wind from the weather's profile (the model's, where model data is read),
+docs/weather-aloft.md): the wind from the weather's profile (the model's, where model data is read),
 the gust of the turbulence there (`scene/turbulence.py`), the temperature and an icing flag,
 so a host's flight model flies in the weather its pilot sees.
 

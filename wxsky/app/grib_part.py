@@ -1,5 +1,5 @@
-"""The daemon's model data (`[grib] sources`, `wxsky run --grib`; docs/grib.md): GRIB2 files,
-directories of forecast steps or URLs, read into the weather aloft at the site.
+"""The daemon's model data (`[grib] sources`, `wxsky run --grib`; docs/weather-aloft.md):
+GRIB2 files, directories of forecast steps or URLs, read into the weather aloft at the site.
 
 On a task of its own, off the frame path:
 
@@ -26,7 +26,7 @@ import multiprocessing
 import os
 import time
 from collections.abc import Callable, Sequence
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +48,8 @@ from wxsky.weather.stations import StationWeather
 log = logging.getLogger("wxsky.app.grib")
 
 Nearest = Callable[[], tuple[StationWeather, float] | None]
+# How far beyond its first or last step a forecast is still held (GFS steps are 3 h apart).
+MAX_HOLD = timedelta(hours=6)
 
 
 def cache_dir(section: GribSection) -> Path:
@@ -57,8 +59,9 @@ def cache_dir(section: GribSection) -> Path:
     return Path(base) / "wxsky" / "grib"
 
 
-def _decode_in_child(data: bytes, name: str, window: Window) -> list[ModelField]:
-    return decode(data, name, window)
+def _decode_in_child(data: bytes, name: str, window: Window) -> tuple[list[ModelField], list[str]]:
+    problems: list[str] = []
+    return decode(data, name, window, problems), problems
 
 
 def _lower_priority() -> None:
@@ -86,6 +89,7 @@ class GribPart(Part):
                 cache_max_bytes=int(section.cache_max_mb * 1024 * 1024),
                 timeout_s=section.http_timeout_s,
                 byte_ranges=section.byte_ranges,
+                fields=section.fields,
             )
             for spec in self.specs
         ]
@@ -94,6 +98,7 @@ class GribPart(Part):
         self._decoded: dict[str, list[ModelField]] = {}
         self._window: Window | None = None
         self._steps: dict[datetime, ModelStep] = {}
+        self._gaps: list[str] = []  # levels left out for want of a field
         self._profile: ModelProfile | None = None
         self._reason = "no model data yet"
         self._pool: concurrent.futures.ProcessPoolExecutor | None = None
@@ -136,6 +141,7 @@ class GribPart(Part):
                 if hasattr(self, "_engine")
                 else None,
                 "reason": None if p is not None else self._reason,
+                "gaps": list(self._gaps),
                 "profile": None if p is None else p.as_json(),
             }
         }
@@ -208,10 +214,13 @@ class GribPart(Part):
                 got = self._decoded.get(blob.digest)
                 if got is None:
                     try:
-                        got = await self._decode(blob, window)
+                        got, problems = await self._decode(blob, window)
                     except GribError as e:
                         self._fail(stats, str(e))
                         continue
+                    # what could be used is used; each problem said, the last in status
+                    for problem in problems:
+                        self._fail(stats, problem, keep_ok=bool(got))
                     self._decoded[blob.digest] = got
                     stats.message()
                 good += 1
@@ -223,10 +232,13 @@ class GribPart(Part):
             del self._decoded[digest]
         if fields:
             self._steps = merge_steps(fields, tuple(names))
+            self._gaps = [gap for step in self._steps.values() for gap in step.gaps()]
             for stats in self.stats:
                 stats.detail["steps"] = len(self._steps)
+            for gap in self._gaps:
+                self._warn.warning("gap", f"model data: {gap}")
 
-    async def _decode(self, blob: GribBlob, window: Window) -> list[ModelField]:
+    async def _decode(self, blob: GribBlob, window: Window) -> tuple[list[ModelField], list[str]]:
         loop = asyncio.get_running_loop()
         if self._pool is None:
             self._pool = concurrent.futures.ProcessPoolExecutor(
@@ -242,9 +254,9 @@ class GribPart(Part):
             self._pool = None
             raise GribError(f"{blob.name}: the decoder's process ended on this file") from None
 
-    def _fail(self, stats: InputStats, text: str) -> None:
+    def _fail(self, stats: InputStats, text: str, keep_ok: bool = False) -> None:
         stats.error(text)
-        stats.ok = False
+        stats.ok = stats.ok and keep_ok
         self._warn.warning(stats.name, text)
 
     async def _update(self) -> None:
@@ -253,6 +265,20 @@ class GribPart(Part):
         lat, lon = self._site()
         at = self._engine.state.time_utc
         steps = self._steps
+        first, last = min(steps), max(steps)
+        if not first - MAX_HOLD <= at <= last + MAX_HOLD:
+            # A forecast for another day is no weather for this one: the sources below speak.
+            self._reason = (
+                f"the model data's steps ({_iso(first)} to {_iso(last)}) are more than "
+                f"{MAX_HOLD.total_seconds() / 3600:g} h from the clock ({_iso(at)})"
+            )
+            if self._profile is not None or self._last_patch is not None:
+                self._warn.warning("far", f"model data: {self._reason}; not used")
+                self._engine.release(Source.GRIB)
+                self._ctx.publish_target()
+            self._profile = None
+            self._last_patch = None
+            return
         profile = await asyncio.to_thread(profile_at, steps, lat, lon, at)
         if profile is None:
             self._reason = f"no forecast step covers {lat:.2f}, {lon:.2f}"
@@ -271,11 +297,11 @@ class GribPart(Part):
             temperature_c=None if profile.t2m_k is None else profile.t2m_k - KELVIN,
         )
         if patch != self._last_patch:
-            first = self._last_patch is None
+            news = self._last_patch is None
             self._engine.apply(patch)
             self._last_patch = patch
             self._ctx.publish_target()
-            if first:
+            if news:
                 log.info(
                     "model data applied: %d levels, %d cloud layers, steps %s",
                     len(profile.levels),

@@ -64,7 +64,7 @@ def add_commands(sub: Subparsers) -> None:
         default=[],
         metavar="SOURCE",
         help="read model data (GRIB2): a file, a directory of forecast steps, or an http(s) "
-        "URL (repeatable; adds to [grib] sources in the config; docs/grib.md)",
+        "URL (repeatable; adds to [grib] sources in the config; docs/weather-aloft.md)",
     )
     run.add_argument(
         "--replay",
@@ -72,7 +72,7 @@ def add_commands(sub: Subparsers) -> None:
         metavar="TIME",
         help="replay a past day: start the clock at TIME (ISO 8601, UTC unless it says) and "
         "take the METAR feeds as an archive, each station's latest report not after the "
-        "clock (docs/grib.md says where to get archives); [clock] rate runs it faster",
+        "clock (docs/weather-aloft.md says where to get archives); [clock] rate runs it faster",
     )
     run.add_argument(
         "--serial",

@@ -1,4 +1,4 @@
-"""`wxsky grib ...`: model data (docs/grib.md).
+"""`wxsky grib ...`: model data (docs/weather-aloft.md).
 
 - `wxsky grib show SOURCE... [--lat --lon] [--time] [--json]`: the column the daemon would
   use at a place and time (levels from the ground up, the freezing level, the tropopause, the

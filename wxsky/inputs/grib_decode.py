@@ -1,4 +1,4 @@
-"""GRIB2 messages into model fields: the **only** eccodes user (issue 45, docs/grib.md).
+"""GRIB2 messages into model fields: the **only** eccodes user (issue 45, docs/weather-aloft.md).
 
 ECMWF's eccodes decodes; its wheels carry the C library, so no system package is needed.
 Two things it must be told:
@@ -33,6 +33,9 @@ from wxsky.errors import GribError
 from wxsky.weather.model_fields import Grid, ModelField
 
 G0_MPS2 = 9.80665  # standard gravity: geopotential (m2/s2) over this is geopotential metres
+# Pressure levels above this (lower pressure) are left out: 100 hPa is about 16 km (FL530),
+# above every cloud and every civil aircraft's ceiling, and a fifth of a model's levels.
+MIN_LEVEL_HPA = 100.0
 
 # (eccodes shortName, typeOfLevel) -> (wxsky name, level type, scale). The level number is
 # kept only for isobaric levels (in hPa); `scale` turns the centre's unit into wxsky's.
@@ -108,19 +111,26 @@ def _last_complaint() -> str:
     return f" (eccodes: {lines[-1][:160]})" if lines else ""
 
 
-def decode(data: bytes, name: str, window: Window | None = None) -> list[ModelField]:
+def decode(
+    data: bytes, name: str, window: Window | None = None, problems: list[str] | None = None
+) -> list[ModelField]:
     """The wanted fields of every message in `data` (GRIB edition 2; edition 1 is refused).
-    Raises GribError, one line naming `name`, the message and what is wrong."""
+    Each problem is one line naming `name`, the message and the field: without `problems`,
+    the first raises GribError; with it, each is added there and what can be used is used (a
+    field out of its range is left out, a truncated file gives the messages before the cut).
+    Data with no GRIB message at all raises either way."""
     if not data:
         raise GribError(f"{name}: empty, no GRIB messages")
     _quiet()
     try:
-        return _decode(data, name, window)
+        return _decode(data, name, window, problems)
     except GribError as e:
         raise GribError(f"{e}{_last_complaint()}") from None
 
 
-def _decode(data: bytes, name: str, window: Window | None) -> list[ModelField]:
+def _decode(
+    data: bytes, name: str, window: Window | None, problems: list[str] | None
+) -> list[ModelField]:
     out: list[ModelField] = []
     eccodes.codes_grib_multi_support_on()
     with _memory_file(data) as f:
@@ -130,12 +140,21 @@ def _decode(data: bytes, name: str, window: Window | None) -> list[ModelField]:
             try:
                 h = eccodes.codes_grib_new_from_file(f)
             except Exception as e:  # eccodes raises its own errors for a truncated message
-                raise GribError(f"{where}: {_said(e)}") from None
+                if problems is None or n == 0:
+                    raise GribError(f"{where}: {_said(e)}") from None
+                # nothing after a broken message can be found again
+                problems.append(f"{where}: {_said(e)}; the file's rest left out")
+                break
             if h is None:
                 break
             n += 1
             try:
                 field = _field(h, f"{where} at byte {_get(h, 'offset', -1):.0f}", window)
+            except GribError as e:
+                if problems is None:
+                    raise
+                problems.append(f"{e}{_last_complaint()}")
+                continue
             finally:
                 eccodes.codes_release(h)
             if field is not None:
@@ -143,6 +162,45 @@ def _decode(data: bytes, name: str, window: Window | None) -> list[ModelField]:
     if n == 0:
         raise GribError(f"{name}: no GRIB messages found ({len(data)} bytes)")
     return out
+
+
+# What each field may hold, in wxsky's units (NaN, where the model has no value, is allowed):
+# beyond it a field is refused, not clipped (a file that says 400 m/s says nothing).
+_LIMITS: dict[tuple[str, str], tuple[float, float, str]] = {
+    ("u", "isobaric"): (-150.0, 150.0, "m/s"),
+    ("v", "isobaric"): (-150.0, 150.0, "m/s"),
+    ("t", "isobaric"): (150.0, 350.0, "K"),
+    ("gh", "isobaric"): (-1000.0, 60_000.0, "m"),
+    ("r", "isobaric"): (-1.0, 110.0, "%"),
+    ("clwmr", "isobaric"): (0.0, 0.1, "kg/kg"),
+    ("u10", "surface"): (-150.0, 150.0, "m/s"),
+    ("v10", "surface"): (-150.0, 150.0, "m/s"),
+    ("t2m", "surface"): (150.0, 350.0, "K"),
+    ("sp", "surface"): (20_000.0, 115_000.0, "Pa"),
+    ("orog", "surface"): (-1000.0, 9000.0, "m"),
+    ("cape", "surface"): (0.0, 20_000.0, "J/kg"),
+    ("prate", "surface"): (0.0, 0.2, "kg m-2 s-1"),
+    ("gh", "freezing"): (-1000.0, 10_000.0, "m"),
+    ("gh", "tropopause"): (2000.0, 30_000.0, "m"),
+}
+
+
+def _check_range(where: str, name: str, level_type: str, level: float, values: np.ndarray) -> None:
+    limits = _LIMITS.get((name, level_type))
+    if limits is None and level_type.endswith("_cloud"):
+        limits = (0.0, 100.5, "%")  # a deck's cover
+    if limits is None:
+        return
+    lo, hi, unit = limits
+    finite = values[np.isfinite(values)]
+    bad = finite[(finite < lo) | (finite > hi)]
+    if bad.size:
+        at = f" at {level:g} hPa" if level_type == "isobaric" else f" ({level_type})"
+        worst = float(bad[np.argmax(np.abs(bad))])
+        raise GribError(
+            f"{where}: {name}{at}: {bad.size} values outside {lo:g}..{hi:g} {unit} "
+            f"(e.g. {worst:.6g}); the field left out"
+        )
 
 
 @contextlib.contextmanager
@@ -193,6 +251,8 @@ def _field(h: Any, where: str, window: Window | None) -> ModelField | None:
         level = float(_get(h, "level", 0))
         if _get(h, "typeOfLevel") == "isobaricInPa":
             level /= 100.0
+        if level < MIN_LEVEL_HPA:
+            return None
     try:
         grid, values = _grid_values(h, window)
     except GribError as e:
@@ -200,7 +260,9 @@ def _field(h: Any, where: str, window: Window | None) -> ModelField | None:
     except Exception as e:
         raise GribError(f"{where}: {_said(e)}") from None
     valid = _valid_utc(h, where)
-    return ModelField(name, level_type, level, valid, grid, (values * scale).astype(np.float32))
+    scaled = (values * scale).astype(np.float32)
+    _check_range(where, name, level_type, level, scaled)
+    return ModelField(name, level_type, level, valid, grid, scaled)
 
 
 def _valid_utc(h: Any, where: str) -> datetime:
@@ -362,8 +424,12 @@ def _idx_text(h: Any, offset: int) -> str:
     return f"{offset}:d={date:08d}{time_ // 100:02d}:{var}:{level_text}:{forecast}:"
 
 
-# The inventory lines whose messages the daemon fetches by byte range: wgrib2's names for
-# `wanted`'s fields.
+# The inventory lines whose messages the daemon fetches by byte range (`[grib] fields`): wgrib2's
+# names for `wanted`'s fields, "mb" standing for every pressure level down to MIN_LEVEL_HPA.
+# "wind": the wind and temperature profile alone, under a fifth of a GFS file; heights are
+# reckoned from the temperatures up from the lowest level's standard height (model_profile).
+IDX_WIND: tuple[tuple[str, str], ...] = (("UGRD", "mb"), ("VGRD", "mb"), ("TMP", "mb"))
+# "all": everything wxsky reads (heights, humidity, cloud water, the cloud decks, the surface).
 IDX_WANTED: tuple[tuple[str, str], ...] = (
     ("UGRD", "mb"), ("VGRD", "mb"), ("TMP", "mb"), ("HGT", "mb"), ("RH", "mb"),
     ("CLWMR", "mb"), ("HGT", "surface"), ("PRES", "surface"), ("CAPE", "surface"),

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Protocol
 
 from wxsky.errors import GribError
-from wxsky.inputs.grib_decode import IDX_WANTED
+from wxsky.inputs.grib_decode import IDX_WANTED, IDX_WIND, MIN_LEVEL_HPA
 from wxsky.inputs.grib_http import Answer, CacheEntry, DiskCache, Validators, get
 from wxsky.weather.grib_idx import ByteRange, fewer_ranges, parse_idx, wanted_ranges
 
@@ -41,7 +41,7 @@ MAX_GRIB_BYTES = 1024**3  # one file or URL: a whole 0.25 degree GFS step is abo
 MAX_GRIB_DIR_BYTES = 4 * 1024**3  # a directory's files together, all held at once
 MAX_IDX_BYTES = 16 * 1024**2  # a GFS 0.25 degree inventory is about 60 kB
 # Requests for one file's messages: the nearest are joined until no more than this are left.
-MAX_RANGE_REQUESTS = 16
+MAX_RANGE_REQUESTS = 64
 # Left out of a directory: inventories, hidden files, and files still being written.
 _NOT_GRIB_SUFFIXES = (".idx", ".part", ".tmp")
 
@@ -83,14 +83,18 @@ def open_grib_source(
     cache_max_bytes: int = 2 * 1024**3,
     timeout_s: float = 30.0,
     byte_ranges: bool = True,
+    fields: str = "all",
 ) -> GribSource:
     """A source for a config/CLI spec: an http(s):// URL of one GRIB2 file, a directory (one
     file per forecast step) or a file. `cache_dir` keeps a URL's last data on disk (bounded by
-    `cache_max_bytes`); `byte_ranges` False always fetches a URL's whole file."""
+    `cache_max_bytes`); `byte_ranges` False always fetches a URL's whole file; `fields` which
+    messages a URL's byte ranges take ("all" wxsky reads, or "wind": the wind and temperature
+    profile alone)."""
     if spec.startswith(("http://", "https://")):
         cache = DiskCache(cache_dir, cache_max_bytes) if cache_dir is not None else None
+        wanted = IDX_WIND if fields == "wind" else IDX_WANTED
         return HttpGribSource(
-            spec, wanted=IDX_WANTED, timeout_s=timeout_s, byte_ranges=byte_ranges, cache=cache
+            spec, wanted=wanted, timeout_s=timeout_s, byte_ranges=byte_ranges, cache=cache
         )
     if "://" in spec:
         raise GribError(f"GRIB source {spec!r}: only files, directories and http(s) URLs")
@@ -315,7 +319,8 @@ class HttpGribSource:
                 return None
             if idx.status == 200:
                 text = idx.body.decode("utf-8", "replace")
-                ranges = wanted_ranges(parse_idx(text, self.idx_url), self.wanted)
+                entries = parse_idx(text, self.idx_url)
+                ranges = wanted_ranges(entries, self.wanted, min_hpa=MIN_LEVEL_HPA)
                 ranges = fewer_ranges(ranges, MAX_RANGE_REQUESTS)
                 if not ranges:
                     raise GribError(f"{self.idx_url}: lists none of the fields wxsky reads")

@@ -1,4 +1,4 @@
-"""Turbulence for a host's flight model (issue 45, docs/grib.md): how rough the air is at a
+"""Turbulence for a host's flight model (issue 45, docs/weather-aloft.md): how rough the air is at a
 point, and the gust there, so the aircraft flies in the weather its pilot sees.
 
 **Intensity.** The vertical gust's standard deviation `sigma_w` adds, in variance, what each

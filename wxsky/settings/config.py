@@ -382,7 +382,7 @@ class MetarSection(_Section):
 
 @dataclass(frozen=True)
 class GribSection(_Section):
-    """Model data (issue 45, docs/grib.md): GRIB2 files, directories of forecast steps, or
+    """Model data (issue 45, docs/weather-aloft.md): GRIB2 files, directories of forecast steps, or
     URLs, read into winds, temperatures and clouds aloft."""
 
     SECTION: ClassVar[str] = "grib"
@@ -391,6 +391,8 @@ class GribSection(_Section):
     poll_interval_s: float = _opt(300.0, _num(0.1, 86_400.0, "s"))
     http_timeout_s: float = _opt(30.0, _num(0.1, 600.0, "s"))
     byte_ranges: bool = _opt(True)  # fetch only the messages used, by the .idx inventory
+    # which messages: "all" wxsky reads, or "wind" (the wind and temperature profile alone)
+    fields: str = _opt("all", Text(choices=("all", "wind")))
     cache_dir: str = _opt("")  # "": $XDG_CACHE_HOME/wxsky/grib (~/.cache/wxsky/grib)
     cache_max_mb: float = _opt(2048.0, _num(1.0, 1_000_000.0, "MiB"))
     window_deg: float = _opt(6.0, _num(1.0, 90.0, "deg"))  # fields kept around the site

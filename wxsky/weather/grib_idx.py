@@ -17,6 +17,7 @@ Pure: text in, entries and ranges out; the caller fetches.
 from __future__ import annotations
 
 import itertools
+import math
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -82,18 +83,21 @@ def parse_idx(text: str, name: str) -> list[IdxEntry]:
 
 
 def wanted_ranges(
-    entries: Sequence[IdxEntry], wanted: Iterable[tuple[str, str]]
+    entries: Sequence[IdxEntry], wanted: Iterable[tuple[str, str]], min_hpa: float = 0.0
 ) -> list[ByteRange]:
     """The byte ranges of the messages holding a wanted (VAR, LEVEL) field, in file order,
     each message once (a u/v pair is one message) and neighbouring messages merged into one
     range, so each range is one request. LEVEL "mb" stands for every pressure level (a level
-    ending in " mb"). `entries` as `parse_idx` returns them (offsets never go backwards)."""
+    ending in " mb") down to `min_hpa`. `entries` as `parse_idx` returns them (offsets never
+    go backwards)."""
     pairs = set(wanted)
     any_mb = {var for var, level in pairs if level == "mb"}
     # Each distinct offset is one message; it is wanted when any of its fields is.
     messages: list[tuple[int, bool]] = []
     for e in entries:
-        hit = (e.var, e.level) in pairs or (e.var in any_mb and e.level.endswith(" mb"))
+        hit = (e.var, e.level) in pairs or (
+            e.var in any_mb and e.level.endswith(" mb") and _hpa(e.level) >= min_hpa
+        )
         if messages and messages[-1][0] == e.offset_b:
             messages[-1] = (e.offset_b, messages[-1][1] or hit)
         else:
@@ -109,6 +113,15 @@ def wanted_ranges(
     if run_start_b is not None:
         ranges.append((run_start_b, None))
     return ranges
+
+
+def _hpa(level: str) -> float:
+    """The pressure of an "N mb" level; an unreadable number counts as any level."""
+    try:
+        value = float(level[:-3])
+    except ValueError:
+        return math.inf
+    return value if math.isfinite(value) else math.inf
 
 
 def fewer_ranges(ranges: Sequence[ByteRange], most: int) -> list[ByteRange]:

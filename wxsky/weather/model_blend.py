@@ -1,4 +1,4 @@
-"""A METAR over the model (issue 45, docs/grib.md): near a station and near its report's
+"""A METAR over the model (issue 45, docs/weather-aloft.md): near a station and near its report's
 time the METAR wins at the surface and for the layers it reports; aloft and far from
 stations, the model.
 

@@ -1,4 +1,4 @@
-"""Cloud layers from a model column (issue 45, docs/grib.md): what the sky holds where no
+"""Cloud layers from a model column (issue 45, docs/weather-aloft.md): what the sky holds where no
 METAR speaks (above what a station reports, and far from stations), and the tops of the
 layers a METAR reports.
 

@@ -137,15 +137,31 @@ class ModelStep:
         return self.fields.get((name, level_type, level))
 
     def isobaric_levels_hpa(self) -> tuple[float, ...]:
-        """Pressure levels holding the whole set a profile needs (u, v, t, gh), high pressure
-        (low altitude) first."""
-        need = ("u", "v", "t", "gh")
+        """Pressure levels holding the whole set a profile needs (u, v, t; heights are
+        reckoned where the model gives none), high pressure (low altitude) first."""
+        need = ("u", "v", "t")
         levels = {k[2] for k in self.fields if k[1] == "isobaric"}
         full = [p for p in levels if all((n, "isobaric", p) in self.fields for n in need)]
         return tuple(sorted(full, reverse=True))
 
     def covers(self, lat_deg: float, lon_deg: float) -> bool:
         return all(f.grid.covers(lat_deg, lon_deg) for f in self.fields.values())
+
+    def gaps(self) -> list[str]:
+        """The pressure levels that lack part of what a profile needs (u, v, t), one line
+        each: such a level is left out of the profile."""
+        need = ("u", "v", "t")
+        levels = sorted({k[2] for k in self.fields if k[1] == "isobaric"}, reverse=True)
+        out = []
+        for p in levels:
+            have = [n for n in need if (n, "isobaric", p) in self.fields]
+            if have and len(have) < len(need):
+                missing = [n for n in need if n not in have]
+                out.append(
+                    f"{self.valid_utc.isoformat().replace('+00:00', 'Z')} {p:g} hPa: "
+                    f"{', '.join(have)} but no {', '.join(missing)}; the level left out"
+                )
+        return out
 
 
 def merge_steps(fields: list[ModelField], sources: tuple[str, ...]) -> dict[datetime, ModelStep]:

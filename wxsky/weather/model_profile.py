@@ -1,4 +1,4 @@
-"""The model's column at a place and time (issue 45, docs/grib.md): winds, temperatures and
+"""The model's column at a place and time (issue 45, docs/weather-aloft.md): winds, temperatures and
 humidity by height, the surface, the freezing level and the tropopause.
 
 Interpolation, as the issue asks: bilinear in latitude and longitude between the four grid
@@ -254,8 +254,10 @@ def _profile(
     surface_hpa = None if sp_pa is None else sp_pa / 100.0
     levels: list[ProfileLevel] = []
     pressures = sorted({float(k.split("@")[1]) for k in col if k.startswith("u@")}, reverse=True)
+    heights = _heights(col, pressures, surface_hpa)
     for p in pressures:
-        u, v, t, gh = (col.get(f"{n}@{p:g}") for n in ("u", "v", "t", "gh"))
+        u, v, t = (col.get(f"{n}@{p:g}") for n in ("u", "v", "t"))
+        gh = heights.get(p)
         if u is None or v is None or t is None or gh is None:
             continue
         if surface_hpa is not None and p > surface_hpa:
@@ -301,6 +303,56 @@ def _profile(
         tropopause_hpa=_hpa(trop_p),
         decks=decks,
     )
+
+
+RD_JKGK = 287.05  # the gas constant of dry air
+G0_MPS2 = 9.80665
+
+
+def _heights(col: Column, pressures: list[float], surface_hpa: float | None) -> dict[float, float]:
+    """Each level's height: the model's geopotential height where it gives one; between and
+    beyond those, the hypsometric equation through the levels' temperatures (dz = Rd/g0 * T
+    * dln p, T the mean of the two levels'), from the nearest level with a height, or from
+    the ground (the model's surface height and pressure) where no level has one. Fetching
+    `fields = "wind"` gives one level's height only; a file missing some levels' heights is
+    mended the same way."""
+    temps = {p: col.get(f"t@{p:g}") for p in pressures}
+    out = {p: gh for p in pressures if (gh := col.get(f"gh@{p:g}")) is not None}
+    orog = col.get("orog")
+    if not out and orog is not None and surface_hpa is not None:
+        ground_t = col.get("t2m") or next((t for t in temps.values() if t is not None), None)
+        below = [p for p in pressures if p <= surface_hpa]
+        if ground_t is not None and below and temps.get(below[0]) is not None:
+            first = below[0]
+            mean_t = 0.5 * (ground_t + float(temps[first] or ground_t))
+            out[first] = orog + RD_JKGK / G0_MPS2 * mean_t * math.log(surface_hpa / first)
+    if not out:
+        # No height anywhere (`fields = "wind"`): the lowest level at its height in the
+        # standard atmosphere, off by the day's pressure anomaly (some 8 m a hectopascal)
+        known = [p for p in pressures if temps.get(p) is not None]
+        if not known:
+            return out
+        out[known[0]] = _standard_height_m(known[0])
+    order = sorted(pressures, reverse=True)  # from the ground up
+
+    def step(a: float, b: float) -> float | None:
+        ta, tb = temps.get(a), temps.get(b)
+        if ta is None or tb is None or a not in out:
+            return None
+        return out[a] + RD_JKGK / G0_MPS2 * 0.5 * (ta + tb) * math.log(a / b)
+
+    for i in range(1, len(order)):  # upwards
+        if order[i] not in out and (z := step(order[i - 1], order[i])) is not None:
+            out[order[i]] = z
+    for i in range(len(order) - 2, -1, -1):  # downwards
+        if order[i] not in out and (z := step(order[i + 1], order[i])) is not None:
+            out[order[i]] = z
+    return out
+
+
+def _standard_height_m(hpa: float) -> float:
+    """The ICAO standard atmosphere's height of a pressure in the troposphere."""
+    return float(288.15 / 0.0065 * (1.0 - (hpa / 1013.25) ** (RD_JKGK * 0.0065 / G0_MPS2)))
 
 
 def _hpa(pa: float | None) -> float | None:
