@@ -412,7 +412,9 @@ def test_at_the_station_the_metar_and_200_km_away_the_model() -> None:
     assert far.wind == MODEL_WIND and far.layers == MODEL_LAYERS
 
 
-def test_absurd_values_leave_out_their_field_and_the_rest_is_used(data: bytes) -> None:
+def test_absurd_values_leave_out_their_field_and_the_rest_is_used(
+    data: bytes, whole: list[ModelField]
+) -> None:
     """A copy of the real file whose 250 hPa u field is shifted by 10,000 m/s (its packing's
     reference value changed): that field is named and left out, v beside it in the same
     message and every other field stay."""
@@ -436,6 +438,9 @@ def test_absurd_values_leave_out_their_field_and_the_rest_is_used(data: bytes) -
     assert "outside -150..150 m/s" in problem and "\n" not in problem
     with pytest.raises(GribError, match="u at 250 hPa"):
         decode(bytes(absurd), "absurd.grib2", Window(*LONDON))
+    # that file was given up between a message's u and its v: the next file read is its own,
+    # not the abandoned v first (eccodes keeps a message's rest across files)
+    assert [f.key for f in decode(data, "gfs")] == [f.key for f in whole]
     # the level without its u is said, and left out of the column
     steps = merge_steps(fields, ("absurd",))
     (gap,) = next(iter(steps.values())).gaps()
@@ -449,3 +454,39 @@ def test_a_truncated_file_gives_what_came_before_the_cut(data: bytes) -> None:
     fields = decode(data[: len(data) // 2 + 17], "half.grib2", Window(*LONDON), problems)
     assert fields and len(problems) == 1
     assert problems[0].startswith("half.grib2: message ") and "left out" in problems[0]
+
+
+def test_crossing_a_step_the_target_moves_no_faster_than_the_transitions(data: bytes) -> None:
+    """Three steps six hours apart (the later two made from the real one, their winds
+    doubled, then back): the grib source's target, worked out every 10 s as the daemon does
+    ([grib] update_s) from ten minutes before the middle step to ten after, never moves
+    further in one update than the default [transition] rates allow in that time."""
+    from wxsky.weather.model_clouds import model_layers as layers_of
+    from wxsky.weather.transition import TransitionRates
+
+    rates = TransitionRates()
+    first = decode(data, "gfs", Window(*LONDON))
+    later = [*_shifted(first, 6.0, 2.0), *_shifted(first, 12.0, 1.0)]
+    steps = merge_steps([*first, *later], ("a", "b", "c"))
+    assert len(steps) == 3
+    update_s = 10.0
+    before: WeatherState | None = None
+    middle = VALID + timedelta(hours=6)
+    t = middle - timedelta(minutes=10)
+    while t <= middle + timedelta(minutes=10):
+        p = profile_at(steps, *LONDON, t)
+        assert p is not None
+        patch = WeatherPatch(source=Source.GRIB, wind=p.winds(), layers=layers_of(p))
+        target = SourceStack(base=WeatherState()).with_patch(patch, 0.0).target()
+        if before is not None:
+            for a, b in zip(before.wind, target.wind, strict=True):
+                ae, an = a.velocity_mps()
+                be, bn = b.velocity_mps()
+                assert math.hypot(be - ae, bn - an) <= rates.wind_mps_per_s * update_s
+            for a, b in zip(before.layers, target.layers, strict=True):
+                assert a.type == b.type
+                cover_step = rates.cover_oktas_per_min * update_s / 60.0
+                assert abs(b.cover_oktas - a.cover_oktas) <= cover_step
+                assert abs(b.base_m - a.base_m) <= rates.base_m_per_min * update_s / 60.0
+        before = target
+        t += timedelta(seconds=update_s)

@@ -209,7 +209,13 @@ def _memory_file(data: bytes) -> Iterator[Any]:
     with os.fdopen(fd, "w+b") as f:
         f.write(data)
         f.seek(0)
-        yield f
+        try:
+            yield f
+        finally:
+            # With multi-field support on, eccodes keeps the rest of a message whose first
+            # field was read (NCEP's v after its u) for the next read of *any* file: left
+            # there by a file given up half-way, it came out of the next file's first read.
+            eccodes.codes_grib_multi_support_reset_file(f)
 
 
 def _said(e: BaseException) -> str:
