@@ -496,10 +496,12 @@ def test_a_directory_gives_every_grib_file_and_sees_changes(
     assert_same_fields(decode(blobs[0].data, "x", WINDOW), whole_fields)
     assert 0 < len(decode(blobs[1].data, "x", WINDOW)) < len(whole_fields)
     assert src.fetch() is None
-    # One file changes: the list again, the unchanged file's blob kept, not read again.
+    # One file changes: the list again, the unchanged file held (not read again, its bytes
+    # not kept by the source), the changed one with its data
     (folder / "step-two.bin").write_bytes(grib[: cut_b // 2])
     again = src.fetch()
-    assert again is not None and again[0] is blobs[0] and again[1].digest != blobs[1].digest
+    assert again is not None and again[0].held and again[0].digest == blobs[0].digest
+    assert not again[1].held and again[1].digest != blobs[1].digest
     assert src.fetch() is None
     (folder / "third").write_bytes(grib[:cut_b])
     added = src.fetch()
@@ -507,8 +509,9 @@ def test_a_directory_gives_every_grib_file_and_sees_changes(
     (folder / "gfs.f120").unlink()
     removed = src.fetch()
     assert removed is not None and [Path(b.name).name for b in removed] == ["step-two.bin", "third"]
-    src.forget()
-    assert src.fetch() is not None
+    src.forget()  # every file read again
+    every = src.fetch()
+    assert every is not None and not any(b.held for b in every)
     for p in ("step-two.bin", "third"):
         (folder / p).unlink()
     with pytest.raises(GribError) as e:

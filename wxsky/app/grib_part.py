@@ -192,6 +192,8 @@ class GribPart(Part):
         if redecode:
             self._window = window
             self._decoded.clear()
+            for source in self._sources:
+                source.forget()  # the bytes again: only what was decoded is kept
         for k, (source, stats) in enumerate(zip(self._sources, self.stats, strict=True)):
             try:
                 blobs = await asyncio.to_thread(source.fetch)
@@ -208,10 +210,14 @@ class GribPart(Part):
         assert window is not None
         fields: list[ModelField] = []
         names: list[str] = []
-        for blobs, stats in zip(self._blobs, self.stats, strict=True):
+        for k, (blobs, stats) in enumerate(zip(self._blobs, self.stats, strict=True)):
             good = 0
             for blob in blobs:
                 got = self._decoded.get(blob.digest)
+                if got is None and blob.held:
+                    # decoded for another window and not read again: next poll reads it
+                    self._sources[k].forget()
+                    continue
                 if got is None:
                     try:
                         got, problems = await self._decode(blob, window)
@@ -227,6 +233,8 @@ class GribPart(Part):
                 fields.extend(got)
                 names.append(blob.name)
             stats.detail.update(files=len(blobs), decoded=good)
+            # only what was decoded is kept, not the bytes (gigabytes at 0.25 degree)
+            self._blobs[k] = [blob.without_data() for blob in blobs]
         live = {b.digest for blobs in self._blobs for b in blobs}
         for digest in [d for d in self._decoded if d not in live]:
             del self._decoded[digest]

@@ -58,6 +58,16 @@ class GribBlob:
     def of(cls, name: str, data: bytes) -> GribBlob:
         return cls(name, data, hashlib.sha256(data).hexdigest())
 
+    @property
+    def held(self) -> bool:
+        """Unchanged since the caller last had its data, which is not sent again (`data`
+        empty; `digest` says which): a directory of 0.25 degree steps is gigabytes, and the
+        caller keeps what it decoded, not the bytes."""
+        return not self.data
+
+    def without_data(self) -> GribBlob:
+        return GribBlob(self.name, b"", self.digest)
+
 
 class GribSource(Protocol):
     name: str
@@ -173,12 +183,14 @@ class DirGribSource:
     """Every regular, non-hidden file of a directory but `.idx` inventories and `*.part` /
     `*.tmp` files (still being written), whatever their names: the messages' own dates say
     which forecast step each is. Only files that changed are read again; a fetch returns
-    every file's blob, sorted by name, whenever one was added, changed or removed."""
+    every file's blob, sorted by name, whenever one was added, changed or removed, those
+    unchanged since the last fetch `held` (no data: the source keeps no file's bytes).
+    After `forget`, every file is read again."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.name = str(path)
-        self._files: dict[str, tuple[_Key, GribBlob]] = {}
+        self._files: dict[str, tuple[_Key, GribBlob]] = {}  # blobs without their data
         self._owed = True  # a fetch owes the caller the data (none handed out, or forgotten)
 
     def fetch(self) -> list[GribBlob] | None:
@@ -189,6 +201,7 @@ class DirGribSource:
         except OSError as exc:
             raise GribError(f"{self.name}: cannot list: {exc.strerror or exc}") from None
         files: dict[str, tuple[_Key, GribBlob]] = {}
+        out: list[GribBlob] = []
         changed = self._owed
         total_b = 0
         for item in items:
@@ -210,10 +223,13 @@ class DirGribSource:
                     f"GRIB directory at {item.name}"
                 )
             old = self._files.get(item.path)
-            if old is not None and old[0] == key:
+            if old is not None and old[0] == key and not self._owed:
                 files[item.path] = old
+                out.append(old[1])
                 continue
-            files[item.path] = (key, GribBlob.of(item.path, _read(Path(item.path), item.path, key)))
+            blob = GribBlob.of(item.path, _read(Path(item.path), item.path, key))
+            files[item.path] = (key, blob.without_data())
+            out.append(blob)
             changed = True
         if not files:
             self._files = {}
@@ -223,7 +239,7 @@ class DirGribSource:
             )
         changed = changed or files.keys() != self._files.keys()
         self._files, self._owed = files, False
-        return [blob for _, blob in files.values()] if changed else None
+        return out if changed else None
 
     def forget(self) -> None:
         self._owed = True
