@@ -205,3 +205,28 @@ def test_a_past_day_replays_each_stations_reports_in_their_order(tmp_path: Path)
         assert max(bases(first)) > 3000  # BKN120, 15:46Z
         later = _wait(daemon, lambda s: max(bases(s), default=0) < 3000, "the 15:51Z report")
         assert later["weather"]["time_utc"] >= "2025-07-26T15:51"
+
+
+@pytest.mark.skipif(not GFS.exists(), reason=f"the GFS fixture is absent: {GFS}")
+def test_a_snapshot_lays_its_metar_over_the_model(tmp_path: Path) -> None:
+    """`wxsky snapshot --metar ... --grib FILE`: the METAR's layer below, the model's
+    cirrus above what the station reports (docs/gallery/weather-aloft.png)."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "sky.png"
+    metar = "LSZH 151150Z 24008KT 9999 FEW045 07/02 Q1020"
+    proc = subprocess.run(
+        [
+            *(sys.executable, "-m", "wxsky", "snapshot", "--metar", metar),
+            *("--grib", str(GFS), "--time", "2011-01-15T12:00:00Z", "--size", "64x36"),
+            *("--out", str(out)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=HANG_S,
+    )
+    assert proc.returncode == 0, proc.stderr
+    clouds = proc.stdout.split("clouds ", 1)[1].split()
+    assert clouds[0].startswith("cumulus:2/8@") and clouds[1].startswith("cirrus:")
+    assert out.stat().st_size > 0

@@ -267,6 +267,15 @@ def add_commands(sub: Subparsers) -> None:
         help="cloud seed (default: the weather's)",
     )
     snap.add_argument(
+        "--grib",
+        action="append",
+        default=[],
+        metavar="SOURCE",
+        help="lay the weather over model data (GRIB2: a file, a directory of steps, a URL) "
+        "at its site and the picture's time, as the daemon does: the upper layers, tops and "
+        "winds aloft (repeatable; docs/weather-aloft.md)",
+    )
+    snap.add_argument(
         "--transition-to",
         metavar="PRESET",
         help="picture the sky --elapsed-s after the weather target changed to this preset, "
@@ -546,7 +555,10 @@ def _cmd_snapshot(args: argparse.Namespace) -> int:
     args.progress("reading the weather")
     config = load_config(args.config)
     width, height = args.size
-    state = WeatherState().apply(_weather_patch(args, config.presets.dirs))
+    patch = _weather_patch(args, config.presets.dirs)
+    state = WeatherState().apply(patch)
+    if args.grib:
+        state = _under_model(args, patch, state)
     weather_time = state.time_utc
     state = state.apply(WeatherPatch(source=Source.CONTROL, time_utc=args.time, seed=args.seed))
     # Where the daemon puts its camera: the config's height above the observer.
@@ -615,6 +627,33 @@ def _exposure_arg(text: str) -> float | str:
         value = text.strip()
     checked: float | str = EXPOSURE.validate("--exposure", value)
     return checked
+
+
+def _under_model(args: argparse.Namespace, patch: Any, state: Any) -> Any:
+    """The weather with the model's column at its site and the snapshot's time below it, as
+    the daemon lays it: a preset is the base (the model above it), a METAR is laid over the
+    model as at its station and time (docs/weather-aloft.md)."""
+    from wxsky.cli.grib_cmd import column_at
+    from wxsky.weather.model_clouds import model_layers
+    from wxsky.weather.model_profile import KELVIN
+    from wxsky.weather.precedence import SourceStack
+    from wxsky.weather.state import Source, WeatherPatch, WeatherState
+
+    obs = state.observer
+    when = args.time or state.time_utc
+    column = column_at(args.grib, obs.lat_deg, obs.lon_deg, when, args.progress)
+    model = WeatherPatch(
+        source=Source.GRIB,
+        layers=model_layers(column),
+        wind=column.winds() or None,
+        temperature_c=None if column.t2m_k is None else column.t2m_k - KELVIN,
+    )
+    if patch.source is Source.METAR:
+        site = WeatherState().apply(WeatherPatch(source=Source.PRESET, observer=obs))
+        stack = SourceStack(base=site).with_patch(model, 0.0).with_patch(patch, 0.0)
+    else:
+        stack = SourceStack(base=state).with_patch(model, 0.0)
+    return stack.target()
 
 
 def _weather_patch(args: argparse.Namespace, preset_dirs: Sequence[Path]) -> Any:

@@ -12,12 +12,17 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from wxsky.cli.common import KindRef, NumberArg, Subparsers, UsageError, time_arg
 from wxsky.errors import GribError
 from wxsky.schema import Number
+
+if TYPE_CHECKING:
+    from wxsky.weather.model_profile import ModelProfile
 
 GRIB_LON_DEG = Number(-180.0, 360.0, unit="deg")
 HALF_DEG = 3.0  # the window a `show` decodes around its point
@@ -92,36 +97,53 @@ def _site(args: argparse.Namespace) -> tuple[float, float]:
     return obs.lat_deg, obs.lon_deg
 
 
-def _cmd_show(args: argparse.Namespace) -> int:
+def column_at(
+    specs: Sequence[str],
+    lat: float,
+    lon: float,
+    when: datetime,
+    progress: Callable[[str], object],
+    byte_ranges: bool = True,
+) -> ModelProfile:
+    """The model's column at a place and time from GRIB sources, read once, as the daemon
+    reads them (used by `grib show` and `snapshot --grib`)."""
     from wxsky.inputs.grib_decode import Window, decode
     from wxsky.inputs.grib_sources import open_grib_source
-    from wxsky.weather.model_clouds import model_layers
     from wxsky.weather.model_fields import merge_steps
     from wxsky.weather.model_profile import profile_at
 
-    lat, lon = _site(args)
     window = Window(lat, lon, HALF_DEG)
     fields = []
     names: list[str] = []
-    for spec in args.sources:
-        args.progress(f"reading {spec}")
-        source = open_grib_source(spec, byte_ranges=not args.no_byte_ranges)
+    for spec in specs:
+        progress(f"reading {spec}")
+        source = open_grib_source(spec, byte_ranges=byte_ranges)
         try:
             blobs = source.fetch() or []
         finally:
             source.close()
         for blob in blobs:
-            args.progress(f"decoding {blob.name}")
+            progress(f"decoding {blob.name}")
             fields.extend(decode(blob.data, blob.name, window))
             names.append(blob.name)
     steps = merge_steps(fields, tuple(names))
-    when = args.time or datetime.now(UTC)
     profile = profile_at(steps, lat, lon, when)
     if profile is None:
         raise GribError(
-            f"{', '.join(args.sources)}: no step has winds, temperatures and heights on "
-            f"pressure levels at {lat:.2f}, {lon:.2f}"
+            f"{', '.join(specs)}: no step has winds and temperatures on pressure levels at "
+            f"{lat:.2f}, {lon:.2f}"
         )
+    return profile
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from wxsky.weather.model_clouds import model_layers
+
+    lat, lon = _site(args)
+    when = args.time or datetime.now(UTC)
+    profile = column_at(
+        args.sources, lat, lon, when, args.progress, byte_ranges=not args.no_byte_ranges
+    )
     layers = model_layers(profile)
     clouds = [
         {

@@ -17,10 +17,11 @@ where ramp(x, a..b) is 1 up to a, 0 from b, linear between. Then:
 * **layers**: the METAR reaches up to `reach_m`: its highest reported layer's top, or, when
   it reports no cloud, `CLEAR_REACH_AGL_M` above the field (12,000 ft, where automated
   stations stop looking). Below the reach, each METAR layer is paired with the model's layer
-  of nearest base within `PAIR_M`; a pair's cover, base and top are weighted by w, its type
-  the METAR's while w >= 0.5. A METAR layer's top, which a report never gives, is the
-  model's where they pair. Layers of one side only keep their own weight of cover. Above the
-  reach, the model's layers stand as they are.
+  of nearest base within `PAIR_M`; a pair's cover and base are weighted by w, its type the
+  METAR's while w >= 0.5. Its top, which a report never gives, is the model's, unless the
+  model's cloud ends before the reported one has half its type's usual depth (they then
+  disagree on the height, and the type's depth stands). Layers of one side only keep their
+  own weight of cover. Above the reach, the model's layers stand as they are.
 """
 
 from __future__ import annotations
@@ -154,7 +155,10 @@ def _layers(
             unpaired.remove(g)
             cover = w * m.cover_oktas + (1.0 - w) * g.cover_oktas
             base = w * m.base_m + (1.0 - w) * g.base_m
-            top = max(g.top_m, base + 100.0)
+            # the model's top, unless the model's cloud ends before the reported one has
+            # half its usual depth: then they disagree on the height, and the type's depth
+            # the METAR's layer came with stands
+            top = g.top_m if g.top_m >= base + 0.5 * m.thickness_m else base + m.thickness_m
             out.append(CloudLayer(min(cover, 8.0), base, top, m.type if w >= 0.5 else g.type))
         elif w * m.cover_oktas >= MIN_COVER_OKTAS:
             out.append(CloudLayer(w * m.cover_oktas, m.base_m, m.top_m, m.type))
