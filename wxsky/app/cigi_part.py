@@ -19,6 +19,7 @@ source sends then too.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -45,6 +46,7 @@ from wxsky.protocols.cigi_weather import answer_layer_ids
 from wxsky.scene.conditions import BlockMemo, conditions_many
 from wxsky.scene.gather import Drift
 from wxsky.settings.config import CigiSection
+from wxsky.weather.model_profile import temperature_at_height
 from wxsky.weather.state import Source, WeatherPatch, WeatherState
 from wxsky.weather.stations import StationWeather
 
@@ -267,6 +269,14 @@ class CigiPart(Part):
         ]
         out: list[Packet] = []
         answered = conditions_many(state, drift, points, batch.memo)
+        aloft = self._engine.aloft_temperatures
+        if aloft:  # model data: its temperature at each height, not the standard atmosphere's
+            answered = [
+                dataclasses.replace(w, temperature_c=t)
+                if (t := temperature_at_height(aloft, p[2])) is not None
+                else w
+                for w, p in zip(answered, points, strict=True)
+            ]
         for request, weather in zip(requests, answered, strict=True):
             out += responses(request, weather, ids)
         return out

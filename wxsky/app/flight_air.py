@@ -12,7 +12,6 @@ clouds (in cloud or not, which cloud, the temperature there) is looked up on a t
 from __future__ import annotations
 
 import concurrent.futures
-import itertools
 import math
 from dataclasses import dataclass
 from datetime import datetime
@@ -21,10 +20,10 @@ from typing import Any
 from wxsky.engine.stages import FramePlan, SkyEngine
 from wxsky.scene.conditions import BlockMemo, conditions_at
 from wxsky.scene.turbulence import gust_mps, icing, roughness
+from wxsky.weather.model_profile import temperature_at_height
 from wxsky.weather.state import CloudType, WeatherState
 
 LOOKUP_HZ = 5.0
-LAPSE_K_PER_M = 0.0065  # the standard atmosphere's, below the model's lowest level
 
 
 @dataclass(frozen=True)
@@ -137,23 +136,9 @@ class FlightAir:
         if got.in_cloud and water:
             wettest = max(range(len(water)), key=lambda i: water[i])
             kind = state.layers[wettest].type if wettest < len(state.layers) else None
-        temperature = _aloft_at(aloft, point[2])
+        temperature = temperature_at_height(aloft, point[2])
         return _Lookup(
             kind,
             got.temperature_c if temperature is None else temperature,
             max(water, default=0.0),
         )
-
-
-def _aloft_at(levels: tuple[tuple[float, float], ...], alt_m: float) -> float | None:
-    """The model's temperature at a height (linear between its levels), or None. Below its
-    lowest level (the model's smoothed ground may stand above a valley airfield), the standard
-    lapse rate carries it down."""
-    if not levels:
-        return None
-    if alt_m <= levels[0][0]:
-        return levels[0][1] + LAPSE_K_PER_M * (levels[0][0] - alt_m)
-    for (h0, t0), (h1, t1) in itertools.pairwise(levels):
-        if h0 <= alt_m <= h1:
-            return t0 + (t1 - t0) * (alt_m - h0) / (h1 - h0) if h1 > h0 else t0
-    return levels[-1][1]

@@ -170,6 +170,24 @@ class ModelProfile:
         }
 
 
+LAPSE_K_PER_M = 0.0065  # the standard atmosphere's, below a column's lowest level
+
+
+def temperature_at_height(levels: tuple[tuple[float, float], ...], alt_m: float) -> float | None:
+    """The model's temperature (degC) at a height from its ((height_m, degC), ...) from the
+    ground up: linear between levels; below the lowest (the model's smoothed ground may stand
+    above a valley airfield) the standard lapse rate carries it down; above the highest,
+    the highest's. None without levels."""
+    if not levels:
+        return None
+    if alt_m <= levels[0][0]:
+        return levels[0][1] + LAPSE_K_PER_M * (levels[0][0] - alt_m)
+    for (h0, t0), (h1, t1) in itertools.pairwise(levels):
+        if h0 <= alt_m <= h1:
+            return t0 + (t1 - t0) * (alt_m - h0) / (h1 - h0) if h1 > h0 else t0
+    return levels[-1][1]
+
+
 def _r(x: float | None, nd: int) -> float | None:
     return None if x is None else round(x, nd)
 
