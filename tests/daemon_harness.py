@@ -9,9 +9,10 @@ import subprocess
 import sys
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from gl_probe import skip_without_gl
 
@@ -19,6 +20,21 @@ from wxsky.host.client import ControlClient
 
 # Waits here are for events; their timeouts only catch a hang, never a slow machine.
 HANG_S = 120.0
+
+
+def wait_status(
+    daemon: RunningDaemon, check: Callable[[dict[str, Any]], bool], what: str
+) -> dict[str, Any]:
+    """The daemon's first `status` for which `check` holds (asked every 0.05 s); the log's
+    tail in the failure when none comes within HANG_S."""
+    deadline = time.monotonic() + HANG_S
+    with daemon.client() as c:
+        while time.monotonic() < deadline:
+            status = c.call("status")
+            if check(status):
+                return status  # type: ignore[no-any-return]
+            time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}:\n{daemon.log()[-3000:]}")
 
 
 @dataclass

@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import shutil
 import time
-from collections.abc import Callable
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import pytest
-from daemon_harness import HANG_S, RunningDaemon, running_daemon
+from daemon_harness import HANG_S, RunningDaemon, running_daemon, wait_status
+from grib_fixture import GFS, VALID, needs_gfs
 
 from wxsky.inputs.grib_decode import Window, decode
 from wxsky.weather.model_clouds import model_layers
@@ -21,15 +20,7 @@ from wxsky.weather.model_profile import profile_at
 
 pytestmark = pytest.mark.gl
 
-GFS = (
-    Path(__file__).resolve().parents[2]
-    / "shared"
-    / "data"
-    / "grib"
-    / "gfs.t12z.pgrbf120.2p5deg.grib2"
-)
 
-VALID = datetime(2011, 1, 15, 12, tzinfo=UTC)  # the file's one step: the clock is held to it
 CONFIG = """
 [camera]
 width = 160
@@ -44,15 +35,7 @@ step_s = 0.2
 """
 
 
-def _wait(daemon: RunningDaemon, check: Callable[[dict[str, Any]], bool], what: str) -> dict:
-    deadline = time.monotonic() + HANG_S
-    with daemon.client() as c:
-        while time.monotonic() < deadline:
-            status = c.call("status")
-            if check(status):
-                return status  # type: ignore[no-any-return]
-            time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}:\n{daemon.log()[-3000:]}")
+_wait = wait_status
 
 
 def _air(daemon: RunningDaemon) -> dict[str, Any]:
@@ -73,7 +56,7 @@ def _grib_input(status: dict[str, Any], name: str) -> dict[str, Any]:
     return next(i for i in status["inputs"] if i["name"] == f"grib:{name}")
 
 
-@pytest.mark.skipif(not GFS.exists(), reason=f"the GFS fixture is absent: {GFS}")
+@needs_gfs
 def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> None:
     steps = tmp_path / "steps"
     steps.mkdir()
@@ -155,6 +138,15 @@ def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> No
         for g, w in zip(got, want, strict=True):
             assert g[1:] == pytest.approx(w[1:], abs=0.01)
         assert status["target"]["sources"]["layers"] == "grib"
+        # each layer drifts with the wind at its own height: the stratocumulus's and the
+        # cirrus's differ (status says both)
+        winds = _wait(
+            daemon,
+            lambda s: len(s["grib"]["layer_winds"]) == len(want),
+            "the model's layers applied",
+        )["grib"]["layer_winds"]
+        low, high = winds[0], winds[-1]
+        assert abs(high["wind_speed_mps"] - low["wind_speed_mps"]) > 5.0
 
         # a clock far from the forecast: the model is no weather for it, and status says so
         with daemon.client() as c:
@@ -207,7 +199,7 @@ def test_a_past_day_replays_each_stations_reports_in_their_order(tmp_path: Path)
         assert later["weather"]["time_utc"] >= "2025-07-26T15:51"
 
 
-@pytest.mark.skipif(not GFS.exists(), reason=f"the GFS fixture is absent: {GFS}")
+@needs_gfs
 def test_a_snapshot_lays_its_metar_over_the_model(tmp_path: Path) -> None:
     """`wxsky snapshot --metar ... --grib FILE`: the METAR's layer below, the model's
     cirrus above what the station reports (docs/gallery/weather-aloft.png)."""

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from daemon_harness import HANG_S, RunningDaemon, running_daemon
+from daemon_harness import HANG_S, running_daemon, wait_status
 from metar_helpers import gzip_bomb
 
 # Every test runs a daemon, which draws every frame.
@@ -55,15 +55,7 @@ def _write(path: Path, text: str) -> None:
     os.replace(tmp, path)  # as feed tools do: the reader never sees half a file
 
 
-def _wait(daemon: RunningDaemon, check: Callable[[dict[str, Any]], bool], what: str) -> dict:
-    deadline = time.monotonic() + HANG_S
-    with daemon.client() as c:
-        while time.monotonic() < deadline:
-            status = c.call("status")
-            if check(status):
-                return status  # type: ignore[no-any-return]
-            time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}:\n{daemon.log()[-3000:]}")
+_wait = wait_status
 
 
 def _metar_input(status: dict[str, Any]) -> dict[str, Any]:

@@ -11,10 +11,10 @@ import dataclasses
 import itertools
 import math
 from datetime import UTC, datetime, timedelta
-from pathlib import Path
 
 import numpy as np
 import pytest
+from grib_fixture import GFS, LONDON, VALID, needs_gfs
 
 from wxsky.errors import GribError
 from wxsky.inputs.grib_decode import Window, decode, inventory
@@ -25,17 +25,7 @@ from wxsky.weather.model_profile import ModelProfile, ProfileLevel, profile_at
 from wxsky.weather.precedence import SourceStack
 from wxsky.weather.state import CloudLayer, CloudType, Source, WeatherPatch, WeatherState, WindLayer
 
-GFS = (
-    Path(__file__).resolve().parents[2]
-    / "shared"
-    / "data"
-    / "grib"
-    / "gfs.t12z.pgrbf120.2p5deg.grib2"
-)
-VALID = datetime(2011, 1, 15, 12, tzinfo=UTC)  # run 2011-01-10 12Z + 120 h
-LONDON = (51.5, -0.1)
-
-pytestmark = pytest.mark.skipif(not GFS.exists(), reason=f"the GFS fixture is absent: {GFS}")
+pytestmark = needs_gfs
 
 
 @pytest.fixture(scope="module")

@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from datetime import UTC, datetime
-from pathlib import Path
 
 import pytest
+from grib_fixture import GFS, LONDON, VALID, needs_gfs
 
 from wxsky.inputs.grib_decode import Window, decode
 from wxsky.protocols.cigi import decode_datagram, encode_datagram
@@ -21,17 +20,7 @@ from wxsky.weather.model_fields import merge_steps
 from wxsky.weather.model_profile import ModelProfile, profile_at
 from wxsky.weather.state import CloudLayer, CloudType, Observer, WeatherState
 
-GFS = (
-    Path(__file__).resolve().parents[2]
-    / "shared"
-    / "data"
-    / "grib"
-    / "gfs.t12z.pgrbf120.2p5deg.grib2"
-)
-VALID = datetime(2011, 1, 15, 12, tzinfo=UTC)
-LONDON = (51.5, -0.1)
-
-pytestmark = pytest.mark.skipif(not GFS.exists(), reason=f"the GFS fixture is absent: {GFS}")
+pytestmark = needs_gfs
 
 
 @pytest.fixture(scope="module")

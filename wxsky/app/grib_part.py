@@ -22,6 +22,7 @@ import asyncio
 import concurrent.futures
 import contextlib
 import logging
+import math
 import multiprocessing
 import os
 import time
@@ -42,7 +43,7 @@ from wxsky.weather.model_blend import metar_weight
 from wxsky.weather.model_clouds import model_layers
 from wxsky.weather.model_fields import ModelField, ModelStep, merge_steps
 from wxsky.weather.model_profile import KELVIN, ModelProfile, profile_at
-from wxsky.weather.state import Source, WeatherPatch
+from wxsky.weather.state import Source, WeatherPatch, dir_from_deg
 from wxsky.weather.stations import StationWeather
 
 log = logging.getLogger("wxsky.app.grib")
@@ -142,9 +143,29 @@ class GribPart(Part):
                 else None,
                 "reason": None if p is not None else self._reason,
                 "gaps": list(self._gaps),
+                "layer_winds": self._layer_winds(),
                 "profile": None if p is None else p.as_json(),
             }
         }
+
+    def _layer_winds(self) -> list[dict[str, Any]]:
+        """Each applied cloud layer with the wind it drifts with (at its middle height)."""
+        if not hasattr(self, "_engine"):
+            return []
+        state = self._engine.state
+        out = []
+        for lay, (e, n) in zip(state.layers, state.layer_winds_mps, strict=True):
+            speed = math.hypot(e, n)
+            out.append(
+                {
+                    "type": lay.type.wire_name,
+                    "base_m": round(lay.base_m, 1),
+                    "top_m": round(lay.top_m, 1),
+                    "wind_speed_mps": round(speed, 2),
+                    "wind_dir_deg": round(dir_from_deg(e, n), 1) if speed > 0 else 0.0,
+                }
+            )
+        return out
 
     async def close(self, deadline_s: float) -> None:
         task, self._task = self._task, None
@@ -308,6 +329,10 @@ class GribPart(Part):
             news = self._last_patch is None
             self._engine.apply(patch)
             self._last_patch = patch
+            if news and not self._engine.sources.metar:
+                # As the METAR feeds' first weather does: the start-up preset was a stand-in
+                # until live weather came, not a sky to morph out of for minutes.
+                self._engine.settle()
             self._ctx.publish_target()
             if news:
                 log.info(
