@@ -82,6 +82,15 @@ def test_flightgears_winds_aloft_are_the_columns(state: WeatherState, column: Mo
         assert abs(turn - 180.0) < 0.05 or math.isclose(speed, 0.0)
         speeds.append(speed)
     assert len(set(round(s, 1) for s in speeds)) == 3
+    assert not any(p.endswith("temperature-degc") and "aloft" in p for p in props)
+    # with the model's temperatures (as the daemon offers them), each entry has its own
+    aloft = tuple((lev.height_m, lev.t_k - 273.15) for lev in column.levels)
+    warm = dict(weather_properties(state, aloft))
+    for i in range(3):
+        entry = f"/environment/config/aloft/entry[{i}]"
+        at = column.at_height(float(warm[f"{entry}/elevation-ft"]) * 0.3048)
+        assert at is not None
+        assert float(warm[f"{entry}/temperature-degc"]) == pytest.approx(at.t_k - 273.15, abs=0.02)
 
 
 def test_a_layer_the_model_gives_no_wind_for_falls_back_to_the_nearest_level(

@@ -103,7 +103,7 @@ class FlightGearPart(Part):
         """A frame went out: FlightGear gets the weather it applied (only what changed, at
         most every write_interval_s)."""
         if self._weather is not None:
-            self._weather.offer(frame.state)
+            self._weather.offer(frame.state, self.engine.aloft_temperatures)
 
     async def close(self, deadline_s: float) -> None:
         """Stop both threads together, waiting for them off the loop until the deadline."""

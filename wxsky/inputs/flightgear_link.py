@@ -154,6 +154,7 @@ class FlightGearWeather:
         self._last_probe = 0.0
         self.stats = stats or InputStats(f"{name}:weather", "flightgear", ok=False)
         self._latest: WeatherState | None = None
+        self._aloft_c: tuple[tuple[float, float], ...] = ()
         self._offered = 0  # bumped by every offer
         self._sent: dict[str, str] = {}
         self._wake = threading.Condition()
@@ -161,10 +162,12 @@ class FlightGearWeather:
         self._thread = threading.Thread(target=self._run, name="wxsky-fg-weather", daemon=True)
         self._thread.start()
 
-    def offer(self, state: WeatherState) -> None:
-        """The weather to write next (never blocks; only the latest offered is written)."""
+    def offer(self, state: WeatherState, aloft_c: tuple[tuple[float, float], ...] = ()) -> None:
+        """The weather to write next (never blocks; only the latest offered is written), with
+        model data's temperatures by height where it is read."""
         with self._wake:
             self._latest = state
+            self._aloft_c = aloft_c
             self._offered += 1
             self._wake.notify()
 
@@ -228,10 +231,11 @@ class FlightGearWeather:
                     self._check_alive(conn)  # a FlightGear that quit while nothing changed
                 if self._closed:
                     return
-                state, written = self._latest, self._offered
+                state, written, aloft_c = self._latest, self._offered, self._aloft_c
             assert state is not None
             self._check_alive(conn)
-            changed = [(p, v) for p, v in weather_properties(state) if self._sent.get(p) != v]
+            props = weather_properties(state, aloft_c)
+            changed = [(p, v) for p, v in props if self._sent.get(p) != v]
             if changed:
                 conn.sendall(b"".join(_set(p, v) for p, v in changed))
                 self._sent.update(changed)

@@ -19,6 +19,7 @@ from datetime import UTC, datetime
 
 from wxsky.units import FT_TO_M, INHG_TO_HPA, KT_TO_MPS
 from wxsky.weather.geo import enu_from_geodetic
+from wxsky.weather.model_profile import temperature_at_height
 from wxsky.weather.state import (
     TIME_RANGE_TEXT,
     CloudLayer,
@@ -239,10 +240,13 @@ def coverage_name(layer: CloudLayer) -> str:
     return "overcast"
 
 
-def weather_properties(state: WeatherState) -> tuple[tuple[str, str], ...]:
+def weather_properties(
+    state: WeatherState, aloft_c: tuple[tuple[float, float], ...] = ()
+) -> tuple[tuple[str, str], ...]:
     """Every property that puts `state` (wxsky's applied weather) into FlightGear, in the
     order to set them: its cloud layers (lowest first; the rest cleared), visibility, surface
-    wind and temperatures, pressure, and the winds aloft."""
+    wind and temperatures, pressure, and the winds aloft, with model data's temperatures
+    there (`aloft_c`, ((height_m, degC), ...) from the ground up) where it is read."""
     out: list[tuple[str, str]] = []
     layers = sorted((lay for lay in state.layers if lay.cover_oktas > 0.0), key=_base)
     for i in range(MAX_LAYERS):
@@ -279,6 +283,9 @@ def weather_properties(state: WeatherState) -> tuple[tuple[str, str], ...]:
         out.append((f"{entry}/wind-from-heading-deg", _num(heading)))
         out.append((f"{entry}/wind-speed-kt", _num(speed)))
         out.append((f"{entry}/visibility-m", _num(state.visibility_m)))
+        temperature = temperature_at_height(aloft_c, alt_m)
+        if temperature is not None:
+            out.append((f"{entry}/temperature-degc", _num(temperature)))
     return tuple(out)
 
 
