@@ -222,3 +222,37 @@ def test_a_snapshot_lays_its_metar_over_the_model(tmp_path: Path) -> None:
     clouds = proc.stdout.split("clouds ", 1)[1].split()
     assert clouds[0].startswith("cumulus:2/8@") and clouds[1].startswith("cirrus:")
     assert out.stat().st_size > 0
+
+
+@needs_gfs
+def test_a_metar_at_the_site_lies_over_the_model(tmp_path: Path) -> None:
+    """Replaying Zurich at 2011-01-15 11:55Z with its 11:50Z report and the GFS step: the
+    station is at the site and the report 5 minutes old, so the METAR's weight is 1: its
+    wind at the surface and its layer below, the model's cirrus above what it reports."""
+    feed = tmp_path / "metar.txt"
+    feed.write_text("LSZH 151150Z 24008KT 9999 FEW045 07/02 Q1020\n")
+    config = CONFIG + '[metar]\npoll_interval_s = 0.2\nstation = "LSZH"\n'
+    with running_daemon(
+        tmp_path,
+        config,
+        args=(
+            *("--grib", str(GFS), "--metar-feed", str(feed), "--preset", "clear"),
+            *("--replay", "2011-01-15T11:55:00Z"),
+        ),
+    ) as daemon:
+        status = _wait(
+            daemon,
+            lambda s: (
+                s["grib"]["metar_weight"] is not None
+                and s["target"]["sources"]["layers"] == "metar"
+            ),
+            "the METAR over the model",
+        )
+        assert status["grib"]["metar_weight"] == pytest.approx(1.0)
+        layers = status["target"]["layers"]
+        assert [lay["type"] for lay in layers] == ["cumulus", "cirrus"]
+        assert layers[0]["cover_oktas"] == pytest.approx(2.0)  # FEW: the report's
+        wind = status["target"]["wind"]
+        assert wind[0]["dir_deg"] == pytest.approx(240.0, abs=0.5)  # 24008KT
+        assert wind[0]["speed_mps"] == pytest.approx(8 * 0.514444, abs=0.05)
+        assert len(wind) > 10 and wind[-1]["speed_mps"] > 15.0  # the model's aloft

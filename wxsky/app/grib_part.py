@@ -100,6 +100,7 @@ class GribPart(Part):
         self._window: Window | None = None
         self._steps: dict[datetime, ModelStep] = {}
         self._gaps: list[str] = []  # levels left out for want of a field
+        self._metar_weight: float | None = None
         self._profile: ModelProfile | None = None
         self._reason = "no model data yet"
         self._pool: concurrent.futures.ProcessPoolExecutor | None = None
@@ -138,9 +139,8 @@ class GribPart(Part):
                     "lon_deg": self._window.lon_deg,
                     "half_deg": self._window.half_deg,
                 },
-                "metar_weight": round(self._engine.metar_weight, 3)
-                if hasattr(self, "_engine")
-                else None,
+                # how much the METAR counts against the model; None while no METAR is used
+                "metar_weight": self._metar_weight,
                 "reason": None if p is not None else self._reason,
                 "gaps": list(self._gaps),
                 "layer_winds": self._layer_winds(),
@@ -347,10 +347,13 @@ class GribPart(Part):
     def _set_metar_weight(self, at: datetime) -> None:
         near = self._nearest() if self._nearest is not None else None
         if near is None:
+            self._metar_weight = None
             return
         station, distance = near
         age = None if station.observed_utc is None else (at - station.observed_utc).total_seconds()
-        self._engine.set_metar_weight(metar_weight(distance, age))
+        weight = metar_weight(distance, age)
+        self._engine.set_metar_weight(weight)
+        self._metar_weight = round(weight, 3)
 
 
 def _iso(t: datetime) -> str:

@@ -488,6 +488,7 @@ def _cmd_status(args: argparse.Namespace) -> int:
         print(f"changing toward: clouds {target or 'none'}")
     for name, hold in sorted(status.get("overrides", {}).items()):
         print(f"override {name}: {hold['source']}")
+    _print_model(status.get("grib"))
     ch = status.get("channel") or {}
     if ch.get("role") in ("master", "channel"):
         line = f"sky {ch['role']} {ch['name']!r} of site {ch['site']!r} on zenoh:{ch['endpoint']}"
@@ -535,6 +536,30 @@ def _cmd_status(args: argparse.Namespace) -> int:
         if not inp["ok"] and inp.get("last_error"):
             print(f"  last error: {inp['last_error']}")
     return 0
+
+
+def _print_model(grib: dict[str, Any] | None) -> None:
+    """The model data's line (docs/weather-aloft.md): its steps, the freezing level and the
+    tropopause at the site, the METAR's weight against it; or why it is not used."""
+    if not grib:
+        return
+    p = grib.get("profile")
+    if p is None:
+        print(f"model data: not used: {grib.get('reason')}")
+        return
+
+    def metres(x: float | None) -> str:
+        return "-" if x is None else f"{x:.0f} m"
+
+    line = (
+        f"model data: steps {', '.join(grib['steps_utc'])}; freezing level "
+        f"{metres(p['freezing_level_m'])}, tropopause {metres(p['tropopause_m'])}"
+    )
+    if grib.get("metar_weight") is not None:
+        line += f"; METAR weight {grib['metar_weight']:.2f}"
+    print(line)
+    for gap in grib.get("gaps", []):
+        print(f"model data gap: {gap}")
 
 
 def _counts(counts: dict[str, int]) -> str:
