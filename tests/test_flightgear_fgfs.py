@@ -95,10 +95,13 @@ def _angle(a: float, b: float) -> float:
 
 
 @contextmanager
-def _fgfs(tmp_path: Path, telnet: int, pose_port: int) -> Iterator[subprocess.Popen[bytes]]:
+def _fgfs(
+    tmp_path: Path, telnet: int, pose_port: int, fgfs_args: tuple[str, ...] = ()
+) -> Iterator[subprocess.Popen[bytes]]:
     log = (tmp_path / "fgfs.log").open("wb")
+    launch = [str(LAUNCHER), "--headless", "--telnet", str(telnet), "--pose-port", str(pose_port)]
     proc = subprocess.Popen(
-        [str(LAUNCHER), "--headless", "--telnet", str(telnet), "--pose-port", str(pose_port)],
+        [*launch, *(("--", *fgfs_args) if fgfs_args else ())],
         stdout=log,
         stderr=subprocess.STDOUT,
         start_new_session=True,
@@ -227,3 +230,72 @@ def test_a_daemon_follows_fgfs_and_fgfs_flies_in_wxskys_weather(tmp_path: Path) 
         assert float(got[f"{LAYER1}/elevation-ft"]) == pytest.approx(1930.0 / FT_TO_M, abs=100.0)
         # The surface wind turned from fair-cumulus's 250 degrees to the bise from 060.
         assert _angle(float(got[f"{BOUNDARY}/wind-from-heading-deg"]), 60.0) <= 5.0
+
+
+GFS = ROOT.parent / "shared" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
+ALOFT = tuple(f"/environment/config/aloft/entry[{i}]" for i in range(3))
+
+
+@pytest.mark.skipif(not GFS.exists(), reason=f"the GFS fixture is absent: {GFS}")
+def test_fgfs_flies_in_the_models_winds_and_temperatures_aloft(tmp_path: Path) -> None:
+    """Issue 45: FlightGear set to the GFS file's day (its clock moves wxsky's, its aircraft
+    wxsky's site to Honolulu); its winds aloft are then the model's column there, wind and
+    temperature at each entry's height."""
+    from daemon_harness import running_daemon
+
+    telnet, pose_port = _free_port(socket.SOCK_STREAM), _free_port(socket.SOCK_DGRAM)
+    args = (
+        *("--preset", "clear", "--grib", str(GFS)),
+        *("--flightgear", f"tcp:127.0.0.1:{telnet}"),
+        *("--flightgear-pose", f"udp:127.0.0.1:{pose_port}"),
+    )
+    extra = '[flightgear]\nwrite_interval_s = 1.0\nclock = "flightgear"\n[grib]\nupdate_s = 1.0\n'
+    day = ("--start-date-gmt=2011:01:15:11:30:00",)
+    paths = tuple(f"{e}/{k}" for e in ALOFT for k in KEYS_ALOFT)
+    with running_daemon(tmp_path, extra, args) as d, _fgfs(tmp_path, telnet, pose_port, day):
+
+        def status() -> dict[str, Any]:
+            with d.client() as c:
+                return c.call("status")
+
+        def in_honolulu_on_the_day() -> bool:
+            s = status()
+            p = s["grib"]["profile"]
+            return p is not None and abs(p["lon_deg"] + 157.9) < 1.0 and bool(s["settled"])
+
+        _until(
+            f"the model over FlightGear's aircraft (logs in {tmp_path})",
+            in_honolulu_on_the_day,
+            300.0,
+        )
+        last: list[Any] = []
+
+        def agree() -> bool:
+            got = _get(telnet, paths)
+            s = status()
+            levels = s["grib"]["profile"]["levels"]
+            aloft = tuple((lev["height_m"], lev["t_c"]) for lev in levels)
+            want = dict(weather_properties(weather_from_dict(s["weather"]), aloft))
+            bad = []
+            for path in paths:
+                if (
+                    abs(float(got[path]) - float(want[path]))
+                    > TOLERANCE_ALOFT[path.rsplit("/", 1)[1]]
+                ):
+                    bad.append(f"{path} {got[path]} != {want[path]}")
+            last[:] = [bad, want]
+            return not bad
+
+        _until(lambda: f"FlightGear's aloft to be the model's: {last[0]}", agree, 120.0)
+        want = last[1]
+        speeds = {round(float(want[f"{e}/wind-speed-kt"])) for e in ALOFT}
+        assert len(speeds) > 1  # the winds differ by height: a column, not one wind
+
+
+KEYS_ALOFT = ("elevation-ft", "wind-from-heading-deg", "wind-speed-kt", "temperature-degc")
+TOLERANCE_ALOFT = {
+    "elevation-ft": 1.0,
+    "wind-from-heading-deg": 5.0,
+    "wind-speed-kt": 2.0,
+    "temperature-degc": 0.5,
+}
