@@ -480,3 +480,27 @@ def test_crossing_a_step_the_target_moves_no_faster_than_the_transitions(data: b
                 assert abs(b.base_m - a.base_m) <= rates.base_m_per_min * update_s / 60.0
         before = target
         t += timedelta(seconds=update_s)
+
+
+def test_a_steep_lapse_rate_heaps_the_low_cloud_up() -> None:
+    """The same wet low levels: in air cooling 9 K a kilometre (conditionally unstable) the
+    cloud is cumulus; in air cooling 5 K a kilometre, stratocumulus."""
+    from wxsky.weather.model_clouds import lapse_k_per_km
+
+    def column(lapse_k_per_km: float) -> ModelProfile:
+        rh = {1000: 60, 925: 97, 850: 98, 700: 50, 500: 40}
+        levels = []
+        for hpa, r in rh.items():
+            h = 8000.0 * math.log(1013.0 / hpa)
+            levels.append(ProfileLevel(hpa, h, 5.0, 0.0, 290.0 - lapse_k_per_km * h / 1000.0, r))
+        return ModelProfile(
+            51.0, 0.0, VALID, (VALID,), tuple(levels), 0.0, 1013.0, 290.0, 0.0, 0.0, 2000.0,
+            11000.0, 250.0, (),
+        )  # fmt: skip
+
+    steep, gentle = column(9.0), column(5.0)
+    assert lapse_k_per_km(steep) == pytest.approx(9.0) and lapse_k_per_km(gentle) == pytest.approx(
+        5.0
+    )
+    assert model_layers(steep)[0].type is CloudType.CUMULUS
+    assert model_layers(gentle)[0].type is CloudType.STRATOCUMULUS

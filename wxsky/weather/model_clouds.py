@@ -15,7 +15,8 @@ Two ways, the first the model allows:
    8 * (1 - sqrt((1 - RH) / (1 - RHc))) oktas at the run's wettest level.
 
 The type follows the height and the stability: low cloud is cumulus where the air is
-unstable (CAPE over `CUMULUS_CAPE_JKG`, or the convective deck has cover), cumulonimbus
+unstable (CAPE over `CUMULUS_CAPE_JKG`, the lapse rate from the ground to 700 hPa over
+`UNSTABLE_LAPSE_K_PER_KM`, or the convective deck has cover), cumulonimbus
 where it is strongly so and the cloud reaches well above the freezing level; stratus or
 stratocumulus otherwise, nimbostratus where it is thick and rains; middle cloud altostratus
 when nearly overcast, else altocumulus; high cloud cirrostratus when nearly overcast, else
@@ -34,6 +35,9 @@ MIN_THICKNESS_M = 150.0
 MAX_TOP_M = 25_000.0  # CloudLayer's limit
 CUMULUS_CAPE_JKG = 250.0
 CUMULONIMBUS_CAPE_JKG = 1000.0
+# Between the moist (about 6) and the dry (9.8) adiabatic lapse rates the air is
+# conditionally unstable: a lifted cloudy parcel keeps rising, and low cloud heaps up.
+UNSTABLE_LAPSE_K_PER_KM = 7.5
 RAIN_MMPH = 0.5
 LOW_TOP_HPA = 680.0  # the bottom of the middle deck, as NCEP divides them
 HIGH_BASE_HPA = 440.0
@@ -148,13 +152,26 @@ def _run_layer(
     return CloudLayer(cover, base, top, _type(p, deck, base_hpa, base, top, cover))
 
 
+def lapse_k_per_km(p: ModelProfile) -> float:
+    """How fast the temperature falls with height from the lowest level to 700 hPa (K/km;
+    0 where the column does not reach that high)."""
+    if not p.levels:
+        return 0.0
+    low = p.levels[0]
+    top = next((lev for lev in p.levels if lev.pressure_hpa <= 700.0), None)
+    if top is None or top.height_m - low.height_m < 500.0:
+        return 0.0
+    return (low.t_k - top.t_k) / ((top.height_m - low.height_m) / 1000.0)
+
+
 def _type(
     p: ModelProfile, deck: str, base_hpa: float, base_m: float, top_m: float, cover: float
 ) -> CloudType:
     cape = p.cape_jkg or 0.0
     rain = (p.precip_mmph or 0.0) >= RAIN_MMPH
     conv_deck = any(d.name == "convective" and d.cover_pct >= MIN_COVER_PCT for d in p.decks)
-    if deck == "convective" or (deck == "low" and (cape >= CUMULUS_CAPE_JKG or conv_deck)):
+    unstable = cape >= CUMULUS_CAPE_JKG or conv_deck or lapse_k_per_km(p) >= UNSTABLE_LAPSE_K_PER_KM
+    if deck == "convective" or (deck == "low" and unstable):
         deep = p.freezing_m is not None and top_m > p.freezing_m + 2000.0
         if cape >= CUMULONIMBUS_CAPE_JKG and deep:
             return CloudType.CUMULONIMBUS
