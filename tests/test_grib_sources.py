@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import http.server
+import itertools
 import os
 import re
 import shutil
@@ -32,7 +33,13 @@ from wxsky.inputs.grib_sources import (
     HttpGribSource,
     open_grib_source,
 )
-from wxsky.weather.grib_idx import IdxEntry, fewer_ranges, parse_idx, wanted_ranges
+from wxsky.weather.grib_idx import (
+    IdxEntry,
+    fewer_ranges,
+    parse_ecmwf_index,
+    parse_idx,
+    wanted_ranges,
+)
 from wxsky.weather.model_fields import ModelField, merge_steps
 from wxsky.weather.model_profile import profile_at
 
@@ -293,13 +300,14 @@ def test_without_an_idx_the_whole_file_comes_and_decodes_the_same(
     src = http_source(server.url("/gfs.grib2"))
     blobs = src.fetch()
     assert blobs is not None and blobs[0].data == grib
-    assert server.served.paths() == ["/gfs.grib2.idx", "/gfs.grib2"]
-    assert "Range" not in server.served.requests[1][1]
+    # NOAA's .idx, then ECMWF's .index beside a .grib2, then the file
+    assert server.served.paths() == ["/gfs.grib2.idx", "/gfs.index", "/gfs.grib2"]
+    assert "Range" not in server.served.requests[2][1]
     assert_same_fields(decoded(blobs), whole_fields)
     server.served.reset_counts()
     assert src.fetch() is None  # a 304 on the file itself
     assert server.served.requests[-1][1]["If-None-Match"].startswith('"')
-    assert server.served.bytes_sent == len(NOT_FOUND)  # the .idx's 404, nothing else
+    assert server.served.bytes_sent == 2 * len(NOT_FOUND)  # the indexes' 404s, nothing else
 
 
 def test_byte_ranges_off_fetches_the_whole_file(server: GribServer, grib: bytes) -> None:
@@ -633,3 +641,85 @@ def test_a_wind_and_temperature_profile_is_a_fifth_of_the_file(
         ref = by_p[lev.pressure_hpa]
         assert (lev.u_mps, lev.v_mps, lev.t_k) == (ref.u_mps, ref.v_mps, ref.t_k)
         assert lev.height_m == pytest.approx(ref.height_m, abs=150.0)
+
+
+def _ecmwf_index(data: bytes) -> str:
+    """An index of the fixture as ECMWF open data writes one beside each file (one JSON
+    object a message: its parameter, level type and level, offset and length), made with
+    eccodes' own keys."""
+    import json
+    import os
+
+    import eccodes
+
+    items: list[dict[str, object]] = []
+    eccodes.codes_grib_multi_support_on()
+    with os.fdopen(os.memfd_create("idx"), "w+b") as f:
+        f.write(data)
+        f.seek(0)
+        while (h := eccodes.codes_grib_new_from_file(f)) is not None:
+            try:
+                level_type = eccodes.codes_get(h, "typeOfLevel")
+                item = {
+                    "date": str(eccodes.codes_get(h, "dataDate")),
+                    "time": f"{eccodes.codes_get(h, 'dataTime'):04d}",
+                    "step": str(eccodes.codes_get(h, "stepRange")),
+                    "levtype": "pl" if level_type == "isobaricInhPa" else "sfc",
+                    "param": eccodes.codes_get(h, "shortName"),
+                    "_offset": int(eccodes.codes_get(h, "offset")),
+                }
+                if level_type == "isobaricInhPa":
+                    item["levelist"] = str(eccodes.codes_get(h, "level"))
+                items.append(item)
+            finally:
+                eccodes.codes_release(h)
+        eccodes.codes_grib_multi_support_reset_file(f)
+    # a message's length: to the next message (NCEP's u and v share one; ECMWF's never do,
+    # and eccodes' totalLength is a field's there, not the message's)
+    starts = [*sorted({int(i["_offset"]) for i in items}), len(data)]
+    after = dict(itertools.pairwise(starts))
+    for item in items:
+        item["_length"] = after[int(item["_offset"])] - int(item["_offset"])
+    return "".join(json.dumps(item) + "\n" for item in items)
+
+
+def test_ecmwf_open_datas_index_takes_the_byte_ranges_too(
+    server: GribServer, grib: bytes, whole_fields: list[ModelField]
+) -> None:
+    """ECMWF open data publishes FILE.index (JSON lines with each message's offset and
+    length) beside FILE.grib2, and no .idx: the wanted messages come by byte ranges, and
+    decode as the whole file does."""
+    server.served.publish("/ifs.grib2", grib, idx=False)
+    server.served.files["/ifs.index"] = _ecmwf_index(grib).encode()
+    src = http_source(server.url("/ifs.grib2"))
+    blobs = src.fetch()
+    assert blobs is not None
+    paths = server.served.paths()
+    assert paths[:2] == ["/ifs.grib2.idx", "/ifs.index"] and set(paths[2:]) == {"/ifs.grib2"}
+    assert all("Range" in h for _, h in server.served.requests[2:])
+    assert server.served.bytes_sent < 0.6 * len(grib)
+    # ECMWF's parameters: the pressure levels' u, v, t, gh and r, and its surface fields
+    # (cloud water and NCEP's cloud decks have no ECMWF name); each the whole file's
+    got = _by_key(decoded(blobs))
+    whole = _by_key(whole_fields)
+    assert set(got) <= set(whole)
+    for name in ("u", "v", "t", "gh", "r"):
+        levels = {k[2] for k in got if k[0] == name and k[1] == "isobaric"}
+        assert len(levels) >= PRESSURE_LEVELS_READ - 1, (name, levels)
+    for key, mine in got.items():
+        np.testing.assert_array_equal(mine.values, whole[key].values)
+    server.served.reset_counts()
+    assert src.fetch() is None  # the .index alone asked again, 304
+    assert server.served.paths() == ["/ifs.index"]
+
+
+def test_a_bad_ecmwf_index_line_is_one_line_naming_it() -> None:
+    for text, why in (
+        ("{not json\n", "not a JSON object"),
+        ("[1, 2]\n", "not a JSON object"),
+        ('{"param": "u", "_offset": -1, "_length": 10}\n', "byte counts"),
+        ('{"param": "u", "_offset": "0", "_length": 10}\n', "byte counts"),
+    ):
+        with pytest.raises(GribError) as e:
+            parse_ecmwf_index(text, "x.index")
+        one_line_error(e, "x.index: line 1", why)

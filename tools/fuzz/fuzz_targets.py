@@ -1821,6 +1821,53 @@ def check_grib_idx(data: bytes) -> None:
         assert inside == (offset in wanted_at), f"message at {offset}: fetched {inside}"
 
 
+def grib_ecmwf_index_seeds() -> list[bytes]:
+    """Lines of ECMWF open data's index, as its files have them."""
+    return [
+        b'{"domain": "g", "date": "20240301", "time": "0000", "expver": "0001", "class": "od", '
+        b'"type": "fc", "stream": "oper", "step": "6", "levelist": "500", "levtype": "pl", '
+        b'"param": "u", "_offset": 0, "_length": 609069}\n'
+        b'{"date": "20240301", "time": "0000", "step": "6", "levtype": "sfc", "param": "2t", '
+        b'"_offset": 609069, "_length": 500000}\n',
+        b'{"levtype": "pl", "levelist": "850", "param": "t", "_offset": 10, "_length": 5}\n',
+    ]
+
+
+@target(
+    "grib-ecmwf-index",
+    seeds=grib_ecmwf_index_seeds,
+    tokens=(b'"_offset": ', b'"_length": ', b'"param": "u"', b'"levtype": "pl"', b"{", b"}"),
+    max_len=4096,
+)
+def check_grib_ecmwf_index(data: bytes) -> None:
+    """parse_ecmwf_index: GribError in one line naming a line the index has; or entries in
+    file order whose wanted ranges are sorted, apart, and each within a listed message."""
+    from wxsky.inputs.grib_decode import IDX_WANTED  # eccodes: only where this target runs
+    from wxsky.weather.grib_idx import parse_ecmwf_index
+
+    text = data.decode("utf-8", "replace")
+    try:
+        entries = parse_ecmwf_index(text, "fuzz.index")
+    except GribError as exc:
+        message = str(exc)
+        assert len(message.splitlines()) == 1, f"not one line: {message[:200]!r}"
+        m = re.match(r"fuzz\.index: line (\d+): ", message)
+        assert m is not None, f"names no line: {message[:200]!r}"
+        assert 1 <= int(m.group(1)) <= text.count("\n") + 1, f"no such line: {message[:200]!r}"
+        return
+    offsets = [e.offset_b for e in entries]
+    assert offsets == sorted(offsets), "entries out of file order"
+    ranges = wanted_ranges(entries, IDX_WANTED)
+    for k, (first, last) in enumerate(ranges):
+        assert last is not None and first <= last, f"a bad range {first}-{last}"
+        if k:
+            before = ranges[k - 1][1]
+            assert before is not None and before + 1 < first, f"ranges not apart: {ranges}"
+        assert any(e.offset_b <= first <= e.offset_b + (e.length_b or 0) - 1 for e in entries), (
+            f"range {first}-{last} starts in no message"
+        )
+
+
 # --- GRIB2 messages (wxsky/inputs/grib_decode.py): what eccodes makes of a file -----------
 
 

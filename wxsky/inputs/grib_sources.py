@@ -15,6 +15,7 @@ import logging
 import os
 import stat
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
@@ -22,7 +23,14 @@ from typing import Protocol
 from wxsky.errors import GribError
 from wxsky.inputs.grib_decode import IDX_WANTED, IDX_WIND, MIN_LEVEL_HPA
 from wxsky.inputs.grib_http import Answer, CacheEntry, DiskCache, Validators, get
-from wxsky.weather.grib_idx import ByteRange, fewer_ranges, parse_idx, wanted_ranges
+from wxsky.weather.grib_idx import (
+    ByteRange,
+    IdxEntry,
+    fewer_ranges,
+    parse_ecmwf_index,
+    parse_idx,
+    wanted_ranges,
+)
 
 __all__ = [
     "MAX_GRIB_BYTES",
@@ -42,6 +50,7 @@ MAX_GRIB_DIR_BYTES = 4 * 1024**3  # a directory's files together, all held at on
 MAX_IDX_BYTES = 16 * 1024**2  # a GFS 0.25 degree inventory is about 60 kB
 # Requests for one file's messages: the nearest are joined until no more than this are left.
 MAX_RANGE_REQUESTS = 64
+IndexParser = Callable[[str, str], list[IdxEntry]]
 # Left out of a directory: inventories, hidden files, and files still being written.
 _NOT_GRIB_SUFFIXES = (".idx", ".part", ".tmp")
 
@@ -273,6 +282,7 @@ class HttpGribSource:
         self.url = url
         self.name = url
         self.idx_url = url + ".idx"
+        self._index_found: tuple[str, IndexParser] | None = None  # the index that answered
         self.wanted = wanted
         self.timeout_s = timeout_s
         self.byte_ranges = byte_ranges
@@ -330,26 +340,40 @@ class HttpGribSource:
     def _download(self) -> tuple[bytes, Validators] | None:
         """The data and its validators, or None on a 304."""
         if self.byte_ranges:
-            idx = self._get(self.idx_url, self._conditional(self.idx_url), MAX_IDX_BYTES)
-            if idx.status == 304:
-                return None
-            if idx.status == 200:
-                text = idx.body.decode("utf-8", "replace")
-                entries = parse_idx(text, self.idx_url)
-                ranges = wanted_ranges(entries, self.wanted, min_hpa=MIN_LEVEL_HPA)
-                ranges = fewer_ranges(ranges, MAX_RANGE_REQUESTS)
-                if not ranges:
-                    raise GribError(f"{self.idx_url}: lists none of the fields wxsky reads")
-                return self._ranges(ranges), idx.validators(self.idx_url)
-            if not 400 <= idx.status < 500:  # a server in trouble, not a missing .idx
-                raise _failed(self.idx_url, idx)
-            log.debug("%s: HTTP %d; fetching the whole file", self.idx_url, idx.status)
+            for index_url, parse in self._indexes():
+                idx = self._get(index_url, self._conditional(index_url), MAX_IDX_BYTES)
+                if idx.status == 304:
+                    return None
+                if idx.status == 200:
+                    self._index_found = (index_url, parse)
+                    text = idx.body.decode("utf-8", "replace")
+                    entries = parse(text, index_url)
+                    ranges = wanted_ranges(entries, self.wanted, min_hpa=MIN_LEVEL_HPA)
+                    ranges = fewer_ranges(ranges, MAX_RANGE_REQUESTS)
+                    if not ranges:
+                        raise GribError(f"{index_url}: lists none of the fields wxsky reads")
+                    return self._ranges(ranges), idx.validators(index_url)
+                if not 400 <= idx.status < 500:  # a server in trouble, not a missing index
+                    raise _failed(index_url, idx)
+                log.debug("%s: HTTP %d", index_url, idx.status)
+            log.debug("%s: no index; fetching the whole file", self.url)
         whole = self._get(self.url, self._conditional(self.url), MAX_GRIB_BYTES)
         if whole.status == 304:
             return None
         if whole.status != 200:
             raise _failed(self.url, whole)
         return whole.body, whole.validators(self.url)
+
+    def _indexes(self) -> list[tuple[str, IndexParser]]:
+        """Where the file's index may be, in the order to try: NOAA's `URL.idx` (wgrib2's
+        inventory), then for a `.grib2` URL ECMWF open data's `.index` beside it (JSON
+        lines); once one has answered, that one alone."""
+        if self._index_found is not None:
+            return [self._index_found]
+        out: list[tuple[str, IndexParser]] = [(self.idx_url, parse_idx)]
+        if self.url.endswith(".grib2"):
+            out.append((self.url.removesuffix(".grib2") + ".index", parse_ecmwf_index))
+        return out
 
     def _ranges(self, ranges: list[ByteRange]) -> bytes:
         parts: list[bytes] = []

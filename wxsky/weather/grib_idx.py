@@ -17,6 +17,7 @@ Pure: text in, entries and ranges out; the caller fetches.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import re
 from collections.abc import Iterable, Sequence
@@ -24,7 +25,13 @@ from dataclasses import dataclass
 
 from wxsky.errors import GribError
 
-__all__ = ["MAX_OFFSET_B", "IdxEntry", "parse_idx", "wanted_ranges"]
+__all__ = [
+    "MAX_OFFSET_B",
+    "IdxEntry",
+    "parse_ecmwf_index",
+    "parse_idx",
+    "wanted_ranges",
+]
 
 # Past any real file, and small enough for any server's Range header to take.
 MAX_OFFSET_B = 2**53
@@ -43,6 +50,9 @@ class IdxEntry:
     var: str  # wgrib2's name: "UGRD"
     level: str  # "10 mb", "surface", "2 m above ground"
     forecast: str  # "120 hour fcst", "anl"
+    # The message's length where the index says it (ECMWF's); else it runs to the next
+    # message's offset
+    length_b: int | None = None
 
 
 def parse_idx(text: str, name: str) -> list[IdxEntry]:
@@ -92,12 +102,12 @@ def wanted_ranges(
     go backwards)."""
     pairs = set(wanted)
     any_mb = {var for var, level in pairs if level == "mb"}
+    if any(e.length_b is not None for e in entries):
+        return _sized_ranges(entries, pairs, any_mb, min_hpa)
     # Each distinct offset is one message; it is wanted when any of its fields is.
     messages: list[tuple[int, bool]] = []
     for e in entries:
-        hit = (e.var, e.level) in pairs or (
-            e.var in any_mb and e.level.endswith(" mb") and _hpa(e.level) >= min_hpa
-        )
+        hit = _hit(e, pairs, any_mb, min_hpa)
         if messages and messages[-1][0] == e.offset_b:
             messages[-1] = (e.offset_b, messages[-1][1] or hit)
         else:
@@ -113,6 +123,95 @@ def wanted_ranges(
     if run_start_b is not None:
         ranges.append((run_start_b, None))
     return ranges
+
+
+def _hit(e: IdxEntry, pairs: set[tuple[str, str]], any_mb: set[str], min_hpa: float) -> bool:
+    return (e.var, e.level) in pairs or (
+        e.var in any_mb and e.level.endswith(" mb") and _hpa(e.level) >= min_hpa
+    )
+
+
+def _sized_ranges(
+    entries: Sequence[IdxEntry], pairs: set[tuple[str, str]], any_mb: set[str], min_hpa: float
+) -> list[ByteRange]:
+    """With each message's length given (ECMWF's index): the wanted messages' bytes, those
+    that touch merged into one range."""
+    spans = sorted(
+        (e.offset_b, e.offset_b + (e.length_b or 0) - 1)
+        for e in entries
+        if e.length_b and _hit(e, pairs, any_mb, min_hpa)
+    )
+    ranges: list[ByteRange] = []
+    for first, last in spans:
+        if ranges:
+            prev_first, prev_last = ranges[-1]
+            assert prev_last is not None
+            if first <= prev_last + 1:
+                ranges[-1] = (prev_first, max(prev_last, last))
+                continue
+        ranges.append((first, last))
+    return ranges
+
+
+# ECMWF open data's parameters (its `param` and `levtype`) in wgrib2's names, so one wanted
+# list serves both indexes.
+_ECMWF_SURFACE = {
+    "2t": ("TMP", "2 m above ground"),
+    "10u": ("UGRD", "10 m above ground"),
+    "10v": ("VGRD", "10 m above ground"),
+    "sp": ("PRES", "surface"),
+    "tp": ("APCP", "surface"),
+    "tcc": ("TCDC", "entire atmosphere"),
+    "lcc": ("TCDC", "low cloud layer"),
+    "mcc": ("TCDC", "middle cloud layer"),
+    "hcc": ("TCDC", "high cloud layer"),
+}
+_ECMWF_LEVEL = {"u": "UGRD", "v": "VGRD", "t": "TMP", "gh": "HGT", "r": "RH", "q": "SPFH"}
+
+
+def parse_ecmwf_index(text: str, name: str) -> list[IdxEntry]:
+    """The entries of ECMWF open data's `.index` (one JSON object a line, with `param`,
+    `levtype`, `levelist`, `_offset` and `_length`), in file order, with wgrib2's names
+    (`UGRD` at `500 mb`). Raises GribError, one line naming `name` and the line."""
+    entries: list[IdxEntry] = []
+    for line_no, raw in enumerate(text.split("\n"), start=1):
+        line = raw.removesuffix("\r")
+        if not line.strip():
+            continue
+        where = f"{name}: line {line_no}"
+        try:
+            item = json.loads(line)
+        except (ValueError, RecursionError):
+            raise GribError(f"{where}: not a JSON object: {_quote(line)}") from None
+        if not isinstance(item, dict):
+            raise GribError(f"{where}: not a JSON object: {_quote(line)}")
+        offset, length = item.get("_offset"), item.get("_length")
+        if not (isinstance(offset, int) and isinstance(length, int)):
+            raise GribError(f"{where}: _offset and _length must be byte counts in a file")
+        if not (_count(offset) and _count(length)) or offset + length > MAX_OFFSET_B:
+            raise GribError(f"{where}: _offset and _length must be byte counts in a file")
+        param, levtype = str(item.get("param", "")), str(item.get("levtype", ""))
+        if levtype == "pl" and param in _ECMWF_LEVEL:
+            var, level = _ECMWF_LEVEL[param], f"{_quote_free(item.get('levelist'))} mb"
+        elif param in _ECMWF_SURFACE:
+            var, level = _ECMWF_SURFACE[param]
+        else:
+            var, level = param.upper() or "?", levtype or "?"
+        date = f"d={_quote_free(item.get('date'))}{_quote_free(item.get('time'))[:2]}"
+        forecast = f"{_quote_free(item.get('step'))} hour fcst"
+        entries.append(IdxEntry(str(line_no), offset, date, var, level, forecast, length))
+    entries.sort(key=lambda e: e.offset_b)
+    return entries
+
+
+def _count(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_OFFSET_B
+
+
+def _quote_free(value: object) -> str:
+    """A short plain text of an index value (no ':' or line breaks, which inventories use)."""
+    text = str(value)[:_QUOTE_CHARS]
+    return "".join(c for c in text if c.isprintable() and c != ":")
 
 
 def _hpa(level: str) -> float:
