@@ -81,8 +81,20 @@ def _get(port: int, paths: tuple[str, ...] = READ) -> dict[str, str]:
 
 
 def _until(what: str | Callable[[], str], check: Callable[[], bool], timeout_s: float) -> None:
+    """Until `check()` holds. A props server that does not answer a read in time (FlightGear
+    answers a get a frame, and on a loaded machine its frames take seconds) is a "not yet",
+    as long as the deadline has not passed."""
     deadline = time.monotonic() + timeout_s
-    while not check():
+
+    def holds() -> bool:
+        try:
+            return check()
+        except (TimeoutError, ConnectionError):
+            if time.monotonic() >= deadline:
+                raise
+            return False
+
+    while not holds():
         if time.monotonic() >= deadline:
             raise AssertionError(
                 f"timed out waiting for {what if isinstance(what, str) else what()}"
