@@ -4,6 +4,7 @@ METAR speaks, and a broken file that costs nothing but its own error."""
 
 from __future__ import annotations
 
+import gzip
 import shutil
 import time
 from pathlib import Path
@@ -156,7 +157,8 @@ def test_the_daemon_takes_the_weather_aloft_from_the_model(tmp_path: Path) -> No
         assert far["target"]["sources"]["wind"] != "grib"
 
 
-CYCLE = GFS.parents[1] / "metar" / "noaa_cycle_2025-07-26_okay_weather_HEAD1500.txt"
+# NOAA's cycle file, as tests/data keeps it (gzip; the shared original where present)
+CYCLE = GFS.parents[1] / "metar" / "noaa_cycle_2025-07-26_okay_weather_HEAD1500.txt.gz"
 
 
 @pytest.mark.skipif(not CYCLE.exists(), reason=f"the METAR archive is absent: {CYCLE}")
@@ -166,7 +168,7 @@ def test_a_past_day_replays_each_stations_reports_in_their_order(tmp_path: Path)
     stands, then the second: never the later report before its time."""
     archive = tmp_path / "archive"
     archive.mkdir()
-    records = CYCLE.read_text().split("\n\n")
+    records = gzip.decompress(CYCLE.read_bytes()).decode().split("\n\n")
     half = len(records) // 2
     (archive / "15Z.TXT").write_text("\n\n".join(records[:half]) + "\n")
     (archive / "16Z.TXT").write_text("\n\n".join(records[half:]))

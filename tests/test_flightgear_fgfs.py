@@ -244,7 +244,7 @@ def test_a_daemon_follows_fgfs_and_fgfs_flies_in_wxskys_weather(tmp_path: Path) 
         assert _angle(float(got[f"{BOUNDARY}/wind-from-heading-deg"]), 60.0) <= 5.0
 
 
-GFS = ROOT.parent / "shared" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
+GFS = ROOT / "tests" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
 ALOFT = tuple(f"/environment/config/aloft/entry[{i}]" for i in range(3))
 
 

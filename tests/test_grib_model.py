@@ -14,7 +14,7 @@ from datetime import UTC, datetime, timedelta
 
 import numpy as np
 import pytest
-from grib_fixture import GFS, LONDON, VALID, needs_gfs
+from grib_fixture import GFS, LONDON, SHARED_GFS, VALID, needs_gfs
 
 from wxsky.errors import GribError
 from wxsky.inputs.grib_decode import Window, decode, inventory
@@ -504,3 +504,10 @@ def test_a_steep_lapse_rate_heaps_the_low_cloud_up() -> None:
     )
     assert model_layers(steep)[0].type is CloudType.CUMULUS
     assert model_layers(gentle)[0].type is CloudType.STRATOCUMULUS
+
+
+def test_the_kept_copy_is_the_shared_file() -> None:
+    """tests/data/grib holds a byte-for-byte copy of ../shared/data/grib's file."""
+    if not SHARED_GFS.exists():
+        pytest.skip(f"the shared original is not present at {SHARED_GFS}")
+    assert GFS.read_bytes() == SHARED_GFS.read_bytes()

@@ -44,7 +44,7 @@ from wxsky.weather.model_fields import ModelField, merge_steps
 from wxsky.weather.model_profile import profile_at
 
 ROOT = Path(__file__).resolve().parents[1]
-FIXTURE = ROOT.parent / "shared" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
+FIXTURE = ROOT / "tests" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"  # ../shared's, copied
 WINDOW = Window(21.3, -157.9)  # Honolulu: a small window keeps the decodes fast
 TIMEOUT_S = 5.0  # only so a hang fails instead of waiting forever
 # u and v on 10..1000 hPa (the fixture's README), of which wxsky reads 1000..100 hPa

@@ -45,7 +45,7 @@ from wxsky.weather.model_clouds import model_layers  # noqa: E402
 from wxsky.weather.model_fields import merge_steps  # noqa: E402
 from wxsky.weather.model_profile import profile_at  # noqa: E402
 
-GFS = ROOT.parent / "shared" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
+GFS = ROOT / "tests" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
 VALID = datetime(2011, 1, 15, 12, tzinfo=UTC)
 SITE = (47.46, 8.55)
 

@@ -1728,7 +1728,7 @@ def check_share(data: bytes) -> None:
 from wxsky.errors import GribError  # noqa: E402
 from wxsky.weather.grib_idx import MAX_OFFSET_B, parse_idx, wanted_ranges  # noqa: E402
 
-GRIB_FIXTURE = SHARED_DATA / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
+GRIB_FIXTURE = ROOT / "tests" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
 GRIB_IDX_LINES = 24  # lines per seed: a window of the real inventory
 GRIB_IDX_TOKENS = tuple(
     t.encode()

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # run as a script from a checkout
     sys.path.insert(0, str(ROOT))
 
-GFS = ROOT.parent / "shared" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
+GFS = ROOT / "tests" / "data" / "grib" / "gfs.t12z.pgrbf120.2p5deg.grib2"
 METAR = "LSZH 151150Z 24008KT 9999 FEW045 07/02 Q1020"
 TIME = "2011-01-15T12:00:00Z"  # the GFS file's valid time
 SITE = ("47.4647", "8.5492")  # the default site, where a --metar snapshot stands
