@@ -974,7 +974,11 @@ name = "{SERIAL_NAME}"
         settle = [s for s in self.samples if m["soak_end"] < s.t]
         warm_t = m["soak_start"] + self.plan.warmup_s
         warm, end_samples = rss_windows(soak, warm_t, m["soak_end"])
+        # The baseline's last seconds, once the daemon has settled; on a machine so busy that
+        # they hold fewer than two samples (the sampler's status call waited), all of it.
         fps_base = _fps(self.samples, m["baseline_start"] + 2, m["soak_start"])
+        if fps_base is None:
+            fps_base = _fps(self.samples, m["baseline_start"], m["soak_start"])
         fps_soak = _fps(self.samples, m["soak_start"], m["soak_end"])
         rss_warm = statistics.median(s.rss_kib for s in warm) if warm else 0
         rss_end = statistics.median(s.rss_kib for s in end_samples) if end_samples else 0
