@@ -1781,6 +1781,14 @@ def grib_idx_seeds() -> list[bytes]:
     return sample(seeds)
 
 
+def _assert_names_a_line(message: str, name: str, text: str) -> None:
+    """An index's error: one line, naming the index and a line it has."""
+    assert len(message.splitlines()) == 1, f"not one line: {message[:200]!r}"
+    m = re.match(re.escape(name) + r": line (\d+): ", message)
+    assert m is not None, f"names no line: {message[:200]!r}"
+    assert 1 <= int(m.group(1)) <= text.count("\n") + 1, f"no such line: {message[:200]!r}"
+
+
 @target("grib-idx", seeds=grib_idx_seeds, tokens=GRIB_IDX_TOKENS, max_len=4096)
 def check_grib_idx(data: bytes) -> None:
     """parse_idx: GribError, one line naming the inventory and a line it has; or entries in
@@ -1792,11 +1800,7 @@ def check_grib_idx(data: bytes) -> None:
     try:
         entries = parse_idx(text, "fuzz.idx")
     except GribError as exc:
-        message = str(exc)
-        assert len(message.splitlines()) == 1, f"not one line: {message[:200]!r}"
-        m = re.match(r"fuzz\.idx: line (\d+): ", message)
-        assert m is not None, f"names no line: {message[:200]!r}"
-        assert 1 <= int(m.group(1)) <= text.count("\n") + 1, f"no such line: {message[:200]!r}"
+        _assert_names_a_line(str(exc), "fuzz.idx", text)
         return
     offsets = [e.offset_b for e in entries]
     assert offsets == sorted(offsets), "entries out of file order"
@@ -1849,11 +1853,7 @@ def check_grib_ecmwf_index(data: bytes) -> None:
     try:
         entries = parse_ecmwf_index(text, "fuzz.index")
     except GribError as exc:
-        message = str(exc)
-        assert len(message.splitlines()) == 1, f"not one line: {message[:200]!r}"
-        m = re.match(r"fuzz\.index: line (\d+): ", message)
-        assert m is not None, f"names no line: {message[:200]!r}"
-        assert 1 <= int(m.group(1)) <= text.count("\n") + 1, f"no such line: {message[:200]!r}"
+        _assert_names_a_line(str(exc), "fuzz.index", text)
         return
     offsets = [e.offset_b for e in entries]
     assert offsets == sorted(offsets), "entries out of file order"

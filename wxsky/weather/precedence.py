@@ -157,8 +157,7 @@ class SourceStack:
             (Source.COCKPIT, self.cockpit),
         ):
             if slot:
-                whole = {n: h.value for n, h in slot.items() if n in FIELDS}
-                state = state.apply(WeatherPatch(source=source, **whole))
+                state = state.apply(WeatherPatch(source=source, **_whole(slot)))
         fine = {n: h.value for n, h in self.cockpit.items() if n not in FIELDS}
         return overlay(state, fine)
 
