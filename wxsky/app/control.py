@@ -438,6 +438,41 @@ def set_weather(engine: SkyEngine, params: dict[str, Any]) -> list[str]:
     return sorted(weather)
 
 
+FREEZE = Table({"frozen": Field(Bool(), REQUIRED)})
+SAVE_PRESET = Table(
+    {
+        "name": Field(PRESET_NAME, REQUIRED),
+        "description": Field(Text(max_len=200), ""),
+        "force": Field(Bool(), False),
+    }
+)
+
+
+def freeze(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
+    """`frozen`: stop the weather where it stands (the clock, the clouds' drift and growth,
+    the transitions), or let it go on; the frames go on either way."""
+    v = checked_params("freeze", FREEZE, params)
+    engine.frozen = v["frozen"]
+    return {"frozen": engine.frozen}
+
+
+def save_preset(engine: SkyEngine, params: dict[str, Any]) -> dict[str, Any]:
+    """The target weather (what the sky is moving to, or shows once settled) as the user
+    preset `name` (`wxsky preset save`'s folder), refusing to replace one unless `force`."""
+    from datetime import UTC, datetime
+
+    from wxsky.settings.presets import patch_from_weather_dict, preset_to_toml, write_user_preset
+    from wxsky.weather.state import weather_to_dict
+
+    v = checked_params("save_preset", SAVE_PRESET, params)
+    patch = patch_from_weather_dict(weather_to_dict(engine.target))
+    description = v["description"] or f"Saved from the running daemon at {engine.state.summary()}"
+    stamp = f"{datetime.now(UTC):%Y-%m-%d %H:%MZ}"
+    text = preset_to_toml(patch, description, comment=f"Written by save_preset {stamp}")
+    path = write_user_preset(v["name"], text, force=v["force"])
+    return {"name": v["name"], "path": str(path)}
+
+
 def dispatch_table(
     handlers: dict[str, Callable[[dict[str, Any]], Any]],
 ) -> Callable[[str, dict[str, Any]], Any]:

@@ -32,11 +32,13 @@ from wxsky.app.control import (
     camera_from_params,
     camera_to_dict,
     dispatch_table,
+    freeze,
     no_params,
     output_format,
     radar_key,
     radar_reply,
     release,
+    save_preset,
     set_aircraft,
     set_time,
     set_weather,
@@ -232,6 +234,8 @@ class Daemon:
             "output_format": lambda p: output_format(
                 p, config.output.layer_format, self._segment_version()
             ),
+            "freeze": lambda p: freeze(self.engine, p),
+            "save_preset": lambda p: save_preset(self.engine, p),
         }
         self._dispatch = dispatch_table(self._commands)
 
@@ -286,6 +290,8 @@ class Daemon:
             fps=self.fps,
             stop=self._stop,
             broadcast=self._server_broadcast,
+            command=self._command,
+            status=self.status,
         )
         for part in self.parts:
             await part.start(context)
@@ -515,7 +521,11 @@ class Daemon:
     # -- control channel --------------------------------------------------------------
 
     async def _handle(self, method: str, params: dict[str, Any]) -> Any:
-        stats = self.inputs["control"]
+        return await self._command(method, params, self.inputs["control"])
+
+    async def _command(self, method: str, params: dict[str, Any], stats: InputStats) -> Any:
+        """Every command, whichever way it came (the control channel, the web station): the
+        parts' refusals, the one handler, the errors counted in the caller's `stats`."""
         stats.message()
         try:
             refused = self._refusal(method)
@@ -531,7 +541,8 @@ class Daemon:
             stats.error(clip(exc))
             kind = method if method in self._commands else "unknown command"
             self._control_log.warning(
-                f"rejected:{kind}", f"control {clip(method, 64)} rejected: {exc}"
+                f"rejected:{stats.name}:{kind}",
+                f"{stats.name} {clip(method, 64)} rejected: {exc}",
             )
             raise
 
@@ -638,6 +649,7 @@ class Daemon:
             "camera": camera_to_dict(self.engine.camera),
             "clock_rate": self.engine.clock_rate,
             "clock_at_end": self.engine.clock_at_end,
+            "frozen": self.engine.frozen,
             "frames": self._frame_times.to_dict(),
             "at_eye": self._at_eye,
             "scene_work": self.engine.scene_work(),

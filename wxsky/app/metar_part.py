@@ -11,6 +11,7 @@ import logging
 import time
 from collections.abc import Sequence
 from datetime import datetime
+from typing import Any
 
 from wxsky.app.parts import Part, PartContext
 from wxsky.engine.stages import SkyEngine, geodetic_from_enu
@@ -18,8 +19,9 @@ from wxsky.inputs.feed_sources import open_source
 from wxsky.inputs.metar_input import MetarFeedInput, MetarSettings
 from wxsky.inputs.stats import InputStats
 from wxsky.settings.config import MetarSection
-from wxsky.weather.state import WeatherPatch
-from wxsky.weather.stations import StationWeather
+from wxsky.weather.state import WeatherPatch, format_time_utc
+from wxsky.weather.stations import StationWeather, distance_m
+from wxsky.web.view import station_rows
 
 log = logging.getLogger("wxsky.app.metar")
 
@@ -61,6 +63,27 @@ class MetarFeedsPart(Part):
         """The nearest station the METAR weather uses now, with its distance (the first feed
         that gives weather here)."""
         return next((feed.nearest for feed in self.feeds if feed.nearest), None)
+
+    def stations(self) -> list[dict[str, Any]]:
+        """The stations the METAR weather is made of now, with their distances from the
+        camera and weights (`web.view.station_rows`); [] before the first report."""
+        first = next((feed for feed in self.feeds if feed.nearest), None)
+        if first is None or first.nearest is None or getattr(self, "_engine", None) is None:
+            return []
+        stations = first.blended or (first.nearest[0],)
+        lat, lon = self._camera_lat_lon()
+        return station_rows(
+            [
+                (
+                    s.station,
+                    s.lat_deg,
+                    s.lon_deg,
+                    distance_m(lat, lon, s.lat_deg, s.lon_deg),
+                    None if s.observed_utc is None else format_time_utc(s.observed_utc),
+                )
+                for s in stations
+            ]
+        )
 
     async def start(self, ctx: PartContext) -> None:
         self._engine = ctx.engine

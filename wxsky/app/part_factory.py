@@ -18,6 +18,7 @@ from wxsky.app.grib_part import GribPart
 from wxsky.app.metar_part import MetarFeedsPart
 from wxsky.app.parts import Part
 from wxsky.app.share_part import SharePart
+from wxsky.app.web_part import WebPart
 from wxsky.errors import ConfigError
 from wxsky.inputs.drivers import open_link
 from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
@@ -37,11 +38,12 @@ class PartOptions:
     cigi_send: Sequence[str] = ()
     flightgear: str | None = None
     flightgear_pose: str | None = None
+    web: str | None = None  # HOST:PORT for the web station, over [web] listen
 
 
 def parts_from_config(config: DaemonConfig, options: PartOptions | None = None) -> list[Part]:
     """The daemon's parts in the order it walks them: the METAR feeds, the model data, the
-    cockpit links, CIGI, FlightGear, the channel bus. ConfigError (one line) for a
+    cockpit links, CIGI, FlightGear, the web station, the channel bus. ConfigError (one line) for a
     combination refused."""
     opt = options or PartOptions()
     feeds = MetarFeedsPart(config.metar, (*config.metar.feeds, *opt.metar_feeds), replay=opt.replay)
@@ -91,4 +93,7 @@ def parts_from_config(config: DaemonConfig, options: PartOptions | None = None) 
         used.append(cigi)
     if flightgear.enabled:
         used.append(flightgear)
+    listen = opt.web or config.web.listen
+    if listen:
+        used.append(WebPart(config, listen, stations=feeds.stations))
     return [*used, share]

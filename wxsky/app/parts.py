@@ -31,11 +31,12 @@ bad input a part reads is its own to count in its inputs' stats and log, rate-li
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from wxsky.engine.stages import SkyEngine
+from wxsky.errors import WxskyError
 from wxsky.inputs.stats import InputStats
 from wxsky.weather.state import WeatherState
 
@@ -50,6 +51,14 @@ def _no_fps() -> float:
 
 def _no_broadcast(topic: str, params: dict[str, Any]) -> None:
     return None
+
+
+async def _no_command(method: str, params: dict[str, Any], stats: InputStats) -> Any:
+    raise WxskyError(f"{method}: no daemon to run it")
+
+
+def _no_status() -> dict[str, Any]:
+    return {}
 
 
 @dataclass(frozen=True)
@@ -69,6 +78,10 @@ class PartContext:
     # Set when the daemon begins to stop: a part's tasks wait on it. A part may set it to
     # stop the daemon.
     stop: asyncio.Event = field(default_factory=asyncio.Event)
+    # Runs a control command as the control channel does (the parts' refusals, the same
+    # handler, its answer or a WxskyError of one line), counted in `stats`, the caller's.
+    command: Callable[[str, dict[str, Any], InputStats], Awaitable[Any]] = _no_command
+    status: Callable[[], dict[str, Any]] = _no_status  # the `status` command's answer
 
 
 @dataclass(frozen=True)

@@ -124,6 +124,14 @@ def add_commands(sub: Subparsers) -> None:
         help="take the camera from a FlightGear's pose stream arriving there, e.g. "
         "udp:127.0.0.1:5505 (over [flightgear] pose)",
     )
+    run.add_argument(
+        "--web",
+        type=Checked("--web", _web_spec),
+        metavar="HOST:PORT",
+        help="serve the instructor station in the browser there, e.g. 127.0.0.1:8080 "
+        "(over [web] listen; off loopback every browser needs the token of [web] token_file; "
+        "docs/web.md)",
+    )
     share = run.add_argument_group(
         "one sky on several daemons (docs/channels.md)",
     )
@@ -338,6 +346,13 @@ def _udp_spec(spec: str) -> str:
     return spec
 
 
+def _web_spec(spec: str) -> str:
+    from wxsky.settings.config import parse_web_listen
+
+    parse_web_listen(spec)
+    return spec
+
+
 def _tcp_spec(spec: str) -> str:
     from wxsky.app.flightgear_part import parse_tcp
 
@@ -438,6 +453,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         cigi_send=args.cigi_send,
         flightgear=args.flightgear,
         flightgear_pose=args.flightgear_pose,
+        web=args.web,
     )
     daemon = Daemon(
         config,

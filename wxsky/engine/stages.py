@@ -188,6 +188,9 @@ class SkyEngine:
         self._aloft_temperatures: tuple[tuple[float, float], ...] = ()
         self.settings = settings
         self.clock_rate = clock_rate
+        # An instructor's freeze: the weather stands still (its clock, the clouds' drift and
+        # growth, the transitions) until unfrozen; a change applied "now" still shows at once.
+        self.frozen = False
         self.rates = rates
         self.transition_step_s = transition_step_s
         self._wall_s = 0.0
@@ -929,7 +932,8 @@ class SkyEngine:
 
     def _step_weather(self, dt_wall_s: float) -> None:
         self._advanced_at = time.monotonic()
-        if self._following:  # the master moves the weather and the clock
+        # Following, the master moves the weather and the clock; frozen, nothing moves.
+        if self._following or self.frozen:
             self._wall_s += max(0.0, dt_wall_s)
             return
         self._transition(max(0.0, dt_wall_s))

@@ -279,10 +279,11 @@ def bilinear(image: Image, a: F64, b: F64) -> F64:
     y0 = np.minimum(y.astype(int), ph - 2) if ph > 1 else np.zeros_like(y, dtype=int)
     fx = (x - x0)[:, None]
     fy = (y - y0)[:, None]
-    img = unit(image)
     x1 = np.minimum(x0 + 1, pw - 1)
     y1 = np.minimum(y0 + 1, ph - 1)
-    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
-    bottom = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
+    # The four texels gathered first, then made float: a ring image is a megapixel, the
+    # rays that meet it a fraction of that.
+    top = unit(image[y0, x0]) * (1 - fx) + unit(image[y0, x1]) * fx
+    bottom = unit(image[y1, x0]) * (1 - fx) + unit(image[y1, x1]) * fx
     result: F64 = top * (1 - fy) + bottom * fy
     return result

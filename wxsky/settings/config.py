@@ -399,6 +399,44 @@ class GribSection(_Section):
     update_s: float = _opt(10.0, _num(0.1, 3600.0, "s"))  # the column worked out again
 
 
+def _web_listen(value: Any) -> str:
+    """HOST:PORT for the web station; '' leaves it off."""
+    if not isinstance(value, str):
+        raise ValueError(f"must be HOST:PORT such as 127.0.0.1:8080, got {value!r}")
+    if value == "":
+        return value
+    parse_web_listen(value)
+    return value
+
+
+def parse_web_listen(text: str) -> tuple[str, int]:
+    """("127.0.0.1", 8080) from "127.0.0.1:8080" ("[::1]:8080" for IPv6); ValueError (one
+    line) for anything else. Port 0: one the system picks."""
+    host, sep, port = text.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or int(port) > 65535 or len(text) > 300:
+        raise ValueError(f"{text[:80]!r} is not HOST:PORT such as 127.0.0.1:8080")
+    return host, int(port)
+
+
+@dataclass(frozen=True)
+class WebSection(_Section):
+    """The instructor station in the browser (issue 46, docs/web.md); off until `listen` is
+    given (or `wxsky run --web HOST:PORT`)."""
+
+    SECTION: ClassVar[str] = "web"
+
+    listen: str = _opt("", Custom(_web_listen, "HOST:PORT such as 127.0.0.1:8080"))
+    # Off loopback every request needs this file's token (made 0600 on first run); "":
+    # $XDG_CONFIG_HOME/wxsky/web-token (~/.config/wxsky/web-token).
+    token_file: str = _opt("")
+    max_clients: int = _opt(32, Number(1, 256, integer=True))
+    picture_fps: float = _opt(4.0, _num(0.0, 30.0, "Hz"))  # 0: no live picture
+    # The share of one core the live picture may take; pictures are spaced to keep it.
+    picture_cpu_share: float = _opt(0.05, _num(0.01, 1.0))
+    view_interval_s: float = _opt(0.5, _num(0.05, 60.0, "s"))  # a view pushed this often
+
+
 @dataclass(frozen=True)
 class TransitionSection(_Section):
     SECTION: ClassVar[str] = "transition"
@@ -596,6 +634,7 @@ class DaemonConfig:
     presets: PresetsSection = field(default_factory=PresetsSection)
     metar: MetarSection = field(default_factory=MetarSection)
     grib: GribSection = field(default_factory=GribSection)
+    web: WebSection = field(default_factory=WebSection)
     transition: TransitionSection = field(default_factory=TransitionSection)
     serial: tuple[SerialInputSection, ...] = ()  # [[serial]] tables
     can: tuple[CanInputSection, ...] = ()  # [[can]] tables

@@ -1,0 +1,110 @@
+"""The web station's live picture (docs/web.md): the latest published frame read from the
+shared-memory segment and composited as a host does (`host/reference.py`), at the width the
+pages ask for, as a JPEG. The **only** Pillow user.
+
+A picture costs the daemon CPU beside its frames, so it is made small: the sky and near
+layers are decimated to about the asked width before compositing (a tablet's picture needs
+a quarter of a 1080p frame's pixels or fewer), and the web part spaces pictures so that
+making them takes a bounded share of one core (`app/web_part.py`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from PIL import Image
+
+from wxsky.errors import WxskyError
+from wxsky.host.reference import HostFrame, host_frame
+from wxsky.output.shm import FrameReader
+
+MIN_WIDTH_PX = 160
+MAX_WIDTH_PX = 1920
+JPEG_QUALITY = 80  # sky gradients without visible blocks at a tenth of a PNG's size
+
+
+@dataclass(frozen=True)
+class Picture:
+    jpeg: bytes
+    frame_number: int
+    width_px: int
+    height_px: int
+    took_s: float  # reading, compositing and encoding it, on this thread's clock
+
+
+def decimated(frame: HostFrame, width_px: int) -> HostFrame:
+    """The frame with its screen layers (sky, near, the near layer's front) taken every
+    k-th pixel, k the largest step that keeps them at least `width_px` wide, and its camera
+    sized to match: the composite then costs 1/k² of the whole frame's."""
+    layers, camera = frame.layers, frame.meta.camera
+    step = max(1, camera.width_px // max(1, width_px))
+    if step == 1:
+        return frame
+    front = layers.near_front
+    small = dataclasses.replace(
+        layers,
+        sky=layers.sky[::step, ::step],
+        near=layers.near[::step, ::step],
+        near_front=None if front is None else front[::step, ::step],
+    )
+    h, w = small.sky.shape[:2]
+    # The same field of view over fewer pixels: every ray goes where the full frame's did.
+    small_camera = dataclasses.replace(camera, width_px=w, height_px=h)
+    meta = dataclasses.replace(frame.meta, camera=small_camera)
+    return HostFrame(meta, small)
+
+
+class PictureMaker:
+    """Makes pictures of one segment's frames; used from one thread at a time. `close()`
+    is idempotent."""
+
+    def __init__(self, shm_name: str) -> None:
+        self.shm_name = shm_name
+        self._reader: FrameReader | None = None
+
+    def make(self, width_px: int) -> Picture:
+        """The latest frame as a JPEG about `width_px` wide (never wider than the frame).
+        WxskyError or OSError when the segment cannot be read (the next call reopens it)."""
+        t0 = time.thread_time()
+        width_px = min(MAX_WIDTH_PX, max(MIN_WIDTH_PX, int(width_px)))
+        try:
+            reader = self._open()
+            frame = host_frame(reader.read(timeout_s=1.0))
+        except (WxskyError, OSError):
+            self.close()
+            raise
+        rgba = decimated(frame, width_px).composite()
+        image = Image.fromarray(np.ascontiguousarray(rgba[..., :3]), "RGB")
+        if image.width > width_px:
+            height = max(1, round(image.height * width_px / image.width))
+            image = image.resize((width_px, height), Image.Resampling.BILINEAR)
+        out = io.BytesIO()
+        image.save(out, "JPEG", quality=JPEG_QUALITY)
+        return Picture(
+            out.getvalue(),
+            frame.meta.frame_number,
+            image.width,
+            image.height,
+            time.thread_time() - t0,
+        )
+
+    def _open(self) -> FrameReader:
+        if self._reader is not None and not self._reader.is_current():
+            self.close()
+        if self._reader is None:
+            self._reader = FrameReader.open(self.shm_name)
+        return self._reader
+
+    def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
+
+    def __enter__(self) -> PictureMaker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
