@@ -2025,6 +2025,99 @@ def wxsky_file_session() -> Iterator[None]:
 _WXSKY_ERROR = re.compile(r"err (\d+) fuzz\.wxsky:(\d+): [ -~]*")
 
 
+WEB_TOKENS = (
+    b'"id"',
+    b'"cmd"',
+    b'"params"',
+    b'"apply_preset"',
+    b'"set_weather"',
+    b'"set_time"',
+    b'"freeze"',
+    b'"view"',
+    b'"presets"',
+    b'"release"',
+    b'"save_preset"',
+    b'"layers"',
+    b'"visibility_m"',
+    b'"width_px"',
+    b"NaN",
+    b"1e999",
+    b"-0",
+    b"9007199254740992",
+    b"[[[[[[[[[",
+    b"\\ud800",
+    b"true",
+    b"null",
+)
+
+
+def web_message_seeds() -> list[bytes]:
+    """The messages the page sends (docs/web.md), one of each command."""
+    layer = {"type": "stratus", "cover_oktas": 8, "base_m": 600.0, "top_m": 900.0}
+    wind = {"alt_m": 432.0, "dir_deg": 250.0, "speed_mps": 5.0, "gust_mps": 0.0}
+    messages = [
+        {"id": 1, "cmd": "view", "params": {"width_px": 960}},
+        {"id": 2, "cmd": "presets"},
+        {"id": 3, "cmd": "apply_preset", "params": {"name": "thunderstorm", "now": True}},
+        {"id": 4, "cmd": "release", "params": {"now": False}},
+        {"id": 5, "cmd": "save_preset", "params": {"name": "my-sky", "description": "x"}},
+        {"id": 6, "cmd": "set_weather", "params": {"layers": [layer], "wind": [wind]}},
+        {
+            "id": 7,
+            "cmd": "set_weather",
+            "params": {"visibility_m": 800, "present_weather": ["+RA"]},
+        },
+        {
+            "id": 8,
+            "cmd": "set_weather",
+            "params": {"fog": {"rvr": [{"runway": "14", "rvr_m": 550}]}},
+        },
+        {"id": 9, "cmd": "set_time", "params": {"time_utc": "2026-07-01T18:00:00Z", "rate": 2}},
+        {"id": 10, "cmd": "freeze", "params": {"frozen": True}},
+    ]
+    return [json.dumps(m).encode() for m in messages]
+
+
+@target("web-message", seeds=web_message_seeds, tokens=WEB_TOKENS, max_len=8192)
+def check_web_message(data: bytes) -> None:
+    """decode_message: a message whose id, command and params are what the page may send
+    (nested no deeper than MAX_DEPTH), or MessageError in one line; the answer to either
+    is strict JSON."""
+    from wxsky.web.messages import (
+        COMMANDS,
+        MAX_DEPTH,
+        MAX_ID,
+        MessageError,
+        decode_message,
+        reply,
+        reply_error,
+    )
+
+    try:
+        msg = decode_message(data)
+    except MessageError as exc:
+        text = str(exc)
+        assert text and len(text.splitlines()) == 1, f"not one line: {text[:200]!r}"
+        assert exc.id is None or 0 <= exc.id <= MAX_ID, f"a bad id {exc.id!r}"
+        json.loads(reply_error(exc.id, text))
+        return
+    assert 0 <= msg.id <= MAX_ID and not isinstance(msg.id, bool), f"id {msg.id!r}"
+    assert msg.cmd in COMMANDS, f"command {msg.cmd!r}"
+    assert isinstance(msg.params, dict), f"params {msg.params!r}"
+    depth, stack = 0, [(msg.params, 2)]
+    while stack:
+        item, d = stack.pop()
+        if isinstance(item, dict | list):
+            depth = max(depth, d)
+            stack.extend((v, d + 1) for v in (item.values() if isinstance(item, dict) else item))
+    assert depth <= MAX_DEPTH, f"nested {depth} deep"
+    json.loads(reply(msg.id, msg.params), parse_constant=_no_constant)
+
+
+def _no_constant(name: str) -> None:
+    raise AssertionError(f"{name} in an answer: the page's JSON.parse refuses it")
+
+
 def _osg_available() -> bool:
     probe = subprocess.run(["pkg-config", "--exists", "openscenegraph"], capture_output=True)
     return probe.returncode == 0

@@ -142,11 +142,17 @@ def layers_from_images(
     )
 
 
-def composite(layers: Layers, camera: Camera, ground: Ground | None = None) -> U8:
+def composite(
+    layers: Layers,
+    camera: Camera,
+    ground: Ground | None = None,
+    cache: CompositeCache | None = None,
+) -> U8:
     """(H, W, 4) opaque RGBA8 picture for the camera the sky and near layers were drawn for;
     with `ground`, the host's flat ground drawn over the sky and hiding the ring's clouds
-    beyond it (as a host's depth buffer does)."""
-    out = _composite(layers, camera, ground)
+    beyond it (as a host's depth buffer does). `cache`: geometry kept from the last
+    composites (`CompositeCache`)."""
+    out = _composite(layers, camera, ground, cache)
     result: U8 = np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
     return result
 
@@ -168,23 +174,64 @@ def clouds_alpha(images: Mapping[str, Image], ring_quads_m: F64, camera: Camera)
     return alpha
 
 
-def composite_linear(layers: Layers, camera: Camera, ground: Ground | None = None) -> F64:
+def composite_linear(
+    layers: Layers,
+    camera: Camera,
+    ground: Ground | None = None,
+    cache: CompositeCache | None = None,
+) -> F64:
     """(H, W, 3) the composite of float layers (a linear renderer's: scene-linear colour), as
     `composite` makes it, unclipped."""
-    out: F64 = _composite(layers, camera, ground)[..., :3]
+    out: F64 = _composite(layers, camera, ground, cache)[..., :3]
     return out
 
 
-def _composite(layers: Layers, camera: Camera, ground: Ground | None) -> F64:
+class CompositeCache:
+    """The geometry of the last composites (which ray meets which ring quad where, where a
+    stretched layer's pixels read), kept while the camera and the ring stand still: a host
+    compositing again and again from one viewpoint (the web station's live picture) then
+    pays only for gathering texels. Each kind keeps its one latest entry."""
+
+    def __init__(self) -> None:
+        self._rings: dict[bytes, RingLookup] = {}
+        self._stretch: dict[tuple[tuple[int, ...], int, int], Taps] = {}
+
+    def ring(self, quads_m: F64, camera: Camera) -> RingLookup:
+        key = repr(camera).encode() + np.ascontiguousarray(quads_m).tobytes()
+        found = self._rings.get(key)
+        if found is None:
+            found = RingLookup.of(quads_m, camera)
+            if len(self._rings) >= 2:  # the ring on show and one fading in
+                self._rings.pop(next(iter(self._rings)))
+            self._rings[key] = found
+        return found
+
+    def stretch(self, image: Image, width: int, height: int) -> F64:
+        if image.shape[:2] == (height, width):
+            return unit(image)
+        key = (image.shape, width, height)
+        taps = self._stretch.get(key)
+        if taps is None:
+            taps = stretch_taps(image.shape, width, height)
+            if len(self._stretch) >= 2:  # near and its front
+                self._stretch.pop(next(iter(self._stretch)))
+            self._stretch[key] = taps
+        return taps.sample(image).reshape(height, width, 4)
+
+
+def _composite(
+    layers: Layers, camera: Camera, ground: Ground | None, cache: CompositeCache | None = None
+) -> F64:
     h, w = camera.height_px, camera.width_px
     if layers.sky.shape[:2] != (h, w):
         raise ValueError(
             f"the sky layer {layers.sky.shape[:2]} must match the camera viewport {(h, w)}"
         )
     out = unit(layers.sky)
-    ring, ring_t = sample_ring_depth(layers.ring, layers.ring_quads_m, camera)
+    looks = cache or CompositeCache()
+    ring, ring_t = looks.ring(layers.ring_quads_m, camera).sample(layers.ring)
     if layers.incoming_quads_m is not None and layers.fade > 0.0:
-        incoming, in_t = sample_ring_depth(layers.incoming_ring, layers.incoming_quads_m, camera)
+        incoming, in_t = looks.ring(layers.incoming_quads_m, camera).sample(layers.incoming_ring)
         ring = (1.0 - layers.fade) * ring + layers.fade * incoming
         ring_t = np.minimum(ring_t, in_t)
     if ground is not None:
@@ -193,11 +240,11 @@ def _composite(layers: Layers, camera: Camera, ground: Ground | None) -> F64:
         out[on_ground] = colour[on_ground]
         ring = np.where((ring_t < hit_t)[..., None], ring, 0.0)
     out = ring + (1.0 - ring[..., 3:4]) * out
-    near = stretch(layers.near, w, h)
+    near = looks.stretch(layers.near, w, h)
     out = near + (1.0 - near[..., 3:4]) * out
     # (A host draws its own aircraft here.)
     if layers.near_front is not None:
-        front = stretch(layers.near_front, w, h)
+        front = looks.stretch(layers.near_front, w, h)
         out = front + (1.0 - front[..., 3:4]) * out
     out[..., 3] = 1.0
     return out
@@ -234,28 +281,94 @@ def sample_ring(ring: tuple[Image, ...], quads_m: F64, camera: Camera) -> F64:
 
 def sample_ring_depth(ring: tuple[Image, ...], quads_m: F64, camera: Camera) -> tuple[F64, F64]:
     """sample_ring, and (H, W) the distance along each ray to the quad it met (inf: none)."""
-    rays = camera.pixel_rays()
-    eye = np.asarray(camera.position_m, dtype=np.float64)
-    h, w = rays.shape[:2]
-    out = np.zeros((h, w, 4))
-    best_t = np.full((h, w), np.inf)
-    for quad, image in zip(quads_m, ring, strict=True):
-        tl, tr, _br, bl = quad
-        u, v = tr - tl, bl - tl
-        normal = np.cross(u, v)
-        denom = rays @ normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((tl - eye) @ normal) / denom
-        hit_ok = np.isfinite(t) & (t > 0.0) & (t < best_t)
-        p = eye + rays * np.where(hit_ok, t, 0.0)[..., None] - tl
-        a = (p @ u) / (u @ u)
-        b = (p @ v) / (v @ v)
-        hit = hit_ok & (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0)
-        if not hit.any():
-            continue
-        out[hit] = bilinear(image, a[hit], b[hit])
-        best_t[hit] = t[hit]
-    return out, best_t
+    return RingLookup.of(quads_m, camera).sample(ring)
+
+
+@dataclass(frozen=True)
+class Taps:
+    """Where a bilinear sample of an image reads, for many points at once: the four texels'
+    rows and columns and the weights between them (`bilinear` is `taps(...).sample`). Made
+    once for a fixed geometry, it samples any image of that size again for a gather."""
+
+    x0: npt.NDArray[np.intp]
+    x1: npt.NDArray[np.intp]
+    y0: npt.NDArray[np.intp]
+    y1: npt.NDArray[np.intp]
+    fx: F64  # (N, 1)
+    fy: F64  # (N, 1)
+
+    @classmethod
+    def of(cls, shape: tuple[int, ...], a: F64, b: F64) -> Taps:
+        """Taps at normalised (a across, b down) of an image of `shape`, texel centres at
+        (i + 0.5) / size and edges clamped, as GL's LINEAR filter with CLAMP_TO_EDGE."""
+        ph, pw = shape[:2]
+        x = np.clip(a * pw - 0.5, 0.0, pw - 1.0)
+        y = np.clip(b * ph - 0.5, 0.0, ph - 1.0)
+        x0 = np.minimum(x.astype(int), pw - 2) if pw > 1 else np.zeros_like(x, dtype=int)
+        y0 = np.minimum(y.astype(int), ph - 2) if ph > 1 else np.zeros_like(y, dtype=int)
+        return cls(
+            x0,
+            np.minimum(x0 + 1, pw - 1),
+            y0,
+            np.minimum(y0 + 1, ph - 1),
+            (x - x0)[:, None],
+            (y - y0)[:, None],
+        )
+
+    def sample(self, image: Image) -> F64:
+        """(N, 4): the four texels gathered first, then made float (a ring image is a
+        megapixel, the rays that meet it a fraction of that)."""
+        fx, fy = self.fx, self.fy
+        top = unit(image[self.y0, self.x0]) * (1 - fx) + unit(image[self.y0, self.x1]) * fx
+        bottom = unit(image[self.y1, self.x0]) * (1 - fx) + unit(image[self.y1, self.x1]) * fx
+        result: F64 = top * (1 - fy) + bottom * fy
+        return result
+
+
+@dataclass(frozen=True)
+class RingLookup:
+    """Which pixel's ray meets which quad of a ring, where on it, and how far off: the
+    geometry of `sample_ring_depth`, apart from the images, so that a host whose camera and
+    ring stand still (the web station's picture) works it out once."""
+
+    shape: tuple[int, int]  # (H, W)
+    # Per quad some ray meets, in the ring's order: its index, the pixels' mask, and where
+    # on the quad they meet it (a across, b down); a later, nearer quad's hits overwrite.
+    hits: tuple[tuple[int, npt.NDArray[np.bool_], F64, F64], ...]
+    best_t: F64  # (H, W) distance along each ray to the quad it met (inf: none)
+
+    @classmethod
+    def of(cls, quads_m: F64, camera: Camera) -> RingLookup:
+        rays = camera.pixel_rays()
+        eye = np.asarray(camera.position_m, dtype=np.float64)
+        h, w = rays.shape[:2]
+        best_t = np.full((h, w), np.inf)
+        hits = []
+        for k, quad in enumerate(quads_m):
+            tl, tr, _br, bl = quad
+            u, v = tr - tl, bl - tl
+            normal = np.cross(u, v)
+            denom = rays @ normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = ((tl - eye) @ normal) / denom
+            hit_ok = np.isfinite(t) & (t > 0.0) & (t < best_t)
+            p = eye + rays * np.where(hit_ok, t, 0.0)[..., None] - tl
+            a = (p @ u) / (u @ u)
+            b = (p @ v) / (v @ v)
+            hit = hit_ok & (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0)
+            if not hit.any():
+                continue
+            hits.append((k, hit, a[hit], b[hit]))
+            best_t[hit] = t[hit]
+        return cls((h, w), tuple(hits), best_t)
+
+    def sample(self, ring: tuple[Image, ...]) -> tuple[F64, F64]:
+        """(H, W, 4) premultiplied colour of the ring's images through each pixel, and the
+        distances (`best_t`)."""
+        out = np.zeros((*self.shape, 4))
+        for k, hit, a, b in self.hits:
+            out[hit] = bilinear(ring[k], a, b)
+        return out, self.best_t
 
 
 def stretch(image: Image, width: int, height: int) -> F64:
@@ -264,26 +377,17 @@ def stretch(image: Image, width: int, height: int) -> F64:
     with edges clamped, as a host's GL does; exact when the sizes agree."""
     if image.shape[:2] == (height, width):
         return unit(image)
+    return stretch_taps(image.shape, width, height).sample(image).reshape(height, width, 4)
+
+
+def stretch_taps(shape: tuple[int, ...], width: int, height: int) -> Taps:
+    """`stretch`'s taps of an image of `shape` over a width x height viewport."""
     a = np.broadcast_to((np.arange(width) + 0.5) / width, (height, width)).reshape(-1)
     b = np.broadcast_to(((np.arange(height) + 0.5) / height)[:, None], (height, width))
-    return bilinear(image, a, b.reshape(-1)).reshape(height, width, 4)
+    return Taps.of(shape, a, b.reshape(-1))
 
 
 def bilinear(image: Image, a: F64, b: F64) -> F64:
     """Sample (N, 4) from an image at normalised (a across, b down), texel centres at
     (i + 0.5) / size and edges clamped, as GL's LINEAR filter with CLAMP_TO_EDGE does."""
-    ph, pw = image.shape[:2]
-    x = np.clip(a * pw - 0.5, 0.0, pw - 1.0)
-    y = np.clip(b * ph - 0.5, 0.0, ph - 1.0)
-    x0 = np.minimum(x.astype(int), pw - 2) if pw > 1 else np.zeros_like(x, dtype=int)
-    y0 = np.minimum(y.astype(int), ph - 2) if ph > 1 else np.zeros_like(y, dtype=int)
-    fx = (x - x0)[:, None]
-    fy = (y - y0)[:, None]
-    x1 = np.minimum(x0 + 1, pw - 1)
-    y1 = np.minimum(y0 + 1, ph - 1)
-    # The four texels gathered first, then made float: a ring image is a megapixel, the
-    # rays that meet it a fraction of that.
-    top = unit(image[y0, x0]) * (1 - fx) + unit(image[y0, x1]) * fx
-    bottom = unit(image[y1, x0]) * (1 - fx) + unit(image[y1, x1]) * fx
-    result: F64 = top * (1 - fy) + bottom * fy
-    return result
+    return Taps.of(image.shape, a, b).sample(image)

@@ -16,6 +16,7 @@ from wxsky.errors import WxskyError
 from wxsky.host.client import ControlClient
 from wxsky.host.compositor import (
     F64,
+    CompositeCache,
     Ground,
     Layers,
     composite,
@@ -42,21 +43,26 @@ class HostFrame:
         return self.layers.sky.dtype != np.uint8
 
     def composite(
-        self, ground: Ground | None = None, exposure: float = LEGACY_EXPOSURE
+        self,
+        ground: Ground | None = None,
+        exposure: float = LEGACY_EXPOSURE,
+        cache: CompositeCache | None = None,
     ) -> npt.NDArray[np.uint8]:
         """The opaque RGBA8 picture. RGBA16F layers are composited in linear, then exposed
         (`exposure`, a scale on scene-linear colour) and tone-mapped once, as an HDR host does
         (docs/linear-output.md); RGBA8 layers are composited as they are (`exposure` unused:
         the daemon exposed them)."""
         if not self.linear:
-            return composite(self.layers, self.meta.camera, ground)
-        rgb = display(self.composite_linear(ground), exposure)
+            return composite(self.layers, self.meta.camera, ground, cache)
+        rgb = display(self.composite_linear(ground, cache), exposure)
         h, w = rgb.shape[:2]
         out = np.full((h, w, 4), 255, np.uint8)
         out[..., :3] = np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
         return out
 
-    def composite_linear(self, ground: Ground | None = None) -> F64:
+    def composite_linear(
+        self, ground: Ground | None = None, cache: CompositeCache | None = None
+    ) -> F64:
         """(H, W, 3) the scene-linear composite of RGBA16F layers, before exposure and tone
         map (what `wxsky snapshot --linear-out` writes)."""
         if not self.linear:
@@ -64,7 +70,7 @@ class HostFrame:
                 "composite_linear: this frame's layers are rgba8 display values; ask the "
                 'daemon for rgba16f ([output] layer_format = "rgba16f")'
             )
-        return composite_linear(self.layers, self.meta.camera, ground)
+        return composite_linear(self.layers, self.meta.camera, ground, cache)
 
     def shadow_at(self, points_m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """(...) the cloud shadow T at world points (..., 3): 1 where the frame has no map."""

@@ -433,7 +433,7 @@ class WebSection(_Section):
     max_clients: int = _opt(32, Number(1, 256, integer=True))
     picture_fps: float = _opt(4.0, _num(0.0, 30.0, "Hz"))  # 0: no live picture
     # The share of one core the live picture may take; pictures are spaced to keep it.
-    picture_cpu_share: float = _opt(0.05, _num(0.01, 1.0))
+    picture_cpu_share: float = _opt(0.1, _num(0.01, 1.0))
     view_interval_s: float = _opt(0.5, _num(0.05, 60.0, "s"))  # a view pushed this often
 
 

@@ -2,10 +2,12 @@
 shared-memory segment and composited as a host does (`host/reference.py`), at the width the
 pages ask for, as a JPEG. The **only** Pillow user.
 
-A picture costs the daemon CPU beside its frames, so it is made small: the sky and near
-layers are decimated to about the asked width before compositing (a tablet's picture needs
-a quarter of a 1080p frame's pixels or fewer), and the web part spaces pictures so that
-making them takes a bounded share of one core (`app/web_part.py`)."""
+A picture costs the daemon CPU beside its frames, so it is made small and cheap: the sky
+and near layers are decimated to about the asked width before compositing (a tablet's
+picture needs a quarter of a 1080p frame's pixels or fewer), the geometry of the composite
+is kept while the camera and ring stand still (`host.compositor.CompositeCache`), and the
+web part spaces pictures so that making them takes a bounded share of one core
+(`app/web_part.py`)."""
 
 from __future__ import annotations
 
@@ -18,12 +20,17 @@ import numpy as np
 from PIL import Image
 
 from wxsky.errors import WxskyError
+from wxsky.host.compositor import CompositeCache
 from wxsky.host.reference import HostFrame, host_frame
 from wxsky.output.shm import FrameReader
 
 MIN_WIDTH_PX = 160
 MAX_WIDTH_PX = 1920
 JPEG_QUALITY = 80  # sky gradients without visible blocks at a tenth of a PNG's size
+# The widest picture composited; a wider page gets it scaled up. The composite's cost goes
+# with its pixels (some 70 ms of one core at 480 x 270 with the geometry kept, on the
+# development machine's CPU): wider would leave too few pictures a second in the CPU share.
+MAX_COMPOSITE_PX = 480
 
 
 @dataclass(frozen=True)
@@ -37,10 +44,10 @@ class Picture:
 
 def decimated(frame: HostFrame, width_px: int) -> HostFrame:
     """The frame with its screen layers (sky, near, the near layer's front) taken every
-    k-th pixel, k the largest step that keeps them at least `width_px` wide, and its camera
+    k-th pixel, k the smallest step that makes them at most `width_px` wide, and its camera
     sized to match: the composite then costs 1/k² of the whole frame's."""
     layers, camera = frame.layers, frame.meta.camera
-    step = max(1, camera.width_px // max(1, width_px))
+    step = max(1, -(-camera.width_px // max(1, width_px)))
     if step == 1:
         return frame
     front = layers.near_front
@@ -64,9 +71,13 @@ class PictureMaker:
     def __init__(self, shm_name: str) -> None:
         self.shm_name = shm_name
         self._reader: FrameReader | None = None
+        # While the camera and ring stand still (an IOS beside a parked aircraft, a host
+        # between moves), which ray meets which quad is worked out once.
+        self._cache = CompositeCache()
 
     def make(self, width_px: int) -> Picture:
-        """The latest frame as a JPEG about `width_px` wide (never wider than the frame).
+        """The latest frame as a JPEG `width_px` wide (never wider than the frame), made from
+        a composite at most MAX_COMPOSITE_PX wide.
         WxskyError or OSError when the segment cannot be read (the next call reopens it)."""
         t0 = time.thread_time()
         width_px = min(MAX_WIDTH_PX, max(MIN_WIDTH_PX, int(width_px)))
@@ -76,11 +87,13 @@ class PictureMaker:
         except (WxskyError, OSError):
             self.close()
             raise
-        rgba = decimated(frame, width_px).composite()
+        small = decimated(frame, min(width_px, MAX_COMPOSITE_PX))
+        rgba = small.composite(cache=self._cache)
         image = Image.fromarray(np.ascontiguousarray(rgba[..., :3]), "RGB")
-        if image.width > width_px:
-            height = max(1, round(image.height * width_px / image.width))
-            image = image.resize((width_px, height), Image.Resampling.BILINEAR)
+        wanted = min(width_px, frame.meta.camera.width_px)
+        if image.width != wanted:
+            height = max(1, round(image.height * wanted / image.width))
+            image = image.resize((wanted, height), Image.Resampling.BILINEAR)
         out = io.BytesIO()
         image.save(out, "JPEG", quality=JPEG_QUALITY)
         return Picture(
