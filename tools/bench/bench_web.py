@@ -3,8 +3,9 @@
 private daemon with the station on loopback and a serial link on a pty pair, and measures:
 
     fps          frames a second with no page, with N pages connected (each taking every
-                 view and picture), and with N pages while a hostile client floods bad
-                 messages and a thousand connection attempts: windows taken in turn
+                 view and picture), and with N pages while hostile clients flood bad
+                 messages, open a thousand connections every ten seconds and never read
+                 (five of them): windows taken in turn
                  (none, pages, hostile, none, pages, hostile, ...), the ratios window pair
                  by window pair;
     picture      what one live picture costs the daemon (its thread's CPU time), and how
@@ -51,8 +52,9 @@ PRESETS = ("overcast-stratus", "scattered-cumulus")
 
 
 async def _pages(url: str, count: int, hostile: bool) -> None:
-    """`count` pages reading everything until stdin closes; with `hostile`, one more client
-    sending junk as fast as it may and a thousand connection attempts."""
+    """`count` pages reading everything until stdin closes; with `hostile`, besides them a
+    client flooding junk, a thousand connections every ten seconds and five pages that never
+    read."""
     import aiohttp
 
     got = {"views": 0, "pictures": 0}
@@ -68,27 +70,50 @@ async def _pages(url: str, count: int, hostile: bool) -> None:
                     got["pictures"] += 1
 
     async def flood(session: aiohttp.ClientSession) -> None:
+        """Junk as fast as the socket takes it; the daemon closes a flooder: back in 1 s."""
         junk = ["{bad", "[]", '{"id": 1, "cmd": "nope"}', "x" * 70_000, '{"id":1}']
-        async with session.ws_connect(url + "ws") as ws:
-            n = 0
-            while True:
-                await ws.send_str(junk[n % len(junk)])
-                n += 1
-                if n % 50 == 0:
-                    await asyncio.sleep(0.01)
+        while True:
+            with contextlib.suppress(aiohttp.ClientError, ConnectionError, RuntimeError):
+                async with session.ws_connect(url + "ws") as ws:
+                    n = 0
+                    while not ws.closed:
+                        await ws.send_str(junk[n % len(junk)])
+                        n += 1
+            await asyncio.sleep(1.0)
 
     async def knock(session: aiohttp.ClientSession) -> None:
-        while True:
-            for _ in range(1000):
-                with contextlib.suppress(aiohttp.ClientError):
+        """A thousand WebSocket connections at once, every ten seconds (most refused: the
+        station holds [web] max_clients)."""
+        gate = asyncio.Semaphore(100)
+
+        async def one() -> None:
+            async with gate:
+                with contextlib.suppress(aiohttp.ClientError, ConnectionError):
                     ws = await session.ws_connect(url + "ws")
+                    await asyncio.sleep(1.0)
                     await ws.close()
-            await asyncio.sleep(1.0)
+
+        while True:
+            await asyncio.gather(*(one() for _ in range(1000)))
+            await asyncio.sleep(10.0)
+
+    async def slow_reader() -> None:
+        """A page that opens the WebSocket and never reads a byte of it."""
+        host, port = url.split("//")[1].strip("/").rsplit(":", 1)
+        _reader, writer = await asyncio.open_connection(host, int(port))
+        writer.write(
+            f"GET /ws HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
+            "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+            "Sec-WebSocket-Version: 13\r\n\r\n".encode()
+        )
+        await writer.drain()
+        await asyncio.sleep(3600.0)
 
     async with aiohttp.ClientSession() as session:
         tasks = [asyncio.create_task(page(session)) for _ in range(count)]
         if hostile:
             tasks += [asyncio.create_task(flood(session)), asyncio.create_task(knock(session))]
+            tasks += [asyncio.create_task(slow_reader()) for _ in range(5)]
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(None, sys.stdin.read)  # until the parent closes it
         for t in tasks:
@@ -214,6 +239,20 @@ def main() -> int:
     p.add_argument("--rounds", type=int, default=4, help="rounds of windows (default 4)")
     p.add_argument("--changes", type=int, default=20, help="presets applied (default 20)")
     p.add_argument("--pulls", type=int, default=3, help="serial lines pulled (default 3)")
+    p.add_argument(
+        "--picture-fps", type=float, help="the station's [web] picture_fps (default: its own)"
+    )
+    p.add_argument(
+        "--picture-cpu-share",
+        type=float,
+        help="the station's [web] picture_cpu_share (default: its own)",
+    )
+    p.add_argument(
+        "--tick-hz",
+        type=float,
+        help="the daemon's [daemon] tick_hz (default: its own, 30): above what the machine "
+        "draws, every frame's cost shows in the rate",
+    )
     p.add_argument("--json", type=Path, help="write the results there too")
     p.add_argument("--pages-worker", metavar="URL", help=argparse.SUPPRESS)
     p.add_argument("--hostile", action="store_true", help=argparse.SUPPRESS)
@@ -228,7 +267,14 @@ def main() -> int:
         device.symlink_to(os.ttyname(slave))
         cfg.write_text(
             f'[output]\nshm_name = "wxsky-bench-web-{uuid.uuid4().hex[:8]}"\n'
-            f'[web]\nlisten = "127.0.0.1:0"\n'
+            + (f"[daemon]\ntick_hz = {args.tick_hz}\n" if args.tick_hz is not None else "")
+            + '[web]\nlisten = "127.0.0.1:0"\n'
+            + (f"picture_fps = {args.picture_fps}\n" if args.picture_fps is not None else "")
+            + (
+                f"picture_cpu_share = {args.picture_cpu_share}\n"
+                if args.picture_cpu_share is not None
+                else ""
+            )
         )
         env = dict(os.environ, XDG_CONFIG_HOME=str(tmp / "config"))
         cmd = [sys.executable, "-m", "wxsky", "run", "--config", str(cfg)]
@@ -272,6 +318,7 @@ def main() -> int:
     }
     window = args.window_s + 2.0
     result = {
+        "tick_hz": args.tick_hz or 30.0,
         "pages": args.pages,
         "window_s": args.window_s,
         "fps": {k: summary(v) for k, v in fps.items()},

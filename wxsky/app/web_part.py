@@ -4,8 +4,8 @@ It serves the page on the daemon's own loop (`web/server.py`), and for every con
 - a `view` (`web/view.py`) twice a second, and at once when the target weather changes, so
   a change made on one page shows on every other within a frame or two;
 - the live picture: the newest published frame composited as a host does, as a JPEG
-  (`web/picture.py`), made on a thread of its own, never on the frame path, only while a
-  page is connected, and spaced so that making them takes at most `[web]
+  (`web/picture.py`), made in a child process below the frames' priority, never on the
+  frame path, only while a page is connected, and spaced so that making them takes at most `[web]
   picture_cpu_share` of one core (and at most `picture_fps` a second);
 - the answer to each of its messages. A command runs through the daemon's one command path
   (`PartContext.command`: the same handlers, refusals and checks as the control channel),
@@ -42,7 +42,7 @@ from wxsky.web.messages import (
     reply_error,
     to_text,
 )
-from wxsky.web.picture import MAX_WIDTH_PX, MIN_WIDTH_PX, PictureMaker
+from wxsky.web.picture import MAX_WIDTH_PX, MIN_WIDTH_PX, PictureWorker
 from wxsky.web.server import WebClient, WebServer
 from wxsky.web.view import page_view
 
@@ -88,12 +88,12 @@ class WebPart(Part):
         self._has_clients = asyncio.Event()
         self._last_view: str | None = None
         self._picture_exec: concurrent.futures.ThreadPoolExecutor | None = None
-        self._maker = PictureMaker(config.output.shm_name)
+        self._maker = PictureWorker(config.output.shm_name)
         self._picture_costs: deque[float] = deque(maxlen=PICTURE_COSTS_KEPT)
         self.pictures = 0
         self._picture_error: str | None = None
         self._target_version = -1
-        self._ring_version = 0
+        self._shown_ring: object | None = None
         self._rebuilds = 0
         self._log = RateLimitedLog(log)
 
@@ -148,10 +148,12 @@ class WebPart(Part):
             await server.close(deadline_s)
         if self._picture_exec is not None:
             executor, self._picture_exec = self._picture_exec, None
-            # A picture in the making finishes on its own (a fraction of a second); its
-            # reader is closed after it, on that thread.
-            executor.submit(self._maker.close)
-            executor.shutdown(wait=False, cancel_futures=False)
+            # After a picture in the making (a fraction of a second), on that thread: the
+            # child asked to stop, then killed if it does not.
+            closing = asyncio.get_running_loop().run_in_executor(executor, self._maker.close)
+            with contextlib.suppress(TimeoutError, Exception):
+                await asyncio.wait_for(closing, max(0.05, deadline_s - time.monotonic()))
+            executor.shutdown(wait=False, cancel_futures=True)
 
     # -- frames -----------------------------------------------------------------------
 
@@ -160,10 +162,12 @@ class WebPart(Part):
         if ctx is None:
             return
         engine = ctx.engine
-        if engine.ring_version != self._ring_version:
-            if self._ring_version:
+        # A rebuild is a new whole ring on show (the version also moves with every slice and
+        # step of a cross-fade).
+        if engine.ring is not self._shown_ring:
+            if self._shown_ring is not None:
                 self._rebuilds += 1
-            self._ring_version = engine.ring_version
+            self._shown_ring = engine.ring
         if engine.target_version != self._target_version:
             self._target_version = engine.target_version
             self._view_now.set()

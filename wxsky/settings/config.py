@@ -432,8 +432,9 @@ class WebSection(_Section):
     token_file: str = _opt("")
     max_clients: int = _opt(32, Number(1, 256, integer=True))
     picture_fps: float = _opt(4.0, _num(0.0, 30.0, "Hz"))  # 0: no live picture
-    # The share of one core the live picture may take; pictures are spaced to keep it.
-    picture_cpu_share: float = _opt(0.1, _num(0.01, 1.0))
+    # The share of one core the live picture may take; pictures are spaced to keep it (they
+    # are made in a child process at nice 10, which yields to the frames).
+    picture_cpu_share: float = _opt(0.3, _num(0.01, 1.0))
     view_interval_s: float = _opt(0.5, _num(0.05, 60.0, "s"))  # a view pushed this often
 
 

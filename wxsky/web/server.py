@@ -18,8 +18,10 @@ misses views and pictures but never makes the daemon hold more; one that takes l
 from __future__ import annotations
 
 import asyncio
+import base64
 import collections
 import contextlib
+import hashlib
 import itertools
 import logging
 import time
@@ -75,6 +77,7 @@ class WebClient:
         self.wants_pictures = True
         self.dropped_views = 0
         self.dropped_pictures = 0
+        self.over_rate = 0  # messages dropped for coming faster than MESSAGES_PER_S
         self._replies: collections.deque[str] = collections.deque()
         self._view: str | None = None
         self._picture: bytes | None = None
@@ -159,6 +162,23 @@ class WebClient:
 MessageHandler = Callable[[WebClient, str | bytes], Awaitable[None]]
 
 
+def login_page(static_dir: Path) -> tuple[str, str]:
+    """login.html with the page's stylesheet put inside it, and the Content-Security-Policy
+    that allows that one style by its hash."""
+    html = (static_dir / "login.html").read_text(encoding="utf-8")
+    css = (static_dir / "style.css").read_text(encoding="utf-8")
+    link = '<link rel="stylesheet" href="/style.css">'
+    if link not in html:
+        raise ValueError(f"{static_dir / 'login.html'}: no {link} to put the style in place of")
+    html = html.replace(link, f"<style>{css}</style>")
+    digest = base64.b64encode(hashlib.sha256(css.encode("utf-8")).digest()).decode()
+    csp = (
+        f"default-src 'none'; style-src 'sha256-{digest}'; img-src data:; "
+        "form-action 'self'; frame-ancestors 'none'; base-uri 'none'"
+    )
+    return html, csp
+
+
 class WebServer:
     """Serves the station at host:port. `token`: what every request must carry (None: none,
     allowed on loopback only). `on_join(client)` is called as a page connects, `on_message`
@@ -191,8 +211,8 @@ class WebServer:
         self._ids = itertools.count(1)
         self._runner: web.AppRunner | None = None
         self._log = RateLimitedLog(log)
-        self._tasks: set[asyncio.Task[None]] = set()
         self.url = ""
+        self._login_html = login_page(static_dir)
 
     # -- life -------------------------------------------------------------------------
 
@@ -270,18 +290,27 @@ class WebServer:
             except web.HTTPException as exc:
                 response = web.Response(status=exc.status, text=f"wxsky: {exc.reason}\n")
         if not response.prepared:  # a WebSocket's headers went with its handshake
-            response.headers.update(SECURITY_HEADERS)
+            for key, value in SECURITY_HEADERS.items():
+                response.headers.setdefault(key, value)
         return response
 
     def _login_page(self, failed: bool) -> web.Response:
-        text = (self.static_dir / "login.html").read_text(encoding="utf-8")
+        """The sign-in form, as the body of a 401: whole in itself, its style inside it (no
+        other file is served without the token) and allowed by its hash alone."""
+        html, csp = self._login_html
         if failed:
-            text = text.replace("<body>", '<body class="failed">', 1)
+            html = html.replace(
+                'class="login-failed" role="alert" hidden', 'class="login-failed" role="alert"'
+            )
         return web.Response(
             status=401,
-            text=text,
+            text=html,
             content_type="text/html",
-            headers={"WWW-Authenticate": 'Bearer realm="wxsky"'},
+            headers={
+                "WWW-Authenticate": 'Bearer realm="wxsky"',
+                **SECURITY_HEADERS,
+                "Content-Security-Policy": csp,
+            },
         )
 
     async def _index(self, request: web.Request) -> web.StreamResponse:
@@ -351,6 +380,13 @@ class WebServer:
                 return
             if msg.type in (WSMsgType.TEXT, WSMsgType.BINARY):
                 if not client.allow_message():
+                    client.over_rate += 1
+                    if client.over_rate > MESSAGE_BURST:
+                        # A flood, not a person: reading it would cost the frames.
+                        why = f"sent more than {MESSAGES_PER_S:.0f} messages a second"
+                        self._log.warning("flood", f"web: page {client.id} ({client.remote}) {why}")
+                        client.close_soon(why)
+                        return
                     now = time.monotonic()
                     if now - warned_rate >= 1.0:
                         warned_rate = now
