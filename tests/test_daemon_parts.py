@@ -42,6 +42,7 @@ STATUS_KEYS = {
     "camera",
     "clock_rate",
     "clock_at_end",
+    "frozen",
     "at_eye",
     "frames",
     "scene_work",

@@ -10,18 +10,16 @@ hang."""
 from __future__ import annotations
 
 import hashlib
-import shutil
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
 from cockpit_helpers import Pty
 from daemon_harness import HANG_S, RunningDaemon, running_daemon, wait_status
 
-CHROMIUM = shutil.which("chromium")
-CHROMEDRIVER = shutil.which("chromedriver")
+from tools.gallery.chromium import CHROMEDRIVER, CHROMIUM, chromium
+
 pytestmark = [
     pytest.mark.xdist_group("web-browser"),
     pytest.mark.skipif(
@@ -30,22 +28,8 @@ pytestmark = [
         "chromium-driver)",
     ),
 ]
-webdriver = pytest.importorskip("selenium.webdriver")
+pytest.importorskip("selenium.webdriver")
 
-# Chromium as root, headless, with nothing reaching out to the network (its background
-# services would be refused on a closed network, many at a time).
-CHROMIUM_FLAGS = (
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--disable-dev-shm-usage",
-    "--window-size=1400,1000",
-)
 WEB = """
 [web]
 listen = "127.0.0.1:0"
@@ -53,17 +37,6 @@ picture_fps = 8.0
 picture_cpu_share = 0.5
 view_interval_s = 0.25
 """
-
-
-def chromium(user_data_dir: Path) -> Any:
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={user_data_dir}"):
-        options.add_argument(flag)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
 
 
 def wait_for(check: Callable[[], Any], what: str) -> Any:

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -192,6 +194,13 @@ def test_the_same_commands_over_the_control_channel(
         saved = c.call("save_preset", {"name": "web-test-save", "description": "from a test"})
     path = Path(saved["path"])
     assert path.name == "web-test-save.toml" and "from a test" in path.read_text()
+    human = subprocess.run(
+        [sys.executable, "-m", "wxsky", "status", "--control", daemon.address],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert "web station http://127.0.0.1:" in human and "(this machine only)" in human
     with daemon.client() as c, pytest.raises(Exception, match="already exists"):
         c.call("save_preset", {"name": "web-test-save"})
 

@@ -8,6 +8,9 @@ private daemon with the station on loopback and a serial link on a pty pair, and
                  (five of them): windows taken in turn
                  (none, pages, hostile, none, pages, hostile, ...), the ratios window pair
                  by window pair;
+    cpu          the daemon process's own CPU time a frame in each window (the picture's
+                 child apart): on 2 cores the clients' processes take the machine's CPU
+                 too, and this says what the daemon itself spent;
     picture      what one live picture costs the daemon (its thread's CPU time), and how
                  many a second the pages got;
     preset       a page's `apply_preset` -> the daemon's `status` showing the new target
@@ -146,11 +149,20 @@ def frames(client: ControlClient) -> tuple[int, float]:
     return int(client.call("status")["frames_published"]), time.monotonic()
 
 
-def window_fps(client: ControlClient, seconds: float) -> float:
+def cpu_s(pid: int) -> float:
+    """The process's CPU time so far, all its threads (its children apart)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def window_fps(client: ControlClient, seconds: float, pid: int) -> tuple[float, float]:
+    """Frames a second over the window, and the daemon's own CPU ms a frame."""
     n0, t0 = frames(client)
+    c0 = cpu_s(pid)
     time.sleep(seconds)
     n1, t1 = frames(client)
-    return (n1 - n0) / (t1 - t0)
+    c1 = cpu_s(pid)
+    return (n1 - n0) / (t1 - t0), 1000.0 * (c1 - c0) / max(1, n1 - n0)
 
 
 async def preset_latency(url: str, client: ControlClient, changes: int) -> dict[str, list[float]]:
@@ -292,13 +304,18 @@ def main() -> int:
                 url = client.call("status")["web"]["url"]
                 time.sleep(5.0)  # past start-up and the first ring build
                 fps: dict[str, list[float]] = {"none": [], "pages": [], "hostile": []}
+                cpu: dict[str, list[float]] = {"none": [], "pages": [], "hostile": []}
                 got: dict[str, list[dict[str, Any]]] = {"pages": [], "hostile": []}
                 for r in range(args.rounds):
-                    fps["none"].append(window_fps(client, args.window_s))
+                    rate, per_frame = window_fps(client, args.window_s, proc.pid)
+                    fps["none"].append(rate)
+                    cpu["none"].append(per_frame)
                     for kind in ("pages", "hostile"):
                         with pages_process(url, args.pages, kind == "hostile") as counts:
                             time.sleep(2.0)  # the pages connected and their pictures going
-                            fps[kind].append(window_fps(client, args.window_s))
+                            rate, per_frame = window_fps(client, args.window_s, proc.pid)
+                            fps[kind].append(rate)
+                            cpu[kind].append(per_frame)
                         got[kind].append(counts)
                     print(
                         f"round {r + 1}: "
@@ -323,6 +340,9 @@ def main() -> int:
         "window_s": args.window_s,
         "fps": {k: summary(v) for k, v in fps.items()},
         "fps_ratio": {k: summary(v) for k, v in ratios.items()},
+        # The daemon process's own CPU a frame (the picture's child apart): what the pages
+        # cost it, whatever the clients' own processes take of the machine.
+        "daemon_cpu_ms_per_frame": {k: summary(v) for k, v in cpu.items()},
         "pictures_per_s_per_page": statistics.median(
             g.get("pictures", 0) / window / args.pages for g in got["pages"]
         ),

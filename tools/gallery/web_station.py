@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -28,36 +27,13 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # run as a script from a checkout
     sys.path.insert(0, str(ROOT))
 
+from tools.gallery.chromium import chromium  # noqa: E402
 from wxsky.host.client import ControlClient  # noqa: E402
 from wxsky.protocols.nmea import sentence  # noqa: E402
 
 FEED = ROOT / "tests" / "data" / "metar" / "noaa_cycle_2025-07-26_okay_weather_HEAD1500.txt.gz"
 REPLAY = "2025-07-26T16:05:00Z"
 SHOTS = (("web-station.png", 1600, 1250), ("web-station-tablet.png", 834, 1194))
-FLAGS = (
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--disable-dev-shm-usage",
-    "--hide-scrollbars",
-)
-
-
-def browser(user_dir: Path, width: int, height: int) -> Any:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
-    for flag in (*FLAGS, f"--user-data-dir={user_dir}", f"--window-size={width},{height}"):
-        options.add_argument(flag)
-    service = Service(shutil.which("chromedriver") or "/usr/bin/chromedriver")
-    return webdriver.Chrome(service=service, options=options)
 
 
 def wait(check: Any, what: str, timeout_s: float = 120.0) -> Any:
@@ -102,7 +78,7 @@ def main() -> int:
                 os.close(slave)
                 wait(lambda: client.call("status")["frames_published"] > 100, "frames")
             for name, width, height in SHOTS:
-                driver = browser(tmp / f"chromium-{width}", width, height)
+                driver = chromium(tmp / f"chromium-{width}", width, height)
                 try:
                     driver.get(url)
                     time.sleep(6.0)  # pictures, views, the station map

@@ -505,6 +505,12 @@ def _cmd_status(args: argparse.Namespace) -> int:
     for name, hold in sorted(status.get("overrides", {}).items()):
         print(f"override {name}: {hold['source']}")
     _print_model(status.get("grib"))
+    if status.get("frozen"):
+        print("frozen: the weather stands still (freeze)")
+    web = status.get("web")
+    if isinstance(web, dict) and web.get("url"):
+        guard = "token needed" if web.get("token") else "this machine only"
+        print(f"web station {web['url']} ({guard}): {web['clients']} pages connected")
     ch = status.get("channel") or {}
     if ch.get("role") in ("master", "channel"):
         line = f"sky {ch['role']} {ch['name']!r} of site {ch['site']!r} on zenoh:{ch['endpoint']}"

@@ -542,6 +542,16 @@
   }
 
   // --- inputs: rows updated in place, keyed by name (tooltips survive the updates)
+  function shortName(name) {
+    const colon = name.indexOf(':');
+    const slash = name.lastIndexOf('/');
+    if (colon < 0 || slash < colon) return name;
+    return `${name.slice(0, colon)}:…/${name.slice(slash + 1)}`;
+  }
+  function clipText(text, n) {
+    return text.length > n ? `${text.slice(0, n - 1)}…` : text;
+  }
+
   function renderInputs(v) {
     const body = $('#inputs-table tbody');
     const list = Array.isArray(v.inputs) ? v.inputs : [];
@@ -559,7 +569,9 @@
       const down = !inp.ok;
       tr.classList.toggle('down', down);
       const [cName, cKind, cState, cMsgs, cErrs, cLast] = tr.children;
-      setText(cName, name);
+      // A feed or a link is named by its path or URL: its last part says which one, the
+      // whole is in the tooltip.
+      setText(cName, shortName(name));
       if (cName.title !== name) cName.title = name;
       setText(cKind, String(inp.kind ?? ''));
       setText(cState, down ? 'DOWN' : 'OK');
@@ -567,7 +579,7 @@
       setText(cMsgs, isNum(inp.messages) ? String(inp.messages) : '–');
       setText(cErrs, isNum(inp.errors) ? String(inp.errors) : '–');
       const last = String(inp.last_error || (down && inp.reason) || '');
-      setText(cLast, last || '—');
+      setText(cLast, last ? clipText(last, 90) : '—');
       const tip = [inp.last_error, inp.reason && inp.reason !== inp.last_error ? `(${inp.reason})` : '']
         .filter(Boolean).join(' ');
       if (cLast.title !== tip) cLast.title = tip;
