@@ -96,3 +96,21 @@ def test_a_browser_page_must_come_from_the_station_itself() -> None:
     assert not origin_allowed("http://127.0.0.1:8081", "127.0.0.1:8080")
     assert not origin_allowed("null", "127.0.0.1:8080")
     assert not origin_allowed("file://", "127.0.0.1:8080")
+
+
+def test_a_pages_mailbox_keeps_the_newest_view_and_picture_and_a_bounded_queue() -> None:
+    """What a page that reads nothing costs: one view, one picture and MAX_QUEUED_REPLIES
+    replies at most, then it is closed."""
+    from wxsky.web.server import MAX_QUEUED_REPLIES, WebClient
+
+    client = WebClient(1, None, "test")  # type: ignore[arg-type]  # never sent to here
+    for k in range(1000):
+        client.send_view(f"view {k}")
+        client.send_picture(b"jpeg %d" % k)
+    assert client._view == "view 999" and client._picture == b"jpeg 999"
+    assert client.dropped_views == 999 and client.dropped_pictures == 999
+    assert all(client.send_text(f"reply {k}") for k in range(MAX_QUEUED_REPLIES))
+    assert client.closed_why is None
+    assert not client.send_text("one too many")
+    assert client.closed_why == f"{MAX_QUEUED_REPLIES} replies unread"
+    assert len(client._replies) == MAX_QUEUED_REPLIES
