@@ -8,6 +8,7 @@ run a second one bound off loopback."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import subprocess
 import sys
@@ -342,6 +343,12 @@ def test_off_loopback_every_route_needs_the_token(tmp_path: Path) -> None:
                     out["with cookie"] = resp.status
                 page = await _page(session, url)
                 out["command"] = await page.call("freeze", frozen=False)
+                # The daemon stops with the page connected: the page is closed, not left.
+                loop = asyncio.get_running_loop()
+                out["exit"], _ = await loop.run_in_executor(None, daemon.stop)
+                while not page.ws.closed:
+                    with contextlib.suppress(ConnectionError):
+                        await page.receive()
             return out
 
         out = _run(go())
@@ -355,3 +362,6 @@ def test_off_loopback_every_route_needs_the_token(tmp_path: Path) -> None:
     assert out["ws"] == 401 and out["wrong"] == 401 and out["bad login"] == 401
     assert out["bearer"] == 200 and out["login"] == 303 and out["with cookie"] == 200
     assert out["command"]["ok"] is True
+    assert out["exit"] == 0
+    log = daemon.log()
+    assert "Traceback" not in log and "did not close in time" not in log, log[-3000:]

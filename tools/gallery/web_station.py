@@ -77,6 +77,8 @@ def main() -> int:
                 os.close(master)  # the cable pulled: the page shows the link down
                 os.close(slave)
                 wait(lambda: client.call("status")["frames_published"] > 100, "frames")
+                # The sky whole: the first ring built and on show.
+                wait(lambda: client.call("scene")["ring"] is not None, "the first ring", 600.0)
             for name, width, height in SHOTS:
                 driver = chromium(tmp / f"chromium-{width}", width, height)
                 try:

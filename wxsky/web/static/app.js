@@ -358,6 +358,7 @@
   function renderPerf(v) {
     const parts = [];
     parts.push(`fps ${fmt1(v.fps)}`);
+    if (isNum(v.fps) && v.fps > 0) parts.push(`frame ${fmt1(1000 / v.fps)} ms`);
     if (isNum(v.frame_gap_ms)) parts.push(`largest gap ${Math.round(v.frame_gap_ms)} ms`);
     if (v.ring) {
       parts.push(`ring rebuilds ${v.ring.rebuilds ?? 0}${v.ring.busy ? ' (building)' : ''}`);
