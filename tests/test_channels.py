@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from daemon_harness import HANG_S, RunningDaemon, running_daemon
+from daemon_harness import HANG_S, DaemonSpec, RunningDaemon, running_daemon, running_daemons
 
 from wxsky.weather.state import parse_time_utc
 
@@ -79,12 +79,16 @@ def dome(tmp_path: Path, endpoint: str) -> Iterator[tuple[RunningDaemon, ...]]:
     for name in ("master", "left", "right"):
         (tmp_path / name).mkdir(exist_ok=True)
     share = f"zenoh:{endpoint}"
+    # The two channels are started together, after the master (their start-ups overlap).
+    channels = [
+        DaemonSpec(tmp_path / name, SMALL, channel_args(share, name, yaw))
+        for name, yaw in (("left", -60.0), ("right", 60.0))
+    ]
     with (
         running_daemon(
             tmp_path / "master", SMALL, ("--share", share, "--preset", "fair-cumulus")
         ) as master,
-        running_daemon(tmp_path / "left", SMALL, channel_args(share, "left", -60.0)) as left,
-        running_daemon(tmp_path / "right", SMALL, channel_args(share, "right", 60.0)) as right,
+        running_daemons(channels) as (left, right),
     ):
         yield master, left, right
 

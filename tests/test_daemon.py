@@ -180,8 +180,11 @@ def test_apply_metar_and_preset_set_the_target_in_precedence_order(tmp_path: Pat
 @pytest.mark.gl
 def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) -> None:
     when = "2026-06-21T15:30:00Z"
+    # Impostors of 128 texels (conftest.py GL_RING_PX), not the default 512, in both pictures
+    # alike (the daemon's config and the snapshot's settings): a sixteenth of each ring's fill.
+    ring = "[scene]\nring_texture_px = 128\n"
     with (
-        running_daemon(tmp_path, extra_config="[clock]\nrate = 0.0\n") as d,
+        running_daemon(tmp_path, extra_config="[clock]\nrate = 0.0\n" + ring) as d,
         ReferenceHost.connect(d.address) as host,
     ):
         host.call("set_time", {"time_utc": when})
@@ -215,7 +218,7 @@ def test_reference_host_composites_the_same_picture_as_snapshot(tmp_path: Path) 
         width_px=320,
         height_px=180,
     )
-    shot = take_snapshot(state, camera, SceneSettings(), drift_s=drift_s)
+    shot = take_snapshot(state, camera, SceneSettings(ring_texture_px=128), drift_s=drift_s)
     assert hosted.shape == shot.image.shape
     diff = np.abs(hosted.astype(int) - shot.image.astype(int))
     assert diff.max() <= 1, f"max diff {diff.max()}, {np.mean(diff > 1):.4f} of values off"

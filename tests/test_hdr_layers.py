@@ -645,9 +645,12 @@ def daemons(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Any, Any
     from daemon_harness import DaemonSpec
 
     root = tmp_path_factory.mktemp("daemons")
+    # Small pictures and impostors, not the default 960x540 and 512 texels: the hosts here
+    # ask for their own sizes (160x90, 96x54), and the formats do not depend on either.
+    small = "[camera]\nwidth = 160\nheight = 90\n[scene]\nring_texture_px = 64\n"
     specs = [
-        DaemonSpec(root / "hdr", 'layer_format = "rgba16f"\n[clock]\nrate = 0.0\n'),
-        DaemonSpec(root / "default", "[clock]\nrate = 0.0\n"),
+        DaemonSpec(root / "hdr", 'layer_format = "rgba16f"\n[clock]\nrate = 0.0\n' + small),
+        DaemonSpec(root / "default", "[clock]\nrate = 0.0\n" + small),
     ]
     for spec in specs:
         spec.tmp_path.mkdir()

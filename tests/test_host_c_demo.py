@@ -30,7 +30,10 @@ WHEN = "2026-07-08T16:30:00Z"
 @pytest.fixture(scope="module")
 def daemon(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningDaemon]:
     folder = tmp_path_factory.mktemp("demo")
-    with running_daemon(folder, args=("--preset", "scattered-cumulus")) as d:
+    # The demo asks for its own size; 128-texel impostors, as the GL tests' (conftest.py
+    # GL_RING_PX), not the default 512: a sixteenth of the ring's fill for every rebuild.
+    small = f"[camera]\nwidth = {W}\nheight = {H}\n[scene]\nring_texture_px = 128\n"
+    with running_daemon(folder, small, args=("--preset", "scattered-cumulus")) as d:
         yield d
 
 

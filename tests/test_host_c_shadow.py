@@ -249,7 +249,13 @@ def test_a_daemons_shadow_map_reaches_both_hosts_and_moves_with_the_clouds(
     layer = preset.layers[0]
     wind = np.array(preset.wind_at(0.5 * (layer.base_m + layer.top_m)))
     with (
-        running_daemon(tmp_path, extra_config="[clock]\nrate = 1.0\n") as d,
+        # 128-texel impostors (conftest.py GL_RING_PX), not the default 512: the ring is not
+        # what is looked at here, the shadow map (its own size) and the ground are.
+        running_daemon(
+            tmp_path,
+            extra_config=f"[clock]\nrate = 1.0\n[camera]\nwidth = {W}\nheight = {H}\n"
+            "[scene]\nring_texture_px = 128\n",
+        ) as d,
         ReferenceHost.connect(d.address) as host,
     ):
         host.call("apply_preset", {"name": "scattered-cumulus"})

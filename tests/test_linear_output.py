@@ -330,10 +330,13 @@ def test_the_daemon_draws_at_the_configured_exposure(tmp_path: Path) -> None:
 
     from wxsky.host.reference import ReferenceHost
 
+    # Small pictures and impostors (the default 960x540 and 512 texels drew far more than the
+    # sky's mean needs): both daemons alike, only the exposure differs.
+    small = f"[camera]\nwidth = {W}\nheight = {H}\n[scene]\nring_texture_px = 128\n"
     specs = []
     for name, extra in (("ev0", ""), ("ev1", "[render]\nexposure = 1.0\n")):
         (tmp_path / name).mkdir()
-        specs.append(DaemonSpec(tmp_path / name, extra_config=extra))
+        specs.append(DaemonSpec(tmp_path / name, extra_config=small + extra))
     skies = []
     with running_daemons(specs) as daemons:
         for d in daemons:
