@@ -304,11 +304,9 @@ class WebPart(Part):
                 await self._has_clients.wait()
                 continue
             await asyncio.sleep(max(0.0, next_s - time.monotonic()))
-            wanting = [c for c in server.clients.values() if c.wants_pictures]
-            if not wanting:
-                next_s = time.monotonic() + 1.0 / section.picture_fps
+            if not server.clients:  # the last page left while we waited
                 continue
-            width = _bucket(max(c.width_px for c in wanting))
+            width = _bucket(max(c.width_px for c in server.clients.values()))
             started = time.monotonic()
             try:
                 assert self._picture_exec is not None

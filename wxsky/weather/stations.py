@@ -86,22 +86,40 @@ def split_by_age(
     return fresh, stale
 
 
+def weights(distances_m: Sequence[float]) -> list[float]:
+    """Each station's share of the blend, from its distance (nearest first), summing to 1:
+    inverse distance squared, or all to the first when it stands at the point."""
+    if not distances_m:
+        return []
+    if len(distances_m) == 1 or distances_m[0] < AT_STATION_M:
+        return [1.0] + [0.0] * (len(distances_m) - 1)
+    inverse = _inverse_square(distances_m)
+    total = sum(inverse)
+    return [w / total for w in inverse]
+
+
+def _inverse_square(distances_m: Sequence[float]) -> list[float]:
+    """The blend's weights as it sums with them (each mean divides by their total)."""
+    return [1.0 / (d * d) for d in distances_m]
+
+
 def blend(chosen: Sequence[tuple[StationWeather, float]]) -> WeatherPatch:
-    """The METAR weather at a point from stations at the given distances (nearest first)."""
+    """The METAR weather at a point from stations at the given distances (nearest first),
+    each counted by its `weights` share."""
     if not chosen:
         return WeatherPatch(source=Source.METAR)
     if len(chosen) == 1 or chosen[0][1] < AT_STATION_M:
         return chosen[0][0].patch
-    weights = [1.0 / (d * d) for _, d in chosen]
+    weights_ = _inverse_square([d for _, d in chosen])
     patches = [s.patch for s, _ in chosen]
     return WeatherPatch(
         source=Source.METAR,
-        layers=_blend_layers(patches, weights),
-        wind=_blend_wind(patches, weights),
-        visibility_m=_mean((p.visibility_m for p in patches), weights),
-        temperature_c=_mean((p.temperature_c for p in patches), weights),
-        dewpoint_c=_mean((p.dewpoint_c for p in patches), weights),
-        qnh_hpa=_mean((p.qnh_hpa for p in patches), weights),
+        layers=_blend_layers(patches, weights_),
+        wind=_blend_wind(patches, weights_),
+        visibility_m=_mean((p.visibility_m for p in patches), weights_),
+        temperature_c=_mean((p.temperature_c for p in patches), weights_),
+        dewpoint_c=_mean((p.dewpoint_c for p in patches), weights_),
+        qnh_hpa=_mean((p.qnh_hpa for p in patches), weights_),
         present_weather=patches[0].present_weather,
     )
 

@@ -74,7 +74,6 @@ class WebClient:
         self.ws = ws
         self.remote = remote
         self.width_px = 640  # how wide the page shows the picture (its `view` message)
-        self.wants_pictures = True
         self.dropped_views = 0
         self.dropped_pictures = 0
         self.over_rate = 0  # messages dropped for coming faster than MESSAGES_PER_S
@@ -255,8 +254,7 @@ class WebServer:
     def broadcast_picture(self, jpeg: bytes) -> None:
         """One picture for every page (made as wide as the widest asks; a browser scales)."""
         for client in self.clients.values():
-            if client.wants_pictures:
-                client.send_picture(jpeg)
+            client.send_picture(jpeg)
 
     # -- HTTP -------------------------------------------------------------------------
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from wxsky.weather.stations import weights
+
 # Status keys the page shows as they are.
 _KEPT = ("fps", "frames_published", "weather", "target", "settled", "overrides", "channel")
 _INPUT_KEYS = ("name", "kind", "ok", "messages", "errors", "last_error", "last_message_s")
@@ -60,20 +62,16 @@ def station_rows(
     chosen: Sequence[tuple[str, float, float, float, str | None]],
 ) -> list[dict[str, Any]]:
     """The stations the METAR weather is made of, each (id, lat, lon, distance_m,
-    observed_utc), weighted as `weather.stations.blend` weighs them (1/d², summing to 1; a
-    station at the site takes it all)."""
-    if not chosen:
-        return []
-    inverse = [1.0 / max(d, 1.0) ** 2 for _, _, _, d, _ in chosen]
-    total = sum(inverse)
+    observed_utc), nearest first, with its share of the blend (`weather.stations.weights`)."""
+    shares = weights([d for _, _, _, d, _ in chosen])
     return [
         {
             "station": sid,
             "lat_deg": lat,
             "lon_deg": lon,
             "distance_km": d / 1000.0,
-            "weight": w / total,
+            "weight": w,
             "observed_utc": observed,
         }
-        for (sid, lat, lon, d, observed), w in zip(chosen, inverse, strict=True)
+        for (sid, lat, lon, d, observed), w in zip(chosen, shares, strict=True)
     ]
