@@ -45,7 +45,10 @@ TERRAIN = KIT / "examples" / "terrain.osg"
 # a moved camera) fills a quarter as much.
 PACING = "near_depth = true\n[scene]\nring_slice_ms = 0\nring_fade_s = 0\nring_texture_px = 128\n"
 TICK = "tick_hz = 10.0"
-HANG_S = 120.0
+# The tools' own wait for a settled frame (their default 60 s was reached on a loaded 2-core
+# CI machine with nothing wrong but the load), and ours for them: only a hang reaches either.
+WAIT_S = 300
+HANG_S = WAIT_S + 60.0
 
 # (north, east offset of the camera from the site in degrees, alt_m, heading, pitch, roll):
 # north over the ridge (the terrain covers the lower part), up to the south (sky only), and
@@ -81,6 +84,8 @@ def _noon(preset: str) -> tuple[datetime, float, float]:
 
 
 def _run(args: list[str], env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """One of the kits' snapshot tools, waiting as long as only a hang would."""
+    args = [*args, "--timeout-s", str(WAIT_S)]
     proc = subprocess.run(args, capture_output=True, text=True, timeout=HANG_S, env=env)
     if proc.returncode == 2:
         pytest.skip(proc.stderr.strip())

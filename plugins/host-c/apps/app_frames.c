@@ -199,7 +199,8 @@ int app_wait_settled_frame(wxsky_client *c, wxsky_segment *seg, wxsky_frame_copy
             snprintf(err, APP_ERR, "the ring did not settle within %d ms", timeout_ms);
             return WXSKY_ETIMEDOUT;
         }
-        app_sleep_ms(10.0);
+        /* a ring takes seconds: asked often, `scene` only takes the daemon's time */
+        app_sleep_ms(50.0);
     }
     /* a frame drawn after the ring was seen settled */
     st = app_wait_frame(seg, copy, rec, wxsky_segment_latest_frame(seg), cam,

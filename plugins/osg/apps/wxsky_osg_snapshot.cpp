@@ -573,8 +573,10 @@ int run(const Args &a) {
                                      sky->status().last_error};
             viewer.frame();
             osgwxsky::Status s = sky->status();
+            // Paced while it waits: a frame drawn as fast as it goes takes a core of a small
+            // machine from the daemon, which is building the very ring waited for.
             if (!s.record_matches_camera || !s.frames_uploaded) {
-                usleep(5000);
+                usleep(20000);
                 continue;
             }
             if (settled == 0 && now_s() >= next_scene) {
@@ -589,7 +591,7 @@ int run(const Args &a) {
                     seen = s.last_frame_number;
                 }
             }
-            usleep(5000);
+            usleep(settled ? 5000 : 50000);
         }
         glFinish();
         px = gl.read(w, h);
