@@ -3,7 +3,7 @@ shared-memory segment and composited as a host does (`host/reference.py`), at th
 pages ask for, as a JPEG. The **only** Pillow user.
 
 A picture costs the daemon CPU beside its frames, so it is made small and cheap: the sky
-and near layers are decimated to about the asked width before compositing (a tablet's
+and near layers are reduced to about the asked width before compositing (a tablet's
 picture needs a quarter of a 1080p frame's pixels or fewer), the geometry of the composite
 is kept while the camera and ring stand still (`host.compositor.CompositeCache`), it is made
 in a child process below the frames' priority (`PictureWorker`), and the web part spaces
@@ -22,10 +22,12 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 
 import numpy as np
+import numpy.typing as npt
 from PIL import Image
 
 from wxsky.errors import WxskyError
 from wxsky.host.compositor import CompositeCache
+from wxsky.host.compositor import Image as Layer
 from wxsky.host.reference import HostFrame, host_frame
 from wxsky.output.shm import FrameReader
 
@@ -47,10 +49,46 @@ class Picture:
     took_s: float  # reading, compositing and encoding it, on this thread's clock
 
 
+def box_reduced(image: Layer, step: int) -> Layer:
+    """`image` (H, W, C) averaged over step x step blocks, its last row and column repeated
+    to fill the last blocks: (ceil(H/step), ceil(W/step), C) of its dtype. The layers are
+    premultiplied, so their mean is the mean of what they show. (A pixel taken every k-th
+    would alias whatever is finer than k pixels: a far rain curtain's sheets came out as pin
+    stripes.)"""
+    h, w, c = image.shape
+    hs, ws = -(-h // step), -(-w // step)
+    full: npt.NDArray[np.generic] = image
+    if (hs * step, ws * step) != (h, w):
+        full = np.pad(image, ((0, hs * step - h), (0, ws * step - w), (0, 0)), mode="edge")
+    if image.dtype == np.uint8:
+        acc_type: type[np.generic] = np.uint16 if step * step * 255 <= 0xFFFF else np.uint32
+    else:
+        acc_type = np.float32
+    # Strided adds, rows then columns: a fifteenth of the time of a mean over the blocks'
+    # axes (7 against 100 ms for 1080p in fours), which walks the array element by element.
+    rows = full.reshape(hs, step, ws * step, c)
+    acc = rows[:, 0].astype(acc_type)
+    for k in range(1, step):
+        acc += rows[:, k]
+    cols = acc.reshape(hs, ws, step, c)
+    total = cols[:, :, 0].copy()
+    for k in range(1, step):
+        total += cols[:, :, k]
+    if image.dtype == np.uint8:
+        rounded: npt.NDArray[np.uint8] = ((total + step * step // 2) // (step * step)).astype(
+            np.uint8
+        )
+        return rounded
+    if image.dtype == np.float16:
+        return (total / (step * step)).astype(np.float16)
+    return (total / (step * step)).astype(np.float32)
+
+
 def decimated(frame: HostFrame, width_px: int) -> HostFrame:
-    """The frame with its screen layers (sky, near, the near layer's front) taken every
-    k-th pixel, k the smallest step that makes them at most `width_px` wide, and its camera
-    sized to match: the composite then costs 1/k² of the whole frame's."""
+    """The frame with its screen layers (sky, near, the near layer's front) reduced by the
+    smallest whole step k that makes them at most `width_px` wide (each pixel the mean of a
+    k x k block), and its camera sized to match: the composite then costs 1/k² of the whole
+    frame's."""
     layers, camera = frame.layers, frame.meta.camera
     step = max(1, -(-camera.width_px // max(1, width_px)))
     if step == 1:
@@ -58,9 +96,9 @@ def decimated(frame: HostFrame, width_px: int) -> HostFrame:
     front = layers.near_front
     small = dataclasses.replace(
         layers,
-        sky=layers.sky[::step, ::step],
-        near=layers.near[::step, ::step],
-        near_front=None if front is None else front[::step, ::step],
+        sky=box_reduced(layers.sky, step),
+        near=box_reduced(layers.near, step),
+        near_front=None if front is None else box_reduced(front, step),
     )
     h, w = small.sky.shape[:2]
     # The same field of view over fewer pixels: every ray goes where the full frame's did.
