@@ -126,6 +126,10 @@ def test_the_page_shows_the_live_picture(station: Station) -> None:
 def test_a_preset_applied_on_the_page_is_the_daemons_target(station: Station) -> None:
     from selenium.webdriver.support.select import Select
 
+    # (the list comes with the daemon's greeting: this test may be a fresh page's first)
+    wait_for(
+        lambda: station.finds('#preset-select option[value="overcast-stratus"]'), "the presets"
+    )
     Select(station.find("#preset-select")).select_by_value("overcast-stratus")
     station.find("#preset-apply").click()
     status = wait_status(

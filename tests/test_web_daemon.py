@@ -343,12 +343,15 @@ def test_off_loopback_every_route_needs_the_token(tmp_path: Path) -> None:
                     out["with cookie"] = resp.status
                 page = await _page(session, url)
                 out["command"] = await page.call("freeze", frozen=False)
-                # The daemon stops with the page connected: the page is closed, not left.
+                # The daemon stops with the page connected: the page is closed, not left. The
+                # page reads on meanwhile, as a browser does (its answer to the close is sent
+                # as it reads it).
                 loop = asyncio.get_running_loop()
-                out["exit"], _ = await loop.run_in_executor(None, daemon.stop)
+                stopping = loop.run_in_executor(None, daemon.stop)
                 while not page.ws.closed:
                     with contextlib.suppress(ConnectionError):
                         await page.receive()
+                out["exit"], _ = await stopping
             return out
 
         out = _run(go())

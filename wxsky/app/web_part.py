@@ -143,17 +143,26 @@ class WebPart(Part):
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         self._tasks = []
+        # The pages and the picture child close side by side, each by the deadline: one
+        # after the other, a page slow to answer its close would leave the child none.
+        steps = []
         if self._server is not None:
             server, self._server = self._server, None
-            await server.close(deadline_s)
+            steps.append(server.close(deadline_s))
         if self._picture_exec is not None:
             executor, self._picture_exec = self._picture_exec, None
-            # After a picture in the making (a fraction of a second), on that thread: the
-            # child asked to stop, then killed if it does not.
-            closing = asyncio.get_running_loop().run_in_executor(executor, self._maker.close)
-            with contextlib.suppress(TimeoutError, Exception):
-                await asyncio.wait_for(closing, max(0.05, deadline_s - time.monotonic()))
-            executor.shutdown(wait=False, cancel_futures=True)
+            steps.append(self._close_pictures(executor, deadline_s))
+        await asyncio.gather(*steps)
+
+    async def _close_pictures(
+        self, executor: concurrent.futures.ThreadPoolExecutor, deadline_s: float
+    ) -> None:
+        # After a picture in the making (a fraction of a second), on that thread: the child
+        # asked to stop, then killed if it does not.
+        closing = asyncio.get_running_loop().run_in_executor(executor, self._maker.close)
+        with contextlib.suppress(TimeoutError, Exception):
+            await asyncio.wait_for(closing, max(0.0, deadline_s - time.monotonic()))
+        executor.shutdown(wait=False, cancel_futures=True)
 
     # -- frames -----------------------------------------------------------------------
 

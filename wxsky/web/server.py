@@ -239,7 +239,7 @@ class WebServer:
             client.close_soon("the daemon is stopping")
         runner, self._runner = self._runner, None
         if runner is not None:
-            left = max(0.05, deadline_s - time.monotonic())
+            left = max(0.0, deadline_s - time.monotonic())
             try:
                 await asyncio.wait_for(runner.cleanup(), left)
             except TimeoutError:
