@@ -57,6 +57,7 @@ def main() -> int:
         sock, cfg, device = tmp / "wx.sock", tmp / "wxsky.toml", tmp / "ttyUSB-panel"
         master, slave = os.openpty()
         device.symlink_to(os.ttyname(slave))
+        args.out_dir.mkdir(parents=True, exist_ok=True)
         cfg.write_text(
             f'[output]\nshm_name = "wxsky-web-gallery-{uuid.uuid4().hex[:8]}"\n'
             "[camera]\nheading_deg = 230.0\npitch_deg = 8.0\n"
@@ -85,7 +86,9 @@ def main() -> int:
                     driver.get(url)
                     time.sleep(6.0)  # pictures, views, the station map
                     out = args.out_dir / name
-                    driver.save_screenshot(str(out))
+                    if not driver.save_screenshot(str(out)):
+                        print(f"web_station: error: could not write {out}", file=sys.stderr)
+                        return 1
                     print(f"wrote {out}")
                 finally:
                     driver.quit()
