@@ -11,7 +11,7 @@ from wxsky.host.compositor import Layers
 from wxsky.host.reference import HostFrame
 from wxsky.output.frame_meta import FrameMeta
 from wxsky.scene.camera import Camera
-from wxsky.web.picture import box_reduced, decimated
+from wxsky.web.picture import box_reduced, reduced
 
 
 def test_box_reduced_averages_each_block_and_repeats_the_edge() -> None:
@@ -62,7 +62,7 @@ def _striped_frame(width_px: int, height_px: int) -> HostFrame:
 
 def test_the_pictures_frame_shows_fine_stripes_as_their_mean() -> None:
     frame = _striped_frame(640, 360)
-    small = decimated(frame, 160)
+    small = reduced(frame, 160)
     cam = small.meta.camera
     assert (cam.width_px, cam.height_px) == (160, 90) == small.layers.sky.shape[1::-1]
     assert cam.fov_deg == frame.meta.camera.fov_deg  # the same view over fewer pixels
@@ -71,4 +71,4 @@ def test_the_pictures_frame_shows_fine_stripes_as_their_mean() -> None:
     assert np.abs(rgb - 128).max() <= 1
     whole = box_reduced(frame.composite(), 4)[..., :3].astype(int)
     assert np.abs(rgb - whole).max() <= 1
-    assert decimated(frame, 640) is frame  # wide enough already: the frame as it is
+    assert reduced(frame, 640) is frame  # wide enough already: the frame as it is

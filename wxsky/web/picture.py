@@ -84,7 +84,7 @@ def box_reduced(image: Layer, step: int) -> Layer:
     return (total / (step * step)).astype(np.float32)
 
 
-def decimated(frame: HostFrame, width_px: int) -> HostFrame:
+def reduced(frame: HostFrame, width_px: int) -> HostFrame:
     """The frame with its screen layers (sky, near, the near layer's front) reduced by the
     smallest whole step k that makes them at most `width_px` wide (each pixel the mean of a
     k x k block), and its camera sized to match: the composite then costs 1/k² of the whole
@@ -130,7 +130,7 @@ class PictureMaker:
         except (WxskyError, OSError):
             self.close()
             raise
-        small = decimated(frame, min(width_px, MAX_COMPOSITE_PX))
+        small = reduced(frame, min(width_px, MAX_COMPOSITE_PX))
         rgba = small.composite(cache=self._cache)
         image = Image.fromarray(np.ascontiguousarray(rgba[..., :3]), "RGB")
         wanted = min(width_px, frame.meta.camera.width_px)
