@@ -54,16 +54,17 @@ float erf_approx(float x) {
 // across, drawn out ten times as long, falling; the core's extinction scaled 0.2..1.8 by them
 // (their mean 1: the radar and the eye see the mean).
 // Sheets narrower than a few pixels where they are seen give way to their mean (0.5), or far
-// curtains would alias into pin stripes.
+// curtains would alias into pin stripes: each from about six pixels a period down to two and
+// a half (a value noise's period is its cell; `pixel_m` is how far the sheets move a pixel).
 float sheets(float across_m, float z_m, float seed, float pixel_m) {
     float fall = (z_m + u_fall_m) / 1400.0;
     float finest = mix(value_noise(vec2(across_m / 19.0 - seed, fall * 2.1)), 0.5,
-                       smoothstep(2.5, 6.0, pixel_m));
+                       smoothstep(3.2, 7.5, pixel_m));
     float fine = 0.7 * mix(value_noise(vec2(across_m / 70.0 + seed, fall * 1.3)), 0.5,
-                           smoothstep(9.0, 22.0, pixel_m))
+                           smoothstep(11.5, 27.0, pixel_m))
                  + 0.3 * finest;
     float coarse = mix(value_noise(vec2(across_m / 260.0 - seed, fall * 0.5 + 7.0)), 0.5,
-                       smoothstep(35.0, 80.0, pixel_m));
+                       smoothstep(44.0, 100.0, pixel_m));
     return 0.2 + 1.6 * clamp(0.45 * fine + 0.55 * coarse + (fine - 0.5) * 0.4, 0.0, 1.0);
 }
 
@@ -110,6 +111,8 @@ void main() {
         // Across the curtain as the eye sees it (fixed to the world: the sheets stay put as
         // the view turns).
         vec2 side = normalize(vec2(-a.y, a.x) + vec2(1e-6, 0.0));
+        float axis_m = length(a);
+        float cos_off = s0 / max(axis_m, 1e-3);
         // The Gaussian column integrated along the ray in three stretches front to back (its
         // near side, its core, its far side: boundaries half a radius either side of the
         // ray's nearest point to the axis), each with the sheets where it lies, so near
@@ -125,8 +128,15 @@ void main() {
             float e1 = erf_approx((s_end - s0) / radius);
             float z = u_eye_z + s_at * slope;
             float across = dot((s0 + (float(k) - 1.0) * radius) * u - a, side);
+            // How fast `across` moves as the ray turns (metres a radian of azimuth, d/dphi of
+            // (D cos phi + (k-1) r) sin phi, phi the ray's angle off the axis): a pixel's
+            // breadth in the sheets, so those finer than a few pixels fade to their mean.
+            // (The distance along the ray is not it: beside or under a storm the sampled
+            // point swings round far faster, and the sheets aliased into pin stripes.)
+            float across_rate = abs(axis_m * (2.0 * cos_off * cos_off - 1.0)
+                                    + (float(k) - 1.0) * radius * cos_off);
             float sheet = sheets(across, z, u_span[i].w + 31.0 * float(k),
-                                 s_at / ch * u_pixel_rad);
+                                 across_rate / ch * u_pixel_rad);
             // Up into the cloud it falls from, the rain fades into it (no edge at its base).
             float ragged_top = value_noise(vec2(across / 110.0, 3.0 + u_span[i].w));
             float tau = u_axis[i].w * across_gauss * (e1 - e0) * sheet
