@@ -47,6 +47,7 @@ class Look:
     structure: float  # 0..255 units
     shaft_minus_base: float | None  # None: no shaft with a base over it in view
     shaft_pixels: int
+    stripes: float  # 0..255 units: pin stripes (`stripes`)
 
 
 def storm_state(when: str) -> WeatherState:
@@ -79,6 +80,13 @@ def structure(lum: npt.NDArray[np.float64]) -> float:
     """The issue's local structure over the upper 40 % of the frame."""
     band = (box_blur(lum, 9) - box_blur(lum, 61))[: int(0.4 * lum.shape[0])]
     return float(band.std())
+
+
+def stripes(lum: npt.NDArray[np.float64]) -> float:
+    """The mean difference of neighbouring columns over the same band: what a curtain's
+    sheets aliased into pin stripes add (they sit under `structure`'s 9-pixel blur)."""
+    band = lum[: int(0.4 * lum.shape[0])]
+    return float(np.abs(np.diff(band, axis=1)).mean())
 
 
 def render(renderer: Renderer, state: WeatherState, cam: Camera) -> npt.NDArray[np.uint8]:
@@ -172,7 +180,8 @@ def measure(renderer: Renderer, when: str, png_dir: Path | None = None) -> dict[
         height_px=SIZE[1],
     )
     image = render(renderer, state, ground)
-    out["ground"] = Look(structure(luminance(image)), None, 0)
+    lum = luminance(image)
+    out["ground"] = Look(structure(lum), None, 0, stripes(lum))
     if png_dir is not None:
         write_png(png_dir / f"storm-ground-{when}.png", image)
     found = shaft_camera(state)
@@ -182,8 +191,9 @@ def measure(renderer: Renderer, when: str, png_dir: Path | None = None) -> dict[
         frame = frame_of(st, cam)
         assert frame.precip is not None
         opacity = curtain_opacity(frame.precip, cam.position_m, cam.pixel_rays().reshape(-1, 3))
-        diff, n = shaft_minus_base(luminance(image), opacity.reshape(SIZE[1], SIZE[0]))
-        out["shaft"] = Look(structure(luminance(image)), diff, n)
+        lum = luminance(image)
+        diff, n = shaft_minus_base(lum, opacity.reshape(SIZE[1], SIZE[0]))
+        out["shaft"] = Look(structure(lum), diff, n, stripes(lum))
         if png_dir is not None:
             write_png(png_dir / f"storm-shaft-{when}.png", image)
     return out
@@ -199,7 +209,8 @@ def main() -> int:
             looks = measure(renderer, when, args.png)
             g = looks["ground"]
             print(
-                f"{when:5s} ground view: base structure {g.structure:.2f}/255 (bar {STRUCTURE_BAR})"
+                f"{when:5s} ground view: base structure {g.structure:.2f}/255 "
+                f"(bar {STRUCTURE_BAR}); neighbouring columns {g.stripes:.3f}/255"
             )
             s = looks.get("shaft")
             if s is None or s.shaft_minus_base is None:
