@@ -165,6 +165,11 @@ def _handler(served: Served) -> type[http.server.BaseHTTPRequestHandler]:
             etag: str | None = None,
             extra: dict[str, str] | None = None,
         ) -> None:
+            # Counted before anything goes: the client may act on the status line alone (a 404
+            # sends it on to the next URL) and the test read the count before this thread got
+            # back from writing the headers, let alone the body.
+            with served.lock:
+                served.bytes_sent += len(body)
             self.send_response(status)
             if etag:
                 self.send_header("ETag", etag)
@@ -173,10 +178,6 @@ def _handler(served: Served) -> type[http.server.BaseHTTPRequestHandler]:
             if status != 304:
                 self.send_header("Content-Length", str(len(body)))
             self.end_headers()
-            # Counted before it goes: the client may have it all (and the test go on to read
-            # the count) before this thread would get back from the write.
-            with served.lock:
-                served.bytes_sent += len(body)
             with contextlib.suppress(ConnectionError):
                 self.wfile.write(body)
 
