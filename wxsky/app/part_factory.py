@@ -18,7 +18,6 @@ from wxsky.app.grib_part import GribPart
 from wxsky.app.metar_part import MetarFeedsPart
 from wxsky.app.parts import Part
 from wxsky.app.share_part import SharePart
-from wxsky.app.web_part import WebPart
 from wxsky.errors import ConfigError
 from wxsky.inputs.drivers import open_link
 from wxsky.settings.config import CanInputSection, DaemonConfig, SerialInputSection
@@ -95,5 +94,9 @@ def parts_from_config(config: DaemonConfig, options: PartOptions | None = None) 
         used.append(flightgear)
     listen = opt.web or config.web.listen
     if listen:
+        # Imported only here: the web library (aiohttp, and the TLS it loads) takes a few
+        # tenths of a second to import, which a daemon without the station need not pay.
+        from wxsky.app.web_part import WebPart
+
         used.append(WebPart(config, listen, stations=feeds.stations))
     return [*used, share]

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
-import eccodes
 import numpy as np
 
 from wxsky.errors import GribError
@@ -69,6 +68,21 @@ for _deck in ("low", "middle", "high", "convective"):
             _TABLE[(_pres, f"{_deck}Cloud{_end}")] = ("pres", f"{_deck}_cloud_{_end.lower()}", 1.0)
 
 
+_ECCODES: Any = None
+
+
+def _eccodes() -> Any:
+    """eccodes, imported on first use: its bindings take a few tenths of a second to load
+    (cffi parses the library's declarations), and every daemon imports this module while
+    most never decode a GRIB message."""
+    global _ECCODES
+    if _ECCODES is None:
+        import eccodes
+
+        _ECCODES = eccodes
+    return _ECCODES
+
+
 def wanted(short_name: str, type_of_level: str) -> tuple[str, str, float] | None:
     """What wxsky makes of a field, or None when it does not use it."""
     if type_of_level in ("isobaricInhPa", "isobaricInPa"):
@@ -97,7 +111,7 @@ def _quiet() -> None:
     global _LOG
     if _LOG is None:
         _LOG = os.fdopen(os.memfd_create("wxsky-eccodes-log", os.MFD_CLOEXEC), "w+b")
-        eccodes.codes_context_set_logging(_LOG)
+        _eccodes().codes_context_set_logging(_LOG)
     _LOG.seek(0)
     _LOG.truncate()
 
@@ -132,13 +146,13 @@ def _decode(
     data: bytes, name: str, window: Window | None, problems: list[str] | None
 ) -> list[ModelField]:
     out: list[ModelField] = []
-    eccodes.codes_grib_multi_support_on()
+    _eccodes().codes_grib_multi_support_on()
     with _memory_file(data) as f:
         n = 0
         while True:
             where = f"{name}: message {n + 1}"
             try:
-                h = eccodes.codes_grib_new_from_file(f)
+                h = _eccodes().codes_grib_new_from_file(f)
             except Exception as e:  # eccodes raises its own errors for a truncated message
                 if problems is None or n == 0:
                     raise GribError(f"{where}: {_said(e)}") from None
@@ -156,7 +170,7 @@ def _decode(
                 problems.append(f"{e}{_last_complaint()}")
                 continue
             finally:
-                eccodes.codes_release(h)
+                _eccodes().codes_release(h)
             if field is not None:
                 out.append(field)
     if n == 0:
@@ -215,7 +229,7 @@ def _memory_file(data: bytes) -> Iterator[Any]:
             # With multi-field support on, eccodes keeps the rest of a message whose first
             # field was read (NCEP's v after its u) for the next read of *any* file: left
             # there by a file given up half-way, it came out of the next file's first read.
-            eccodes.codes_grib_multi_support_reset_file(f)
+            _eccodes().codes_grib_multi_support_reset_file(f)
 
 
 def _said(e: BaseException) -> str:
@@ -225,7 +239,7 @@ def _said(e: BaseException) -> str:
 
 def _get(h: Any, key: str, default: Any = None) -> Any:
     try:
-        return eccodes.codes_get(h, key)
+        return _eccodes().codes_get(h, key)
     except Exception:  # a key a message does not have
         return default
 
@@ -283,19 +297,20 @@ def _valid_utc(h: Any, where: str) -> datetime:
 
 
 def _grid_values(h: Any, window: Window | None) -> tuple[Grid, np.ndarray]:
-    ni = int(eccodes.codes_get(h, "Ni"))
-    nj = int(eccodes.codes_get(h, "Nj"))
+    ec = _eccodes()
+    ni = int(ec.codes_get(h, "Ni"))
+    nj = int(ec.codes_get(h, "Nj"))
     if ni < 1 or nj < 1 or ni * nj > 50_000_000:
         raise GribError(f"grid of {ni} x {nj} points")
-    lat0 = float(eccodes.codes_get(h, "latitudeOfFirstGridPointInDegrees"))
-    lon0 = float(eccodes.codes_get(h, "longitudeOfFirstGridPointInDegrees"))
-    di = float(eccodes.codes_get(h, "iDirectionIncrementInDegrees"))
-    dj = float(eccodes.codes_get(h, "jDirectionIncrementInDegrees"))
+    lat0 = float(ec.codes_get(h, "latitudeOfFirstGridPointInDegrees"))
+    lon0 = float(ec.codes_get(h, "longitudeOfFirstGridPointInDegrees"))
+    di = float(ec.codes_get(h, "iDirectionIncrementInDegrees"))
+    dj = float(ec.codes_get(h, "jDirectionIncrementInDegrees"))
     if not (0.0 < di <= 90.0 and 0.0 < dj <= 90.0):
         raise GribError(f"grid increments {di} x {dj} degrees")
     if int(_get(h, "jPointsAreConsecutive", 0)):
         raise GribError("columns stored first (jPointsAreConsecutive) is not supported")
-    values = np.asarray(eccodes.codes_get_values(h), dtype=np.float64)
+    values = np.asarray(ec.codes_get_values(h), dtype=np.float64)
     if values.size != ni * nj:
         raise GribError(f"{values.size} values for a grid of {ni} x {nj}")
     if int(_get(h, "bitmapPresent", 0)):
@@ -373,14 +388,14 @@ def inventory(data: bytes) -> str:
     Fields wxsky does not read are listed with eccodes' names."""
     lines: list[str] = []
     _quiet()
-    eccodes.codes_grib_multi_support_on()
+    _eccodes().codes_grib_multi_support_on()
     with _memory_file(data) as f:
         n = 0
         last_offset = -1
         parts: list[tuple[int, str]] = []
         while True:
             try:
-                h = eccodes.codes_grib_new_from_file(f)
+                h = _eccodes().codes_grib_new_from_file(f)
             except Exception as e:  # a truncated or corrupt message
                 raise GribError(f"message {n + 1}: {_said(e)}") from None
             if h is None:
@@ -392,7 +407,7 @@ def inventory(data: bytes) -> str:
                     last_offset = offset
                 parts.append((n, _idx_text(h, offset)))
             finally:
-                eccodes.codes_release(h)
+                _eccodes().codes_release(h)
     if n == 0:
         raise GribError(f"no GRIB messages found ({len(data)} bytes)")
     counts: dict[int, int] = {}
