@@ -245,8 +245,8 @@ class _Answers:
     def cigi_weather(self, patch: WeatherPatch) -> None:
         pass
 
-    def cigi_heard(self) -> None:
-        pass
+    def cigi_heard(self) -> bool:
+        return True
 
     def cigi_camera(self, eye: Eye) -> str | None:
         return None

@@ -309,6 +309,15 @@ def test_a_silent_host_hands_its_weather_back(daemon: RunningDaemon) -> None:
         assert time.monotonic() < deadline, "the host's weather was never handed back"
         time.sleep(0.1)
     assert target["sources"]["layers"] == "preset" and target["layers"] == []
+    # Talking again, with the same weather: it is the host's weather again.
+    with CigiHostSocket(ig_address(daemon)) as host:
+        last, _ = drive(host, 0.3, "big", session_body(0.0))
+        deadline = time.monotonic() + HANG_S
+        while (target := status(daemon)["target"])["sources"]["layers"] != "cigi":
+            assert time.monotonic() < deadline, "the host's weather was not taken again"
+            last += 1
+            host.send(frame(last, *session_body(0.0)))
+    assert target["layers"][0]["base_m"] == 1000.0
 
 
 class _Recorder:
@@ -317,12 +326,14 @@ class _Recorder:
     def __init__(self) -> None:
         self.heard = 0
         self.patches: list[WeatherPatch] = []
+        self.held = True  # False: as if the daemon had handed the host's weather back
 
     def cigi_weather(self, patch: WeatherPatch) -> None:
         self.patches.append(patch)
 
-    def cigi_heard(self) -> None:
+    def cigi_heard(self) -> bool:
         self.heard += 1
+        return self.held
 
     def cigi_camera(self, eye: Eye) -> None:
         pass
@@ -355,6 +366,69 @@ def test_only_allowed_hosts_are_heard(tmp_path: Path) -> None:
     assert detail["dropped"] == {"not_allowed": 1} and "127.0.0.1" in detail["last_error"]
     rec, detail = asyncio.run(run(("127.0.0.0/8",)))
     assert rec.heard == 1 and rec.patches and detail["dropped"] == {}
+
+
+def test_weather_handed_back_after_a_silence_is_given_again_unchanged() -> None:
+    """A host that fell silent and talks again sends the same weather (or none, CIGI's state
+    being set until changed): the IG gives it again once the daemon says it no longer
+    stands, and only then. (It used to give weather only when a datagram changed it, so
+    after a silence the host's unchanged weather was never taken again.)"""
+
+    async def run() -> list[int]:
+        rec = _Recorder()
+        ig = CigiIg(IgSettings(("127.0.0.1", 0)), rec)
+        await ig.start()
+        given: list[int] = []
+        try:
+            with CigiHostSocket(("127.0.0.1", ig.port)) as host:
+                for number, held in enumerate((True, True, False, True), start=1):
+                    rec.held = held
+                    host.send(frame(number, STRATUS))
+                    for _ in range(int(HANG_S / 0.01)):
+                        await asyncio.sleep(0.01)
+                        if ig.stats.messages >= number:
+                            break
+                    given.append(len(rec.patches))
+        finally:
+            ig.close()
+        return given
+
+    # the first weather; the same again (not given); the same, handed back (given); again
+    assert asyncio.run(run()) == [1, 1, 2, 2]
+
+
+def test_the_cigi_part_says_when_the_hosts_weather_was_handed_back() -> None:
+    from wxsky.app.cigi_part import CigiPart
+    from wxsky.app.parts import PartContext
+    from wxsky.engine.stages import SkyEngine
+    from wxsky.scene.camera import Camera
+    from wxsky.scene.layout import SceneSettings
+    from wxsky.settings.config import CigiSection
+    from wxsky.weather.state import CloudLayer, CloudType, Source, WeatherState
+    from wxsky.weather.transition import TransitionRates
+
+    engine = SkyEngine(
+        WeatherState(),
+        Camera((0.0, 0.0, 500.0)),
+        SceneSettings(),
+        rates=TransitionRates(),
+        cigi_hold_s=2.0,
+    )
+    part = CigiPart(CigiSection(), clock_rate=1.0)
+    asyncio.run(part.start(PartContext(engine, set_camera=lambda p: p)))
+    assert part.cigi_heard()  # no weather given yet: nothing to give again
+    part.cigi_weather(WeatherPatch(source=Source.CIGI))  # a host's weather of no fields
+    engine.run_weather(3.0)
+    assert part.cigi_heard()  # it left nothing to hand back
+    deck = (CloudLayer(8.0, 900.0, 1500.0, CloudType.STRATUS),)
+    part.cigi_weather(WeatherPatch(source=Source.CIGI, layers=deck))
+    engine.run_weather(1.0)
+    assert part.cigi_heard() and engine.target.sources.layers is Source.CIGI
+    engine.run_weather(3.0)  # silent past the hold
+    assert engine.target.sources.layers is not Source.CIGI
+    assert not part.cigi_heard()
+    part.cigi_weather(WeatherPatch(source=Source.CIGI, layers=deck))
+    assert part.cigi_heard() and engine.state.layers == deck  # taken again, at once
 
 
 def test_a_hosts_first_weather_replaces_the_sky_at_once_later_ones_move() -> None:

@@ -71,6 +71,9 @@ class CigiPart(Part):
     _engine: SkyEngine
     _publish_target: Callable[[], None]
     _set_camera: Callable[[dict[str, Any]], Any]
+    # Whether the host's last weather put anything in the engine's CIGI slot: if so and the
+    # slot is empty now, the engine handed it back after a silence (`cigi_heard`).
+    _gave_weather = False
 
     def __init__(
         self,
@@ -198,12 +201,14 @@ class CigiPart(Part):
 
     # -- CigiHandler: what a host's datagram changes -------------------------------------
 
-    def cigi_heard(self) -> None:
+    def cigi_heard(self) -> bool:
         self._engine.heard_cigi()
+        return bool(self._engine.sources.cigi) or not self._gave_weather
 
     def cigi_weather(self, patch: WeatherPatch) -> None:
         first = not self._engine.sources.cigi
         self._engine.apply(patch)
+        self._gave_weather = bool(self._engine.sources.cigi)
         if first:
             # A host's first weather (or its first after it fell silent) replaces the sky at
             # once, as a feed's first METAR does: the sky before was a stand-in until the

@@ -96,7 +96,9 @@ class CigiHandler(Protocol):
     """What the IG side asks of the daemon; each runs on the event loop."""
 
     def cigi_weather(self, patch: WeatherPatch) -> None: ...
-    def cigi_heard(self) -> None: ...
+    # A datagram came; False when the weather the host gave no longer stands (the daemon
+    # handed it back after `[cigi] hold_s` of silence), so that the IG gives it again.
+    def cigi_heard(self) -> bool: ...
     def cigi_camera(self, eye: Eye) -> str | None: ...  # why it was refused, or None
     def cigi_clock(self, time_utc: datetime | None, running: bool | None) -> None: ...
     def cigi_answers(self, requests: Sequence[Packet]) -> list[Packet]: ...
@@ -235,7 +237,7 @@ class CigiIg(asyncio.DatagramProtocol):
             self._drop(reason, message)
         self._ignored.update(done.ignored)
         h = self._handler
-        h.cigi_heard()
+        held = h.cigi_heard()
         if done.clock_utc is not None or done.clock_running is not None:
             h.cigi_clock(done.clock_utc, done.clock_running)
         view = eye(self.state)
@@ -243,7 +245,12 @@ class CigiIg(asyncio.DatagramProtocol):
             refused = h.cigi_camera(view)
             if refused is not None:
                 self._drop("camera_refused", f"ownship not placed: {refused}")
-        if done.weather_changed:
+        if not held:
+            # The host fell silent and its weather was handed back; talking again, the
+            # weather it set (CIGI's state stays set until the host changes it) is its
+            # weather again, though this datagram changed none of it.
+            self._patch = None
+        if done.weather_changed or not held:
             self._weather(view)
         if done.requests:
             # Only queued here: answering costs a cloud lookup each, and a datagram holds
