@@ -10,12 +10,12 @@ Stages, in frame order (each ends with the GPU idle, so its time is its own):
     near_pass       the sky and the near sprites (renderer.render_frame)
     publish         reading the layers into a real shared-memory slot and publishing it
 
-Frames are paced by simulated time (one every 1/fps s of it), not by the wall clock: the
-benchmark runs as fast as it can. In ring mode the ring is built on its worker as in the
+Timed frames are paced by simulated time (one every 1/fps s of it), not by the wall clock:
+the benchmark runs as fast as it can. In ring mode the ring is built on its worker as in the
 daemon, so a rebuild costs the frames the CPU time it takes from them; the timed frames start
-once the first ring is shown (untimed lead-in frames until then: the daemon's first seconds
-draw no far clouds), unless `--from-start`. `--mode direct` draws every cloud within range as
-sprites every frame, and no ring.
+once the first ring is shown (untimed lead-in frames until then, one a tick as the daemon's:
+its first seconds draw no far clouds), unless `--from-start`. `--mode direct` draws every
+cloud within range as sprites every frame, and no ring.
 """
 
 from __future__ import annotations
@@ -388,7 +388,12 @@ def run_bench(
             t_lead = time.perf_counter()
             while True:
                 say(f"untimed frames until the first ring is shown: {drawn}")
+                t_frame = time.perf_counter()
                 plan = draw(0.0, dt_s if drawn else 0.0)
+                # Paced as the daemon's frames are, one a tick: unpaced, these frames took
+                # the cores from the idle-class worker building the ring they wait for (a
+                # clear sky at 64x36: 22 s of frames idle, 141 s beside stress-ng).
+                time.sleep(max(0.0, dt_s - (time.perf_counter() - t_frame)))
                 ring_shown = plan.rings.current is not None and plan.rings.incoming is None
                 # ... and every tower drawn, with no lit step still owed to it (the steady state
                 # lights a step per tower every 10 s of sim time, not minutes of them at once).
