@@ -20,6 +20,11 @@ STATE = WeatherState().apply(load_preset("scattered-cumulus", ()))
 SETTINGS = SceneSettings(ring_texture_px=64, max_range_m=20_000.0)
 
 
+# Frames enough for the first ring's 8 impostors, sliced by a budget of wall time a frame:
+# beside stress-ng and the other worker's tests, 80 frames held only 6 of them.
+FRAMES = 240
+
+
 @pytest.mark.gl
 def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None:
     trace_path = tmp_path / "trace.jsonl"
@@ -28,20 +33,20 @@ def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None
             STATE,
             SETTINGS,
             straight_and_level(),
-            80,
+            FRAMES,
             "ring",
             (96, 54),
             preset="scattered-cumulus",
             ring_fade_s=0.1,
             trace=trace,
-            # Built in the frame that needs it, so the 80 frames surely hold the whole ring
+            # Built in the frame that needs it, so the frames surely hold the whole ring
             # (in a worker process below the frames' priority, it may not be ready in them).
             ring_build="sync",
             lead_in=False,  # the first ring's events are what this test reads
         )
-    assert result.frames == 80
+    assert result.frames == FRAMES
     for name in STAGES:
-        assert len(result.stage_s[name]) == 80 and min(result.stage_s[name]) >= 0.0
+        assert len(result.stage_s[name]) == FRAMES and min(result.stage_s[name]) >= 0.0
     assert all(f > 0.0 for f in result.frame_s)
     # The first ring: started at frame 1, its 8 impostors one after the other.
     lines = [json.loads(line) for line in trace_path.read_text().splitlines()]
@@ -56,12 +61,12 @@ def test_ring_mode_times_every_stage_and_traces_the_ring(tmp_path: Path) -> None
     assert all(line["slices"] >= 1 for line in rendered)
     assert result.events["ring_rebuild_start"] == 1 and result.build_s
     d = result.to_dict()
-    assert set(d["stages_ms"]) == set(STAGES) and d["frames"] == 80
+    assert set(d["stages_ms"]) == set(STAGES) and d["frames"] == FRAMES
     assert "impostor_slice" in result.table()
     # The CPU stages' own CPU: some in every frame, never more than the wall time they took
     # (one thread), give or take the clocks' grain.
     walls = [sum(f) for f in zip(*(result.stage_s[n] for n in CPU_STAGES), strict=True)]
-    assert len(result.cpu_stages_s) == 80 and all(c > 0.0 for c in result.cpu_stages_s)
+    assert len(result.cpu_stages_s) == FRAMES and all(c > 0.0 for c in result.cpu_stages_s)
     assert all(c <= w + 1e-3 for c, w in zip(result.cpu_stages_s, walls, strict=True))
     assert d["cpu_stages_ms"]["thread_cpu"]["median"] > 0.0
     assert "frame thread's CPU" in result.table()
