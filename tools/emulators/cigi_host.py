@@ -157,10 +157,21 @@ def play(link: HostLink, rate_hz: float, seconds: float) -> dict[str, Any]:
     clock_sent: tuple[int, int] | None = None
     requests = late = 0
     phases: list[dict[str, Any]] = []
+    starts = list(itertools.accumulate((p.length_s for p in cigi_script.SCRIPT), initial=0.0))
+    last = len(cigi_script.SCRIPT) - 1
+    played = 0  # the script's phases played so far, by index
     while True:
         now = time.perf_counter()
         t = min(now - start, seconds)  # the last message is the script's last moment
-        m = cigi_script.moment(t / scale)
+        script_s = t / scale
+        # A stall longer than a phase (a short script on a busy machine: 10 s of it in 3 s is
+        # 0.21 s) must not skip it: every phase is a change the IG is meant to see.
+        index = min(last, max(i for i, at in enumerate(starts) if at <= script_s))
+        if index > played + 1:
+            index = played + 1
+            script_s = starts[index]
+        played = index
+        m = cigi_script.moment(script_s)
         if not phases or phases[-1]["name"] != m.phase.name:
             phases.append({"name": m.phase.name, "at_s": round(t, 3)})
         packets = [cigi_script.ownship(m)]
@@ -176,7 +187,7 @@ def play(link: HostLink, rate_hz: float, seconds: float) -> dict[str, Any]:
             packets.append(cigi_script.conditions_request(m, requests))
             requests, request_at = requests + 1, now
         link.send(packets)
-        if t >= seconds:
+        if t >= seconds and played == last:
             break
         next_tick += period
         if next_tick < time.perf_counter():  # late: carry on from now, no burst to catch up
